@@ -1,0 +1,1 @@
+"""LMNCell FMU build recipes (imported as ``lmncell_build``)."""

@@ -1,0 +1,367 @@
+"""The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
+
+Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charges, SoC 0…1):
+
+- ``sample_time_s``: the model's fixed sample time Ts.
+- ``cell``: ``capacity_ah``, ``efficiency_charge``, ``efficiency_discharge`` (coulombic, η(i)),
+  ``voltage_min_v``, ``voltage_max_v``, ``name``.
+- ``output``: ``"relative_ocv"`` (local models describe u − OCV(SoC)) or ``"absolute"`` (the
+  paper's form: local models describe u itself, OCV carried by their offsets).
+- ``ocv``: ``soc`` and ``voltage_v`` knots, linear between them (held beyond the ends).
+- ``regressors``: ``output_lags`` na, ``current_terms`` nb (i(k) … i(k−nb+1)), ``filters``: list of
+  ``[tau_fast_s, tau_slow_s]`` each giving v = LP_fast(i) − LP_slow(i) (zero DC gain, eq. 19),
+  ``hysteresis_gamma`` (null, or γ of h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ|i|Ts/(3600·Cn))),
+  ``ocv_input``, ``soc_input`` (extra regressors), ``offset`` (constant 1).
+  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, OCV, SoC, 1
+  (absent ones left out); ``columns`` lists their names.
+- ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
+  ``center`` and ``scale`` (z = (raw − center)/scale).
+- ``gating``: ``mode`` ``"none"`` or ``"current_sign"`` (separate charge and discharge trees; a rest,
+  |i| ≤ ``rest_current_a``, keeps the tree of the last current above it), ``initial_direction``.
+- ``tree``: ``roots`` [{``gate``: all|charge|discharge, ``child``: [kind, index]}], ``nodes``
+  [{``weights``: [w0, w_1…w_d], ``children``: [[kind, index], [kind, index]]}], kind ``node`` or
+  ``leaf``. The first child gets φ = 1/(1+exp(−(w0 + w·z))), the second 1 − φ; a leaf's validity is
+  the product along its path (and 0 outside its gate).
+- ``local_models``: ``theta`` (M rows of the columns above).
+- ``limits``: the ranges seen in training (``current_a``, ``soc``, ``temperature_c``,
+  ``voltage_v``).
+- ``noise``: ``residual_std_v`` of the free-run training error (observer defaults).
+- ``baselines`` (optional) and ``training`` (metadata: files with hashes, settings, metrics).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+FORMAT = "lmncell-model"
+VERSION = 1
+PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
+GATES = ("all", "charge", "discharge")
+
+
+class ModelFileError(ValueError):
+    """A model file that cannot be used; the message names the file and the key."""
+
+
+@dataclass
+class LmnModel:
+    """Everything the runtime needs to step the network (see the module docstring)."""
+
+    sample_time_s: float
+    capacity_ah: float
+    ocv_soc: np.ndarray
+    ocv_v: np.ndarray
+    output_lags: int
+    current_terms: int
+    filters: list[tuple[float, float]]
+    hysteresis_gamma: float | None
+    ocv_input: bool
+    soc_input: bool
+    offset: bool
+    relative_ocv: bool
+    partition_variables: list[str]
+    partition_center: np.ndarray
+    partition_scale: np.ndarray
+    roots: list[tuple[str, tuple[str, int]]]
+    node_weights: np.ndarray            # (n_nodes, 1 + d)
+    node_children: list[tuple[tuple[str, int], tuple[str, int]]]
+    theta: np.ndarray                   # (M, p)
+    efficiency_charge: float = 1.0
+    efficiency_discharge: float = 1.0
+    gating_mode: str = "none"
+    rest_current_a: float = 0.01
+    initial_direction: str = "discharge"
+    limits: dict = field(default_factory=dict)
+    cell: dict = field(default_factory=dict)
+    noise: dict = field(default_factory=dict)
+    extra: dict = field(default_factory=dict)   # baselines, training metadata, observers
+
+    # ----- derived structure -------------------------------------------------------------
+    def __post_init__(self) -> None:
+        self._build_paths()
+
+    def _build_paths(self) -> None:
+        """Per leaf: gate and path of (node, side); index arrays for the vectorised product."""
+        m = self.theta.shape[0]
+        paths: list[list[tuple[int, int]] | None] = [None] * m
+        gates: list[str] = ["all"] * m
+
+        def walk(ref: tuple[str, int], path: list[tuple[int, int]], gate: str) -> None:
+            kind, idx = ref
+            if kind == "leaf":
+                if paths[idx] is not None:
+                    raise ModelFileError(f"tree: leaf {idx} is reached twice")
+                paths[idx], gates[idx] = path, gate
+                return
+            for side, child in enumerate(self.node_children[idx]):
+                walk(child, [*path, (idx, side)], gate)
+
+        for gate, child in self.roots:
+            walk(child, [], gate)
+        if any(p is None for p in paths):
+            missing = [k for k, p in enumerate(paths) if p is None]
+            raise ModelFileError(f"tree: local model(s) {missing} belong to no leaf")
+        n_nodes = self.node_weights.shape[0]
+        depth = max((len(p) for p in paths), default=0)
+        # Index into q = [φ_0…φ_{n−1}, 1−φ_0…1−φ_{n−1}, 1]; padding points at the trailing 1.
+        idx = np.full((m, max(depth, 1)), 2 * n_nodes, dtype=np.intp)
+        for j, p in enumerate(paths):
+            for k, (node, side) in enumerate(p):
+                idx[j, k] = node + side * n_nodes
+        self.leaf_paths = paths
+        self.leaf_gates = gates
+        self._path_index = idx
+        self._gate_code = np.array([GATES.index(g) for g in gates])
+
+    @property
+    def n_local_models(self) -> int:
+        return int(self.theta.shape[0])
+
+    @property
+    def n_exo(self) -> int:
+        return len(self.columns()) - self.output_lags
+
+    def columns(self) -> list[str]:
+        """Names of the local-model regressor columns, in order."""
+        cols = [f"y(k-{l})" for l in range(1, self.output_lags + 1)]
+        cols += ["i(k)" if l == 0 else f"i(k-{l})" for l in range(self.current_terms)]
+        cols += [f"v{f + 1}(k)" for f in range(len(self.filters))]
+        if self.hysteresis_gamma is not None:
+            cols.append("h(k)")
+        if self.ocv_input:
+            cols.append("ocv(k)")
+        if self.soc_input:
+            cols.append("soc(k)")
+        if self.offset:
+            cols.append("1")
+        return cols
+
+    def ocv(self, soc: np.ndarray | float) -> np.ndarray | float:
+        """Open-circuit voltage (V) at SoC (fraction), linear between knots, held beyond."""
+        return np.interp(soc, self.ocv_soc, self.ocv_v)
+
+    # ----- validity functions and blended local models ----------------------------------
+    def validities(self, z: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """Φ (N, M) for normalised partition inputs z (N, d) and direction codes (N,) where
+        1 = charge, 2 = discharge (the gate of the current-sign pre-partition)."""
+        n = z.shape[0]
+        n_nodes = self.node_weights.shape[0]
+        q = np.ones((n, 2 * n_nodes + 1))
+        if n_nodes:
+            act = self.node_weights[:, 0] + z @ self.node_weights[:, 1:].T
+            phi = 1.0 / (1.0 + np.exp(-act))
+            q[:, :n_nodes] = phi
+            q[:, n_nodes:2 * n_nodes] = 1.0 - phi
+        Phi = np.prod(q[:, self._path_index], axis=2)
+        if self.gating_mode == "current_sign":
+            Phi = Phi * ((self._gate_code == 0)[None, :]
+                         | (self._gate_code[None, :] == direction[:, None]))
+        return Phi
+
+    def blend(self, x_exo: np.ndarray, z: np.ndarray,
+              direction: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """For N samples: blended feedback coefficients A (N, na), exogenous part b (N,) and Φ.
+
+        ŷ(k) = Σ_l A(k, l)·y(k−l) + b(k) is the network output (eq. 3 with eq. 2 inside).
+        """
+        Phi = self.validities(z, direction)
+        na = self.output_lags
+        A = Phi @ self.theta[:, :na]
+        b = np.einsum("nm,nm->n", Phi, x_exo @ self.theta[:, na:].T)
+        return A, b, Phi
+
+    def normalise(self, raw: np.ndarray) -> np.ndarray:
+        return (raw - self.partition_center) / self.partition_scale
+
+
+# ----- reading and writing ---------------------------------------------------------------
+def _get(doc: dict, key: str, where: str, kind: type | tuple[type, ...]):
+    if key not in doc:
+        raise ModelFileError(f"{where}: missing key '{key}'")
+    val = doc[key]
+    if not isinstance(val, kind) or isinstance(val, bool) and kind is not bool:
+        raise ModelFileError(f"{where}: key '{key}' is {type(val).__name__}, expected "
+                             f"{getattr(kind, '__name__', kind)}")
+    return val
+
+
+def _array(doc: dict, key: str, where: str, ndim: int) -> np.ndarray:
+    try:
+        arr = np.asarray(_get(doc, key, where, list), dtype=float)
+    except (TypeError, ValueError) as exc:
+        raise ModelFileError(f"{where}: key '{key}' is not a numeric array ({exc})") from exc
+    if arr.ndim != ndim and not (arr.size == 0 and ndim == 2):
+        raise ModelFileError(f"{where}: key '{key}' has {arr.ndim} dimension(s), expected {ndim}")
+    if not np.isfinite(arr).all():
+        raise ModelFileError(f"{where}: key '{key}' holds NaN or infinite values")
+    return arr
+
+
+def _ref(val, where: str) -> tuple[str, int]:
+    if (not isinstance(val, list) or len(val) != 2 or val[0] not in ("node", "leaf")
+            or not isinstance(val[1], int)):
+        raise ModelFileError(f"{where}: expected [\"node\"|\"leaf\", index], got {val!r}")
+    return val[0], val[1]
+
+
+def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
+    """Check a model document and build the runtime model; errors name the file and key."""
+    if not isinstance(doc, dict):
+        raise ModelFileError(f"{source}: expected a JSON object")
+    fmt = doc.get("format")
+    if fmt != FORMAT:
+        raise ModelFileError(f"{source}: format is {fmt!r}, expected {FORMAT!r}")
+    ver = doc.get("version")
+    if ver != VERSION:
+        raise ModelFileError(f"{source}: model file version {ver!r}; this LMNCell reads version "
+                             f"{VERSION} only (re-train or convert the model)")
+    ts = float(_get(doc, "sample_time_s", source, (int, float)))
+    if not ts > 0:
+        raise ModelFileError(f"{source}: 'sample_time_s' is {ts}, expected > 0")
+    cell = _get(doc, "cell", source, dict)
+    cap = float(_get(cell, "capacity_ah", f"{source}: cell", (int, float)))
+    if not cap > 0:
+        raise ModelFileError(f"{source}: cell.capacity_ah is {cap}, expected > 0")
+    output = _get(doc, "output", source, str)
+    if output not in ("relative_ocv", "absolute"):
+        raise ModelFileError(f"{source}: 'output' is {output!r}, expected 'relative_ocv' or "
+                             "'absolute'")
+    ocv = _get(doc, "ocv", source, dict)
+    ocv_soc, ocv_v = _array(ocv, "soc", f"{source}: ocv", 1), _array(ocv, "voltage_v",
+                                                                      f"{source}: ocv", 1)
+    if ocv_soc.shape != ocv_v.shape or ocv_soc.size < 2 or (np.diff(ocv_soc) <= 0).any():
+        raise ModelFileError(f"{source}: ocv.soc and ocv.voltage_v must have the same length "
+                             "(≥ 2) and soc must increase")
+    reg = _get(doc, "regressors", source, dict)
+    w = f"{source}: regressors"
+    na = _get(reg, "output_lags", w, int)
+    nb = _get(reg, "current_terms", w, int)
+    filters = [tuple(float(x) for x in f) for f in _get(reg, "filters", w, list)]
+    if na < 0 or nb < 1 or any(len(f) != 2 or not 0 < f[0] < f[1] for f in filters):
+        raise ModelFileError(f"{w}: need output_lags ≥ 0, current_terms ≥ 1 and filters "
+                             "[tau_fast_s, tau_slow_s] with 0 < fast < slow")
+    gamma = reg.get("hysteresis_gamma")
+    part = _get(doc, "partition", source, dict)
+    variables = _get(part, "variables", f"{source}: partition", list)
+    bad = [v for v in variables if v not in PARTITION_VARIABLES]
+    if bad:
+        raise ModelFileError(f"{source}: partition variable(s) {bad} unknown; expected "
+                             f"{PARTITION_VARIABLES}")
+    center = _array(part, "center", f"{source}: partition", 1)
+    scale = _array(part, "scale", f"{source}: partition", 1)
+    d = len(variables)
+    if center.size != d or scale.size != d or (scale <= 0).any():
+        raise ModelFileError(f"{source}: partition center/scale need {d} entries, scale > 0")
+    tree = _get(doc, "tree", source, dict)
+    nodes = _get(tree, "nodes", f"{source}: tree", list)
+    weights = np.asarray([n.get("weights") for n in nodes], dtype=float).reshape(len(nodes), -1)
+    if nodes and weights.shape[1] != d + 1:
+        raise ModelFileError(f"{source}: tree node weights have {weights.shape[1]} entries, "
+                             f"expected {d + 1} (bias + one per partition variable)")
+    children = []
+    for k, n in enumerate(nodes):
+        ch = n.get("children")
+        if not isinstance(ch, list) or len(ch) != 2:
+            raise ModelFileError(f"{source}: tree.nodes[{k}].children must be two references")
+        children.append((_ref(ch[0], f"{source}: tree.nodes[{k}]"),
+                         _ref(ch[1], f"{source}: tree.nodes[{k}]")))
+    roots = []
+    for k, r in enumerate(_get(tree, "roots", f"{source}: tree", list)):
+        gate = r.get("gate")
+        if gate not in GATES:
+            raise ModelFileError(f"{source}: tree.roots[{k}].gate is {gate!r}, expected {GATES}")
+        roots.append((gate, _ref(r.get("child"), f"{source}: tree.roots[{k}]")))
+    lm = _get(doc, "local_models", source, dict)
+    theta = _array(lm, "theta", f"{source}: local_models", 2)
+    gating = doc.get("gating", {"mode": "none"})
+    model = LmnModel(
+        sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
+        current_terms=nb, filters=filters,
+        hysteresis_gamma=None if gamma is None else float(gamma),
+        ocv_input=bool(reg.get("ocv_input", False)), soc_input=bool(reg.get("soc_input", False)),
+        offset=bool(reg.get("offset", True)), relative_ocv=output == "relative_ocv",
+        partition_variables=list(variables), partition_center=center, partition_scale=scale,
+        roots=roots, node_weights=weights.reshape(len(nodes), d + 1), node_children=children,
+        theta=theta, efficiency_charge=float(cell.get("efficiency_charge", 1.0)),
+        efficiency_discharge=float(cell.get("efficiency_discharge", 1.0)),
+        gating_mode=str(gating.get("mode", "none")),
+        rest_current_a=float(gating.get("rest_current_a", 0.01)),
+        initial_direction=str(gating.get("initial_direction", "discharge")),
+        limits=dict(doc.get("limits", {})), cell=dict(cell), noise=dict(doc.get("noise", {})),
+        extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
+               if k in doc})
+    p = len(model.columns())
+    if theta.ndim != 2 or theta.shape[1] != p:
+        raise ModelFileError(f"{source}: local_models.theta has shape {theta.shape}, expected "
+                             f"(M, {p}) for columns {model.columns()}")
+    if "columns" in lm and lm["columns"] != model.columns():
+        raise ModelFileError(f"{source}: local_models.columns {lm['columns']} do not match the "
+                             f"regressor definition {model.columns()}")
+    if model.gating_mode not in ("none", "current_sign"):
+        raise ModelFileError(f"{source}: gating.mode {model.gating_mode!r} unknown")
+    return model
+
+
+def model_to_dict(model: LmnModel) -> dict:
+    """The JSON document of a model (inverse of model_from_dict)."""
+    doc = {
+        "format": FORMAT, "version": VERSION,
+        "description": model.extra.get("description", "LMNCell local model network cell model"),
+        "sample_time_s": model.sample_time_s,
+        "cell": {**model.cell, "capacity_ah": model.capacity_ah,
+                 "efficiency_charge": model.efficiency_charge,
+                 "efficiency_discharge": model.efficiency_discharge},
+        "output": "relative_ocv" if model.relative_ocv else "absolute",
+        "ocv": {"soc": model.ocv_soc.tolist(), "voltage_v": model.ocv_v.tolist()},
+        "regressors": {"output_lags": model.output_lags, "current_terms": model.current_terms,
+                       "filters": [list(f) for f in model.filters],
+                       "hysteresis_gamma": model.hysteresis_gamma,
+                       "ocv_input": model.ocv_input, "soc_input": model.soc_input,
+                       "offset": model.offset},
+        "partition": {"variables": model.partition_variables,
+                      "center": model.partition_center.tolist(),
+                      "scale": model.partition_scale.tolist()},
+        "gating": {"mode": model.gating_mode, "rest_current_a": model.rest_current_a,
+                   "initial_direction": model.initial_direction},
+        "tree": {"roots": [{"gate": g, "child": list(c)} for g, c in model.roots],
+                 "nodes": [{"weights": model.node_weights[k].tolist(),
+                            "children": [list(c) for c in model.node_children[k]]}
+                           for k in range(model.node_weights.shape[0])]},
+        "local_models": {"columns": model.columns(), "theta": model.theta.tolist()},
+        "limits": model.limits, "noise": model.noise,
+    }
+    for key in ("observers", "baselines", "training"):
+        if key in model.extra:
+            doc[key] = model.extra[key]
+    return doc
+
+
+def load_model(path: str | Path) -> LmnModel:
+    """Read and check a model file (JSON only; nothing is executed)."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ModelFileError(f"{path}: cannot read the model file ({exc.strerror})") from exc
+    try:
+        doc = json.loads(text)
+    except json.JSONDecodeError as exc:
+        raise ModelFileError(f"{path}: not valid JSON ({exc})") from exc
+    return model_from_dict(doc, str(path))
+
+
+def save_model(model: LmnModel, path: str | Path) -> Path:
+    """Write the model as JSON; floats are written with repr, so loading is bit-identical."""
+    path = Path(path)
+    path.write_text(json.dumps(model_to_dict(model), indent=1, allow_nan=False) + "\n",
+                    encoding="utf-8")
+    return path
+
+
+def is_finite_number(x: float) -> bool:
+    return isinstance(x, (int, float)) and math.isfinite(x)

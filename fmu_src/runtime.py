@@ -1,0 +1,294 @@
+"""The one implementation of the LMN step, used by training, evaluation and the FMU.
+
+Step k covers (t_{k−1}, t_k] with t_k − t_{k−1} = Ts. Its input is the current held over the step
+(A, > 0 charges) and the temperature (°C); its output the terminal voltage (V) for that step.
+Within a step, in this order: SoC(k) = SoC(k−1) + Ts·η(i)·i/(3600·Cn); the zero-DC-gain filters
+v = LP_fast(i) − LP_slow(i) (exact discretisation a = exp(−Ts/τ)); the hysteresis state
+h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ·|i|·Ts/(3600·Cn)) (→ +1 after charge, −1 after
+discharge); the pre-partition direction (charge/discharge, kept through rests); the network
+ŷ(k) = Σ_j Φ_j(z(k))·x(k)ᵀθ_j; u(k) = ŷ(k) + OCV(SoC(k)) for a relative-OCV model.
+
+At the start of a record the cell is taken as rested: past currents and filter states are 0 and
+the output lags sit at the network's fixed point for zero current at SoC0.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fmu_src.model import LmnModel
+
+CHARGE, DISCHARGE = 1, 2
+
+
+def initial_hysteresis(soc0: float) -> float:
+    """Default hysteresis state: +1 (just charged) at SoC0 ≥ 0.95, else 0 (unknown history)."""
+    return 1.0 if soc0 >= 0.95 else 0.0
+
+
+@dataclass
+class ExoState:
+    """State of everything that does not depend on the model output (SoC, filters, h, lags)."""
+
+    soc: float
+    lp: list[float]          # [fast_1, slow_1, fast_2, slow_2, …] low-pass states (A)
+    h: float
+    direction: int
+    past_current: list[float]  # i(k−1) … i(k−nb+1)
+
+    def copy(self) -> ExoState:
+        return ExoState(self.soc, list(self.lp), self.h, self.direction, list(self.past_current))
+
+    def as_list(self) -> list[float]:
+        return [self.soc, *self.lp, self.h, float(self.direction), *self.past_current]
+
+    @classmethod
+    def from_list(cls, values: list[float], n_filters: int, n_past: int) -> ExoState:
+        k = 1 + 2 * n_filters
+        return cls(values[0], list(values[1:k]), values[k], int(values[k + 1]),
+                   list(values[k + 2:k + 2 + n_past]))
+
+
+class ExoStepper:
+    """Advances ExoState and builds the exogenous regressors and partition inputs of one step."""
+
+    def __init__(self, model: LmnModel, capacity_ah: float | None = None) -> None:
+        self.model = model
+        ts = model.sample_time_s
+        self.capacity_ah = float(capacity_ah if capacity_ah is not None else model.capacity_ah)
+        self.coef = [math.exp(-ts / tau) for f in model.filters for tau in f]
+        self.soc_gain = ts / (3600.0 * self.capacity_ah)
+        self.gamma = model.hysteresis_gamma
+        pv = model.partition_variables
+        self._zi = {name: pv.index(name) for name in pv}
+
+    def initial_state(self, soc0: float, h0: float | None = None) -> ExoState:
+        m = self.model
+        direction = CHARGE if m.initial_direction == "charge" else DISCHARGE
+        return ExoState(float(soc0), [0.0] * (2 * len(m.filters)),
+                        initial_hysteresis(soc0) if h0 is None else float(h0), direction,
+                        [0.0] * (m.current_terms - 1))
+
+    def eta(self, current_a: float) -> float:
+        m = self.model
+        return m.efficiency_charge if current_a > 0 else m.efficiency_discharge
+
+    def update(self, s: ExoState, current_a: float) -> None:
+        """Advance the state by one step with the current held over it."""
+        i = current_a
+        s.soc += self.soc_gain * self.eta(i) * i
+        for k, a in enumerate(self.coef):
+            s.lp[k] = a * s.lp[k] + (1.0 - a) * i
+        if self.gamma is not None:
+            e = math.exp(-self.gamma * abs(i) * self.soc_gain)
+            s.h = e * s.h + (1.0 - e) * (1.0 if i > 0 else -1.0 if i < 0 else 0.0)
+        rest = self.model.rest_current_a
+        if i > rest:
+            s.direction = CHARGE
+        elif i < -rest:
+            s.direction = DISCHARGE
+
+    def features(self, s: ExoState, current_a: float, temperature_c: float,
+                 x: np.ndarray, z: np.ndarray) -> None:
+        """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken."""
+        m = self.model
+        col = 0
+        x[col] = current_a
+        col += 1
+        for past in s.past_current:
+            x[col] = past
+            col += 1
+        for f in range(len(m.filters)):
+            x[col] = s.lp[2 * f] - s.lp[2 * f + 1]
+            col += 1
+        if m.hysteresis_gamma is not None:
+            x[col] = s.h
+            col += 1
+        if m.ocv_input:
+            x[col] = float(m.ocv(s.soc))
+            col += 1
+        if m.soc_input:
+            x[col] = s.soc
+            col += 1
+        if m.offset:
+            x[col] = 1.0
+        zi = self._zi
+        if "soc" in zi:
+            z[zi["soc"]] = s.soc
+        if "current" in zi:
+            z[zi["current"]] = current_a
+        if "filtered_current" in zi:
+            z[zi["filtered_current"]] = s.lp[1] if s.lp else current_a
+        if "temperature" in zi:
+            z[zi["temperature"]] = temperature_c
+
+    def shift(self, s: ExoState, current_a: float) -> None:
+        """After the features of step k: remember i(k) as a past current."""
+        if s.past_current:
+            s.past_current.pop()
+            s.past_current.insert(0, current_a)
+
+
+@dataclass
+class ExoSeries:
+    """Exogenous regressors, partition inputs, direction and SoC of a whole record."""
+
+    x: np.ndarray          # (N, p − na)
+    z: np.ndarray          # (N, d), normalised
+    direction: np.ndarray  # (N,)
+    soc: np.ndarray        # (N,)
+    final_state: ExoState
+
+
+def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray | None,
+               soc0: float, capacity_ah: float | None = None, h0: float | None = None,
+               soc: np.ndarray | None = None) -> ExoSeries:
+    """Run the exogenous part of the step over a whole record (the same code as the step).
+
+    soc: an optional SoC trajectory that replaces coulomb counting (training on a reference).
+    """
+    stepper = ExoStepper(model, capacity_ah)
+    n = current_a.size
+    s = stepper.initial_state(soc0, h0)
+    X = np.zeros((n, model.n_exo))
+    Z = np.zeros((n, len(model.partition_variables)))
+    D = np.zeros(n, dtype=np.intp)
+    S = np.zeros(n)
+    temp = np.full(n, 25.0) if temperature_c is None else temperature_c
+    cur = current_a.tolist()
+    tl = temp.tolist()
+    for k in range(n):
+        stepper.update(s, cur[k])
+        if soc is not None:
+            s.soc = float(soc[k])
+        stepper.features(s, cur[k], tl[k], X[k], Z[k])
+        stepper.shift(s, cur[k])
+        D[k], S[k] = s.direction, s.soc
+    return ExoSeries(X, model.normalise(Z), D, S, s)
+
+
+def fixed_point(model: LmnModel, soc0: float, temperature_c: float, h0: float) -> float:
+    """Output ŷ of the network at rest (zero current, filters settled) at SoC0."""
+    stepper = ExoStepper(model)
+    s = stepper.initial_state(soc0, h0)
+    x = np.zeros((1, model.n_exo))
+    z = np.zeros((1, len(model.partition_variables)))
+    stepper.features(s, 0.0, temperature_c, x[0], z[0])
+    A, b, _ = model.blend(x, model.normalise(z), np.array([s.direction]))
+    denom = 1.0 - float(A.sum())
+    return float(b[0]) / denom if abs(denom) > 1e-9 else 0.0
+
+
+def recursion(A: np.ndarray, b: np.ndarray, y_init: list[float]) -> np.ndarray:
+    """Free-run ŷ(k) = Σ_l A(k,l)·ŷ(k−l) + b(k) from initial lags y_init = [ŷ(−1), ŷ(−2), …]."""
+    na = A.shape[1]
+    n = b.size
+    y = np.empty(n)
+    lags = list(y_init)
+    Al = A.tolist()
+    bl = b.tolist()
+    for k in range(n):
+        a = Al[k]
+        acc = bl[k]
+        for l in range(na):
+            acc += a[l] * lags[l]
+        y[k] = acc
+        if na:
+            lags.pop()
+            lags.insert(0, acc)
+    return y
+
+
+@dataclass
+class SimResult:
+    """Free-run simulation of a record: voltage (V), SoC, network output ŷ and validities."""
+
+    voltage_v: np.ndarray
+    soc: np.ndarray
+    y: np.ndarray
+    validity: np.ndarray
+
+
+def simulate_exo(model: LmnModel, ex: ExoSeries, soc0: float, h0: float,
+                 temperature0_c: float) -> SimResult:
+    """Free-run simulation from precomputed exogenous series (see exo_series)."""
+    A, b, Phi = model.blend(ex.x, ex.z, ex.direction)
+    y0 = fixed_point(model, soc0, temperature0_c, h0)
+    y = recursion(A, b, [y0] * model.output_lags)
+    u = y + model.ocv(ex.soc) if model.relative_ocv else y
+    return SimResult(np.asarray(u), ex.soc, y, Phi)
+
+
+def simulate(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray | None,
+             soc0: float, capacity_ah: float | None = None, h0: float | None = None,
+             soc: np.ndarray | None = None) -> SimResult:
+    """Free-run (parallel-model) simulation of one record sampled at the model's Ts.
+
+    current_a: current held over each step (A, > 0 charges); temperature_c: °C per step or None
+    (then 25 °C); soc0: SoC before the first step; capacity_ah: overrides the model's; h0: initial
+    hysteresis state (default initial_hysteresis(soc0)); soc: a SoC trajectory replacing coulomb
+    counting.
+    """
+    if h0 is None:
+        h0 = initial_hysteresis(soc0)
+    ex = exo_series(model, np.asarray(current_a, dtype=float), temperature_c, soc0, capacity_ah,
+                    h0, soc)
+    t0 = 25.0 if temperature_c is None else float(temperature_c[0])
+    return simulate_exo(model, ex, soc0, h0, t0)
+
+
+class CellStepper:
+    """Step-by-step free-run simulation (the FMU's engine): one call per model sample."""
+
+    def __init__(self, model: LmnModel, soc0: float, capacity_ah: float | None = None,
+                 temperature_c: float = 25.0, h0: float | None = None) -> None:
+        self.model = model
+        self.exo = ExoStepper(model, capacity_ah)
+        h0 = initial_hysteresis(soc0) if h0 is None else h0
+        self.state = self.exo.initial_state(soc0, h0)
+        y0 = fixed_point(model, soc0, temperature_c, h0)
+        self.lags = [y0] * model.output_lags
+        self._x = np.zeros((1, model.n_exo))
+        self._z = np.zeros((1, len(model.partition_variables)))
+        self._d = np.zeros(1, dtype=np.intp)
+        self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
+        self.validity = np.zeros(model.n_local_models)
+
+    @property
+    def soc(self) -> float:
+        return self.state.soc
+
+    def step(self, current_a: float, temperature_c: float = 25.0) -> float:
+        """Advance one sample with the current held over it; returns the terminal voltage (V)."""
+        m, s = self.model, self.state
+        self.exo.update(s, current_a)
+        self.exo.features(s, current_a, temperature_c, self._x[0], self._z[0])
+        self.exo.shift(s, current_a)
+        self._d[0] = s.direction
+        A, b, Phi = m.blend(self._x, m.normalise(self._z), self._d)
+        a = A[0].tolist()
+        acc = float(b[0])
+        lags = self.lags
+        for l in range(m.output_lags):
+            acc += a[l] * lags[l]
+        if m.output_lags:
+            lags.pop()
+            lags.insert(0, acc)
+        self.validity = Phi[0]
+        self.voltage_v = acc + float(m.ocv(s.soc)) if m.relative_ocv else acc
+        return self.voltage_v
+
+    def get_state(self) -> list[float]:
+        """Everything the next step depends on, as a flat list of floats."""
+        return [*self.state.as_list(), *self.lags, self.voltage_v]
+
+    def set_state(self, values: list[float]) -> None:
+        m = self.model
+        n_exo_state = 1 + 2 * len(m.filters) + 2 + (m.current_terms - 1)
+        self.state = ExoState.from_list(list(values[:n_exo_state]), len(m.filters),
+                                        m.current_terms - 1)
+        self.lags = list(values[n_exo_state:n_exo_state + m.output_lags])
+        self.voltage_v = float(values[n_exo_state + m.output_lags])

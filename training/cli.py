@@ -1,0 +1,138 @@
+"""The `lmncell` command line: each sub-command parses its arguments and calls one function."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from fmu_src.model import ModelFileError
+from training.config import ConfigError
+from training.records import DataError
+
+
+def _float01(text: str) -> float:
+    v = float(text)
+    if not 0.0 <= v <= 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a SoC fraction within 0…1")
+    return v
+
+
+def _positive(text: str) -> float:
+    v = float(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a value > 0")
+    return v
+
+
+def cmd_inspect(a: argparse.Namespace) -> int:
+    from training.summary import inspect_files
+
+    inspect_files(a.files, a.plot, a.capacity)
+    return 0
+
+
+def cmd_train(a: argparse.Namespace) -> int:
+    from training.pipeline import train_files
+
+    partition = a.partition.split(",") if a.partition else None
+    train_files(a.data, a.out, a.capacity, a.soc0, partition, a.baselines, a.config,
+                max_local_models=a.max_local_models)
+    return 0
+
+
+def cmd_evaluate(a: argparse.Namespace) -> int:
+    from training.pipeline import evaluate_files
+
+    evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json)
+    return 0
+
+
+def cmd_build_fmu(a: argparse.Namespace) -> int:
+    from lmncell_build.pythonfmu_build import build_fmu
+
+    path = build_fmu(a.model, a.out)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_simulate(a: argparse.Namespace) -> int:
+    from training.drive import simulate_cycle_cli
+
+    return simulate_cycle_cli(a)
+
+
+def cmd_demo(a: argparse.Namespace) -> int:
+    from training.demo import run_demo
+
+    run_demo(Path(a.out))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="lmncell", description="Local model network cell models "
+                                "from cycler data, exported as FMI 2.0 FMUs. Current > 0 "
+                                "charges; SI units; SoC as a fraction.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("inspect", help="summarise cycler files")
+    s.add_argument("files", nargs="+")
+    s.add_argument("--plot", metavar="OUT.png")
+    s.add_argument("--capacity", type=_positive, help="Ah, for C-rates and SoC")
+    s.set_defaults(func=cmd_inspect)
+
+    s = sub.add_parser("train", help="identify an LMN from measurements")
+    s.add_argument("data", nargs="+")
+    s.add_argument("--out", required=True, metavar="MODEL.json")
+    s.add_argument("--capacity", type=_positive, help="Ah (default: from full discharges)")
+    s.add_argument("--soc0", type=_float01, help="start SoC of every record (default: 1.0 for "
+                   "records that start rested at full charge)")
+    s.add_argument("--partition", help="comma list of soc, current, filtered_current, "
+                   "temperature")
+    s.add_argument("--baselines", action="store_true", help="also fit ARX and 2RC baselines")
+    s.add_argument("--config", metavar="FILE.toml")
+    s.add_argument("--max-local-models", type=int)
+    s.set_defaults(func=cmd_train)
+
+    s = sub.add_parser("evaluate", help="free-run error of a model on records")
+    s.add_argument("model")
+    s.add_argument("data", nargs="+")
+    s.add_argument("--soc0", type=_float01)
+    s.add_argument("--json", action="store_true")
+    s.add_argument("--plot", metavar="DIR")
+    s.add_argument("--trace", metavar="OUT.csv")
+    s.set_defaults(func=cmd_evaluate)
+
+    s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU")
+    s.add_argument("model")
+    s.add_argument("--out", required=True, metavar="CELL.fmu")
+    s.set_defaults(func=cmd_build_fmu)
+
+    s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy")
+    s.add_argument("fmu")
+    s.add_argument("--cycle", choices=["wltc", "udds", "us06", "hwfet"], default="wltc")
+    s.add_argument("--vehicle", metavar="FILE.toml")
+    s.add_argument("--repeat", type=int, default=1)
+    s.add_argument("--soc0", type=_float01, default=0.9)
+    s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts)")
+    s.add_argument("--plot", metavar="OUT.png")
+    s.add_argument("--json", action="store_true")
+    s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("demo", help="train, evaluate, build the FMU, drive it, write a report")
+    s.add_argument("--out", default="lmncell-demo")
+    s.set_defaults(func=cmd_demo)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except (DataError, ModelFileError, ConfigError, FileNotFoundError) as exc:
+        print(f"lmncell {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,125 @@
+"""Training settings: documented defaults, TOML loading, checks with clear messages."""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fmu_src.model import PARTITION_VARIABLES
+
+
+class ConfigError(ValueError):
+    """A training setting that cannot be used; the message names the setting."""
+
+
+@dataclass
+class TrainConfig:
+    """Settings of `lmncell train` (units in the names; see README for the meaning of each).
+
+    sample_time_s: model sample time Ts; records are resampled to it (step means).
+    output_lags / current_terms: na past outputs; i(k) … i(k−nb+1).
+    filters: [tau_fast_s, tau_slow_s] pairs, each an input v = LP_fast(i) − LP_slow(i).
+    hysteresis: "auto" (chosen by the OCV pre-fit), "off", or a γ value.
+    output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
+    ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
+    partition: partition-space variables (soc, current, filtered_current, temperature).
+    pre_partition: "none" or "current_sign" (separate charge and discharge trees).
+    oblique: optimise all split weights (True) or only the split's own axis (False).
+    max_local_models: upper bound on M; stop: "validation" (free-run error) or "aicc".
+    validation: "block" (the middle validation_fraction of every record's time), "record"
+    (the last record given), or "none" (then stop = "aicc").
+    soc_window / outside_weight: samples outside the SoC window get this weight in the fit.
+    oe_refinement: final output-error (free-run) refinement of all local models and the OCV.
+    max_pole: largest allowed local pole magnitude (stability repair).
+    """
+
+    sample_time_s: float = 1.0
+    output_lags: int = 3
+    current_terms: int = 3
+    filters: list[list[float]] = field(default_factory=lambda: [[5.0, 100.0]])
+    hysteresis: str | float = "auto"
+    output: str = "relative_ocv"
+    ocv_input: bool = False
+    soc_input: bool = False
+    partition: list[str] = field(default_factory=lambda: ["soc"])
+    pre_partition: str = "none"
+    oblique: bool = True
+    max_local_models: int = 6
+    stop: str = "validation"
+    validation: str = "block"
+    validation_fraction: float = 0.2
+    soc_window: list[float] = field(default_factory=lambda: [0.0, 1.0])
+    outside_weight: float = 1.0
+    oe_refinement: bool = True
+    oe_max_iterations: int = 25
+    lm_iterations: int = 15
+    max_pole: float = 0.9995
+    ocv_knots: int = 21
+    rest_current_a: float = 0.01
+
+    def check(self) -> TrainConfig:
+        """Raise ConfigError for settings that cannot work; return self."""
+        def bad(name: str, why: str) -> ConfigError:
+            return ConfigError(f"setting '{name}' = {getattr(self, name)!r}: {why}")
+
+        if not self.sample_time_s > 0:
+            raise bad("sample_time_s", "expected > 0 s")
+        if self.output_lags < 0 or self.output_lags > 10:
+            raise bad("output_lags", "expected 0…10")
+        if self.current_terms < 1 or self.current_terms > 10:
+            raise bad("current_terms", "expected 1…10")
+        for f in self.filters:
+            if len(f) != 2 or not 0 < f[0] < f[1]:
+                raise bad("filters", "expected pairs [tau_fast_s, tau_slow_s], 0 < fast < slow")
+        if not (self.hysteresis in ("auto", "off") or isinstance(self.hysteresis, (int, float))
+                and self.hysteresis > 0):
+            raise bad("hysteresis", "expected 'auto', 'off' or a γ > 0")
+        if self.output not in ("relative_ocv", "absolute"):
+            raise bad("output", "expected 'relative_ocv' or 'absolute'")
+        unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]
+        if unknown or not self.partition or len(set(self.partition)) != len(self.partition):
+            raise bad("partition", f"expected distinct names from {PARTITION_VARIABLES}")
+        if self.pre_partition not in ("none", "current_sign"):
+            raise bad("pre_partition", "expected 'none' or 'current_sign'")
+        if self.max_local_models < 1 or self.max_local_models > 64:
+            raise bad("max_local_models", "expected 1…64")
+        if self.stop not in ("validation", "aicc"):
+            raise bad("stop", "expected 'validation' or 'aicc'")
+        if self.validation not in ("block", "record", "none"):
+            raise bad("validation", "expected 'block', 'record' or 'none'")
+        if not 0 < self.validation_fraction < 0.5:
+            raise bad("validation_fraction", "expected 0 < fraction < 0.5")
+        lo, hi = self.soc_window
+        if not 0 <= lo < hi <= 1:
+            raise bad("soc_window", "expected [low, high] with 0 ≤ low < high ≤ 1")
+        if not 0 <= self.outside_weight <= 1:
+            raise bad("outside_weight", "expected 0…1")
+        if not 0.9 < self.max_pole < 1:
+            raise bad("max_pole", "expected 0.9 < max_pole < 1")
+        if self.ocv_knots < 3:
+            raise bad("ocv_knots", "expected ≥ 3")
+        return self
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
+    """Defaults, then the [train] table (or top level) of a TOML file, then overrides."""
+    values: dict = {}
+    if path is not None:
+        path = Path(path)
+        try:
+            doc = tomllib.loads(path.read_text(encoding="utf-8"))
+        except (OSError, tomllib.TOMLDecodeError) as exc:
+            raise ConfigError(f"{path}: cannot read the TOML configuration ({exc})") from exc
+        values.update(doc.get("train", doc))
+    values.update({k: v for k, v in overrides.items() if v is not None})
+    names = {f.name for f in dataclasses.fields(TrainConfig)}
+    unknown = sorted(set(values) - names)
+    if unknown:
+        raise ConfigError(f"{path or 'configuration'}: unknown setting(s) {unknown}; known: "
+                          f"{sorted(names)}")
+    return TrainConfig(**values).check()

@@ -1,0 +1,96 @@
+"""From records to the model-rate segments that training and evaluation step through."""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from training.records import DataError, Record
+from training.resample import resample_segment
+from training.soc import REST_CURRENT_A, coulomb_count, discharged_ah
+
+
+@dataclass
+class Segment:
+    """One gap-free stretch of a record at the model's sample time.
+
+    Sample k is the step ending at time_s[k]: current_a (A, > 0 charges) and voltage_v (V) are the
+    means over the step; soc_ref is the reference SoC at time_s[k]; soc0 the SoC at the start of
+    the first step; temperature_c in °C (None if unknown); weight the fit weight of each sample.
+    """
+
+    name: str
+    time_s: np.ndarray
+    current_a: np.ndarray
+    voltage_v: np.ndarray
+    temperature_c: np.ndarray | None
+    soc0: float
+    soc_ref: np.ndarray
+    weight: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.time_s.size)
+
+
+def starts_rested_full(rec: Record) -> bool:
+    """True where the record starts at rest at its highest rested voltage (within 5 mV)."""
+    rest = np.abs(rec.current_a) < REST_CURRENT_A
+    head = rec.time_s - rec.time_s[0] <= 10.0
+    if not rest[head].all():
+        return False
+    return bool(rec.voltage_v[0] >= rec.voltage_v[rest].max() - 0.005)
+
+
+def start_soc(rec: Record, soc0: float | None) -> float:
+    """The given start SoC, or 1.0 for a record that starts rested at full charge."""
+    if soc0 is not None:
+        return float(soc0)
+    if starts_rested_full(rec):
+        return 1.0
+    raise DataError(f"{rec.meta.source}: cannot tell the start SoC (the record does not start "
+                    "with a rest at its top voltage); give --soc0")
+
+
+def estimate_capacity(records: list[Record]) -> float:
+    """Largest net discharge (Ah) of the records that start full: a lower bound of capacity."""
+    full = [discharged_ah(r) for r in records if starts_rested_full(r)]
+    if not full or max(full) <= 0:
+        raise DataError("cannot estimate the capacity: no record starts full and discharges; "
+                        "give --capacity")
+    return max(full)
+
+
+def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_ah: float,
+                       soc_window: tuple[float, float] = (0.0, 1.0),
+                       outside_weight: float = 1.0) -> list[Segment]:
+    """Reference SoC by coulomb counting (tester counters where present), then each gap-free
+    segment resampled to the model rate."""
+    rec = rec.with_soc(coulomb_count(rec, soc0, capacity_ah))
+    temp = rec.temperature_or_chamber()
+    if temp is not None and rec.temperature_c is None:
+        rec.temperature_c = temp
+    out = []
+    for k, seg in enumerate(rec.segments()):
+        if seg.duration_s < 10 * sample_time_s:
+            continue
+        rs = resample_segment(seg, sample_time_s)
+        lo, hi = soc_window
+        w = np.where((rs.soc_ref >= lo) & (rs.soc_ref <= hi), 1.0, outside_weight)
+        name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"
+        out.append(Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
+                           float(seg.soc_ref[0]), rs.soc_ref, w))
+    if not out:
+        raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "
+                        f"time {sample_time_s} s")
+    return out
+
+
+def file_sha256(path: str | Path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()

@@ -1,0 +1,559 @@
+"""Incremental identification of the local model network (the paper's algorithm, generalised).
+
+1. OCV(SoC) and the hysteresis rate γ from a feedback-free pre-fit (training/ocvfit.py).
+2. Start with one local model fitted by (locally weighted) least squares on the one-step error.
+3. Repeat: take the local model with the largest weighted error (eq. 10–12), replace it by a node
+   and two children. The split starts deterministically as the best orthogonal split through the
+   leaf's weighted median along each partition axis; then the node's weights ψ are optimised by
+   Levenberg–Marquardt on the global loss (eq. 10) with the Jacobian of eq. 14–18, the two
+   children's parameters re-estimated by locally weighted least squares at every step. All other
+   nodes and local models stay as they are.
+4. After every split: one-step loss, AICc and free-run RMSE on the validation data are recorded;
+   the number of local models M is chosen from that curve.
+5. Final output-error refinement: all local models (and the OCV knots) by Levenberg–Marquardt on
+   the free-run simulation error, with sensitivities propagated through the output feedback.
+Local models with a pole outside max_pole are repaired (poles pulled in radially, the rest refit).
+Nothing is random: the same data and settings give the same model.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+from fmu_src.model import LmnModel
+from fmu_src.runtime import (
+    ExoSeries,
+    exo_series,
+    fixed_point,
+    initial_hysteresis,
+    recursion,
+    simulate_exo,
+)
+from training.config import TrainConfig
+from training.dataset import Segment
+from training.ocvfit import SMOOTHNESS, fit_ocv, hat_basis, second_difference
+
+HYSTERESIS_CANDIDATES = (10.0, 30.0, 100.0, 300.0)
+HYSTERESIS_MIN_GAIN = 0.03
+VALIDATION_BLOCKS = 5   # 'auto' keeps hysteresis only if it cuts the pre-fit RMSE by 3 %
+
+Progress = Callable[[str], None]
+
+
+def _quiet(_msg: str) -> None:
+    pass
+
+
+# ----- model skeletons -------------------------------------------------------------------
+def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: np.ndarray,
+             gamma: float | None, center: np.ndarray, scale: np.ndarray) -> LmnModel:
+    """A model with the configured structure, one local model of zeros and no split."""
+    d = len(cfg.partition)
+    current_sign = cfg.pre_partition == "current_sign"
+    roots = ([("charge", ("leaf", 0)), ("discharge", ("leaf", 1))] if current_sign
+             else [("all", ("leaf", 0))])
+    m = LmnModel(
+        sample_time_s=cfg.sample_time_s, capacity_ah=capacity_ah, ocv_soc=ocv_soc, ocv_v=ocv_v,
+        output_lags=cfg.output_lags, current_terms=cfg.current_terms,
+        filters=[(float(a), float(b)) for a, b in cfg.filters], hysteresis_gamma=gamma,
+        ocv_input=cfg.ocv_input, soc_input=cfg.soc_input, offset=True,
+        relative_ocv=cfg.output == "relative_ocv", partition_variables=list(cfg.partition),
+        partition_center=center, partition_scale=scale, roots=roots,
+        node_weights=np.zeros((0, d + 1)), node_children=[],
+        theta=np.zeros((len(roots), 1)), gating_mode=cfg.pre_partition,
+        rest_current_a=cfg.rest_current_a)
+    m.theta = np.zeros((len(roots), len(m.columns())))
+    m._build_paths()
+    return m
+
+
+@dataclass
+class Tree:
+    """The growing tree: roots, nodes (weights, children) and one θ row per leaf."""
+
+    roots: list[tuple[str, tuple[str, int]]]
+    weights: list[np.ndarray]
+    children: list[tuple[tuple[str, int], tuple[str, int]]]
+    theta: np.ndarray
+
+    def apply(self, base: LmnModel) -> LmnModel:
+        m = copy.copy(base)
+        m.roots = list(self.roots)
+        d = base.partition_center.size
+        m.node_weights = (np.vstack(self.weights) if self.weights
+                          else np.zeros((0, d + 1)))
+        m.node_children = list(self.children)
+        m.theta = self.theta.copy()
+        m._build_paths()
+        return m
+
+    def split(self, leaf: int, psi: np.ndarray, theta_a: np.ndarray,
+              theta_b: np.ndarray) -> Tree:
+        """Leaf `leaf` becomes a node whose first child is `leaf` (φ) and second a new leaf."""
+        new_leaf = self.theta.shape[0]
+        node = len(self.weights)
+
+        def swap(ref: tuple[str, int]) -> tuple[str, int]:
+            return ("node", node) if ref == ("leaf", leaf) else ref
+
+        t = Tree([(g, swap(c)) for g, c in self.roots], [*self.weights, psi.copy()],
+                 [(swap(a), swap(b)) for a, b in self.children], self.theta.copy())
+        t.children.append((("leaf", leaf), ("leaf", new_leaf)))
+        t.theta[leaf] = theta_a
+        t.theta = np.vstack([t.theta, theta_b])
+        return t
+
+
+# ----- design matrices -------------------------------------------------------------------
+@dataclass
+class Design:
+    """Stacked one-step regression data of all segments, plus per-segment simulation data."""
+
+    X: np.ndarray            # (N, p): measured output lags, then exogenous regressors
+    y: np.ndarray            # (N,) target: u − OCV(SoC) or u
+    Z: np.ndarray            # (N, d) normalised partition inputs
+    D: np.ndarray            # (N,) direction codes
+    w_fit: np.ndarray        # (N,) one-step fit weights (validation and first lags at 0)
+    w_val: np.ndarray        # (N,) validation weights
+    exo: list[ExoSeries] = field(default_factory=list)
+    bounds: list[tuple[int, int]] = field(default_factory=list)
+
+
+def _target(model: LmnModel, seg: Segment, soc: np.ndarray) -> np.ndarray:
+    return seg.voltage_v - model.ocv(soc) if model.relative_ocv else seg.voltage_v.copy()
+
+
+def _lags(y: np.ndarray, na: int) -> np.ndarray:
+    L = np.empty((y.size, na))
+    for l in range(1, na + 1):
+        L[:l, l - 1] = y[0]
+        L[l:, l - 1] = y[:-l]
+    return L
+
+
+def build_design(model: LmnModel, segs: list[Segment], val_masks: list[np.ndarray]) -> Design:
+    Xs, ys, Zs, Ds, wf, wv, exos, bounds = [], [], [], [], [], [], [], []
+    start = 0
+    for seg, vmask in zip(segs, val_masks, strict=True):
+        ex = exo_series(model, seg.current_a, seg.temperature_c, seg.soc0,
+                        h0=initial_hysteresis(seg.soc0))
+        y = _target(model, seg, ex.soc)
+        Xs.append(np.hstack([_lags(y, model.output_lags), ex.x]))
+        ys.append(y)
+        Zs.append(ex.z)
+        Ds.append(ex.direction)
+        w = seg.weight * ~vmask
+        w[: model.output_lags] = 0.0
+        wf.append(w)
+        wv.append(seg.weight * vmask)
+        exos.append(ex)
+        bounds.append((start, start + len(seg)))
+        start += len(seg)
+    return Design(np.vstack(Xs), np.concatenate(ys), np.vstack(Zs), np.concatenate(Ds),
+                  np.concatenate(wf), np.concatenate(wv), exos, bounds)
+
+
+# ----- local least squares and stability -------------------------------------------------
+def wls(X: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted least squares with a tiny relative ridge (for rank-deficient leaves)."""
+    Xw = X * w[:, None]
+    G = X.T @ Xw
+    ridge = 1e-9 * (np.trace(G) / G.shape[0] + 1e-12)
+    return np.linalg.solve(G + ridge * np.eye(G.shape[0]), Xw.T @ y)
+
+
+def poles(theta: np.ndarray, na: int) -> np.ndarray:
+    """Roots of z^na − a1·z^(na−1) − … − a_na of a local model."""
+    if na == 0:
+        return np.zeros(0)
+    return np.roots(np.concatenate([[1.0], -theta[:na]]))
+
+
+def stabilise(theta: np.ndarray, na: int, max_pole: float, X: np.ndarray | None = None,
+              y: np.ndarray | None = None, w: np.ndarray | None = None) -> np.ndarray:
+    """Pull poles beyond max_pole radially inside; refit the other parameters if data given."""
+    p = poles(theta, na)
+    if p.size == 0 or np.abs(p).max() <= max_pole:
+        return theta
+    scale = np.minimum(1.0, max_pole / np.maximum(np.abs(p), 1e-300))
+    a = -np.real(np.poly(p * scale))[1:]
+    out = theta.copy()
+    out[:na] = a
+    if X is not None and y is not None and w is not None and w.sum() > 0:
+        out[na:] = wls(X[:, na:], y - X[:, :na] @ a, w)
+    return out
+
+
+# ----- one split -------------------------------------------------------------------------
+def _sigmoid(a: np.ndarray) -> np.ndarray:
+    return 1.0 / (1.0 + np.exp(-a))
+
+
+@dataclass
+class SplitResult:
+    psi: np.ndarray
+    theta_a: np.ndarray
+    theta_b: np.ndarray
+    loss: float
+    loss_history: list[float]
+
+
+def _split_children(psi: np.ndarray, X: np.ndarray, y: np.ndarray, w: np.ndarray, Pj: np.ndarray,
+                    Z1: np.ndarray, r_rest: np.ndarray, na: int, max_pole: float):
+    phi = _sigmoid(Z1 @ psi)
+    wa, wb = w * Pj * phi, w * Pj * (1.0 - phi)
+    ta = stabilise(wls(X, y, wa), na, max_pole, X, y, wa)
+    tb = stabilise(wls(X, y, wb), na, max_pole, X, y, wb)
+    ya, yb = X @ ta, X @ tb
+    e = r_rest - Pj * (phi * ya + (1.0 - phi) * yb)
+    return ta, tb, ya, yb, phi, e, float(np.sum(w * e * e))
+
+
+def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, Pj: np.ndarray,
+                   r_rest: np.ndarray, cfg: TrainConfig) -> SplitResult | None:
+    """Best initial orthogonal split of one leaf, then Levenberg–Marquardt on its weights ψ."""
+    na, max_pole = cfg.output_lags, cfg.max_pole
+    sel = Pj > 1e-6 * Pj.max()
+    X, y, w, Z, Pj, r_rest = X[sel], y[sel], w[sel], Z[sel], Pj[sel], r_rest[sel]
+    Z1 = np.hstack([np.ones((Z.shape[0], 1)), Z])
+    wl = w * Pj
+    if wl.sum() <= 0:
+        return None
+    best = None
+    for axis in range(Z.shape[1]):
+        zc = Z[:, axis]
+        order = np.argsort(zc, kind="stable")
+        cum = np.cumsum(wl[order])
+        median = zc[order][np.searchsorted(cum, 0.5 * cum[-1])]
+        spread = float(np.sqrt(np.sum(wl * (zc - np.sum(wl * zc) / wl.sum())**2) / wl.sum()))
+        if spread < 1e-6:
+            continue
+        kappa = 2.0 / spread
+        psi = np.zeros(Z1.shape[1])
+        psi[0], psi[axis + 1] = -kappa * median, kappa
+        res = _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole)
+        if best is None or res[-1] < best[1]:
+            best = (psi, res[-1], axis, res)
+    if best is None:
+        return None
+    psi, loss, axis, res = best
+    free = np.arange(psi.size) if cfg.oblique else np.array([0, axis + 1])
+    lam, history = 1e-2, [loss]
+    ta, tb, ya, yb, phi, e, loss = res
+    for _ in range(cfg.lm_iterations):
+        F = (Pj * (ya - yb) * phi * (1.0 - phi))[:, None] * Z1[:, free]
+        H = F.T @ (F * w[:, None])
+        g = F.T @ (w * e)
+        improved = False
+        for _try in range(8):
+            step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
+            cand = psi.copy()
+            cand[free] += step
+            new = _split_children(cand, X, y, w, Pj, Z1, r_rest, na, max_pole)
+            if new[-1] < loss:
+                psi, (ta, tb, ya, yb, phi, e, loss) = cand, new
+                lam = max(lam / 3.0, 1e-9)
+                improved = True
+                break
+            lam *= 4.0
+        history.append(loss)
+        if not improved or history[-2] - loss < 1e-6 * history[-2]:
+            break
+    return SplitResult(psi, ta, tb, loss, history)
+
+
+# ----- free-run evaluation and stage metrics ---------------------------------------------
+def freerun_rmse(model: LmnModel, segs: list[Segment], design: Design,
+                 which: str = "val") -> float:
+    """Weighted free-run RMSE (V) over validation ('val') or fit ('fit') samples."""
+    num = den = 0.0
+    for seg, ex, (a, b) in zip(segs, design.exo, design.bounds, strict=True):
+        w = (design.w_val if which == "val" else design.w_fit)[a:b]
+        if w.sum() == 0:
+            continue
+        t0 = 25.0 if seg.temperature_c is None else float(seg.temperature_c[0])
+        sim = simulate_exo(model, ex, seg.soc0, initial_hysteresis(seg.soc0), t0)
+        err = seg.voltage_v - sim.voltage_v
+        if not np.isfinite(err).all():
+            return float("inf")
+        num += float(np.sum(w * err * err))
+        den += float(w.sum())
+    return float(np.sqrt(num / den)) if den else float("nan")
+
+
+def aicc(loss: float, n: float, n_params: int) -> float:
+    """Corrected Akaike criterion of a least-squares fit (loss = weighted sum of squares)."""
+    if n - n_params - 1 <= 0 or loss <= 0:
+        return float("inf")
+    return n * np.log(loss / n) + 2 * n_params + 2 * n_params * (n_params + 1) / (n - n_params - 1)
+
+
+def one_step(model: LmnModel, design: Design) -> tuple[np.ndarray, np.ndarray]:
+    Phi = model.validities(design.Z, design.D)
+    return Phi, np.sum(Phi * (design.X @ model.theta.T), axis=1)
+
+
+# ----- output-error refinement -----------------------------------------------------------
+def _sensitivity(A: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """S(k) = G(k) + Σ_l A(k,l)·S(k−l), S(k<0) = 0: ∂ŷ/∂params through the feedback."""
+    n, na = A.shape
+    S = np.empty_like(G)
+    for k in range(n):
+        row = G[k].copy()
+        for l in range(1, na + 1):
+            if k - l >= 0:
+                row += A[k, l - 1] * S[k - l]
+        S[k] = row
+    return S
+
+
+def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
+                        cfg: TrainConfig, progress: Progress) -> tuple[LmnModel, dict]:
+    """Levenberg–Marquardt on the free-run error of all segments (θ of every local model and,
+    for a relative-OCV model without OCV input, the OCV knots)."""
+    M, p = model.theta.shape
+    na = model.output_lags
+    with_ocv = model.relative_ocv and not model.ocv_input
+    knots = model.ocv_soc
+    K = knots.size if with_ocv else 0
+    w_all = [np.sqrt(design.w_fit[a:b] + design.w_val[a:b]) for a, b in design.bounds]
+    Phis = [model.validities(ex.z, ex.direction) for ex in design.exo]
+    Bs = [hat_basis(ex.soc, knots) for ex in design.exo] if with_ocv else []
+    h0s = [initial_hysteresis(s.soc0) for s in segs]
+    t0s = [25.0 if s.temperature_c is None else float(s.temperature_c[0]) for s in segs]
+    theta0 = model.theta.copy()
+    n_total = float(sum(float(np.sum(w * w)) for w in w_all))
+    lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
+    D2 = second_difference(K) if K >= 3 else np.zeros((0, K))
+    ridge = 1e-3
+    cache: dict = {}
+
+    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return x[: M * p].reshape(M, p), (x[M * p:] if with_ocv else model.ocv_v)
+
+    def evaluate(x: np.ndarray):
+        key = x.tobytes()
+        if key in cache:
+            return cache[key]
+        theta, ocv_v = unpack(x)
+        m = copy.copy(model)
+        m.theta, m.ocv_v = theta, ocv_v.copy()
+        res, jac = [], []
+        for seg, ex, Phi, sw, h0, t0, k in zip(segs, design.exo, Phis, w_all, h0s, t0s,
+                                               range(len(segs)), strict=True):
+            A = Phi @ theta[:, :na]
+            b = np.sum(Phi * (ex.x @ theta[:, na:].T), axis=1)
+            y0 = fixed_point(m, seg.soc0, t0, h0)
+            y = recursion(A, b, [y0] * na)
+            u = y + m.ocv(ex.soc) if m.relative_ocv else y
+            r = sw * (seg.voltage_v - u)
+            if not np.isfinite(r).all():
+                r = np.where(np.isfinite(r), r, 1e3)
+            res.append(r)
+            ylag = np.empty((y.size, na))
+            for l in range(1, na + 1):
+                ylag[:, l - 1] = np.concatenate([np.full(l, y0), y[:-l]])
+            Xs = np.hstack([ylag, ex.x])
+            G = (Phi[:, :, None] * Xs[:, None, :]).reshape(y.size, M * p)
+            S = _sensitivity(A, G)
+            J = -sw[:, None] * S
+            if with_ocv:
+                J = np.hstack([J, -sw[:, None] * Bs[k]])
+            jac.append(J)
+        x_extra = []
+        j_extra = []
+        reg = np.sqrt(ridge) * (theta - theta0).ravel()
+        x_extra.append(reg)
+        jr = np.zeros((M * p, M * p + K))
+        jr[:, : M * p] = np.sqrt(ridge) * np.eye(M * p)
+        j_extra.append(jr)
+        if with_ocv and D2.shape[0]:
+            x_extra.append(lam_ocv * D2 @ ocv_v)
+            jo = np.zeros((D2.shape[0], M * p + K))
+            jo[:, M * p:] = lam_ocv * D2
+            j_extra.append(jo)
+        out = (np.concatenate(res + x_extra), np.vstack(jac + j_extra))
+        cache.clear()
+        cache[key] = out
+        return out
+
+    x0 = np.concatenate([model.theta.ravel(), model.ocv_v if with_ocv else []])
+    r0 = evaluate(x0)[0]
+    t_start = time.perf_counter()
+    sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
+                        method="trf", x_scale="jac", max_nfev=cfg.oe_max_iterations,
+                        ftol=1e-8, xtol=1e-10, gtol=1e-10)
+    theta, ocv_v = unpack(sol.x)
+    theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])
+    out = copy.copy(model)
+    out.theta, out.ocv_v = theta, np.array(ocv_v, dtype=float)
+    info = {"initial_cost": float(0.5 * r0 @ r0), "final_cost": float(sol.cost),
+            "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
+            "status": int(sol.status)}
+    progress(f"  output-error refinement: cost {info['initial_cost']:.4g} → "
+             f"{info['final_cost']:.4g} in {sol.nfev} evaluations")
+    return out, info
+
+
+# ----- the whole identification ----------------------------------------------------------
+@dataclass
+class TrainResult:
+    model: LmnModel
+    curve: list[dict]
+    chosen_m: int
+    info: dict
+
+
+def validation_masks(segs: list[Segment], cfg: TrainConfig) -> list[np.ndarray]:
+    """Per segment, True on validation samples.
+
+    'block': VALIDATION_BLOCKS evenly spread time blocks that together hold validation_fraction
+    of each segment (so every SoC range is validated); 'record': the whole last segment.
+    """
+    masks = []
+    for k, seg in enumerate(segs):
+        mask = np.zeros(len(seg), dtype=bool)
+        if cfg.validation == "block":
+            n = len(seg)
+            width = cfg.validation_fraction * n / VALIDATION_BLOCKS
+            for b in range(VALIDATION_BLOCKS):
+                mid = (b + 0.5) * n / VALIDATION_BLOCKS
+                mask[int(mid - width / 2): int(mid + width / 2)] = True
+        elif cfg.validation == "record" and k == len(segs) - 1 and len(segs) > 1:
+            mask[:] = True
+        masks.append(mask)
+    return masks
+
+
+def choose_hysteresis(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
+                      masks: list[np.ndarray], progress: Progress):
+    """γ (or None) and the OCV pre-fit, per cfg.hysteresis."""
+    taus = sorted({t for f in cfg.filters for t in f} | {1000.0})
+    plain = [exo_series(base, s.current_a, s.temperature_c, s.soc0) for s in segs]
+    socs = [ex.soc for ex in plain]
+    weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
+    cur = [s.current_a for s in segs]
+    volt = [s.voltage_v for s in segs]
+
+    def prefit(gamma: float | None):
+        hyst = None
+        if gamma is not None:
+            mg = copy.copy(base)
+            mg.hysteresis_gamma = gamma
+            hyst = []
+            for s in segs:
+                ex = exo_series(mg, s.current_a, s.temperature_c, s.soc0)
+                hyst.append(ex.x[:, mg.columns().index("h(k)") - mg.output_lags])
+        return fit_ocv(socs, cur, volt, weights, hyst, cfg.sample_time_s, taus, cfg.ocv_knots)
+
+    if cfg.hysteresis == "off":
+        return None, prefit(None)
+    if cfg.hysteresis != "auto":
+        return float(cfg.hysteresis), prefit(float(cfg.hysteresis))
+    best_gamma, best = None, prefit(None)
+    progress(f"  OCV pre-fit without hysteresis: RMSE {1e3 * best.rmse_v:.2f} mV")
+    base_rmse = best.rmse_v
+    for g in HYSTERESIS_CANDIDATES:
+        fit = prefit(g)
+        progress(f"  OCV pre-fit with hysteresis γ={g:g}: RMSE {1e3 * fit.rmse_v:.2f} mV")
+        if fit.rmse_v < best.rmse_v:
+            best_gamma, best = g, fit
+    if best_gamma is not None and best.rmse_v > (1 - HYSTERESIS_MIN_GAIN) * base_rmse:
+        return None, prefit(None)
+    return best_gamma, best
+
+
+def partition_normalisation(cfg: TrainConfig, base: LmnModel,
+                            segs: list[Segment]) -> tuple[np.ndarray, np.ndarray]:
+    raw = np.vstack([exo_series(base, s.current_a, s.temperature_c, s.soc0).z for s in segs])
+    lo, hi = raw.min(axis=0), raw.max(axis=0)
+    center = 0.5 * (lo + hi)
+    scale = np.where(hi - lo > 1e-9, 0.5 * (hi - lo), 1.0)
+    return center, scale
+
+
+def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
+              progress: Progress = _quiet) -> TrainResult:
+    """Identify an LMN from model-rate segments (see the module docstring)."""
+    t_start = time.perf_counter()
+    d = len(cfg.partition)
+    base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,
+                    np.zeros(d), np.ones(d))
+    center, scale = partition_normalisation(cfg, base, segs)
+    masks = validation_masks(segs, cfg)
+    gamma, ocv = choose_hysteresis(cfg, base, segs, masks, progress)
+    progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
+             f"{1e3 * ocv.rmse_v:.2f} mV")
+    base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale)
+    design = build_design(base, segs, masks)
+    X, y, w = design.X, design.y, design.w_fit
+    n_eff = float(w.sum())
+    na = cfg.output_lags
+    n_roots = len(base.roots)
+    gates = base.leaf_gates
+    theta = np.vstack([stabilise(wls(X, y, w * _gate_weight(design, g)), na, cfg.max_pole, X, y,
+                                 w * _gate_weight(design, g)) for g in gates[:n_roots]])
+    tree = Tree(list(base.roots), [], [], theta)
+    stages: list[Tree] = []
+    curve: list[dict] = []
+    stop_stage = "validation" if cfg.stop == "validation" and cfg.validation != "none" else "aicc"
+    while True:
+        model = tree.apply(base)
+        Phi, yhat = one_step(model, design)
+        e = y - yhat
+        loss = float(np.sum(w * e * e))
+        n_par = model.theta.size + (d + 1) * len(tree.weights)
+        val = (freerun_rmse(model, segs, design, "val") if stop_stage == "validation"
+               else float("nan"))
+        fit_fr = freerun_rmse(model, segs, design, "fit")
+        curve.append({"local_models": model.n_local_models,
+                      "one_step_rmse_mv": 1e3 * float(np.sqrt(loss / n_eff)),
+                      "aicc": float(aicc(loss, n_eff, n_par)),
+                      "train_freerun_rmse_mv": 1e3 * fit_fr,
+                      "validation_freerun_rmse_mv": 1e3 * val})
+        stages.append(tree)
+        progress(f"  M={model.n_local_models}: one-step {curve[-1]['one_step_rmse_mv']:.2f} mV, "
+                 f"free-run train {1e3 * fit_fr:.2f} mV, validation {1e3 * val:.2f} mV "
+                 f"({time.perf_counter() - t_start:.1f} s)")
+        if model.n_local_models >= cfg.max_local_models:
+            break
+        leaf_err = np.sum(w[:, None] * Phi * e[:, None] ** 2, axis=0)
+        split = None
+        for j in np.argsort(-leaf_err, kind="stable"):
+            r_rest = y - (yhat - Phi[:, j] * (X @ model.theta[j]))
+            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg)
+            if split is not None:
+                tree = tree.split(int(j), split.psi, split.theta_a, split.theta_b)
+                break
+        if split is None:
+            progress("  no leaf can be split further")
+            break
+    key = "validation_freerun_rmse_mv" if stop_stage == "validation" else "aicc"
+    scores = np.array([c[key] for c in curve])
+    scores = np.where(np.isfinite(scores), scores, np.inf)
+    if key == "aicc":
+        chosen = int(np.argmin(scores))
+    else:
+        chosen = int(np.flatnonzero(scores <= 1.02 * scores.min())[0])
+    model = stages[chosen].apply(base)
+    progress(f"  chosen M={model.n_local_models} by {key}")
+    info = {"stop": key, "hysteresis_gamma": gamma, "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
+    if cfg.oe_refinement:
+        model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
+        info["refined_validation_freerun_rmse_mv"] = 1e3 * freerun_rmse(model, segs, design)
+        info["refined_train_freerun_rmse_mv"] = 1e3 * freerun_rmse(model, segs, design, "fit")
+    info["seconds"] = time.perf_counter() - t_start
+    return TrainResult(model, curve, model.n_local_models, info)
+
+
+def _gate_weight(design: Design, gate: str) -> np.ndarray:
+    if gate == "all":
+        return np.ones_like(design.y)
+    code = 1 if gate == "charge" else 2
+    return (design.D == code).astype(float)

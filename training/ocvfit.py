@@ -1,0 +1,77 @@
+"""OCV(SoC) and hysteresis pre-fit: a linear, feedback-free cell model solved by least squares.
+
+u(k) = OCV(SoC(k)) + r0·i(k) + Σ_τ g_τ·LP_τ(i)(k) + M·h_γ(k), with OCV piecewise linear over
+equally spaced SoC knots and a second-difference smoothness penalty. Because nothing is fed back,
+its equation error is its free-run error; it gives the LMN its OCV curve and chooses the
+hysteresis rate γ.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.signal import lfilter
+
+SMOOTHNESS = 3e-3   # penalty weight per knot, relative to the number of samples
+
+
+def hat_basis(soc: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """(N, K) linear-interpolation basis; SoC outside the knots is held at the end knot."""
+    s = np.clip(soc, knots[0], knots[-1])
+    k = np.clip(np.searchsorted(knots, s, side="right") - 1, 0, knots.size - 2)
+    frac = (s - knots[k]) / (knots[k + 1] - knots[k])
+    B = np.zeros((s.size, knots.size))
+    rows = np.arange(s.size)
+    B[rows, k] = 1.0 - frac
+    B[rows, k + 1] += frac
+    return B
+
+
+def second_difference(k: int) -> np.ndarray:
+    D = np.zeros((k - 2, k))
+    for r in range(k - 2):
+        D[r, r:r + 3] = (1.0, -2.0, 1.0)
+    return D
+
+
+def lowpass(current_a: np.ndarray, tau_s: float, ts: float) -> np.ndarray:
+    """First-order low-pass with unit DC gain, zero initial state (training-side helper)."""
+    a = np.exp(-ts / tau_s)
+    return lfilter([1.0 - a], [1.0, -a], current_a)
+
+
+@dataclass
+class OcvFit:
+    knots: np.ndarray
+    ocv_v: np.ndarray
+    rmse_v: float
+    coefficients: np.ndarray
+
+
+def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.ndarray],
+            weight: list[np.ndarray], hyst: list[np.ndarray] | None, ts: float,
+            taus_s: list[float], n_knots: int) -> OcvFit:
+    """Solve the pre-fit over several segments (lists of equal-length arrays per segment)."""
+    knots = np.linspace(0.0, 1.0, n_knots)
+    rows, targets, ws = [], [], []
+    for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
+        cols = [hat_basis(s, knots), i[:, None]]
+        cols += [lowpass(i, tau, ts)[:, None] for tau in taus_s]
+        if hyst is not None:
+            cols.append(hyst[k][:, None])
+        rows.append(np.hstack(cols))
+        targets.append(u)
+        ws.append(w)
+    X, y, w = np.vstack(rows), np.concatenate(targets), np.concatenate(ws)
+    sw = np.sqrt(w)
+    A = X * sw[:, None]
+    b = y * sw
+    D = np.zeros((n_knots - 2, X.shape[1]))
+    D[:, :n_knots] = second_difference(n_knots)
+    lam = SMOOTHNESS * max(float(w.sum()), 1.0)
+    G = A.T @ A + lam * D.T @ D + 1e-10 * np.eye(X.shape[1])
+    coef = np.linalg.solve(G, A.T @ b)
+    res = y - X @ coef
+    rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))
+    return OcvFit(knots, coef[:n_knots].copy(), rmse, coef)

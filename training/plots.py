@@ -1,0 +1,120 @@
+"""Figures people look at: fits and errors, validity functions, the M-selection curve, records."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from fmu_src.model import LmnModel  # noqa: E402
+from training.records import Record  # noqa: E402
+
+COLORS = {"measured": "k", "lmn": "tab:red", "arx": "tab:gray", "ecm2rc": "tab:blue",
+          "ecm2rc_hyst": "tab:green"}
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+
+
+def fit_figure(trace, path: Path, title: str = "", zoom_s: float = 600.0) -> Path:
+    """Measured vs simulated voltage over the record, a zoom, and the error (Fig. 7–10)."""
+    seg = trace.segment
+    t = (seg.time_s - seg.time_s[0]) / 3600.0
+    fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), constrained_layout=True)
+    ax = axes[0]
+    ax.plot(t, seg.voltage_v, color="k", lw=0.8, label="measured")
+    for name, v in trace.voltage.items():
+        ax.plot(t, v, color=COLORS.get(name), lw=0.7, label=name)
+    ax.set(ylabel="voltage / V", title=title or seg.name)
+    ax.legend(loc="lower left", ncol=5, fontsize=8)
+    k0 = int(np.argmax(np.abs(seg.current_a)))
+    lo = max(0, k0 - int(zoom_s / 2 / max(np.median(np.diff(seg.time_s)), 1e-9)))
+    hi = min(len(t), lo + int(zoom_s / max(np.median(np.diff(seg.time_s)), 1e-9)))
+    ax = axes[1]
+    ax.plot(t[lo:hi] * 60, seg.voltage_v[lo:hi], color="k", lw=1.0, label="measured")
+    for name, v in trace.voltage.items():
+        ax.plot(t[lo:hi] * 60, v[lo:hi], color=COLORS.get(name), lw=0.8, label=name)
+    ax.set(ylabel="voltage / V", xlabel="time / min", title="zoom around the largest current")
+    ax = axes[2]
+    for name, v in trace.voltage.items():
+        ax.plot(t, 1e3 * (v - seg.voltage_v), color=COLORS.get(name), lw=0.6, label=name)
+    ax.set(ylabel="model − measured / mV", xlabel="time / h")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.legend(loc="lower left", ncol=5, fontsize=8)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def validity_figure(model: LmnModel, path: Path) -> Path:
+    """Validity functions Φ_j over SoC (other partition inputs at their centre)."""
+    soc = np.linspace(0, 1, 401)
+    raw = np.tile(model.partition_center, (soc.size, 1))
+    if "soc" in model.partition_variables:
+        raw[:, model.partition_variables.index("soc")] = soc
+    gates = [("discharge", 2), ("charge", 1)] if model.gating_mode == "current_sign" else [
+        ("", 2)]
+    fig, axes = plt.subplots(len(gates), 1, figsize=(8, 3.2 * len(gates)), squeeze=False,
+                             constrained_layout=True)
+    for ax, (label, code) in zip(axes[:, 0], gates, strict=True):
+        Phi = model.validities(model.normalise(raw), np.full(soc.size, code))
+        for j in range(Phi.shape[1]):
+            if Phi[:, j].max() > 1e-3:
+                ax.plot(100 * soc, Phi[:, j], label=f"LM {j + 1}")
+        ax.set(xlabel="SoC / %", ylabel="validity Φ", ylim=(-0.02, 1.02),
+               title=f"validity functions {label}".strip())
+        ax.legend(fontsize=7, ncol=4)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
+    """One-step and free-run RMSE against the number of local models."""
+    m = [c["local_models"] for c in curve]
+    fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    ax.plot(m, [c["one_step_rmse_mv"] for c in curve], "o-", label="one-step (training)")
+    ax.plot(m, [c["train_freerun_rmse_mv"] for c in curve], "s-", label="free-run (training)")
+    val = [c["validation_freerun_rmse_mv"] for c in curve]
+    if np.isfinite(val).any():
+        ax.plot(m, val, "^-", label="free-run (validation)")
+    ax.axvline(chosen, color="k", ls="--", lw=0.8, label=f"chosen M = {chosen}")
+    ax.set(xlabel="number of local models M", ylabel="RMSE / mV", yscale="log")
+    ax.legend()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def record_figure(rec: Record, path: Path, soc: np.ndarray | None = None) -> Path:
+    """Current, voltage and SoC of a record over time (Fig. 6)."""
+    t = (rec.time_s - rec.time_s[0]) / 3600.0
+    soc = rec.soc_ref if soc is None else soc
+    n = 3 if soc is not None else 2
+    fig, axes = plt.subplots(n, 1, figsize=(10, 2.4 * n), sharex=True, constrained_layout=True)
+    axes[0].plot(t, rec.current_a, lw=0.5)
+    axes[0].set(ylabel="current / A", title=f"{rec.name} (current > 0 charges)")
+    axes[1].plot(t, rec.voltage_v, lw=0.5, color="k")
+    axes[1].set(ylabel="voltage / V")
+    if soc is not None:
+        axes[2].plot(t, 100 * soc, color="tab:green")
+        axes[2].set(ylabel="SoC / %")
+    axes[-1].set(xlabel="time / h")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def evaluation_figures(model: LmnModel, traces: list, out: Path) -> list[Path]:
+    files = [fit_figure(t, out / f"fit_{_safe(t.segment.name)}.png") for t in traces]
+    files.append(validity_figure(model, out / "validity.png"))
+    training = model.extra.get("training", {})
+    if training.get("curve"):
+        files.append(curve_figure(training["curve"], out / "local_models_curve.png",
+                                  model.n_local_models))
+    return files

@@ -1,0 +1,329 @@
+"""Readers for cycler files, chosen by content, each converting to charge-positive current.
+
+Formats: ``plett`` (ESC toolbox CSV, discharge positive), ``arbin`` (Arbin CSV export,
+discharge negative), ``panasonic`` (Kollmeyer ``.mat`` with struct ``meas``), ``bdf`` (Battery Data
+Format CSV, charge positive) and ``generic`` (CSV with an explicit column mapping). Files may be
+gzip-compressed (``.gz``).
+"""
+
+from __future__ import annotations
+
+import csv
+import gzip
+import io
+import re
+import warnings
+from collections.abc import Mapping
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+
+from training.records import DataError, Record, RecordMeta
+from training.resample import find_gaps
+
+FORMATS = ("plett", "arbin", "panasonic", "bdf", "generic")
+PLETT_COLUMNS = ("time", "step", "current", "voltage", "chgAh", "disAh")
+ARBIN_COLUMNS = ("Test_Time(s)", "Current(A)", "Voltage(V)", "Charge_Capacity(Ah)",
+                 "Discharge_Capacity(Ah)")
+BDF_TIME, BDF_VOLTAGE, BDF_CURRENT = "Test Time / s", "Voltage / V", "Current / A"
+BDF_AMBIENT, BDF_T1 = "Ambient Temperature / degC", "Temperature T1 / degC"
+BDF_NET_AH, BDF_SOC = "Net Capacity / Ah", "State of Charge / 1"
+GAP_FACTOR = 20.0       # a time step this many times the median step starts a new segment
+PAUSE_MIN_S = 60.0      # a wall-clock jump this much beyond the Time column marks a hidden pause
+
+
+class DataWarning(UserWarning):
+    """Data that loads but looks suspicious (units, sign)."""
+
+
+def chamber_temp_from_name(path: str | Path) -> float | None:
+    """Chamber temperature (°C) from a file name: A123 ``_N25_``/``_P45_`` or ``25degC``."""
+    name = Path(path).name
+    m = re.search(r"_([NP])(\d{2})(?:_|\.)", name)
+    if m:
+        return (-1.0 if m.group(1) == "N" else 1.0) * float(m.group(2))
+    m = re.search(r"(-?\d+)\s*deg\s*C", name, flags=re.IGNORECASE)
+    return float(m.group(1)) if m else None
+
+
+def _open_text(path: Path) -> io.TextIOBase:
+    if path.suffix == ".gz":
+        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8-sig", newline="")
+    return open(path, encoding="utf-8-sig", newline="")
+
+
+def _mat_path(path: Path) -> bool:
+    return path.name.endswith((".mat", ".mat.gz"))
+
+
+def detect_format(path: str | Path) -> str:
+    """Name of the reader for a file, from its content (header line or MATLAB signature)."""
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    if _mat_path(path):
+        return "panasonic"
+    with _open_text(path) as fh:
+        header = fh.readline().strip()
+    if not header:
+        raise DataError(f"{path}: the file is empty; expected a header line")
+    cols = [c.strip() for c in header.split(",")]
+    if cols[: len(PLETT_COLUMNS)] == list(PLETT_COLUMNS):
+        return "plett"
+    if all(c in cols for c in ARBIN_COLUMNS):
+        return "arbin"
+    if all(c in cols for c in (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)):
+        return "bdf"
+    raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
+                    f"{FORMATS[:4]} (use format='generic' with a column mapping)")
+
+
+def _read_csv_columns(path: Path, sep: str = ",") -> dict[str, np.ndarray]:
+    """Every column of a CSV file as float arrays, with row numbers in errors."""
+    with _open_text(path) as fh:
+        text = fh.read()
+    lines = [ln for ln in text.splitlines() if ln.strip()]
+    if not lines:
+        raise DataError(f"{path}: the file is empty; expected a header line and data rows")
+    header = [c.strip() for c in lines[0].split(sep)]
+    if len(lines) < 2:
+        raise DataError(f"{path}: the file has a header but no data rows")
+    rows = list(csv.reader((ln.replace(sep, ",") for ln in lines[1:]), skipinitialspace=True))
+    out: dict[str, np.ndarray] = {}
+    for j, name in enumerate(header):
+        col = np.empty(len(rows))
+        for r, row in enumerate(rows):
+            try:
+                col[r] = float(row[j])
+            except (ValueError, IndexError):
+                if j >= len(row):
+                    raise DataError(f"{path}: row {r + 2} has {len(row)} fields, expected "
+                                    f"{len(header)} (column '{name}' missing)") from None
+                col[r] = np.nan  # non-numeric cell (date strings etc.): checked where used
+                if name in _NUMERIC_REQUIRED:
+                    raise DataError(f"{path}: column '{name}' row {r + 2}: {row[j]!r} is not "
+                                    "a number") from None
+        out[name] = col
+    return out
+
+
+_NUMERIC_REQUIRED = {"time", "current", "voltage", "chgAh", "disAh", *ARBIN_COLUMNS, BDF_TIME,
+                     BDF_VOLTAGE, BDF_CURRENT}
+
+
+def _require(path: Path, cols: Mapping[str, np.ndarray], names: tuple[str, ...]) -> None:
+    missing = [n for n in names if n not in cols]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {missing}; found {list(cols)}")
+
+
+def _segment_starts_from_gaps(time_s: np.ndarray, current_a: np.ndarray | None = None,
+                              charge_ah: np.ndarray | None = None) -> list[int]:
+    return [0, *find_gaps(time_s, GAP_FACTOR, current_a, charge_ah).tolist()]
+
+
+def _meta(path: Path, fmt: str, sign_note: str, time_s: np.ndarray, **kw) -> RecordMeta:
+    dt = np.diff(time_s)
+    ts = float(np.median(dt)) if dt.size else float("nan")
+    return RecordMeta(source=str(path), fmt=fmt, sign_note=sign_note, sample_time_s=ts,
+                      chamber_temp_c=chamber_temp_from_name(path), **kw)
+
+
+def read_plett(path: Path) -> Record:
+    """Plett ESC toolbox CSV: ``time, step, current, voltage, chgAh, disAh``; discharge > 0."""
+    cols = _read_csv_columns(path, sep=",")
+    _require(path, cols, PLETT_COLUMNS)
+    t = cols["time"] - cols["time"][0]
+    cur, ah = -cols["current"], cols["chgAh"] - cols["disAh"]
+    return Record(t, cur, cols["voltage"],
+                  _meta(path, "plett", "current negated (file: discharge > 0)", cols["time"],
+                        segment_starts=_segment_starts_from_gaps(t, cur, ah)),
+                  charge_ah=ah)
+
+
+def read_arbin(path: Path) -> Record:
+    """Arbin CSV export (``Test_Time(s)``, ``Current(A)``, …); discharge < 0 already."""
+    cols = _read_csv_columns(path)
+    _require(path, cols, ARBIN_COLUMNS)
+    t = cols["Test_Time(s)"]
+    ah = cols["Charge_Capacity(Ah)"] - cols["Discharge_Capacity(Ah)"]
+    return Record(t - t[0], cols["Current(A)"], cols["Voltage(V)"],
+                  _meta(path, "arbin", "none (file: charge > 0)", t,
+                        segment_starts=_segment_starts_from_gaps(t, cols["Current(A)"], ah)),
+                  charge_ah=ah)
+
+
+def _parse_timestamps(stamps: np.ndarray) -> np.ndarray:
+    """Wall-clock ``M/D/YYYY h:mm:ss AM`` strings to seconds since the first one."""
+    flat = [str(np.ravel(s)[0]) if np.size(s) else "" for s in np.ravel(stamps)]
+    cache: dict[str, float] = {}
+    out = np.empty(len(flat))
+    for k, s in enumerate(flat):
+        if s not in cache:
+            fmt = "%m/%d/%Y %I:%M:%S %p" if ":" in s else "%m/%d/%Y"  # midnight has no time
+            cache[s] = datetime.strptime(s, fmt).timestamp()
+        out[k] = cache[s]
+    return out - out[0]
+
+
+def read_panasonic(path: Path) -> Record:
+    """Kollmeyer Panasonic 18650PF ``.mat`` (struct ``meas``); discharge < 0 already.
+
+    Duplicate time stamps are dropped (counted in meta.notes). Gaps in ``Time`` and pauses that only
+    ``TimeStamp`` shows start new segments (meta.segment_starts); ``Ah`` carries charge across.
+    """
+    import scipy.io
+
+    try:
+        if path.suffix == ".gz":
+            with gzip.open(path, "rb") as fh:
+                mat = scipy.io.loadmat(io.BytesIO(fh.read()))
+        else:
+            mat = scipy.io.loadmat(str(path))
+    except Exception as exc:  # scipy raises several types for corrupt files
+        raise DataError(f"{path}: not a readable MATLAB file ({exc})") from exc
+    if "meas" not in mat:
+        raise DataError(f"{path}: no struct 'meas' in the MATLAB file; found "
+                        f"{[k for k in mat if not k.startswith('__')]}")
+    meas = mat["meas"][0, 0]
+    fields = meas.dtype.names or ()
+    need = ("Time", "Voltage", "Current", "Ah")
+    missing = [f for f in need if f not in fields]
+    if missing:
+        raise DataError(f"{path}: struct 'meas' lacks field(s) {missing}; found {list(fields)}")
+    t = np.asarray(meas["Time"], dtype=float).ravel()
+    keep = np.ones(t.size, dtype=bool)
+    keep[1:] = np.diff(t) > 0
+    notes = []
+    if (~keep).any():
+        back = np.flatnonzero(np.diff(t) < 0)
+        if back.size:
+            raise DataError(f"{path}: field 'Time' decreases at row {int(back[0]) + 1} "
+                            f"({t[back[0]]!r} s then {t[back[0] + 1]!r} s); expected "
+                            "increasing time")
+        notes.append(f"dropped {int((~keep).sum())} sample(s) with a repeated time stamp")
+
+    def field_(name: str) -> np.ndarray:
+        return np.asarray(meas[name], dtype=float).ravel()[keep]
+
+    t = t[keep]
+    starts = set(_segment_starts_from_gaps(t, field_("Current"), field_("Ah")))
+    if "TimeStamp" in fields:
+        wall = _parse_timestamps(np.ravel(meas["TimeStamp"])[keep])
+        hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
+        for k in hidden:
+            notes.append(f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at row {k}")
+        starts |= set(hidden.tolist())
+    temp = field_("Battery_Temp_degC") if "Battery_Temp_degC" in fields else None
+    if temp is not None and not np.isfinite(temp).all():
+        notes.append("Battery_Temp_degC has non-finite samples: temperature not used")
+        temp = None
+    meta = _meta(path, "panasonic", "none (file: charge > 0)", t,
+                 segment_starts=sorted(starts), notes=notes)
+    if "Chamber_Temp_degC" in fields:
+        chamber = field_("Chamber_Temp_degC")
+        if np.isfinite(chamber).any():
+            meta.chamber_temp_c = float(np.nanmedian(chamber))
+    return Record(t - t[0], field_("Current"), field_("Voltage"), meta, temperature_c=temp,
+                  charge_ah=field_("Ah"))
+
+
+def read_bdf(path: Path) -> Record:
+    """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …)."""
+    cols = _read_csv_columns(path)
+    _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
+    t = cols[BDF_TIME]
+    temp = cols.get(BDF_T1, cols.get(BDF_AMBIENT))
+    return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE],
+                  _meta(path, "bdf", "none (BDF: charge > 0)", t,
+                        segment_starts=_segment_starts_from_gaps(
+                            t, cols[BDF_CURRENT], cols.get(BDF_NET_AH))),
+                  temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
+
+
+def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
+                 current_scale: float = 1.0, sep: str = ",") -> Record:
+    """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}.
+
+    current_scale multiplies the current (0.001 for a file in mA); discharge_positive negates it.
+    """
+    for key in ("time", "current", "voltage"):
+        if key not in columns:
+            raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)})")
+    cols = _read_csv_columns(path, sep=sep)
+    _require(path, cols, tuple(columns.values()))
+    t = cols[columns["time"]]
+    cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
+    note = "current negated (file: discharge > 0)" if discharge_positive else "none"
+    temp = cols[columns["temperature"]] if "temperature" in columns else None
+    return Record(t - t[0], cur, cols[columns["voltage"]],
+                  _meta(path, "generic", note, t,
+                        segment_starts=_segment_starts_from_gaps(t, cur)),
+                  temperature_c=temp)
+
+
+_READERS = {"plett": read_plett, "arbin": read_arbin, "panasonic": read_panasonic,
+            "bdf": read_bdf}
+
+
+def check_plausibility(rec: Record) -> None:
+    """Warn (DataWarning) where units or the sign of the current look wrong."""
+    src = rec.meta.source
+    vmax = float(np.max(np.abs(rec.voltage_v)))
+    if vmax > 100:
+        warnings.warn(f"{src}: voltage reaches {vmax:.0f}; values look like mV, expected V "
+                      "for a single cell", DataWarning, stacklevel=3)
+    imax = float(np.max(np.abs(rec.current_a)))
+    if imax > 500:
+        warnings.warn(f"{src}: current reaches {imax:.0f}; values look like mA, expected A "
+                      "(use current_scale=0.001)", DataWarning, stacklevel=3)
+    di, dv = np.diff(rec.current_a), np.diff(rec.voltage_v)
+    steps = np.abs(di) > 0.2 * max(imax, 1e-9)
+    if steps.sum() >= 5:
+        agree = float(np.mean(np.sign(di[steps]) == np.sign(dv[steps])))
+        if agree < 0.2:
+            warnings.warn(f"{src}: the voltage falls when the current rises in "
+                          f"{100 * (1 - agree):.0f} % of current steps; the sign looks "
+                          "inverted (expected current > 0 to charge)", DataWarning,
+                          stacklevel=3)
+
+
+def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Record:
+    """Read one cycler file into a Record (SI units, current > 0 charges).
+
+    fmt: one of FORMATS, or None to choose by content. generic_kw go to read_generic.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise DataError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: the file is empty")
+    if fmt is None:
+        fmt = detect_format(path)
+    if fmt == "generic":
+        rec = read_generic(path, **generic_kw)
+    elif fmt in _READERS:
+        rec = _READERS[fmt](path)
+    else:
+        raise DataError(f"{path}: unknown format {fmt!r}; expected one of {FORMATS}")
+    check_plausibility(rec)
+    return rec
+
+
+def write_bdf(rec: Record, path: str | Path) -> Path:
+    """Write a record as Battery Data Format CSV (current > 0 charges), full float precision."""
+    path = Path(path)
+    names = [BDF_TIME, BDF_VOLTAGE, BDF_CURRENT]
+    arrays = [rec.time_s, rec.voltage_v, rec.current_a]
+    for name, arr in ((BDF_T1, rec.temperature_c), (BDF_NET_AH, rec.charge_ah),
+                      (BDF_SOC, rec.soc_ref)):
+        if arr is not None:
+            names.append(name)
+            arrays.append(arr)
+    opener = gzip.open if path.suffix == ".gz" else open
+    with opener(path, "wt", encoding="utf-8", newline="") as fh:
+        fh.write(",".join(names) + "\n")
+        for row in zip(*arrays, strict=True):
+            fh.write(",".join(repr(float(v)) for v in row) + "\n")
+    return path

@@ -1,0 +1,139 @@
+"""The measured time series every part of LMNCell works on.
+
+Conventions: SI units (s, A, V, Ah, °C); current > 0 charges the cell; SoC is a fraction 0…1.
+A record keeps its own time base. Records are never glued together: each starts its own lag
+buffers and SoC integration.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+class DataError(ValueError):
+    """Bad measurement data; the message names the file, the column or row and what was expected."""
+
+
+@dataclass
+class RecordMeta:
+    """Where a record came from and what was done to it on loading."""
+
+    source: str
+    fmt: str
+    sign_note: str = ""
+    sample_time_s: float = float("nan")
+    chamber_temp_c: float | None = None
+    segment_starts: list[int] = field(default_factory=lambda: [0])
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+@dataclass
+class Record:
+    """One measured time series.
+
+    time_s: s, strictly increasing. current_a: A, > 0 charges. voltage_v: terminal voltage, V.
+    temperature_c: measured cell temperature in °C, or None. soc_ref: SoC reference (0…1) or None.
+    charge_ah: net charge into the cell since the record start from the tester's counters (Ah,
+    > 0 charged), or None. meta.segment_starts: indices where a new segment begins after a gap or
+    a pause hidden in the time column (the cell state carries over, the lag buffers do not).
+    """
+
+    time_s: np.ndarray
+    current_a: np.ndarray
+    voltage_v: np.ndarray
+    meta: RecordMeta
+    temperature_c: np.ndarray | None = None
+    soc_ref: np.ndarray | None = None
+    charge_ah: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        validate_record(self)
+
+    @property
+    def name(self) -> str:
+        return self.meta.source.replace("\\", "/").rsplit("/", 1)[-1]
+
+    def __len__(self) -> int:
+        return int(self.time_s.size)
+
+    @property
+    def duration_s(self) -> float:
+        return float(self.time_s[-1] - self.time_s[0]) if len(self) else 0.0
+
+    def temperature_or_chamber(self) -> np.ndarray | None:
+        """Measured temperature, else the chamber set point as a constant, else None (°C)."""
+        if self.temperature_c is not None:
+            return self.temperature_c
+        if self.meta.chamber_temp_c is not None:
+            return np.full(len(self), float(self.meta.chamber_temp_c))
+        return None
+
+    def slice(self, start: int, stop: int, note: str = "") -> Record:
+        """Samples start:stop as a new record (counters and SoC kept as they are)."""
+
+        def cut(a: np.ndarray | None) -> np.ndarray | None:
+            return None if a is None else a[start:stop].copy()
+
+        starts = [s - start for s in self.meta.segment_starts if start <= s < stop]
+        if 0 not in starts:
+            starts = [0, *starts]
+        meta = dataclasses.replace(
+            self.meta, segment_starts=starts, notes=[*self.meta.notes, note] if note else
+            list(self.meta.notes))
+        return Record(self.time_s[start:stop].copy(), self.current_a[start:stop].copy(),
+                      self.voltage_v[start:stop].copy(), meta, cut(self.temperature_c),
+                      cut(self.soc_ref), cut(self.charge_ah))
+
+    def segments(self) -> list[Record]:
+        """The record split where meta.segment_starts marks a gap or a hidden pause."""
+        bounds = [*sorted(set(self.meta.segment_starts) | {0}), len(self)]
+        return [self.slice(a, b, f"segment {k} of {self.name}")
+                for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)) if b - a > 1]
+
+    def with_soc(self, soc: np.ndarray) -> Record:
+        """A copy with soc_ref replaced."""
+        return dataclasses.replace(self, soc_ref=np.asarray(soc, dtype=float))
+
+
+def _check_finite(name: str, values: np.ndarray, source: str) -> None:
+    bad = ~np.isfinite(values)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise DataError(f"{source}: column '{name}' has {int(bad.sum())} NaN or infinite "
+                        f"value(s), first at row {row} (value {values[row]!r}); expected finite "
+                        "numbers")
+
+
+def validate_record(rec: Record) -> None:
+    """Raise DataError unless the record is complete, finite and strictly increasing in time."""
+    src = rec.meta.source
+    n = rec.time_s.size
+    if n == 0:
+        raise DataError(f"{src}: the record is empty (no samples)")
+    for name in ("time_s", "current_a", "voltage_v", "temperature_c", "soc_ref", "charge_ah"):
+        arr = getattr(rec, name)
+        if arr is None:
+            continue
+        arr = np.asarray(arr, dtype=float)
+        object.__setattr__(rec, name, arr)
+        if arr.shape != (n,):
+            raise DataError(f"{src}: column '{name}' has shape {arr.shape}, expected ({n},) "
+                            "like 'time_s'")
+        _check_finite(name, arr, src)
+    dt = np.diff(rec.time_s)
+    if (dt <= 0).any():
+        row = int(np.flatnonzero(dt <= 0)[0]) + 1
+        kind = "repeated" if dt[row - 1] == 0 else "decreasing (a time reset?)"
+        raise DataError(f"{src}: column 'time_s' is {kind} at row {row}: "
+                        f"{rec.time_s[row - 1]!r} s then {rec.time_s[row]!r} s; expected "
+                        "strictly increasing time")
+    if rec.soc_ref is not None and ((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05)).any():
+        row = int(np.flatnonzero((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05))[0])
+        raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected a "
+                        "fraction within 0…1 (check start SoC and capacity)")

@@ -1,0 +1,103 @@
+"""SoC reference, capacity and open-circuit-voltage curves from measurements.
+
+SoC(t) = SoC0 + ∫ i dτ / (3600·Cn), current > 0 charges, capacity Cn in Ah, SoC a fraction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from training.records import DataError, Record
+
+REST_CURRENT_A = 0.02
+
+
+def charge_throughput_ah(rec: Record, use_counters: bool = True) -> np.ndarray:
+    """Net charge into the cell since the record start (Ah, > 0 charged).
+
+    Uses the tester's counters where the record has them (they integrate at the tester's own rate);
+    otherwise integrates the logged current, held from each sample to the next.
+    """
+    if use_counters and rec.charge_ah is not None:
+        return rec.charge_ah - rec.charge_ah[0]
+    dt = np.diff(rec.time_s, prepend=rec.time_s[0])
+    held = np.concatenate([[0.0], rec.current_a[:-1]])
+    return np.cumsum(held * dt) / 3600.0
+
+
+def coulomb_count(rec: Record, soc0: float, capacity_ah: float,
+                  use_counters: bool = True) -> np.ndarray:
+    """SoC over the record from soc0 (fraction) and capacity (Ah)."""
+    if not 0.0 <= soc0 <= 1.0:
+        raise DataError(f"{rec.meta.source}: soc0={soc0!r}; expected a fraction within 0…1")
+    if not capacity_ah > 0:
+        raise DataError(f"{rec.meta.source}: capacity_ah={capacity_ah!r}; expected > 0 Ah")
+    return soc0 + charge_throughput_ah(rec, use_counters) / capacity_ah
+
+
+def starts_full(rec: Record, v_full: float, tol_v: float = 0.08, rest_s: float = 10.0) -> bool:
+    """True where the record starts with a rest at (or near) the top-of-charge voltage v_full."""
+    t = rec.time_s - rec.time_s[0]
+    head = t <= max(rest_s, float(t[min(1, len(t) - 1)]))
+    resting = np.abs(rec.current_a[head]) < REST_CURRENT_A
+    return bool(resting.all() and rec.voltage_v[0] >= v_full - tol_v)
+
+
+def discharged_ah(rec: Record) -> float:
+    """Net charge removed over the record (Ah, > 0 for a net discharge)."""
+    return float(-charge_throughput_ah(rec)[-1])
+
+
+def capacity_from_discharge(*records: Record) -> float:
+    """Capacity (Ah) from consecutive records that go from full to empty (e.g. A123 s1 then s2)."""
+    total = sum(discharged_ah(r) for r in records)
+    if total <= 0:
+        names = ", ".join(r.name for r in records)
+        raise DataError(f"{names}: no net discharge ({total:.4f} Ah); expected records that run "
+                        "from full to empty")
+    return total
+
+
+@dataclass
+class OcvCurve:
+    """OCV over SoC (V over fraction) with the charge and discharge branches and their mean."""
+
+    soc: np.ndarray
+    discharge_v: np.ndarray
+    charge_v: np.ndarray
+
+    @property
+    def mean_v(self) -> np.ndarray:
+        return 0.5 * (self.discharge_v + self.charge_v)
+
+    @property
+    def hysteresis_v(self) -> np.ndarray:
+        """Half the gap between the branches (V)."""
+        return 0.5 * (self.charge_v - self.discharge_v)
+
+
+def _branch(rec: Record, capacity_ah: float, soc0: float, grid: np.ndarray,
+            sign: float) -> np.ndarray:
+    """Voltage over the SoC grid for the part of a slow test with current of the given sign."""
+    soc = coulomb_count(rec, soc0, capacity_ah)
+    sel = sign * rec.current_a > REST_CURRENT_A
+    if sel.sum() < 10:
+        raise DataError(f"{rec.meta.source}: fewer than 10 samples with "
+                        f"{'charge' if sign > 0 else 'discharge'} current; expected a slow test")
+    s, v = soc[sel], rec.voltage_v[sel]
+    order = np.argsort(s, kind="stable")
+    s, v = s[order], v[order]
+    s_u, idx = np.unique(s, return_index=True)
+    return np.interp(grid, s_u, v[idx])
+
+
+def ocv_from_slow_tests(discharge: Record, charge: Record, capacity_ah: float,
+                        discharge_soc0: float = 1.0, charge_soc0: float = 0.0,
+                        points: int = 101) -> OcvCurve:
+    """Charge and discharge OCV branches from slow (C/20, C/30) tests; beyond the measured SoC
+    range of a branch its last value is held."""
+    grid = np.linspace(0.0, 1.0, points)
+    return OcvCurve(grid, _branch(discharge, capacity_ah, discharge_soc0, grid, -1.0),
+                    _branch(charge, capacity_ah, charge_soc0, grid, +1.0))

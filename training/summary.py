@@ -1,0 +1,95 @@
+"""`lmncell inspect`: one summary per record, optionally a plot of current, voltage and SoC."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from training.dataset import starts_rested_full
+from training.readers import read_record
+from training.records import Record
+from training.soc import charge_throughput_ah
+
+NOMINAL_AH = {"A123": 2.3, "Pan18650PF": 2.9}
+
+
+def nominal_capacity(rec: Record) -> float | None:
+    for key, cap in NOMINAL_AH.items():
+        if key in rec.name:
+            return cap
+    return None
+
+
+def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
+    """Duration, sample time, current (A and C-rate), voltage, SoC swing and temperature."""
+    cap = capacity_ah or nominal_capacity(rec)
+    q = charge_throughput_ah(rec)
+    out = {
+        "file": rec.meta.source, "format": rec.meta.fmt, "samples": len(rec),
+        "duration_s": rec.duration_s, "sample_time_s": rec.meta.sample_time_s,
+        "segments": len(rec.meta.segment_starts), "sign": rec.meta.sign_note,
+        "current_a": [float(rec.current_a.min()), float(rec.current_a.max())],
+        "voltage_v": [float(rec.voltage_v.min()), float(rec.voltage_v.max())],
+        "net_charge_ah": float(q[-1]), "charge_range_ah": [float(q.min()), float(q.max())],
+        "starts_full": starts_rested_full(rec),
+        "chamber_temp_c": rec.meta.chamber_temp_c, "notes": rec.meta.notes,
+    }
+    if cap:
+        out["capacity_ah_assumed"] = cap
+        out["c_rate"] = [out["current_a"][0] / cap, out["current_a"][1] / cap]
+        if out["starts_full"]:
+            soc = 1.0 + q / cap
+            out["soc_range"] = [float(soc.min()), float(soc.max())]
+    if rec.temperature_c is not None:
+        out["temperature_c"] = [float(np.min(rec.temperature_c)),
+                                float(np.max(rec.temperature_c))]
+    return out
+
+
+def format_summary(s: dict) -> str:
+    def rng(v: list[float], fmt: str) -> str:
+        return f"{v[0]:{fmt}} … {v[1]:{fmt}}"
+
+    lines = [f"{s['file']}  [{s['format']}]",
+             f"  {s['samples']} samples, {s['duration_s'] / 3600:.2f} h, sample time "
+             f"{s['sample_time_s']:.3g} s, {s['segments']} segment(s); sign: {s['sign']}",
+             f"  current {rng(s['current_a'], '.3f')} A"
+             + (f" ({rng(s['c_rate'], '.2f')} C at {s['capacity_ah_assumed']} Ah)"
+                if "c_rate" in s else ""),
+             f"  voltage {rng(s['voltage_v'], '.4f')} V; net charge {s['net_charge_ah']:+.4f} Ah",
+             ]
+    if "soc_range" in s:
+        lines.append(f"  SoC {rng([100 * x for x in s['soc_range']], '.1f')} % (starts full)")
+    temp = s.get("temperature_c")
+    if temp:
+        lines.append(f"  temperature {rng(temp, '.1f')} °C")
+    if s["chamber_temp_c"] is not None and not (isinstance(s["chamber_temp_c"], float)
+                                                and math.isnan(s["chamber_temp_c"])):
+        lines.append(f"  chamber {s['chamber_temp_c']:.0f} °C")
+    lines += [f"  note: {n}" for n in s["notes"]]
+    return "\n".join(lines)
+
+
+def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
+                  capacity_ah: float | None = None) -> list[dict]:
+    """Print a summary of every file; with plot, one figure per file (suffix _k for several)."""
+    out = []
+    for k, p in enumerate(paths):
+        rec = read_record(p)
+        s = summarise(rec, capacity_ah)
+        print(format_summary(s), flush=True)
+        out.append(s)
+        if plot is not None:
+            from training.plots import record_figure
+
+            target = Path(plot)
+            if len(paths) > 1:
+                target = target.with_name(f"{target.stem}_{k}{target.suffix}")
+            soc = None
+            if s.get("soc_range"):
+                soc = 1.0 + charge_throughput_ah(rec) / s["capacity_ah_assumed"]
+            record_figure(rec, target, soc)
+            print(f"  plot: {target}")
+    return out
