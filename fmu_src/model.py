@@ -184,7 +184,7 @@ def _get(doc: dict, key: str, where: str, kind: type | tuple[type, ...]):
     if key not in doc:
         raise ModelFileError(f"{where}: missing key '{key}'")
     val = doc[key]
-    if not isinstance(val, kind) or isinstance(val, bool) and kind is not bool:
+    if not isinstance(val, kind) or (isinstance(val, bool) and kind is not bool):
         raise ModelFileError(f"{where}: key '{key}' is {type(val).__name__}, expected "
                              f"{getattr(kind, '__name__', kind)}")
     return val
@@ -259,10 +259,15 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         raise ModelFileError(f"{source}: partition center/scale need {d} entries, scale > 0")
     tree = _get(doc, "tree", source, dict)
     nodes = _get(tree, "nodes", f"{source}: tree", list)
-    weights = np.asarray([n.get("weights") for n in nodes], dtype=float).reshape(len(nodes), -1)
-    if nodes and weights.shape[1] != d + 1:
-        raise ModelFileError(f"{source}: tree node weights have {weights.shape[1]} entries, "
-                             f"expected {d + 1} (bias + one per partition variable)")
+    try:
+        weights = (np.asarray([n.get("weights") for n in nodes], dtype=float) if nodes
+                   else np.zeros((0, d + 1)))
+    except (TypeError, ValueError, AttributeError) as exc:
+        raise ModelFileError(f"{source}: tree node weights are not numeric arrays") from exc
+    if weights.ndim != 2 or weights.shape[1] != d + 1 or not np.isfinite(weights).all():
+        raise ModelFileError(f"{source}: tree node weights have shape {weights.shape}, "
+                             f"expected (nodes, {d + 1}) finite values (bias + one per "
+                             "partition variable)")
     children = []
     for k, n in enumerate(nodes):
         ch = n.get("children")

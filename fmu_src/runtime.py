@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fmu_src.model import LmnModel
+from .model import LmnModel
 
 CHARGE, DISCHARGE = 1, 2
 

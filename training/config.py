@@ -73,8 +73,8 @@ class TrainConfig:
         for f in self.filters:
             if len(f) != 2 or not 0 < f[0] < f[1]:
                 raise bad("filters", "expected pairs [tau_fast_s, tau_slow_s], 0 < fast < slow")
-        if not (self.hysteresis in ("auto", "off") or isinstance(self.hysteresis, (int, float))
-                and self.hysteresis > 0):
+        if not (self.hysteresis in ("auto", "off") or (isinstance(self.hysteresis, (int, float))
+                and self.hysteresis > 0)):
             raise bad("hysteresis", "expected 'auto', 'off' or a γ > 0")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")

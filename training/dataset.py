@@ -35,13 +35,23 @@ class Segment:
         return int(self.time_s.size)
 
 
+def rested_mask(rec: Record, min_rest_s: float = 60.0) -> np.ndarray:
+    """Samples inside rests (|i| < REST_CURRENT_A) that last at least min_rest_s, and the first
+    sample when the record starts at rest (a record that starts rested is rested at its start)."""
+    rest = np.abs(rec.current_a) < REST_CURRENT_A
+    out = np.zeros_like(rest)
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], rest.astype(int), [0]])))
+    for a, b in zip(edges[::2], edges[1::2], strict=True):
+        if rec.time_s[b - 1] - rec.time_s[a] >= min_rest_s:
+            out[a:b] = True
+    out[0] = rest[0]
+    return out
+
+
 def starts_rested_full(rec: Record) -> bool:
     """True where the record starts at rest at its highest rested voltage (within 5 mV)."""
-    rest = np.abs(rec.current_a) < REST_CURRENT_A
-    head = rec.time_s - rec.time_s[0] <= 10.0
-    if not rest[head].all():
-        return False
-    return bool(rec.voltage_v[0] >= rec.voltage_v[rest].max() - 0.005)
+    rested = rested_mask(rec)
+    return bool(rested[0] and rec.voltage_v[0] >= rec.voltage_v[rested].max() - 0.005)
 
 
 def start_soc(rec: Record, soc0: float | None) -> float:

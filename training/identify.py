@@ -556,4 +556,4 @@ def _gate_weight(design: Design, gate: str) -> np.ndarray:
     if gate == "all":
         return np.ones_like(design.y)
     code = 1 if gate == "charge" else 2
-    return (design.D == code).astype(float)
+    return (code == design.D).astype(float)

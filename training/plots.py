@@ -7,11 +7,11 @@ from pathlib import Path
 import matplotlib
 
 matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from fmu_src.model import LmnModel  # noqa: E402
-from training.records import Record  # noqa: E402
+from fmu_src.model import LmnModel
+from training.records import Record
 
 COLORS = {"measured": "k", "lmn": "tab:red", "arx": "tab:gray", "ecm2rc": "tab:blue",
           "ecm2rc_hyst": "tab:green"}

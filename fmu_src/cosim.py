@@ -1,0 +1,142 @@
+"""Co-simulation engine of the LMNCell FMU, independent of the FMI wrapper (numpy + stdlib).
+
+Communication steps and the model sample time Ts: inputs are held over each communication step.
+The engine integrates them; whenever a full Ts has been covered it takes one model step with the
+means over that Ts (a communication step that is a multiple of Ts gives that many sub-steps with
+the held input; a shorter or uneven step is accumulated exactly across calls). Outputs are those
+of the last completed model step. This is the resampling rule of training (step means), so the FMU
+and the pipeline see the same inputs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from .model import LmnModel
+from .runtime import CellStepper
+
+STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
+
+
+class InputError(ValueError):
+    """A non-finite or impossible input; the message names the variable."""
+
+
+@dataclass
+class Parameters:
+    soc0: float
+    capacity_ah: float
+    observer: int = 0
+
+
+class CellCosim:
+    """Holds a CellStepper, the partial-step accumulators and the trained-range flag."""
+
+    def __init__(self, model: LmnModel, params: Parameters) -> None:
+        self.model = model
+        self.params = params
+        self.reset()
+
+    def reset(self, temperature_c: float = 25.0) -> None:
+        p = self.params
+        if not 0.0 <= p.soc0 <= 1.0 or not math.isfinite(p.soc0):
+            raise InputError(f"parameter 'soc0' = {p.soc0!r}: expected a fraction within 0…1")
+        if not (math.isfinite(p.capacity_ah) and p.capacity_ah > 0):
+            raise InputError(f"parameter 'capacity' = {p.capacity_ah!r}: expected > 0 Ah")
+        self.stepper = CellStepper(self.model, p.soc0, p.capacity_ah, temperature_c)
+        self.covered_s = 0.0
+        self.charge_as = 0.0
+        self.temp_int = 0.0
+        self.volt_int = 0.0
+        self.volt_time = 0.0
+        self.out_of_range = False
+        self.range_message = ""
+        self.steps = 0
+
+    @property
+    def voltage_v(self) -> float:
+        return self.stepper.voltage_v
+
+    @property
+    def soc(self) -> float:
+        return self.stepper.soc
+
+    def check_range(self, current_a: float, temperature_c: float) -> str:
+        """'' when inside the trained region, else a message (the model still extrapolates)."""
+        lim = self.model.limits
+        msgs = []
+        lo, hi = lim.get("current_a", (-math.inf, math.inf))
+        if current_a < lo - 0.05 * abs(lo) - 1e-3 or current_a > hi + 0.05 * abs(hi) + 1e-3:
+            msgs.append(f"current {current_a:.3f} A outside the trained {lo:.3f}…{hi:.3f} A")
+        slo, shi = lim.get("soc", (-math.inf, math.inf))
+        soc = self.stepper.soc
+        if soc < slo - 0.02 or soc > shi + 0.02:
+            msgs.append(f"SoC {soc:.3f} outside the trained {slo:.3f}…{shi:.3f}")
+        tlo, thi = lim.get("temperature_c", (-math.inf, math.inf))
+        if "temperature" in self.model.partition_variables and not tlo - 2 <= temperature_c <= \
+                thi + 2:
+            msgs.append(f"temperature {temperature_c:.1f} °C outside the trained "
+                        f"{tlo:.1f}…{thi:.1f} °C")
+        return "; ".join(msgs)
+
+    def advance(self, step_s: float, current_a: float, temperature_c: float = 25.0,
+                voltage_measured_v: float = 0.0) -> int:
+        """Advance by one communication step with held inputs; returns model steps taken.
+
+        voltage_measured_v ≤ 0 means "not measured". Raises InputError (naming the variable)
+        before changing any state.
+        """
+        for name, val in (("current", current_a), ("temperature", temperature_c)):
+            if not math.isfinite(val):
+                raise InputError(f"input '{name}' = {val!r}: expected a finite number")
+        if not math.isfinite(step_s) or step_s <= 0:
+            raise InputError(f"communication step size {step_s!r}: expected > 0 s")
+        if not math.isfinite(voltage_measured_v):
+            raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
+                             "finite number (0 when not measured)")
+        ts = self.model.sample_time_s
+        remaining = step_s
+        taken = 0
+        while remaining > STEP_TOL * ts:
+            take = min(ts - self.covered_s, remaining)
+            self.covered_s += take
+            self.charge_as += current_a * take
+            self.temp_int += temperature_c * take
+            if voltage_measured_v > 0:
+                self.volt_int += voltage_measured_v * take
+                self.volt_time += take
+            remaining -= take
+            if self.covered_s >= ts * (1.0 - STEP_TOL):
+                self._model_step()
+                taken += 1
+        return taken
+
+    def _model_step(self) -> None:
+        ts = self.model.sample_time_s
+        i = self.charge_as / ts
+        temp = self.temp_int / ts
+        self.range_message = self.check_range(i, temp)
+        self.out_of_range = bool(self.range_message)
+        self.stepper.step(i, temp)
+        self.steps += 1
+        self.covered_s = self.charge_as = self.temp_int = 0.0
+        self.volt_int = self.volt_time = 0.0
+
+    # ----- state --------------------------------------------------------------------------
+    def get_state(self) -> dict:
+        return {"stepper": self.stepper.get_state(),
+                "acc": [self.covered_s, self.charge_as, self.temp_int, self.volt_int,
+                        self.volt_time],
+                "flags": [self.out_of_range, self.range_message, self.steps],
+                "params": [self.params.soc0, self.params.capacity_ah, self.params.observer]}
+
+    def set_state(self, state: dict) -> None:
+        soc0, cap, obs = state["params"]
+        self.params = Parameters(float(soc0), float(cap), int(obs))
+        self.stepper = CellStepper(self.model, self.params.soc0, self.params.capacity_ah)
+        self.stepper.set_state(list(state["stepper"]))
+        (self.covered_s, self.charge_as, self.temp_int, self.volt_int,
+         self.volt_time) = (float(x) for x in state["acc"])
+        self.out_of_range, self.range_message, self.steps = (
+            bool(state["flags"][0]), str(state["flags"][1]), int(state["flags"][2]))

@@ -1,0 +1,150 @@
+"""pythonfmu adapter: the LMNCell FMU's slave class, a thin layer over fmu_src.cosim.
+
+The build copies this package into the FMU's resources under a name unique to the model and
+generates a one-line module that subclasses LmnCellSlave, so that two LMNCell FMUs in one
+process each run their own code. The model file travels as resources/model.json.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+from pathlib import Path
+
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu.enums import Fmi2Status
+
+from .cosim import CellCosim, InputError, Parameters
+from .model import ModelFileError, load_model
+
+OBSERVERS = {0: "none"}
+
+
+class LmnCellSlave(Fmi2Slave):
+    """FMI 2.0 co-simulation slave of an LMN cell model (see GUIDE: FMU interface)."""
+
+    author = "LMNCell"
+    description = "Local model network battery cell model"
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(**kwargs)
+        self._dedupe_sys_path()
+        res = Path(self.resources) if self.resources else Path(__file__).resolve().parent.parent
+        self._model = load_model(res / "model.json")
+        m = self._model
+        self.current = 0.0
+        self.voltage_measured = 0.0
+        self.temperature = 25.0
+        self.soc0 = 1.0
+        self.capacity = float(m.capacity_ah)
+        self.observer = 0
+        self._cosim: CellCosim | None = None
+        self._failed = False
+        reg = self.register_variable
+        reg(Real("current", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
+                 description="cell current held over the step, > 0 charges [A]"))
+        reg(Real("voltage_measured", causality=Fmi2Causality.input,
+                 variability=Fmi2Variability.continuous,
+                 description="measured terminal voltage, mean over the step, for the observer; "
+                             "0 = not measured [V]"))
+        reg(Real("temperature", causality=Fmi2Causality.input,
+                 variability=Fmi2Variability.continuous, description="cell temperature [degC]"))
+        reg(Real("voltage", causality=Fmi2Causality.output,
+                 variability=Fmi2Variability.continuous,
+                 getter=lambda: self._out("voltage_v"),
+                 description="model terminal voltage of the last completed model step [V]"))
+        reg(Real("soc", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
+                 getter=lambda: self._out("soc"),
+                 description="state of charge (coulomb counting) [1]"))
+        reg(Boolean("out_of_range", causality=Fmi2Causality.output,
+                    variability=Fmi2Variability.discrete,
+                    getter=lambda: bool(self._cosim and self._cosim.out_of_range),
+                    description="true while current, SoC or temperature leave the trained "
+                                "region (the model extrapolates)"))
+        reg(Real("soc0", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
+                 description="initial state of charge [1]"))
+        reg(Real("capacity", causality=Fmi2Causality.parameter,
+                 variability=Fmi2Variability.fixed,
+                 description="capacity for coulomb counting [Ah]"))
+        reg(Integer("observer", causality=Fmi2Causality.parameter,
+                    variability=Fmi2Variability.fixed,
+                    description="SoC observer: 0 none (coulomb counting); observers not in this "
+                                "version"))
+
+    def _dedupe_sys_path(self) -> None:
+        """The wrapper appends resources to sys.path at every instantiation: keep one entry."""
+        if self.resources:
+            seen = [p for p in sys.path if p == self.resources]
+            for _ in seen[1:]:
+                sys.path.remove(self.resources)
+
+    def _out(self, name: str) -> float:
+        if self._cosim is None:
+            if name == "soc":
+                return float(self.soc0)
+            return float(self._model.ocv(self.soc0)) if self._model.relative_ocv else math.nan
+        return float(getattr(self._cosim, name))
+
+    def _error(self, msg: str) -> None:
+        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
+
+    def exit_initialization_mode(self) -> None:
+        if self.observer not in OBSERVERS:
+            msg = (f"parameter 'observer' = {self.observer}: this FMU offers "
+                   f"{sorted(OBSERVERS)} ({', '.join(OBSERVERS.values())})")
+            self._error(msg)
+            raise InputError(msg)
+        try:
+            self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
+                                                            float(self.capacity),
+                                                            int(self.observer)))
+            self._cosim.reset(float(self.temperature) if math.isfinite(self.temperature)
+                              else 25.0)
+        except InputError as exc:
+            self._error(str(exc))
+            raise
+
+    def do_step(self, current_time: float, step_size: float) -> bool:
+        if self._cosim is None:
+            self._error("do_step called before initialisation")
+            return False
+        try:
+            was = self._cosim.out_of_range
+            self._cosim.advance(step_size, float(self.current), float(self.temperature),
+                                float(self.voltage_measured))
+        except InputError as exc:
+            self._error(f"t = {current_time} s: {exc}; the step was not taken")
+            return False
+        if self._cosim.out_of_range and not was:
+            self.log(f"{self.instance_name}: t = {current_time} s: {self._cosim.range_message}",
+                     Fmi2Status.warning)
+        return True
+
+    # ----- FMU state: parameters, inputs and the whole engine state ------------------------
+    def _get_fmu_state(self) -> dict:
+        return {"inputs": [self.current, self.voltage_measured, self.temperature],
+                "params": [self.soc0, self.capacity, self.observer],
+                "cosim": None if self._cosim is None else self._cosim.get_state()}
+
+    def _set_fmu_state(self, state: dict) -> None:
+        self.current, self.voltage_measured, self.temperature = state["inputs"]
+        self.soc0, self.capacity, self.observer = state["params"]
+        if state["cosim"] is None:
+            self._cosim = None
+        else:
+            if self._cosim is None:
+                self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
+                                                                float(self.capacity)))
+            self._cosim.set_state(state["cosim"])
+
+    @staticmethod
+    def _fmu_state_to_bytes(state: dict) -> bytes:
+        return json.dumps(state, allow_nan=True).encode("utf-8")
+
+    @staticmethod
+    def _fmu_state_from_bytes(data: bytes) -> dict:
+        return json.loads(data.decode("utf-8"))
+
+
+__all__ = ["LmnCellSlave", "ModelFileError"]
