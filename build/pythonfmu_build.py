@@ -66,7 +66,8 @@ sample time Ts = {model.sample_time_s} s, {model.n_local_models} local models ov
 <li><b>voltage</b> (output, V): model terminal voltage of the last completed model step.</li>
 <li><b>soc</b> (output): coulomb-counted state of charge; <b>out_of_range</b> (output): true while
 the inputs leave the trained region (the model extrapolates, nothing is clamped).</li>
-<li><b>soc0</b>, <b>capacity</b> (Ah), <b>observer</b> (0 only in this version): parameters.</li></ul>
+<li><b>soc0</b>, <b>capacity</b> (Ah), <b>observer</b> (0 only in this version):
+parameters.</li></ul>
 <p>Sub-stepping: inputs are integrated over the communication step; each completed Ts is one
 model step with the mean inputs over it. A step that is a multiple of Ts gives that many
 sub-steps; other steps are accumulated exactly across calls. The outputs hold the last completed

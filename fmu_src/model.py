@@ -16,8 +16,9 @@ Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charg
   (absent ones left out); ``columns`` lists their names.
 - ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
   ``center`` and ``scale`` (z = (raw − center)/scale).
-- ``gating``: ``mode`` ``"none"`` or ``"current_sign"`` (separate charge and discharge trees; a rest,
-  |i| ≤ ``rest_current_a``, keeps the tree of the last current above it), ``initial_direction``.
+- ``gating``: ``mode`` ``"none"`` or ``"current_sign"`` (separate charge and discharge trees;
+  a rest, |i| ≤ ``rest_current_a``, keeps the tree of the last current above it),
+  ``initial_direction``.
 - ``tree``: ``roots`` [{``gate``: all|charge|discharge, ``child``: [kind, index]}], ``nodes``
   [{``weights``: [w0, w_1…w_d], ``children``: [[kind, index], [kind, index]]}], kind ``node`` or
   ``leaf``. The first child gets φ = 1/(1+exp(−(w0 + w·z))), the second 1 − φ; a leaf's validity is

@@ -5,7 +5,8 @@
   between SOC_KNOTS), global τ1, τ2, an Arrhenius-like factor exp(β·(25 − T)/10) on every
   resistance, OCV(SoC) knots, and optionally a one-state hysteresis M·h (Plett's form, rate γ);
   fitted with scipy on the free-run voltage error:
-  u = OCV(SoC) + R0·i + v1 + v2 [+ M·h], v_m(k) = e_m·v_m(k−1) + R_m·(1 − e_m)·i(k), e_m = exp(−Ts/τ_m).
+  u = OCV(SoC) + R0·i + v1 + v2 [+ M·h], v_m(k) = e_m·v_m(k−1) + R_m·(1 − e_m)·i(k),
+  e_m = exp(−Ts/τ_m).
 """
 
 from __future__ import annotations

@@ -8,6 +8,7 @@ buffers and SoC integration.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -94,7 +95,7 @@ class Record:
         """The record split where meta.segment_starts marks a gap or a hidden pause."""
         bounds = [*sorted(set(self.meta.segment_starts) | {0}), len(self)]
         return [self.slice(a, b, f"segment {k} of {self.name}")
-                for k, (a, b) in enumerate(zip(bounds[:-1], bounds[1:], strict=True)) if b - a > 1]
+                for k, (a, b) in enumerate(itertools.pairwise(bounds)) if b - a > 1]
 
     def with_soc(self, soc: np.ndarray) -> Record:
         """A copy with soc_ref replaced."""

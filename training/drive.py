@@ -1,0 +1,224 @@
+"""Vehicle drive cycles through the LMNCell FMU with fmpy (`lmncell simulate`).
+
+speed trace (m/s, 1 s) → longitudinal vehicle model → pack power → cell power → cell current
+i = −P_cell / u_cell (current > 0 charges; u_cell is the FMU's voltage of the previous step) →
+FMU. Wheel force F = k_rot·m·a + m·g·(c_r·cos θ + sin θ) + ½·ρ·c_d·A·v²; battery power
+P = F·v/η_drive + P_aux when driving, max(F·v·η_regen, −P_regen,max) + P_aux when braking.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from training.records import DataError
+
+G = 9.81
+CYCLES = {"udds": "udds.csv", "us06": "us06.csv", "hwfet": "hwfet.csv", "wltc": "wltc_3b.csv"}
+
+
+def data_dir() -> Path:
+    """The shipped data folder (repository `data/`)."""
+    return Path(__file__).resolve().parent.parent / "data"
+
+
+@dataclass
+class Vehicle:
+    name: str
+    mass_kg: float
+    rotational_inertia_factor: float
+    drag_coefficient: float
+    frontal_area_m2: float
+    rolling_resistance: float
+    air_density_kg_m3: float
+    drivetrain_efficiency: float
+    regen_efficiency: float
+    regen_power_limit_w: float
+    auxiliary_power_w: float
+    n_series: int
+    n_parallel: int
+
+
+def load_vehicle(path: str | Path | None = None) -> Vehicle:
+    """A vehicle TOML file ([vehicle] and [pack] tables); None gives the default compact EV."""
+    if path is None:
+        text = resources.files("training").joinpath("vehicles/compact_ev.toml").read_text()
+        where = "compact_ev.toml"
+    else:
+        where = str(path)
+        try:
+            text = Path(path).read_text(encoding="utf-8")
+        except OSError as exc:
+            raise DataError(f"{path}: cannot read the vehicle file ({exc.strerror})") from exc
+    try:
+        doc = tomllib.loads(text)
+        values = {**doc["vehicle"], **doc["pack"]}
+        veh = Vehicle(**values)
+    except (tomllib.TOMLDecodeError, KeyError, TypeError) as exc:
+        raise DataError(f"{where}: not a vehicle file with [vehicle] and [pack] tables of the "
+                        f"documented keys ({exc})") from exc
+    for key in ("mass_kg", "drag_coefficient", "frontal_area_m2", "n_series", "n_parallel"):
+        if not getattr(veh, key) > 0:
+            raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected > 0")
+    for key in ("drivetrain_efficiency", "regen_efficiency"):
+        if not 0 < getattr(veh, key) <= 1:
+            raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected 0 < η ≤ 1")
+    return veh
+
+
+def load_cycle(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Time (s), speed (m/s) and grade of a shipped speed trace."""
+    if name not in CYCLES:
+        raise DataError(f"unknown cycle {name!r}; expected one of {sorted(CYCLES)}")
+    path = data_dir() / "drive_cycles" / CYCLES[name]
+    with open(path, encoding="utf-8-sig") as fh:
+        header = fh.readline().strip().split(",")
+    arr = np.loadtxt(path, delimiter=",", skiprows=1, encoding="utf-8-sig")
+    cols = {h: arr[:, k] for k, h in enumerate(header)}
+    for c in ("cycSecs", "cycMps"):
+        if c not in cols:
+            raise DataError(f"{path}: missing column '{c}'")
+    grade = cols.get("cycGrade", np.zeros_like(cols["cycSecs"]))
+    return cols["cycSecs"], cols["cycMps"], grade
+
+
+def pack_power(vehicle: Vehicle, speed: np.ndarray, grade: np.ndarray, dt: float) -> np.ndarray:
+    """Battery power (W, > 0 discharging) for each 1-s interval of the trace."""
+    v = speed
+    a = np.diff(v, append=v[-1]) / dt
+    v_mid = v + 0.5 * a * dt
+    theta = np.arctan(grade)
+    force = (vehicle.rotational_inertia_factor * vehicle.mass_kg * a
+             + vehicle.mass_kg * G * (vehicle.rolling_resistance * np.cos(theta) * (v_mid > 0)
+                                      + np.sin(theta))
+             + 0.5 * vehicle.air_density_kg_m3 * vehicle.drag_coefficient
+             * vehicle.frontal_area_m2 * v_mid**2)
+    wheel = force * v_mid
+    drive = wheel / vehicle.drivetrain_efficiency
+    regen = np.maximum(wheel * vehicle.regen_efficiency, -vehicle.regen_power_limit_w)
+    return np.where(wheel >= 0, drive, regen) + vehicle.auxiliary_power_w
+
+
+@dataclass
+class CycleResult:
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    current_a: np.ndarray
+    voltage_v: np.ndarray
+    soc: np.ndarray
+    out_of_range: np.ndarray
+    figures: dict
+
+
+def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = None,
+              repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
+              temperature_c: float = 25.0) -> CycleResult:
+    """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step."""
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    vehicle = vehicle or load_vehicle()
+    t, speed, grade = load_cycle(cycle)
+    dt = float(np.median(np.diff(t)))
+    power = np.tile(pack_power(vehicle, speed, grade, dt), repeat)
+    speed = np.tile(speed, repeat)
+    cell_power = power / (vehicle.n_series * vehicle.n_parallel)
+    md = read_model_description(str(fmu))
+    h = step_s or md.defaultExperiment.stepSize and float(md.defaultExperiment.stepSize) or 1.0
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    unzipped = extract(str(fmu))
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cycle")
+    n = int(math.floor(power.size * dt / h + 1e-9))
+    out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed")}
+    try:
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.setReal([vr["soc0"]], [soc0])
+        slave.setReal([vr["temperature"]], [temperature_c])
+        slave.exitInitializationMode()
+        u = slave.getReal([vr["voltage"]])[0]
+        for k in range(n):
+            t0 = k * h
+            idx = min(int(t0 / dt + 1e-9), power.size - 1)
+            i = -cell_power[idx] / u
+            slave.setReal([vr["current"]], [i])
+            status = slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
+            if status is not None and status > 1:
+                raise RuntimeError(f"FMU doStep failed at t = {t0} s (status {status})")
+            u, soc = slave.getReal([vr["voltage"], vr["soc"]])
+            out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
+            out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
+            out["speed"][k] = speed[idx]
+        slave.terminate()
+    finally:
+        slave.freeInstance()
+        shutil.rmtree(unzipped, ignore_errors=True)
+    cur, volt = out["current"], out["voltage"]
+    figures = {
+        "cycle": cycle, "repetitions": repeat, "step_s": h, "duration_s": float(n * h),
+        "distance_km": float(np.sum(out["speed"]) * h / 1000.0),
+        "cell_energy_wh": float(np.sum(-cur * volt) * h / 3600.0),
+        "pack_energy_kwh": float(np.sum(-cur * volt) * h / 3600.0 * vehicle.n_series
+                                 * vehicle.n_parallel / 1000.0),
+        "ah_throughput": float(np.sum(np.abs(cur)) * h / 3600.0),
+        "current_min_a": float(cur.min()), "current_max_a": float(cur.max()),
+        "voltage_min_v": float(volt.min()), "voltage_max_v": float(volt.max()),
+        "soc_start": soc0, "soc_end": float(out["soc"][-1]),
+        "soc_swing": float(out["soc"].max() - out["soc"].min()),
+        "out_of_range_steps": int(out["oor"].sum()), "vehicle": vehicle.name,
+    }
+    return CycleResult(out["time"], out["speed"], cur, volt, out["soc"], out["oor"].astype(bool),
+                       figures)
+
+
+def plot_cycle(res: CycleResult, path: str | Path) -> Path:
+    from training.plots import plt
+
+    t = res.time_s / 60.0
+    fig, ax = plt.subplots(4, 1, figsize=(10, 8.5), sharex=True, constrained_layout=True)
+    ax[0].plot(t, 3.6 * res.speed_mps)
+    ax[0].set(ylabel="speed / km/h", title=f"{res.figures['cycle'].upper()} through the FMU "
+              f"({res.figures['vehicle']})")
+    ax[1].plot(t, res.current_a, lw=0.7)
+    ax[1].set(ylabel="cell current / A")
+    ax[2].plot(t, res.voltage_v, color="k", lw=0.7)
+    if res.out_of_range.any():
+        ax[2].plot(t[res.out_of_range], res.voltage_v[res.out_of_range], "r.", ms=2,
+                   label="outside trained range")
+        ax[2].legend()
+    ax[2].set(ylabel="cell voltage / V")
+    ax[3].plot(t, 100 * res.soc, color="tab:green")
+    ax[3].set(ylabel="SoC / %", xlabel="time / min")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return Path(path)
+
+
+def simulate_cycle_cli(a) -> int:
+    vehicle = load_vehicle(a.vehicle)
+    res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step)
+    if a.plot:
+        plot_cycle(res, a.plot)
+    f = res.figures
+    if a.json:
+        print(json.dumps(f, indent=1))
+    else:
+        print(f"{f['cycle'].upper()} x{f['repetitions']} at {f['step_s']} s steps: "
+              f"{f['distance_km']:.1f} km, cell energy {f['cell_energy_wh']:.2f} Wh (pack "
+              f"{f['pack_energy_kwh']:.2f} kWh), {f['ah_throughput']:.3f} Ah throughput, "
+              f"current {f['current_min_a']:.2f}…{f['current_max_a']:.2f} A, minimum voltage "
+              f"{f['voltage_min_v']:.3f} V, SoC {100 * f['soc_start']:.1f} → "
+              f"{100 * f['soc_end']:.1f} % (swing {100 * f['soc_swing']:.1f} points)")
+    if f["out_of_range_steps"]:
+        print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
+              "(current, SoC or temperature); see the FMU log and the plot")
+    return 0
