@@ -92,8 +92,18 @@ class LmnModel:
         paths: list[list[tuple[int, int]] | None] = [None] * m
         gates: list[str] = ["all"] * m
 
+        visited: set[int] = set()
+
         def walk(ref: tuple[str, int], path: list[tuple[int, int]], gate: str) -> None:
             kind, idx = ref
+            limit = m if kind == "leaf" else len(self.node_children)
+            if not 0 <= idx < limit:
+                raise ModelFileError(f"tree: reference [{kind!r}, {idx}] out of range (there "
+                                     f"are {limit} {kind}s)")
+            if kind == "node":
+                if idx in visited:
+                    raise ModelFileError(f"tree: node {idx} is reached twice")
+                visited.add(idx)
             if kind == "leaf":
                 if paths[idx] is not None:
                     raise ModelFileError(f"tree: leaf {idx} is reached twice")
@@ -354,6 +364,8 @@ def load_model(path: str | Path) -> LmnModel:
         text = path.read_text(encoding="utf-8")
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot read the model file ({exc.strerror})") from exc
+    except UnicodeDecodeError as exc:
+        raise ModelFileError(f"{path}: not a text (JSON) model file ({exc.reason})") from exc
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:

@@ -1,0 +1,40 @@
+"""Shared fixtures: paths to the shipped data, a quickly trained model and its FMU."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parent.parent
+DATA = ROOT / "data"
+SHARED = ROOT.parent / "shared" / "data"
+PAN_US06 = DATA / "panasonic_18650pf/25degC/drive_cycles/03-20-17_01.43_25degC_US06_Pan18650PF.mat"
+PAN_HWFET = DATA / "panasonic_18650pf/25degC/drive_cycles/03-20-17_05.56_25degC_HWFTa_Pan18650PF.mat"
+A123_S1 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s1.csv.gz"
+A123_S2 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s2.csv.gz"
+
+
+def shared_or_skip(rel: str = "") -> Path:
+    path = SHARED / rel
+    if not path.exists():
+        pytest.skip(f"needs the full data set at {path} (../shared/data), absent here")
+    return path
+
+
+@pytest.fixture(scope="session")
+def quick_model(tmp_path_factory) -> Path:
+    """A small LMN trained on the shipped Panasonic HWFET record (2 local models)."""
+    from training.pipeline import train_files
+
+    out = tmp_path_factory.mktemp("model") / "pan.json"
+    train_files([PAN_HWFET], out, capacity_ah=2.85, progress=lambda _m: None,
+                max_local_models=2, oe_max_iterations=4, hysteresis="off")
+    return out
+
+
+@pytest.fixture(scope="session")
+def quick_fmu(quick_model, tmp_path_factory) -> Path:
+    from lmncell_build.pythonfmu_build import build_fmu
+
+    return build_fmu(quick_model, tmp_path_factory.mktemp("fmu") / "pan.fmu")

@@ -1,0 +1,90 @@
+"""Identification on real data (issue: identification)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fmu_src.model import load_model
+from training.config import ConfigError, load_config
+from training.dataset import record_to_segments
+from training.identify import (
+    build_design,
+    optimise_split,
+    poles,
+    skeleton,
+    stabilise,
+    validation_masks,
+    wls,
+)
+from training.pipeline import train_files
+from training.readers import read_record
+from tests.conftest import PAN_HWFET
+
+
+@pytest.fixture(scope="module")
+def design():
+    cfg = load_config(partition=["soc", "current"])
+    rec = read_record(PAN_HWFET)
+    segs = record_to_segments(rec, 1.0, 1.0, 2.85)
+    base = skeleton(cfg, 2.85, np.linspace(0, 1, 3), np.array([3.4, 3.7, 4.2]), None,
+                    np.array([0.5, 0.0]), np.array([0.5, 5.0]))
+    return cfg, build_design(base, segs, validation_masks(segs, cfg))
+
+
+def test_lm_split_reduces_the_global_loss(design) -> None:
+    cfg, d = design
+    theta = wls(d.X, d.y, d.w_fit)
+    e = d.y - d.X @ theta
+    loss0 = float(np.sum(d.w_fit * e * e))
+    res = optimise_split(d.X, d.y, d.w_fit, d.Z, np.ones_like(d.y), d.y.copy(), cfg)
+    assert res is not None
+    assert res.loss < loss0
+    assert all(b <= a for a, b in zip(res.loss_history, res.loss_history[1:], strict=False))
+    assert res.loss_history[-1] < res.loss_history[0]   # the LM steps themselves improved it
+
+
+def test_stabilise_pulls_poles_inside() -> None:
+    theta = np.array([2.1, -1.05, 0.0, 0.3, 0.1])   # poles beyond the unit circle
+    assert np.abs(poles(theta, 2)).max() > 1
+    fixed = stabilise(theta, 2, 0.999)
+    assert np.abs(poles(fixed, 2)).max() <= 0.999 + 1e-12
+
+
+def test_training_twice_gives_identical_files(tmp_path) -> None:
+    kw = dict(capacity_ah=2.85, progress=lambda _m: None, max_local_models=3,
+              oe_max_iterations=3, hysteresis="off")
+    train_files([PAN_HWFET], tmp_path / "a.json", **kw)
+    train_files([PAN_HWFET], tmp_path / "b.json", **kw)
+    a = (tmp_path / "a.json").read_text().splitlines()
+    b = (tmp_path / "b.json").read_text().splitlines()
+    # the hash-identical parts: everything but the wall-clock timings
+    strip = [ln for ln in a if "seconds" not in ln]
+    assert strip == [ln for ln in b if "seconds" not in ln]
+    ma, mb = load_model(tmp_path / "a.json"), load_model(tmp_path / "b.json")
+    assert np.array_equal(ma.theta, mb.theta) and np.array_equal(ma.ocv_v, mb.ocv_v)
+    for t in ma.theta:
+        assert np.abs(poles(t, ma.output_lags)).max() < 1
+
+
+@pytest.mark.parametrize("kw, message", [
+    ({"partition": ["soc", "pressure"]}, "'partition'"),
+    ({"filters": [[100.0, 5.0]]}, "'filters'"),
+    ({"max_local_models": 0}, "'max_local_models'"),
+    ({"output": "volts"}, "'output'"),
+    ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
+    ({"no_such_setting": 1}, "unknown setting"),
+])
+def test_bad_configuration(kw, message) -> None:
+    with pytest.raises(ConfigError, match=message):
+        load_config(**kw)
+
+
+def test_bad_config_file(tmp_path) -> None:
+    p = tmp_path / "c.toml"
+    p.write_text("[train]\nmax_local_models = 'many'\n")
+    with pytest.raises((ConfigError, TypeError)):
+        load_config(p)
+    p.write_text("[train\n")
+    with pytest.raises(ConfigError, match="c.toml: cannot read"):
+        load_config(p)

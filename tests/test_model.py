@@ -1,0 +1,97 @@
+"""LMN runtime and model file (issue: identification)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from fmu_src.model import ModelFileError, load_model, model_from_dict, model_to_dict, save_model
+from fmu_src.runtime import CellStepper, simulate
+from training.config import load_config
+from training.identify import Tree, skeleton
+
+
+def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3):
+    """A model with a tree of n_splits random oblique splits and random stable local models."""
+    rng = np.random.default_rng(0)
+    cfg = load_config(partition=["soc", "current", "temperature"][:d], pre_partition=gating)
+    base = skeleton(cfg, 2.0, np.linspace(0, 1, 5), np.linspace(3.0, 3.4, 5), 50.0,
+                    np.zeros(d), np.ones(d))
+    p = len(base.columns())
+    theta = rng.normal(0, 0.01, (len(base.roots), p))
+    theta[:, :3] = [0.5, 0.2, 0.1]
+    tree = Tree(list(base.roots), [], [], theta)
+    for _ in range(n_splits):
+        leaf = int(rng.integers(tree.theta.shape[0]))
+        child = rng.normal(0, 0.01, p)
+        child[:3] = [0.6, 0.1, 0.05]
+        tree = tree.split(leaf, rng.normal(0, 2, d + 1), tree.theta[leaf], child)
+    return tree.apply(base)
+
+
+@pytest.mark.parametrize("gating", ["none", "current_sign"])
+def test_validities_sum_to_one(gating: str) -> None:
+    m = random_tree_model(gating)
+    rng = np.random.default_rng(1)
+    z = rng.normal(0, 3, (2000, 3))
+    direction = rng.integers(1, 3, 2000)
+    Phi = m.validities(z, direction)
+    assert Phi.shape == (2000, m.n_local_models)
+    assert np.all(Phi >= 0)
+    assert np.allclose(Phi.sum(axis=1), 1.0, atol=1e-12)
+
+
+def test_batch_and_step_paths_agree() -> None:
+    m = random_tree_model("current_sign")
+    rng = np.random.default_rng(2)
+    cur = np.repeat(rng.normal(0, 2, 300), 5)
+    temp = np.full(cur.size, 20.0)
+    sim = simulate(m, cur, temp, 0.7)
+    st = CellStepper(m, 0.7, temperature_c=20.0)
+    steps = np.array([st.step(i, 20.0) for i in cur])
+    assert np.max(np.abs(steps - sim.voltage_v)) <= 1e-12
+    assert st.soc == pytest.approx(sim.soc[-1], abs=1e-15)
+
+
+def test_model_round_trip_is_bit_identical(tmp_path) -> None:
+    m = random_tree_model()
+    p1, p2 = tmp_path / "a.json", tmp_path / "b.json"
+    save_model(m, p1)
+    m2 = load_model(p1)
+    save_model(m2, p2)
+    assert p1.read_bytes() == p2.read_bytes()
+    assert np.array_equal(m.theta, m2.theta) and np.array_equal(m.node_weights, m2.node_weights)
+    cur = np.sin(np.arange(500) / 20.0)
+    assert np.array_equal(simulate(m, cur, None, 0.5).voltage_v,
+                          simulate(m2, cur, None, 0.5).voltage_v)
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda d: d.update(version=2), "version 2; this LMNCell reads version 1"),
+    (lambda d: d.update(format="other"), "format is 'other'"),
+    (lambda d: d["local_models"]["theta"][0].pop(), "inhomogeneous|theta"),
+    (lambda d: d["local_models"]["theta"].pop(), "belong to no leaf|leaf"),
+    (lambda d: d["partition"].update(variables=["soc", "pressure", "temperature"]),
+     "'pressure'"),
+    (lambda d: d["tree"]["nodes"][0].update(weights=[1.0]), "tree node weights"),
+    (lambda d: d.update(sample_time_s=-1), "'sample_time_s' is -1"),
+    (lambda d: d["cell"].pop("capacity_ah"), "missing key 'capacity_ah'"),
+])
+def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
+    doc = model_to_dict(random_tree_model())
+    edit(doc)
+    p = tmp_path / "bad.json"
+    p.write_text(json.dumps(doc))
+    with pytest.raises((ModelFileError, ValueError), match=message):
+        load_model(p)
+
+
+def test_not_json_is_refused(tmp_path) -> None:
+    p = tmp_path / "m.json"
+    p.write_bytes(b"\x80\x04pickle?")
+    with pytest.raises(ModelFileError, match="m.json"):
+        load_model(p)
+    with pytest.raises(ModelFileError, match="expected a JSON object"):
+        model_from_dict([1, 2], "list")

@@ -1,0 +1,154 @@
+"""Readers, records and bad input (issue: foundation)."""
+
+from __future__ import annotations
+
+import gzip
+import warnings
+
+import numpy as np
+import pytest
+
+from training.readers import DataWarning, detect_format, read_record, write_bdf
+from training.records import DataError
+from tests.conftest import A123_S1, DATA, PAN_US06, shared_or_skip
+
+
+def test_every_shipped_file_reads() -> None:
+    files = sorted(DATA.rglob("*.csv.gz")) + sorted(DATA.rglob("*.mat"))
+    assert len(files) >= 12
+    for f in files:
+        rec = read_record(f)
+        assert len(rec) > 100
+        assert np.all(np.diff(rec.time_s) > 0)
+
+
+def test_plett_sign_and_counters() -> None:
+    rec = read_record(A123_S1)
+    assert rec.meta.fmt == "plett" and rec.meta.chamber_temp_c == 25.0
+    assert "negated" in rec.meta.sign_note
+    # the record discharges overall: counters and current agree on the sign
+    assert rec.charge_ah[-1] < -1.5
+    held = np.sum(rec.current_a[:-1] * np.diff(rec.time_s)) / 3600
+    assert held == pytest.approx(rec.charge_ah[-1], rel=0.03)
+
+
+def test_arbin_and_panasonic_formats() -> None:
+    assert detect_format(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz") == "arbin"
+    rec = read_record(PAN_US06)
+    assert rec.meta.fmt == "panasonic" and rec.temperature_c is not None
+    assert rec.current_a.min() < -15 and rec.charge_ah[-1] < -2
+    assert any("repeated time stamp" in n for n in rec.meta.notes)
+
+
+def test_hppc_gaps_become_segments() -> None:
+    rec = read_record(DATA / "panasonic_18650pf/25degC/hppc/"
+                      "03-11-17_08.47_25degC_5Pulse_HPPC_Pan18650PF.mat")
+    assert len(rec.meta.segment_starts) > 10
+    segs = rec.segments()
+    assert sum(len(s) for s in segs) <= len(rec)
+
+
+def test_hidden_pause_is_marked() -> None:
+    path = shared_or_skip("panasonic_18650pf/25degC/drive_cycles/"
+                          "03-18-17_02.17_25degC_Cycle_1_Pan18650PF.mat")
+    rec = read_record(path)
+    assert len(rec.meta.segment_starts) == 3
+    assert sum("pause" in n for n in rec.meta.notes) == 2
+
+
+def test_bdf_round_trip_is_identical(tmp_path) -> None:
+    rec = read_record(PAN_US06)
+    rec = rec.slice(0, 5000)
+    rec.soc_ref = 1.0 + rec.charge_ah / 2.85
+    path = write_bdf(rec, tmp_path / "r.bdf.csv")
+    back = read_record(path)
+    assert back.meta.fmt == "bdf"
+    for name in ("time_s", "current_a", "voltage_v", "temperature_c", "charge_ah", "soc_ref"):
+        assert np.array_equal(getattr(rec, name), getattr(back, name)), name
+
+
+def test_generic_csv_with_mapping_and_sign(tmp_path) -> None:
+    p = tmp_path / "g.csv"
+    p.write_text("t,I_mA,U\n0,0,3.3\n1,-1000,3.2\n2,-1000,3.19\n3,0,3.25\n")
+    rec = read_record(p, fmt="generic", columns={"time": "t", "current": "I_mA", "voltage": "U"},
+                      current_scale=1e-3, discharge_positive=True)
+    assert rec.current_a.tolist() == [0.0, 1.0, 1.0, 0.0]
+
+
+# ----- bad input: each case names the file and the problem -----------------------------
+def _plett(tmp_path, rows: list[str], name: str = "x.csv"):
+    p = tmp_path / name
+    p.write_text("time, step, current, voltage, chgAh, disAh\n" + "\n".join(rows) + "\n")
+    return p
+
+
+GOOD = [f"{k}, 1, 1.0, 3.3, 0, {k / 3600:.6f}" for k in range(10)]
+
+
+@pytest.mark.parametrize("case, rows, expected", [
+    ("nan", GOOD[:3] + ["3, 1, nan, 3.3, 0, 0"] + GOOD[4:], "'current_a' has 1 NaN"),
+    ("inf", GOOD[:3] + ["3, 1, 1.0, inf, 0, 0"] + GOOD[4:], "'voltage_v' has 1 NaN or infinite"),
+    ("repeated", GOOD[:3] + [GOOD[2]] + GOOD[4:], "repeated at row 3"),
+    ("reset", GOOD[:5] + ["0.5, 1, 1.0, 3.3, 0, 0"] + GOOD[6:], "decreasing (a time reset?)"),
+    ("text", GOOD[:3] + ["3, 1, abc, 3.3, 0, 0"], "'current' row 5: 'abc' is not a number"),
+])
+def test_bad_plett_input(tmp_path, case, rows, expected) -> None:
+    p = _plett(tmp_path, rows, f"{case}.csv")
+    with pytest.raises(DataError) as err:
+        read_record(p)
+    assert str(p) in str(err.value) and expected in str(err.value)
+
+
+def test_missing_column(tmp_path) -> None:
+    p = tmp_path / "m.csv"
+    p.write_text("Test Time / s,Voltage / V\n0,3.3\n1,3.3\n")
+    with pytest.raises(DataError, match="unknown format"):
+        read_record(p)
+    with pytest.raises(DataError, match=r"missing column\(s\) \['Current / A'\]"):
+        read_record(p, fmt="bdf")
+
+
+def test_empty_and_unknown_files(tmp_path) -> None:
+    empty = tmp_path / "e.csv"
+    empty.write_text("")
+    with pytest.raises(DataError, match="e.csv: the file is empty"):
+        read_record(empty)
+    header_only = _plett(tmp_path, [], "h.csv")
+    with pytest.raises(DataError, match="header but no data rows"):
+        read_record(header_only)
+    odd = tmp_path / "odd.csv"
+    odd.write_text("a,b\n1,2\n")
+    with pytest.raises(DataError, match="odd.csv: unknown format"):
+        read_record(odd)
+    with pytest.raises(DataError, match="no such file"):
+        read_record(tmp_path / "missing.csv")
+    bad_mat = tmp_path / "bad.mat"
+    bad_mat.write_bytes(b"not a mat file at all" * 10)
+    with pytest.raises(DataError, match="bad.mat: not a readable MATLAB file"):
+        read_record(bad_mat)
+
+
+def test_gzip_csv_reads(tmp_path) -> None:
+    p = tmp_path / "z.csv.gz"
+    with gzip.open(p, "wt") as fh:
+        fh.write("time, step, current, voltage, chgAh, disAh\n" + "\n".join(GOOD) + "\n")
+    assert len(read_record(p)) == 10
+
+
+def test_milliamp_and_sign_warnings(tmp_path) -> None:
+    p = tmp_path / "ma.csv"
+    rows = ["Test Time / s,Voltage / V,Current / A"]
+    rows += [f"{k},{3.3 + (0.1 if k % 4 < 2 else 0)},{1000 if k % 4 < 2 else 0}"
+             for k in range(40)]
+    p.write_text("\n".join(rows) + "\n")
+    with pytest.warns(DataWarning, match="look like mA"):
+        read_record(p)
+    q = tmp_path / "sign.csv"
+    rows = ["Test Time / s,Voltage / V,Current / A"]
+    rows += [f"{k},{3.3 - (0.1 if k % 4 < 2 else 0)},{2 if k % 4 < 2 else 0}" for k in range(40)]
+    q.write_text("\n".join(rows) + "\n")
+    with pytest.warns(DataWarning, match="sign looks inverted"):
+        read_record(q)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_record(A123_S1)  # real data: no warning
