@@ -35,7 +35,8 @@ def model_hash(path: Path) -> str:
 
 def slave_source(module_hash: str, model: LmnModel) -> str:
     return (f'"""LMNCell FMU slave (generated for model {module_hash})."""\n\n'
-            f"from lmncell_rt_{module_hash}.slave import LmnCellSlave\n\n\n"
+            f"from lmncell_rt_{module_hash}.slave import LmnCellSlave, keep_module_dict\n\n"
+            "keep_module_dict(globals())  # balances pythonfmu 0.7.0 (see slave.py)\n\n\n"
             "class LMNCell(LmnCellSlave):\n"
             f'    """{model.extra.get("description", "LMNCell model")}."""\n\n'
             f'    description = {model.extra.get("description", "LMNCell model")!r}\n'

@@ -20,6 +20,18 @@ from .model import ModelFileError, load_model
 
 OBSERVERS = {0: "none"}
 
+# pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
+# module's namespace and then releases one reference to the module's __dict__ that it never
+# owned, at every instantiation: without a counterweight the module dictionary is freed while
+# still in use. The generated slave module calls keep_module_dict(globals()) at its top level,
+# so each (re-)execution keeps one reference here (8 bytes each), balancing that release.
+_MODULE_DICT_REFS: list[dict] = []
+
+
+def keep_module_dict(namespace: dict) -> None:
+    """Keep a reference to a slave module's namespace (see _MODULE_DICT_REFS)."""
+    _MODULE_DICT_REFS.append(namespace)
+
 
 class LmnCellSlave(Fmi2Slave):
     """FMI 2.0 co-simulation slave of an LMN cell model (see GUIDE: FMU interface)."""
@@ -73,11 +85,19 @@ class LmnCellSlave(Fmi2Slave):
                                 "version"))
 
     def _dedupe_sys_path(self) -> None:
-        """The wrapper appends resources to sys.path at every instantiation: keep one entry."""
-        if self.resources:
-            seen = [p for p in sys.path if p == self.resources]
-            for _ in seen[1:]:
-                sys.path.remove(self.resources)
+        """The wrapper inserts the resources folder into sys.path at every instantiation: keep
+        one entry for it, and drop entries of FMU resources folders that no longer exist (left by
+        earlier, since removed extractions)."""
+        if not self.resources:
+            return
+        kept: list[str] = []
+        for p in sys.path:
+            if p == self.resources and p in kept:
+                continue
+            if p != self.resources and p.endswith("resources") and not Path(p).is_dir():
+                continue
+            kept.append(p)
+        sys.path[:] = kept
 
     def _out(self, name: str) -> float:
         if self._cosim is None:
@@ -147,4 +167,4 @@ class LmnCellSlave(Fmi2Slave):
         return json.loads(data.decode("utf-8"))
 
 
-__all__ = ["LmnCellSlave", "ModelFileError"]
+__all__ = ["LmnCellSlave", "ModelFileError", "keep_module_dict"]

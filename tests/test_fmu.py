@@ -1,0 +1,229 @@
+"""The pythonfmu LMNCell FMU (issue: FMU)."""
+
+from __future__ import annotations
+
+import math
+import shutil
+import subprocess
+import sys
+import zipfile
+
+import numpy as np
+import pytest
+from fmpy import extract
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+from fmu_src.model import load_model
+from fmu_src.runtime import CellStepper
+from training.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
+from training.dataset import record_to_segments
+from training.readers import read_record
+from tests.conftest import PAN_HWFET, PAN_US06
+from tests.fmu_helpers import Instance
+
+
+def test_fmpy_validate_reports_no_problem(quick_fmu) -> None:
+    assert validate_fmu(str(quick_fmu)) == []
+    with zipfile.ZipFile(quick_fmu) as z:
+        xml = z.read("modelDescription.xml").decode()
+        names = z.namelist()
+    assert "<InitialUnknowns>" in xml and 'unit="V"' in xml and 'stepSize="1.0"' in xml
+    assert 'canGetAndSetFMUstate="true"' in xml and 'canSerializeFMUstate="true"' in xml
+    assert "documentation/index.html" in names and "resources/model.json" in names
+    assert any(n.startswith("resources/lmncell_rt_") for n in names)
+
+
+def test_fmu_equals_pipeline_on_a_real_record(quick_model, quick_fmu) -> None:
+    res = compare_fmu_with_pipeline(quick_model, quick_fmu, PAN_US06)
+    assert res["steps"] > 4000
+    assert res["max_dv_v"] <= 1e-9
+    assert res["max_dsoc"] <= 1e-12
+
+
+def test_sub_stepping(quick_model, quick_fmu) -> None:
+    model = load_model(quick_model)
+    seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
+    ref = CellStepper(model, 1.0, temperature_c=float(seg.temperature_c[0]))
+    n = 300
+    expect = [ref.step(float(i), float(t)) for i, t in
+              zip(seg.current_a[:n], seg.temperature_c[:n], strict=True)]
+    fine = run_fmu_on_segment(quick_fmu, seg, 1.0, step_s=0.1)
+    assert np.max(np.abs(fine["voltage"][1:n + 1] - expect)) <= 1e-9
+    # an uneven step (2.5 Ts) accumulates exactly: after 2 calls, 5 model steps
+    inst = Instance(quick_fmu, start={"soc0": 1.0})
+    try:
+        for _ in range(2):
+            inst.step(-2.0, h=2.5)
+        st = CellStepper(model, 1.0)
+        for _ in range(5):
+            st.step(-2.0, 25.0)
+        assert inst.get("voltage")[0] == pytest.approx(st.voltage_v, abs=1e-12)
+    finally:
+        inst.free()
+
+
+def test_nan_input_is_refused_and_host_continues(quick_fmu, capfd) -> None:
+    inst = Instance(quick_fmu, start={"soc0": 0.8})
+    try:
+        inst.step(-1.0)
+        before = inst.get("voltage", "soc")
+        for bad in (math.nan, math.inf):
+            with pytest.raises(FMICallException) as err:
+                inst.step(bad)
+            assert err.value.status >= 2       # not OK: fmi2Discard from pythonfmu 0.7
+            assert inst.get("voltage", "soc") == before   # nothing advanced
+        out = capfd.readouterr().out
+        assert "input 'current' = nan" in out
+        inst.step(-1.0)
+        assert inst.get("soc")[0] < before[1]
+    finally:
+        inst.free()
+
+
+def test_state_round_trips_exactly(quick_fmu) -> None:
+    inst = Instance(quick_fmu, start={"soc0": 0.9})
+    try:
+        for i in np.linspace(-3, 2, 37):
+            inst.step(float(i), h=0.7)
+        state = inst.slave.getFMUstate()
+        blob = inst.slave.serializeFMUstate(state)
+        ref = []
+        for i in np.linspace(2, -5, 50):
+            inst.step(float(i), h=0.7)
+            ref.append(inst.get("voltage", "soc"))
+        for restore in (state, inst.slave.deSerializeFMUstate(blob)):
+            inst.slave.setFMUstate(restore)
+            inst.t = 37 * 0.7
+            again = []
+            for i in np.linspace(2, -5, 50):
+                inst.step(float(i), h=0.7)
+                again.append(inst.get("voltage", "soc"))
+            assert again == ref
+        inst.slave.freeFMUstate(state)
+    finally:
+        inst.free()
+
+
+def test_reset_and_independent_instances(quick_fmu) -> None:
+    d = extract(str(quick_fmu))
+    a = Instance(quick_fmu, "a", {"soc0": 0.9}, unzipped=d)
+    b = Instance(quick_fmu, "b", {"soc0": 0.5, "capacity": 2.0}, unzipped=d)
+    try:
+        for _ in range(20):
+            a.step(-2.0)
+            b.step(1.0)
+        assert a.get("soc")[0] == pytest.approx(0.9 - 20 * 2.0 / 3600 / 2.85, abs=1e-12)
+        assert b.get("soc")[0] == pytest.approx(0.5 + 20 * 1.0 / 3600 / 2.0, abs=1e-12)
+        a.slave.reset()
+        a.slave.setupExperiment(startTime=0.0)
+        a.slave.enterInitializationMode()
+        a.slave.exitInitializationMode()
+        assert a.get("soc")[0] == pytest.approx(0.9, abs=1e-12) or a.get("soc")[0] == 1.0
+    finally:
+        a.free()
+        b.free()
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def _rss_mb() -> float:
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * 4096 / 2**20
+
+
+def test_many_instantiations_do_not_leak(quick_fmu) -> None:
+    d = extract(str(quick_fmu))
+    try:
+        for _ in range(50):
+            Instance(quick_fmu, unzipped=d).free()
+        path_len, rss0 = len(sys.path), _rss_mb()
+        for k in range(1000):
+            inst = Instance(quick_fmu, f"i{k}", unzipped=d)
+            inst.step(-1.0)
+            inst.free()
+        assert len(sys.path) == path_len
+        assert _rss_mb() - rss0 < 5.0
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def test_out_of_range_flag(quick_fmu) -> None:
+    inst = Instance(quick_fmu, start={"soc0": 0.9})
+    try:
+        inst.step(-1.0)
+        assert not inst.slave.getBoolean([inst.vr["out_of_range"]])[0]
+        inst.step(-100.0)
+        assert inst.slave.getBoolean([inst.vr["out_of_range"]])[0]
+        inst.step(-1.0)
+        assert not inst.slave.getBoolean([inst.vr["out_of_range"]])[0]
+    finally:
+        inst.free()
+
+
+def test_two_models_in_one_process(quick_model, quick_fmu, tmp_path) -> None:
+    """Different models, unique module names: each FMU runs its own code and parameters."""
+    from lmncell_build.pythonfmu_build import build_fmu
+
+    doc = quick_model.read_text().replace('"sample_time_s": 1.0', '"sample_time_s": 2.0')
+    other = tmp_path / "other.json"
+    other.write_text(doc)
+    fmu2 = build_fmu(other, tmp_path / "other.fmu")
+    a, b = Instance(quick_fmu, "a", {"soc0": 0.9}), Instance(fmu2, "b", {"soc0": 0.9})
+    try:
+        for _ in range(10):
+            a.step(-2.0, h=2.0)
+            b.step(-2.0, h=2.0)
+        m1, m2 = load_model(quick_model), load_model(other)
+        s1, s2 = CellStepper(m1, 0.9), CellStepper(m2, 0.9)
+        for _ in range(20):
+            s1.step(-2.0, 25.0)
+        for _ in range(10):
+            s2.step(-2.0, 25.0)
+        assert a.get("voltage")[0] == pytest.approx(s1.voltage_v, abs=1e-12)
+        assert b.get("voltage")[0] == pytest.approx(s2.voltage_v, abs=1e-12)
+    finally:
+        a.free()
+        b.free()
+
+
+def test_libcosim_gives_the_same_outputs(quick_fmu) -> None:
+    pytest.importorskip("libcosimpy", reason="libcosimpy (DNV libcosim) is not installed")
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+
+    log_output_level(CosimLogLevel.ERROR)
+    ex = CosimExecution.from_step_size(step_size=int(1e9))
+    idx = ex.add_local_slave(CosimLocalSlave(fmu_path=str(quick_fmu), instance_name="cell"))
+    obs = CosimObserver.create_last_value()
+    ex.add_observer(obs)
+    man = CosimManipulator.create_override()
+    ex.add_manipulator(man)
+    refs = {(v.name.decode() if isinstance(v.name, bytes) else v.name): v.reference
+            for v in ex.slave_variables(idx)}
+    ex.real_initial_value(idx, refs["soc0"], 0.8)
+    man.slave_real_values(idx, [refs["current"]], [-2.0])
+    ex.simulate_until(int(30e9))
+    v_cosim, soc_cosim = obs.last_real_values(idx, [refs["voltage"], refs["soc"]])
+    inst = Instance(quick_fmu, start={"soc0": 0.8})
+    try:
+        for _ in range(30):
+            inst.step(-2.0)
+        v, soc = inst.get("voltage", "soc")
+    finally:
+        inst.free()
+    assert v_cosim == pytest.approx(v, abs=1e-12)
+    assert soc_cosim == pytest.approx(soc, abs=1e-12)
+
+
+def test_fmu_manipulation_toolbox_check(quick_fmu) -> None:
+    exe = shutil.which("fmutool")
+    if exe is None:
+        pytest.skip("fmu-manipulation-toolbox (fmutool) is not installed")
+    out = subprocess.run([exe, "-input", str(quick_fmu), "-check"], capture_output=True,
+                         text=True, timeout=120)
+    text = out.stdout + out.stderr
+    assert out.returncode == 0, text
+    assert "compliant with FMI-2.0" in text and "No semantic error" in text
