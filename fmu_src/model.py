@@ -11,7 +11,9 @@ Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charg
 - ``regressors``: ``output_lags`` na, ``current_terms`` nb (i(k) … i(k−nb+1)), ``filters``: list of
   ``[tau_fast_s, tau_slow_s]`` each giving v = LP_fast(i) − LP_slow(i) (zero DC gain, eq. 19),
   ``hysteresis_gamma`` (null, or γ of h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ|i|Ts/(3600·Cn))),
-  ``ocv_input``, ``soc_input`` (extra regressors), ``offset`` (constant 1).
+  ``ocv_input``, ``soc_input`` (extra regressors), ``offset`` (constant 1),
+  ``arrhenius_k`` (null, or E in K: the current and filter regressors are multiplied by
+  g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``).
   The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, OCV, SoC, 1
   (absent ones left out); ``columns`` lists their names.
 - ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
@@ -77,6 +79,8 @@ class LmnModel:
     gating_mode: str = "none"
     rest_current_a: float = 0.01
     initial_direction: str = "discharge"
+    arrhenius_k: float | None = None
+    reference_temperature_c: float = 25.0
     limits: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
@@ -257,6 +261,10 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         raise ModelFileError(f"{w}: need output_lags ≥ 0, current_terms ≥ 1 and filters "
                              "[tau_fast_s, tau_slow_s] with 0 < fast < slow")
     gamma = reg.get("hysteresis_gamma")
+    arrhenius = reg.get("arrhenius_k")
+    if arrhenius is not None and not (isinstance(arrhenius, (int, float))
+                                      and math.isfinite(arrhenius)):
+        raise ModelFileError(f"{w}: 'arrhenius_k' is {arrhenius!r}, expected null or a number")
     part = _get(doc, "partition", source, dict)
     variables = _get(part, "variables", f"{source}: partition", list)
     bad = [v for v in variables if v not in PARTITION_VARIABLES]
@@ -308,6 +316,8 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         gating_mode=str(gating.get("mode", "none")),
         rest_current_a=float(gating.get("rest_current_a", 0.01)),
         initial_direction=str(gating.get("initial_direction", "discharge")),
+        arrhenius_k=None if arrhenius is None else float(arrhenius),
+        reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         limits=dict(doc.get("limits", {})), cell=dict(cell), noise=dict(doc.get("noise", {})),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
                if k in doc})
@@ -338,7 +348,8 @@ def model_to_dict(model: LmnModel) -> dict:
                        "filters": [list(f) for f in model.filters],
                        "hysteresis_gamma": model.hysteresis_gamma,
                        "ocv_input": model.ocv_input, "soc_input": model.soc_input,
-                       "offset": model.offset},
+                       "offset": model.offset, "arrhenius_k": model.arrhenius_k,
+                       "reference_temperature_c": model.reference_temperature_c},
         "partition": {"variables": model.partition_variables,
                       "center": model.partition_center.tolist(),
                       "scale": model.partition_scale.tolist()},

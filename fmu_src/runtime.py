@@ -2,6 +2,7 @@
 
 Step k covers (t_{k−1}, t_k] with t_k − t_{k−1} = Ts. Its input is the current held over the step
 (A, > 0 charges) and the temperature (°C); its output the terminal voltage (V) for that step.
+Current and filter regressors are multiplied by the Arrhenius gain g(T) where the model has one.
 Within a step, in this order: SoC(k) = SoC(k−1) + Ts·η(i)·i/(3600·Cn); the zero-DC-gain filters
 v = LP_fast(i) − LP_slow(i) (exact discretisation a = exp(−Ts/τ)); the hysteresis state
 h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ·|i|·Ts/(3600·Cn)) (→ +1 after charge, −1 after
@@ -64,6 +65,14 @@ class ExoStepper:
         self.gamma = model.hysteresis_gamma
         pv = model.partition_variables
         self._zi = {name: pv.index(name) for name in pv}
+        self._inv_tref = 1.0 / (model.reference_temperature_c + 273.15)
+
+    def temperature_gain(self, temperature_c: float) -> float:
+        """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
+        e = self.model.arrhenius_k
+        if e is None:
+            return 1.0
+        return math.exp(e * (1.0 / (temperature_c + 273.15) - self._inv_tref))
 
     def initial_state(self, soc0: float, h0: float | None = None) -> ExoState:
         m = self.model
@@ -95,14 +104,15 @@ class ExoStepper:
                  x: np.ndarray, z: np.ndarray) -> None:
         """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken."""
         m = self.model
+        g = self.temperature_gain(temperature_c)
         col = 0
-        x[col] = current_a
+        x[col] = g * current_a
         col += 1
         for past in s.past_current:
-            x[col] = past
+            x[col] = g * past
             col += 1
         for f in range(len(m.filters)):
-            x[col] = s.lp[2 * f] - s.lp[2 * f + 1]
+            x[col] = g * (s.lp[2 * f] - s.lp[2 * f + 1])
             col += 1
         if m.hysteresis_gamma is not None:
             x[col] = s.h

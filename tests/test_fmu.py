@@ -16,11 +16,11 @@ from fmpy.validation import validate_fmu
 
 from fmu_src.model import load_model
 from fmu_src.runtime import CellStepper
-from training.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
-from training.dataset import record_to_segments
-from training.readers import read_record
 from tests.conftest import PAN_HWFET, PAN_US06
 from tests.fmu_helpers import Instance
+from training.dataset import record_to_segments
+from training.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
+from training.readers import read_record
 
 
 def test_fmpy_validate_reports_no_problem(quick_fmu) -> None:

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from fmu_src.model import load_model
+from tests.conftest import PAN_HWFET
 from training.config import ConfigError, load_config
 from training.dataset import record_to_segments
 from training.identify import (
@@ -19,7 +20,6 @@ from training.identify import (
 )
 from training.pipeline import train_files
 from training.readers import read_record
-from tests.conftest import PAN_HWFET
 
 
 @pytest.fixture(scope="module")

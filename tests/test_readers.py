@@ -8,9 +8,9 @@ import warnings
 import numpy as np
 import pytest
 
+from tests.conftest import A123_S1, DATA, PAN_US06, shared_or_skip
 from training.readers import DataWarning, detect_format, read_record, write_bdf
 from training.records import DataError
-from tests.conftest import A123_S1, DATA, PAN_US06, shared_or_skip
 
 
 def test_every_shipped_file_reads() -> None:

@@ -5,11 +5,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from tests.conftest import A123_S1, A123_S2, DATA, PAN_US06
 from training.dataset import starts_rested_full
 from training.readers import read_record
 from training.resample import resample, resample_segment
 from training.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
-from tests.conftest import A123_S1, A123_S2, DATA, PAN_US06
 
 
 def test_a123_capacity_and_soc_run_from_full_to_empty() -> None:

@@ -124,7 +124,8 @@ def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
         return np.where(np.isfinite(r), r, 1e3)
 
     t0 = time.perf_counter()
-    sol = least_squares(residuals, x0, method="trf", x_scale="jac", max_nfev=max_nfev)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(residuals, x0, method="trf", x_scale="jac", max_nfev=max_nfev)
     model = _unpack(sol.x, k, with_h, gamma, capacity_ah, ts, ocv_soc)
     return model, {"seconds": time.perf_counter() - t0, "evaluations": int(sol.nfev),
                    "cost": float(sol.cost)}

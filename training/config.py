@@ -19,9 +19,14 @@ class TrainConfig:
     """Settings of `lmncell train` (units in the names; see README for the meaning of each).
 
     sample_time_s: model sample time Ts; records are resampled to it (step means).
-    output_lags / current_terms: na past outputs; i(k) … i(k−nb+1).
-    filters: [tau_fast_s, tau_slow_s] pairs, each an input v = LP_fast(i) − LP_slow(i).
+    output_lags / current_terms: na past outputs; i(k) … i(k−nb+1). The default na = 0 gives
+    local models without output feedback (fixed-pole, OBF-like: their one-step error is their
+    free-run error, and they cannot go unstable); na = 3, current_terms = 3 is the paper's ARX.
+    filters: [tau_fast_s, tau_slow_s] pairs, each an input v = LP_fast(i) − LP_slow(i) (zero DC
+    gain); the default ladder spans relaxation from seconds to about an hour.
     hysteresis: "auto" (chosen by the OCV pre-fit), "off", or a γ value.
+    temperature_scaling: "auto" (an Arrhenius gain on the current regressors, its E chosen by
+    the OCV pre-fit when the training temperatures span more than 5 K), "off", or E in K.
     output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
     partition: partition-space variables (soc, current, filtered_current, temperature).
@@ -36,17 +41,20 @@ class TrainConfig:
     """
 
     sample_time_s: float = 1.0
-    output_lags: int = 3
-    current_terms: int = 3
-    filters: list[list[float]] = field(default_factory=lambda: [[5.0, 100.0]])
+    output_lags: int = 0
+    current_terms: int = 2
+    filters: list[list[float]] = field(
+        default_factory=lambda: [[0.01, 5.0], [5.0, 30.0], [30.0, 150.0], [150.0, 800.0],
+                                 [800.0, 3000.0]])
     hysteresis: str | float = "auto"
+    temperature_scaling: str | float = "auto"
     output: str = "relative_ocv"
     ocv_input: bool = False
     soc_input: bool = False
     partition: list[str] = field(default_factory=lambda: ["soc"])
     pre_partition: str = "none"
     oblique: bool = True
-    max_local_models: int = 6
+    max_local_models: int = 8
     stop: str = "validation"
     validation: str = "block"
     validation_fraction: float = 0.2
@@ -76,6 +84,9 @@ class TrainConfig:
         if not (self.hysteresis in ("auto", "off") or (isinstance(self.hysteresis, (int, float))
                 and self.hysteresis > 0)):
             raise bad("hysteresis", "expected 'auto', 'off' or a γ > 0")
+        if not (self.temperature_scaling in ("auto", "off")
+                or isinstance(self.temperature_scaling, (int, float))):
+            raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")
         unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]

@@ -131,12 +131,12 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     speed = np.tile(speed, repeat)
     cell_power = power / (vehicle.n_series * vehicle.n_parallel)
     md = read_model_description(str(fmu))
-    h = step_s or md.defaultExperiment.stepSize and float(md.defaultExperiment.stepSize) or 1.0
+    h = step_s or (md.defaultExperiment.stepSize and float(md.defaultExperiment.stepSize)) or 1.0
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipped = extract(str(fmu))
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cycle")
-    n = int(math.floor(power.size * dt / h + 1e-9))
+    n = math.floor(power.size * dt / h + 1e-9)
     out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed")}
     try:
         slave.instantiate()

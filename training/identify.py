@@ -386,19 +386,25 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     x0 = np.concatenate([model.theta.ravel(), model.ocv_v if with_ocv else []])
     r0 = evaluate(x0)[0]
     t_start = time.perf_counter()
-    sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
-                        method="trf", x_scale="jac", max_nfev=cfg.oe_max_iterations,
-                        ftol=1e-8, xtol=1e-10, gtol=1e-10)
+    with np.errstate(over="ignore", invalid="ignore"):
+        sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
+                            method="trf", x_scale="jac", max_nfev=cfg.oe_max_iterations,
+                            ftol=1e-8, xtol=1e-10, gtol=1e-10)
     theta, ocv_v = unpack(sol.x)
     theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])
     out = copy.copy(model)
     out.theta, out.ocv_v = theta, np.array(ocv_v, dtype=float)
+    before = freerun_rmse(model, segs, design, "fit")
+    after = freerun_rmse(out, segs, design, "fit")
+    accepted = bool(np.isfinite(after) and after < before)
     info = {"initial_cost": float(0.5 * r0 @ r0), "final_cost": float(sol.cost),
             "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
-            "status": int(sol.status)}
-    progress(f"  output-error refinement: cost {info['initial_cost']:.4g} → "
-             f"{info['final_cost']:.4g} in {sol.nfev} evaluations")
-    return out, info
+            "status": int(sol.status), "train_rmse_before_mv": 1e3 * before,
+            "train_rmse_after_mv": 1e3 * after, "accepted": accepted}
+    progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
+             f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
+             + ("" if accepted else " (not better: kept the model before refinement)"))
+    return (out if accepted else model), info
 
 
 # ----- the whole identification ----------------------------------------------------------
@@ -431,42 +437,79 @@ def validation_masks(segs: list[Segment], cfg: TrainConfig) -> list[np.ndarray]:
     return masks
 
 
-def choose_hysteresis(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
-                      masks: list[np.ndarray], progress: Progress):
-    """γ (or None) and the OCV pre-fit, per cfg.hysteresis."""
-    taus = sorted({t for f in cfg.filters for t in f} | {1000.0})
+ARRHENIUS_CANDIDATES_K = (1000.0, 2000.0, 3000.0, 4000.0, 5000.0, 6000.0, 8000.0)
+
+
+def _temperature_span(segs: list[Segment]) -> float:
+    temps = [s.temperature_c for s in segs if s.temperature_c is not None]
+    if not temps:
+        return 0.0
+    t = np.concatenate(temps)
+    return float(t.max() - t.min())
+
+
+def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
+                   ref_c: float = 25.0) -> np.ndarray:
+    """g(T) of fmu_src.runtime.ExoStepper.temperature_gain for a whole series."""
+    if e_k is None or temperature_c is None:
+        return np.ones(n)
+    return np.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
+
+
+def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
+                  masks: list[np.ndarray], progress: Progress):
+    """Arrhenius E (or None), hysteresis γ (or None) and the OCV pre-fit, per the settings."""
+    taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
+                  if t >= 2 * cfg.sample_time_s)
     plain = [exo_series(base, s.current_a, s.temperature_c, s.soc0) for s in segs]
     socs = [ex.soc for ex in plain]
     weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
     cur = [s.current_a for s in segs]
     volt = [s.voltage_v for s in segs]
+    hyst_cache: dict[float, list[np.ndarray]] = {}
 
-    def prefit(gamma: float | None):
-        hyst = None
-        if gamma is not None:
+    def hyst_series(gamma: float) -> list[np.ndarray]:
+        if gamma not in hyst_cache:
             mg = copy.copy(base)
             mg.hysteresis_gamma = gamma
-            hyst = []
-            for s in segs:
-                ex = exo_series(mg, s.current_a, s.temperature_c, s.soc0)
-                hyst.append(ex.x[:, mg.columns().index("h(k)") - mg.output_lags])
-        return fit_ocv(socs, cur, volt, weights, hyst, cfg.sample_time_s, taus, cfg.ocv_knots)
+            col = mg.columns().index("h(k)") - mg.output_lags
+            hyst_cache[gamma] = [exo_series(mg, s.current_a, s.temperature_c, s.soc0).x[:, col]
+                                 for s in segs]
+        return hyst_cache[gamma]
 
+    def prefit(gamma: float | None, e_k: float | None):
+        gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
+        return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
+                       cfg.sample_time_s, taus, cfg.ocv_knots, gain)
+
+    # temperature scaling first (the larger effect where temperatures differ), then hysteresis
+    e_k: float | None = None
+    if isinstance(cfg.temperature_scaling, (int, float)):
+        e_k = float(cfg.temperature_scaling)
+    elif cfg.temperature_scaling == "auto" and _temperature_span(segs) > 5.0:
+        best = prefit(None, None)
+        progress(f"  OCV pre-fit without temperature scaling: RMSE {1e3 * best.rmse_v:.2f} mV")
+        for cand in ARRHENIUS_CANDIDATES_K:
+            fit = prefit(None, cand)
+            if fit.rmse_v < best.rmse_v:
+                e_k, best = cand, fit
+        progress(f"  temperature scaling: {'off' if e_k is None else f'E = {e_k:g} K'} "
+                 f"(pre-fit RMSE {1e3 * best.rmse_v:.2f} mV)")
     if cfg.hysteresis == "off":
-        return None, prefit(None)
+        return None, e_k, prefit(None, e_k)
     if cfg.hysteresis != "auto":
-        return float(cfg.hysteresis), prefit(float(cfg.hysteresis))
-    best_gamma, best = None, prefit(None)
-    progress(f"  OCV pre-fit without hysteresis: RMSE {1e3 * best.rmse_v:.2f} mV")
+        return float(cfg.hysteresis), e_k, prefit(float(cfg.hysteresis), e_k)
+    best_gamma, best = None, prefit(None, e_k)
     base_rmse = best.rmse_v
     for g in HYSTERESIS_CANDIDATES:
-        fit = prefit(g)
-        progress(f"  OCV pre-fit with hysteresis γ={g:g}: RMSE {1e3 * fit.rmse_v:.2f} mV")
+        fit = prefit(g, e_k)
+        progress(f"  OCV pre-fit with hysteresis γ={g:g}: RMSE {1e3 * fit.rmse_v:.2f} mV "
+                 f"(without: {1e3 * base_rmse:.2f} mV)")
         if fit.rmse_v < best.rmse_v:
             best_gamma, best = g, fit
     if best_gamma is not None and best.rmse_v > (1 - HYSTERESIS_MIN_GAIN) * base_rmse:
-        return None, prefit(None)
-    return best_gamma, best
+        return None, e_k, prefit(None, e_k)
+    return best_gamma, e_k, best
 
 
 def partition_normalisation(cfg: TrainConfig, base: LmnModel,
@@ -487,10 +530,11 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
                     np.zeros(d), np.ones(d))
     center, scale = partition_normalisation(cfg, base, segs)
     masks = validation_masks(segs, cfg)
-    gamma, ocv = choose_hysteresis(cfg, base, segs, masks, progress)
+    gamma, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress)
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale)
+    base.arrhenius_k = e_k
     design = build_design(base, segs, masks)
     X, y, w = design.X, design.y, design.w_fit
     n_eff = float(w.sum())
@@ -543,7 +587,8 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         chosen = int(np.flatnonzero(scores <= 1.02 * scores.min())[0])
     model = stages[chosen].apply(base)
     progress(f"  chosen M={model.n_local_models} by {key}")
-    info = {"stop": key, "hysteresis_gamma": gamma, "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
+    info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
+            "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
     if cfg.oe_refinement:
         model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
         info["refined_validation_freerun_rmse_mv"] = 1e3 * freerun_rmse(model, segs, design)

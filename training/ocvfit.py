@@ -51,13 +51,16 @@ class OcvFit:
 
 def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.ndarray],
             weight: list[np.ndarray], hyst: list[np.ndarray] | None, ts: float,
-            taus_s: list[float], n_knots: int) -> OcvFit:
-    """Solve the pre-fit over several segments (lists of equal-length arrays per segment)."""
+            taus_s: list[float], n_knots: int,
+            gain: list[np.ndarray] | None = None) -> OcvFit:
+    """Solve the pre-fit over several segments (lists of equal-length arrays per segment);
+    gain multiplies the current terms (the Arrhenius gain g(T))."""
     knots = np.linspace(0.0, 1.0, n_knots)
     rows, targets, ws = [], [], []
     for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
-        cols = [hat_basis(s, knots), i[:, None]]
-        cols += [lowpass(i, tau, ts)[:, None] for tau in taus_s]
+        g = np.ones_like(i) if gain is None else gain[k]
+        cols = [hat_basis(s, knots), (g * i)[:, None]]
+        cols += [(g * lowpass(i, tau, ts))[:, None] for tau in taus_s]
         if hyst is not None:
             cols.append(hyst[k][:, None])
         rows.append(np.hstack(cols))
@@ -70,7 +73,8 @@ def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.n
     D = np.zeros((n_knots - 2, X.shape[1]))
     D[:, :n_knots] = second_difference(n_knots)
     lam = SMOOTHNESS * max(float(w.sum()), 1.0)
-    G = A.T @ A + lam * D.T @ D + 1e-10 * np.eye(X.shape[1])
+    G = A.T @ A + lam * D.T @ D
+    G += 1e-10 * (np.trace(G) / G.shape[0]) * np.eye(X.shape[1])
     coef = np.linalg.solve(G, A.T @ b)
     res = y - X @ coef
     rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))

@@ -1,0 +1,200 @@
+"""`lmncell demo`: the paper's story on the shipped A123 data, from measurements to a validated FMU.
+
+Training: the dynamic tests at −5, 5 and 45 °C (temperature in the partition space, the
+20–80 % SoC window weighted fully, the rest at OUTSIDE_WEIGHT). Validation: the 25 °C test, a
+temperature the training never saw. Then the pythonfmu FMU, the WLTC and US06 scenarios through
+fmpy, FMU against pipeline, and report.html with its figures.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fmu_src.model import load_model
+from training.drive import data_dir, load_vehicle, plot_cycle, run_cycle
+from training.fmucheck import compare_fmu_with_pipeline
+from training.interpret import local_model_table
+from training.metrics import WINDOW
+from training.pipeline import evaluate_model, train_files
+from training.readers import read_record
+from training.report import Report
+from training.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
+
+A123 = "a123_plett"
+TRAIN = ["A123_DYN_30_N05_s1.csv.gz", "A123_DYN_45_P05_s1.csv.gz", "A123_DYN_50_P45_s1.csv.gz"]
+VALIDATE = "A123_DYN_50_P25_s1.csv.gz"
+EMPTY_25C = "A123_DYN_50_P25_s2.csv.gz"
+OUTSIDE_WEIGHT = 0.2
+
+
+def _say(msg: str) -> None:
+    print(f"[demo] {msg}", flush=True)
+
+
+def ocv_figure(out: Path) -> tuple[Path, float]:
+    """Fig. 1: charge and discharge OCV branches of the 25 °C C/30 test."""
+    from training.plots import plt
+
+    d = data_dir() / A123 / "ocv"
+    s1, s2, s3 = (read_record(d / f"A123_OCV_P25_S{k}.csv.gz") for k in (1, 2, 3))
+    cap = capacity_from_discharge(s1, s2)
+    curve = ocv_from_slow_tests(s1, s3, cap)
+    fig, ax = plt.subplots(figsize=(8, 4.5), constrained_layout=True)
+    ax.plot(100 * curve.soc, curve.discharge_v, label="discharge (C/30)")
+    ax.plot(100 * curve.soc, curve.charge_v, label="charge (C/30)")
+    ax.plot(100 * curve.soc, curve.mean_v, "k--", lw=0.8, label="mean")
+    ax.set(xlabel="SoC / %", ylabel="voltage / V", ylim=(3.0, 3.5),
+           title="A123 LFP: OCV hysteresis at 25 °C")
+    ax.legend()
+    path = out / "fig01_ocv_hysteresis.png"
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    mid = (curve.soc > 0.2) & (curve.soc < 0.8)
+    return path, float(2e3 * np.median(curve.hysteresis_v[mid]))
+
+
+def run_demo(out: Path) -> Path:
+    """Train, evaluate, build the FMU, drive it, check it, write the report; returns its path."""
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    dyn = data_dir() / A123 / "dyn"
+    rep = Report("LMNCell demo: a local model network of an A123 LFP cell", out)
+    val_rec, empty = read_record(dyn / VALIDATE), read_record(dyn / EMPTY_25C)
+    capacity = capacity_from_discharge(val_rec, empty)
+    _say(f"capacity from the 25 °C full discharge (s1 + s2): {capacity:.4f} Ah")
+
+    from training import plots
+
+    rep.section("Data")
+    rep.text("A123 26650 LFP cell, dynamic tests of G. L. Plett (Battery Management Systems, "
+             "Vol. I, 2015; ESC toolbox data). Training: the tests at −5, 5 and 45 °C; "
+             "validation: the 25 °C test, which the training never saw. Current > 0 charges; "
+             f"capacity {capacity:.4f} Ah from the 25 °C discharge to 2.0 V (s1 + s2).")
+    fig1, hyst_mv = ocv_figure(out)
+    rep.figure(fig1, f"Fig. 1 — the OCV of LFP depends on the direction of the current: the "
+                     f"charge branch lies {hyst_mv:.0f} mV above the discharge branch between "
+                     "20 and 80 % SoC (median). This is why the model needs a hysteresis state.")
+    train_rec = read_record(dyn / TRAIN[1])
+    soc_train = coulomb_count(train_rec, 1.0, capacity)
+    rep.figure(plots.record_figure(train_rec, out / "fig06_training_record.png", soc_train),
+               "Fig. 6 — one training record (5 °C): repeated UDDS-derived blocks with rests "
+               "walk the cell from full to about 10 % SoC.")
+
+    _say("training the LMN and the baselines (ARX, 2RC, 2RC with hysteresis) …")
+    model_path = out / "a123_lmn.json"
+    train_files([dyn / f for f in TRAIN], model_path, capacity_ah=capacity, soc0=1.0,
+                partition=["soc", "temperature"], baselines=True,
+                progress=lambda m: _say(m), soc_window=list(WINDOW),
+                outside_weight=OUTSIDE_WEIGHT)
+    model = load_model(model_path)
+    tr = model.extra["training"]
+
+    rep.section("Identification")
+    rep.figure(plots.curve_figure(tr["curve"], out / "fig_local_models_curve.png",
+                                  model.n_local_models),
+               "Error against the number of local models: the free-run validation error "
+               f"chose M = {model.n_local_models}; then all local models were refined on the "
+               "free-run (output) error.")
+    rep.figure(plots.validity_figure(model, out / "fig_validity.png"),
+               "Validity functions over SoC (temperature at the middle of the trained range): "
+               "where each local linear model is in charge.")
+    table = local_model_table(model)
+    cols = [("local_model", "LM", ""), *[(v, v, ".2f") for v in model.partition_variables],
+            ("r0_mohm", "R0 / mΩ", ".1f"), ("r_static_mohm", "R static / mΩ", ".1f"),
+            ("time_constants_s", "time constants / s", ".1f")]
+    if "hysteresis_mv" in table[0]:
+        cols.append(("hysteresis_mv", "hysteresis / mV", ".1f"))
+    rep.table(table, cols, "Local models: operating point, instantaneous and static "
+                           "resistance and time constants (the interpretation the LMN offers).")
+
+    _say("evaluating free-run on the training records and on the unseen 25 °C record …")
+    traces, rows = evaluate_model(model, [dyn / f for f in TRAIN] + [dyn / VALIDATE], soc0=1.0)
+    for t in traces[:-1]:
+        if t.segment.name.startswith(TRAIN[1].split(".")[0]):
+            rep.figure(plots.fit_figure(t, out / "fig07_08_training_fit.png",
+                                        f"training record {t.segment.name}"),
+                       "Fig. 7/8 — measured and simulated (free-run) voltage on a training "
+                       "record, a zoom around the largest current, and the error.")
+    rep.figure(plots.fit_figure(traces[-1], out / "fig09_10_validation_fit.png",
+                                f"validation record {traces[-1].segment.name} (25 °C, unseen)"),
+               "Fig. 9/10 — the unseen 25 °C record simulated free-run from full charge: "
+               "the LMN against the baselines.")
+    rep.section("Accuracy (free-run, mV)")
+    flat = []
+    for r in rows:
+        for name, m in r.items():
+            if name != "record":
+                flat.append({"record": r["record"], "model": name, **m})
+    rep.table(flat, [("record", "record", ""), ("model", "model", ""),
+                     ("rmse_mv", "RMSE", ".2f"), ("mae_mv", "MAE", ".2f"),
+                     ("max_mv", "max", ".1f"), ("window_rmse_mv", "RMSE 20–80 % SoC", ".2f")],
+              "Free-run voltage error of the LMN and the baselines fitted on the same data; the "
+              "last record was not used in training.")
+
+    _say("building the FMU …")
+    from lmncell_build.pythonfmu_build import build_fmu
+
+    fmu = build_fmu(model_path, out / "A123_LMNCell.fmu")
+    check = compare_fmu_with_pipeline(model_path, fmu, dyn / VALIDATE, soc0=1.0)
+    _say(f"FMU vs pipeline on {check['record']}: max |Δu| = {check['max_dv_v']:.2e} V, "
+         f"max |ΔSoC| = {check['max_dsoc']:.2e}")
+    rep.section("FMU")
+    rep.figure(_agreement_figure(check, out / "fig_fmu_vs_pipeline.png"),
+               f"The FMU driven by fmpy with the 25 °C record's current against the pipeline: "
+               f"largest difference {check['max_dv_v']:.1e} V in voltage and "
+               f"{check['max_dsoc']:.1e} in SoC over {check['steps']} steps.")
+    vehicle = load_vehicle()
+    cycles = {}
+    for cyc in ("wltc", "us06"):
+        _say(f"driving the FMU through {cyc.upper()} …")
+        res = run_cycle(fmu, cyc, vehicle, repeat=1, soc0=0.8, temperature_c=25.0)
+        cycles[cyc] = res.figures
+        rep.figure(plot_cycle(res, out / f"fig_cycle_{cyc}.png"),
+                   f"{cyc.upper()} through the FMU ({vehicle.name}, {vehicle.n_series}s"
+                   f"{vehicle.n_parallel}p): {res.figures['pack_energy_kwh']:.2f} kWh, minimum "
+                   f"cell voltage {res.figures['voltage_min_v']:.3f} V, SoC "
+                   f"{100 * res.figures['soc_start']:.0f} → "
+                   f"{100 * res.figures['soc_end']:.1f} %; red dots mark steps outside the "
+                   "trained range.")
+    val = rows[-1]
+    headline = {
+        "local_models": model.n_local_models,
+        "validation_record": val["record"],
+        "validation_rmse_mv": {k: v["rmse_mv"] for k, v in val.items() if k != "record"},
+        "validation_window_rmse_mv": {k: v["window_rmse_mv"] for k, v in val.items()
+                                      if k != "record"},
+        "fmu_max_dv_v": check["max_dv_v"], "cycles": cycles,
+        "seconds": time.perf_counter() - t0,
+    }
+    (out / "summary.json").write_text(json.dumps(headline, indent=1))
+    rep.section("Run")
+    rep.text(f"Made by `lmncell demo` in {headline['seconds']:.0f} s; model file "
+             f"{model_path.name}, FMU {fmu.name}, figures in this folder, numbers in "
+             "summary.json.")
+    path = rep.write()
+    lmn = headline["validation_window_rmse_mv"]
+    _say(f"report: {path.resolve()}")
+    _say(f"unseen 25 °C record, free-run RMSE over {WINDOW[0]:.0%}–{WINDOW[1]:.0%} SoC: "
+         + ", ".join(f"{k} {v:.2f} mV" for k, v in lmn.items())
+         + f"; FMU = pipeline within {check['max_dv_v']:.1e} V; {headline['seconds']:.0f} s")
+    return path
+
+
+def _agreement_figure(check: dict, path: Path) -> Path:
+    from training.plots import plt
+
+    t = (check["time_s"] - check["time_s"][0]) / 3600
+    fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True, constrained_layout=True)
+    ax[0].plot(t, check["pipeline_voltage_v"], "k", lw=0.8, label="pipeline")
+    ax[0].plot(t, check["fmu_voltage_v"], "r:", lw=1.0, label="FMU (fmpy)")
+    ax[0].set(ylabel="voltage / V")
+    ax[0].legend()
+    ax[1].plot(t, check["fmu_voltage_v"] - check["pipeline_voltage_v"])
+    ax[1].set(ylabel="FMU − pipeline / V", xlabel="time / h")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
