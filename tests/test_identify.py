@@ -63,8 +63,18 @@ def test_training_twice_gives_identical_files(tmp_path) -> None:
     assert strip == [ln for ln in b if "seconds" not in ln]
     ma, mb = load_model(tmp_path / "a.json"), load_model(tmp_path / "b.json")
     assert np.array_equal(ma.theta, mb.theta) and np.array_equal(ma.ocv_v, mb.ocv_v)
-    for t in ma.theta:
-        assert np.abs(poles(t, ma.output_lags)).max() < 1
+
+
+def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
+    """The paper's form (three output lags, absolute output) stays stable."""
+    for output in ("relative_ocv", "absolute"):
+        m, _ = train_files([PAN_HWFET], tmp_path / f"{output}.json", capacity_ah=2.85,
+                           progress=lambda _m: None, max_local_models=3, output_lags=3,
+                           current_terms=3, filters=[[5.0, 100.0]], output=output,
+                           oe_max_iterations=3, hysteresis="off")
+        assert m.output_lags == 3
+        for t in m.theta:
+            assert np.abs(poles(t, 3)).max() <= 0.9995 + 1e-9
 
 
 @pytest.mark.parametrize("kw, message", [
