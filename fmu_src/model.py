@@ -169,7 +169,8 @@ class LmnModel:
         q = np.ones((n, 2 * n_nodes + 1))
         if n_nodes:
             act = self.node_weights[:, 0] + z @ self.node_weights[:, 1:].T
-            phi = 1.0 / (1.0 + np.exp(-act))
+            with np.errstate(over="ignore"):   # exp overflow → φ = 0 exactly, as intended
+                phi = 1.0 / (1.0 + np.exp(-act))
             q[:, :n_nodes] = phi
             q[:, n_nodes:2 * n_nodes] = 1.0 - phi
         Phi = np.prod(q[:, self._path_index], axis=2)

@@ -1,0 +1,130 @@
+"""Benchmark: microseconds per step of the LMNCell pythonfmu FMU through fmpy at 0.1 s and 1 s
+communication steps, beside a trivial pythonfmu FMU built the same way (the floor), instantiate
+time, and the runtime step alone without FMI.
+
+    python tests/benchmarks/bench_fmu.py [MODEL.json]
+
+Without a model file, a model is trained on the shipped Panasonic HWFET record (M ≤ 8).
+"""
+
+from __future__ import annotations
+
+import shutil
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from fmpy import extract
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from fmu_src.model import load_model  # noqa: E402
+from fmu_src.runtime import CellStepper  # noqa: E402
+from tests.fmu_helpers import Instance  # noqa: E402
+
+TRIVIAL = '''
+from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
+
+
+class Trivial(Fmi2Slave):
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.current = 0.0
+        self.temperature = 25.0
+        self.voltage = 3.7
+        self.soc = 0.5
+        self.soc0 = 0.5
+        self.register_variable(Real("current", causality=Fmi2Causality.input,
+                                    variability=Fmi2Variability.continuous))
+        self.register_variable(Real("temperature", causality=Fmi2Causality.input,
+                                    variability=Fmi2Variability.continuous))
+        self.register_variable(Real("voltage", causality=Fmi2Causality.output,
+                                    variability=Fmi2Variability.continuous))
+        self.register_variable(Real("soc", causality=Fmi2Causality.output,
+                                    variability=Fmi2Variability.continuous))
+        self.register_variable(Real("soc0", causality=Fmi2Causality.parameter,
+                                    variability=Fmi2Variability.fixed))
+
+    def do_step(self, current_time, step_size):
+        return True
+'''
+
+
+def build_trivial(out: Path) -> Path:
+    from pythonfmu.builder import FmuBuilder
+
+    with tempfile.TemporaryDirectory() as tmp:
+        script = Path(tmp) / "lmncell_trivial_bench.py"
+        script.write_text(TRIVIAL)
+        return FmuBuilder.build_FMU(script, dest=out)
+
+
+def per_step_us(fmu: Path, h: float, n: int) -> float:
+    d = extract(str(fmu))
+    try:
+        runs = []
+        for _ in range(3):
+            inst = Instance(fmu, start={"soc0": 0.9}, unzipped=d)
+            t0 = time.perf_counter()
+            for k in range(n):
+                inst.step(-1.0 - 0.5 * (k % 7), h)
+                inst.get("voltage", "soc")
+            runs.append((time.perf_counter() - t0) / n)
+            inst.free()
+        return 1e6 * statistics.median(runs)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def instantiate_ms(fmu: Path, n: int = 50) -> float:
+    d = extract(str(fmu))
+    try:
+        times = []
+        for _ in range(n):
+            t0 = time.perf_counter()
+            Instance(fmu, unzipped=d).free()
+            times.append(time.perf_counter() - t0)
+        return 1e3 * statistics.median(times)
+    finally:
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def main() -> None:
+    from lmncell_build.pythonfmu_build import build_fmu
+
+    from training.pipeline import train_files
+
+    out = Path(tempfile.mkdtemp(prefix="lmncell_bench_"))
+    if len(sys.argv) > 1:
+        model_path = Path(sys.argv[1])
+    else:
+        model_path = out / "model.json"
+        train_files([ROOT / "data/panasonic_18650pf/25degC/drive_cycles/"
+                     "03-20-17_05.56_25degC_HWFTa_Pan18650PF.mat"], model_path,
+                    capacity_ah=2.85, partition=["soc", "current"], progress=lambda _m: None)
+    model = load_model(model_path)
+    lmn = build_fmu(model_path, out / "lmn.fmu")
+    trivial = build_trivial(out)
+    n = 3000
+    print(f"model: M = {model.n_local_models}, Ts = {model.sample_time_s} s, "
+          f"{len(model.columns())} regressors")
+    st = CellStepper(model, 0.9)
+    t0 = time.perf_counter()
+    for k in range(20000):
+        st.step(-1.0 - 0.5 * (k % 7), 25.0)
+    runtime_us = 1e6 * (time.perf_counter() - t0) / 20000
+    print(f"runtime step alone (no FMI): {runtime_us:.2f} µs per model step")
+    for h in (0.1, 1.0):
+        a, b = per_step_us(lmn, h, n), per_step_us(trivial, h, n)
+        print(f"through fmpy at h = {h} s (set inputs, doStep, get 2 outputs): LMNCell "
+              f"{a:.1f} µs/step, trivial {b:.1f} µs/step, ratio {a / b:.2f}")
+    print(f"instantiate + initialise + free: LMNCell {instantiate_ms(lmn):.2f} ms, trivial "
+          f"{instantiate_ms(trivial):.2f} ms (median of 50)")
+    shutil.rmtree(out, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,72 @@
+"""The command line end to end on shipped data, and `inspect` on every file of ../shared/data."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+
+from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
+from training.cli import main
+
+
+def test_inspect_reads_every_shared_file(capsys) -> None:
+    shared_or_skip("a123_plett")
+    files = (sorted((SHARED / "a123_plett/dyn").glob("*.csv"))
+             + sorted((SHARED / "a123_plett/ocv").glob("*.csv"))
+             + sorted((SHARED / "panasonic_18650pf").rglob("*.mat")))
+    assert len(files) > 60
+    assert main(["inspect", *map(str, files)]) == 0
+    out = capsys.readouterr().out
+    assert out.count("samples,") == len(files)
+
+
+def test_inspect_plot_and_bad_file(tmp_path, capsys) -> None:
+    assert main(["inspect", str(A123_S1), "--plot", str(tmp_path / "r.png")]) == 0
+    assert (tmp_path / "r.png").stat().st_size > 10_000
+    assert "SoC 12.9 … 100.0 %" in capsys.readouterr().out
+    bad = tmp_path / "bad.csv"
+    bad.write_text("x,y\n1,2\n")
+    assert main(["inspect", str(bad)]) == 2
+    assert "bad.csv: unknown format" in capsys.readouterr().err
+
+
+def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
+    model = tmp_path / "m.json"
+    assert main(["train", str(PAN_US06), "--out", str(model), "--capacity", "2.85",
+                 "--max-local-models", "2", "--partition", "soc,current"]) == 0
+    capsys.readouterr()
+    trace = tmp_path / "t.csv"
+    assert main(["evaluate", str(model), str(PAN_US06), "--json", "--trace", str(trace),
+                 "--plot", str(tmp_path / "plots")]) == 0
+    out = capsys.readouterr().out
+    rows = json.loads(out[out.index("["):])
+    assert rows[0]["lmn"]["rmse_mv"] < 30 and "window_rmse_mv" in rows[0]["lmn"]
+    with open(trace) as fh:
+        head = next(csv.reader(fh))
+    assert head == ["time_s", "current_a", "voltage_measured_v", "voltage_model_v", "soc"]
+    assert (tmp_path / "plots" / "validity.png").exists()
+    fmu = tmp_path / "c.fmu"
+    assert main(["build-fmu", str(model), "--out", str(fmu)]) == 0
+    for cycle in ("wltc", "udds", "us06", "hwfet"):
+        assert main(["simulate", str(fmu), "--cycle", cycle, "--json",
+                     "--plot", str(tmp_path / f"{cycle}.png")]) == 0
+        out = capsys.readouterr().out
+        figures = json.loads(out[out.index("{"):out.rindex("}") + 1])
+        assert figures["cycle"] == cycle and figures["distance_km"] > 5
+        assert (tmp_path / f"{cycle}.png").exists()
+    assert main(["train", str(PAN_US06), "--out", str(model), "--partition", "volts"]) == 2
+
+
+def test_missing_soc0_is_explained(tmp_path, capsys) -> None:
+    rec = DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz"   # charge from empty: not full
+    assert main(["train", str(rec), "--out", str(tmp_path / "m.json"),
+                 "--capacity", "2.0"]) == 2
+    assert "give --soc0" in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_demo_runs(tmp_path) -> None:
+    assert main(["demo", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "report.html").exists()
