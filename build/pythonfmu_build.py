@@ -52,9 +52,12 @@ def documentation_html(model: LmnModel, model_path: Path) -> str:
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v[0]:.4g} … {v[1]:.4g}</td></tr>"
                    for k, v in lim.items())
     metrics = tr.get("train_metrics", [])
-    acc = "".join(f"<tr><td>{html.escape(m['segment'])}</td><td>{m['rmse_mv']:.2f}</td>"
-                  f"<td>{m['window_rmse_mv']:.2f}</td><td>{m['max_mv']:.1f}</td></tr>"
-                  for m in metrics)
+    def num(v: float | None, fmt: str) -> str:
+        return "–" if v is None else format(v, fmt)
+
+    acc = "".join(f"<tr><td>{html.escape(m['segment'])}</td><td>{num(m['rmse_mv'], '.2f')}</td>"
+                  f"<td>{num(m['window_rmse_mv'], '.2f')}</td><td>{num(m['max_mv'], '.1f')}</td>"
+                  "</tr>" for m in metrics)
     return f"""<!DOCTYPE html><html><head><meta charset="utf-8"><title>LMNCell FMU</title></head>
 <body><h1>LMNCell FMU: {html.escape(model.cell.get('name', 'cell'))}</h1>
 <p>{html.escape(model.extra.get('description', ''))}. Model file {html.escape(model_path.name)},
@@ -65,10 +68,12 @@ sample time Ts = {model.sample_time_s} s, {model.n_local_models} local models ov
 <li><b>voltage_measured</b> (input, V): mean measured voltage over the step (observer).</li>
 <li><b>temperature</b> (input, degC).</li>
 <li><b>voltage</b> (output, V): model terminal voltage of the last completed model step.</li>
-<li><b>soc</b> (output): coulomb-counted state of charge; <b>out_of_range</b> (output): true while
-the inputs leave the trained region (the model extrapolates, nothing is clamped).</li>
-<li><b>soc0</b>, <b>capacity</b> (Ah), <b>observer</b> (0 only in this version):
-parameters.</li></ul>
+<li><b>soc</b> (output): state of charge, coulomb-counted or the observer's estimate;
+<b>soc_std</b> (output): the observer's standard deviation; <b>out_of_range</b> (output): true
+while the inputs leave the trained region (the model extrapolates, nothing is clamped).</li>
+<li><b>soc0</b>, <b>capacity</b> (Ah), <b>observer</b> (0 none, 1 EKF, 2 fuzzy, 3 IMM):
+parameters. The observers compare the model with <b>voltage_measured</b> (0 = no update).</li>
+</ul>
 <p>Sub-stepping: inputs are integrated over the communication step; each completed Ts is one
 model step with the mean inputs over it. A step that is a multiple of Ts gives that many
 sub-steps; other steps are accumulated exactly across calls. The outputs hold the last completed

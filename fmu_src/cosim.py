@@ -14,6 +14,7 @@ import math
 from dataclasses import dataclass
 
 from .model import LmnModel
+from .observers import OBSERVER_NAMES, SocObserver
 from .runtime import CellStepper
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
@@ -44,7 +45,16 @@ class CellCosim:
             raise InputError(f"parameter 'soc0' = {p.soc0!r}: expected a fraction within 0…1")
         if not (math.isfinite(p.capacity_ah) and p.capacity_ah > 0):
             raise InputError(f"parameter 'capacity' = {p.capacity_ah!r}: expected > 0 Ah")
-        self.stepper = CellStepper(self.model, p.soc0, p.capacity_ah, temperature_c)
+        if p.observer not in OBSERVER_NAMES:
+            raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
+                             f"{OBSERVER_NAMES}")
+        self.observer: SocObserver | None = None
+        if p.observer:
+            self.observer = SocObserver(self.model, OBSERVER_NAMES[p.observer], p.soc0,
+                                        p.capacity_ah, temperature_c)
+            self.stepper = self.observer.stepper
+        else:
+            self.stepper = CellStepper(self.model, p.soc0, p.capacity_ah, temperature_c)
         self.covered_s = 0.0
         self.charge_as = 0.0
         self.temp_int = 0.0
@@ -60,7 +70,12 @@ class CellCosim:
 
     @property
     def soc(self) -> float:
-        return self.stepper.soc
+        return self.observer.state.soc if self.observer else self.stepper.soc
+
+    @property
+    def soc_std(self) -> float:
+        """Observer's SoC standard deviation; 0 without an observer (coulomb counting)."""
+        return self.observer.soc_std if self.observer else 0.0
 
     def check_range(self, current_a: float, temperature_c: float) -> str:
         """'' when inside the trained region, else a message (the model still extrapolates)."""
@@ -118,7 +133,11 @@ class CellCosim:
         temp = self.temp_int / ts
         self.range_message = self.check_range(i, temp)
         self.out_of_range = bool(self.range_message)
-        self.stepper.step(i, temp)
+        if self.observer:
+            v = self.volt_int / self.volt_time if self.volt_time >= ts * (1 - STEP_TOL) else 0.0
+            self.observer.step(i, v if v > 0 else math.nan, temp)
+        else:
+            self.stepper.step(i, temp)
         self.steps += 1
         self.covered_s = self.charge_as = self.temp_int = 0.0
         self.volt_int = self.volt_time = 0.0
@@ -126,6 +145,7 @@ class CellCosim:
     # ----- state --------------------------------------------------------------------------
     def get_state(self) -> dict:
         return {"stepper": self.stepper.get_state(),
+                "observer": self.observer.get_state() if self.observer else None,
                 "acc": [self.covered_s, self.charge_as, self.temp_int, self.volt_int,
                         self.volt_time],
                 "flags": [self.out_of_range, self.range_message, self.steps],
@@ -134,8 +154,11 @@ class CellCosim:
     def set_state(self, state: dict) -> None:
         soc0, cap, obs = state["params"]
         self.params = Parameters(float(soc0), float(cap), int(obs))
-        self.stepper = CellStepper(self.model, self.params.soc0, self.params.capacity_ah)
-        self.stepper.set_state(list(state["stepper"]))
+        self.reset()
+        if self.observer:
+            self.observer.set_state(state["observer"])
+        else:
+            self.stepper.set_state(list(state["stepper"]))
         (self.covered_s, self.charge_as, self.temp_int, self.volt_int,
          self.volt_time) = (float(x) for x in state["acc"])
         self.out_of_range, self.range_message, self.steps = (

@@ -261,6 +261,7 @@ class CellStepper:
         self.state = self.exo.initial_state(soc0, h0)
         y0 = fixed_point(model, soc0, temperature_c, h0)
         self.lags = [y0] * model.output_lags
+        self.prev_lags = list(self.lags)
         self._x = np.zeros((1, model.n_exo))
         self._z = np.zeros((1, len(model.partition_variables)))
         self._d = np.zeros(1, dtype=np.intp)
@@ -282,6 +283,7 @@ class CellStepper:
         a = A[0].tolist()
         acc = float(b[0])
         lags = self.lags
+        self.prev_lags = list(lags)
         for l in range(m.output_lags):
             acc += a[l] * lags[l]
         if m.output_lags:

@@ -17,8 +17,7 @@ from pythonfmu.enums import Fmi2Status
 
 from .cosim import CellCosim, InputError, Parameters
 from .model import ModelFileError, load_model
-
-OBSERVERS = {0: "none"}
+from .observers import OBSERVER_NAMES as OBSERVERS
 
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never
@@ -68,7 +67,12 @@ class LmnCellSlave(Fmi2Slave):
                  description="model terminal voltage of the last completed model step [V]"))
         reg(Real("soc", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                  getter=lambda: self._out("soc"),
-                 description="state of charge (coulomb counting) [1]"))
+                 description="state of charge: coulomb counting, or the observer's estimate "
+                             "[1]"))
+        reg(Real("soc_std", causality=Fmi2Causality.output,
+                 variability=Fmi2Variability.continuous,
+                 getter=lambda: self._cosim.soc_std if self._cosim else 0.0,
+                 description="observer's SoC standard deviation (0 without observer) [1]"))
         reg(Boolean("out_of_range", causality=Fmi2Causality.output,
                     variability=Fmi2Variability.discrete,
                     getter=lambda: bool(self._cosim and self._cosim.out_of_range),
@@ -81,8 +85,8 @@ class LmnCellSlave(Fmi2Slave):
                  description="capacity for coulomb counting [Ah]"))
         reg(Integer("observer", causality=Fmi2Causality.parameter,
                     variability=Fmi2Variability.fixed,
-                    description="SoC observer: 0 none (coulomb counting); observers not in this "
-                                "version"))
+                    description="SoC observer: 0 none (coulomb counting), 1 EKF, 2 fuzzy "
+                                "observer, 3 IMM; uses voltage_measured"))
 
     def _dedupe_sys_path(self) -> None:
         """The wrapper inserts the resources folder into sys.path at every instantiation: keep

@@ -11,6 +11,7 @@ DATA = ROOT / "data"
 SHARED = ROOT.parent / "shared" / "data"
 PAN_US06 = DATA / "panasonic_18650pf/25degC/drive_cycles/03-20-17_01.43_25degC_US06_Pan18650PF.mat"
 PAN_HWFET = DATA / "panasonic_18650pf/25degC/drive_cycles/03-20-17_05.56_25degC_HWFTa_Pan18650PF.mat"
+PAN_HPPC = DATA / "panasonic_18650pf/25degC/hppc/03-11-17_08.47_25degC_5Pulse_HPPC_Pan18650PF.mat"
 A123_S1 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s1.csv.gz"
 A123_S2 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s2.csv.gz"
 
@@ -24,12 +25,14 @@ def shared_or_skip(rel: str = "") -> Path:
 
 @pytest.fixture(scope="session")
 def quick_model(tmp_path_factory) -> Path:
-    """A small LMN trained on the shipped Panasonic HWFET record (2 local models)."""
+    """A small LMN trained on the shipped Panasonic HWFET and HPPC records (≤ 3 local models;
+    the HPPC rests pin down the OCV). The US06 record stays unseen."""
     from training.pipeline import train_files
 
     out = tmp_path_factory.mktemp("model") / "pan.json"
-    train_files([PAN_HWFET], out, capacity_ah=2.85, progress=lambda _m: None,
-                max_local_models=2, oe_max_iterations=4, hysteresis="off")
+    train_files([PAN_HWFET, PAN_HPPC], out, capacity_ah=2.85, soc0=1.0,
+                progress=lambda _m: None, max_local_models=3, oe_max_iterations=4,
+                hysteresis="off")
     return out
 
 

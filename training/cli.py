@@ -42,6 +42,14 @@ def cmd_train(a: argparse.Namespace) -> int:
 
 
 def cmd_evaluate(a: argparse.Namespace) -> int:
+    if a.observer:
+        from training.observe import evaluate_observer_files
+
+        if a.soc0_est is None:
+            raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
+        evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
+                                a.plot, a.json)
+        return 0
     from training.pipeline import evaluate_files
 
     evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json)
@@ -101,6 +109,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true")
     s.add_argument("--plot", metavar="DIR")
     s.add_argument("--trace", metavar="OUT.csv")
+    s.add_argument("--observer", choices=["ekf", "fuzzy", "imm"],
+                   help="judge a SoC observer instead of the voltage")
+    s.add_argument("--soc0-est", type=_float01, help="the observer's start SoC guess")
+    s.add_argument("--start-soc", type=_float01, help="start the observer where the reference "
+                   "SoC first falls to this value (under load)")
     s.set_defaults(func=cmd_evaluate)
 
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU")

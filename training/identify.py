@@ -334,8 +334,13 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     ridge = 1e-3
     cache: dict = {}
 
+    ocv0 = model.ocv_v.copy()
+    lam_anchor = np.sqrt(n_total) * 0.1    # 10 mV away from the pre-fit OCV costs like 0.1 % of
+    #                                        the samples being 10 mV off: a weak anchor
+
     def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return x[: M * p].reshape(M, p), (x[M * p:] if with_ocv else model.ocv_v)
+        # OCV knots as a start value plus non-negative increments (OCV rises with SoC)
+        return x[: M * p].reshape(M, p), (np.cumsum(x[M * p:]) if with_ocv else model.ocv_v)
 
     def evaluate(x: np.ndarray):
         key = x.tobytes()
@@ -364,7 +369,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             S = _sensitivity(A, G)
             J = -sw[:, None] * S
             if with_ocv:
-                J = np.hstack([J, -sw[:, None] * Bs[k]])
+                J = np.hstack([J, -sw[:, None] * (Bs[k] @ tri)])
             jac.append(J)
         x_extra = []
         j_extra = []
@@ -376,19 +381,29 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
         if with_ocv and D2.shape[0]:
             x_extra.append(lam_ocv * D2 @ ocv_v)
             jo = np.zeros((D2.shape[0], M * p + K))
-            jo[:, M * p:] = lam_ocv * D2
+            jo[:, M * p:] = lam_ocv * D2 @ tri
             j_extra.append(jo)
+        if with_ocv:
+            x_extra.append(lam_anchor * (ocv_v - ocv0))
+            ja = np.zeros((K, M * p + K))
+            ja[:, M * p:] = lam_anchor * tri
+            j_extra.append(ja)
         out = (np.concatenate(res + x_extra), np.vstack(jac + j_extra))
         cache.clear()
         cache[key] = out
         return out
 
-    x0 = np.concatenate([model.theta.ravel(), model.ocv_v if with_ocv else []])
+    tri = np.tril(np.ones((K, K)))
+    incr0 = np.concatenate([[ocv0[0]], np.maximum(np.diff(ocv0), 0.0)]) if with_ocv else []
+    x0 = np.concatenate([model.theta.ravel(), incr0])
+    lower = np.full(x0.size, -np.inf)
+    if with_ocv:
+        lower[M * p + 1:] = 0.0
     r0 = evaluate(x0)[0]
     t_start = time.perf_counter()
     with np.errstate(over="ignore", invalid="ignore"):
         sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
-                            method="trf", x_scale="jac", max_nfev=cfg.oe_max_iterations,
+                            bounds=(lower, np.full(x0.size, np.inf)), method="trf", x_scale="jac", max_nfev=cfg.oe_max_iterations,
                             ftol=1e-8, xtol=1e-10, gtol=1e-10)
     theta, ocv_v = unpack(sol.x)
     theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])

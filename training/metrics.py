@@ -8,11 +8,10 @@ WINDOW = (0.2, 0.8)
 
 
 def error_stats(err_v: np.ndarray, mask: np.ndarray | None = None) -> dict:
-    """RMSE, MAE and max |error| in mV (over mask where given); NaN where no sample."""
+    """RMSE, MAE and max |error| in mV (over mask where given); None where no sample."""
     e = err_v if mask is None else err_v[mask]
     if e.size == 0:
-        return {"rmse_mv": float("nan"), "mae_mv": float("nan"), "max_mv": float("nan"),
-                "samples": 0}
+        return {"rmse_mv": None, "mae_mv": None, "max_mv": None, "samples": 0}
     return {"rmse_mv": 1e3 * float(np.sqrt(np.mean(e * e))),
             "mae_mv": 1e3 * float(np.mean(np.abs(e))),
             "max_mv": 1e3 * float(np.max(np.abs(e))), "samples": int(e.size)}

@@ -2,8 +2,8 @@
 
 u(k) = OCV(SoC(k)) + r0·i(k) + Σ_τ g_τ·LP_τ(i)(k) + M·h_γ(k), with OCV piecewise linear over
 equally spaced SoC knots and a second-difference smoothness penalty. Because nothing is fed back,
-its equation error is its free-run error; it gives the LMN its OCV curve and chooses the
-hysteresis rate γ.
+its equation error is its free-run error; it gives the LMN its OCV curve (constrained to rise
+with SoC) and chooses the hysteresis rate γ and the Arrhenius temperature gain.
 """
 
 from __future__ import annotations
@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import lsq_linear
 from scipy.signal import lfilter
 
 SMOOTHNESS = 3e-3   # penalty weight per knot, relative to the number of samples
@@ -76,6 +77,22 @@ def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.n
     G = A.T @ A + lam * D.T @ D
     G += 1e-10 * (np.trace(G) / G.shape[0]) * np.eye(X.shape[1])
     coef = np.linalg.solve(G, A.T @ b)
+    if np.any(np.diff(coef[:n_knots]) < 0):
+        coef = _monotone_solve(A, b, D, lam, n_knots)
     res = y - X @ coef
     rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))
     return OcvFit(knots, coef[:n_knots].copy(), rmse, coef)
+
+
+def _monotone_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
+                    n_knots: int) -> np.ndarray:
+    """The same least squares with OCV non-decreasing in SoC: knots c = L·d, d_k ≥ 0 (k ≥ 1)."""
+    p = A.shape[1]
+    T = np.eye(p)
+    T[:n_knots, :n_knots] = np.tril(np.ones((n_knots, n_knots)))
+    M = np.vstack([A @ T, np.sqrt(lam) * D @ T])
+    rhs = np.concatenate([b, np.zeros(D.shape[0])])
+    lo = np.full(p, -np.inf)
+    lo[1:n_knots] = 0.0
+    sol = lsq_linear(M, rhs, bounds=(lo, np.full(p, np.inf)), method="bvls")
+    return T @ sol.x

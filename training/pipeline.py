@@ -257,7 +257,9 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float 
             for name, m in r.items():
                 if name == "record":
                     continue
+                win = m["window_rmse_mv"]
+                win_txt = "  (none)" if win is None else f"{win:6.2f} mV"
                 progress(f"{r['record'][:48]:48s} {name:12s} RMSE {m['rmse_mv']:7.2f} mV  MAE "
                          f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | {WINDOW[0]:.0%}–"
-                         f"{WINDOW[1]:.0%} SoC RMSE {m['window_rmse_mv']:6.2f} mV")
+                         f"{WINDOW[1]:.0%} SoC RMSE {win_txt}")
     return rows

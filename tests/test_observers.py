@@ -1,0 +1,82 @@
+"""SoC observers on a real record (issue: observers)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from fmu_src.model import load_model
+from fmu_src.observers import SocObserver
+from tests.conftest import PAN_US06
+from tests.fmu_helpers import Instance
+from training.dataset import record_to_segments
+from training.observe import run_observer, soc_metrics
+from training.readers import read_record
+
+
+@pytest.fixture(scope="module")
+def us06(quick_model):
+    model = load_model(quick_model)
+    seg = record_to_segments(read_record(PAN_US06), 1.0, 1.0, 2.85)[0]
+    return model, seg
+
+
+@pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])
+def test_observer_converges_from_a_wrong_start(us06, kind) -> None:
+    model, seg = us06
+    k0 = int(np.argmax(seg.soc_ref <= 0.6))
+    run = run_observer(model, seg, kind, 0.3, k0)
+    cc = soc_metrics(run_observer(model, seg, "coulomb", 0.3, k0))
+    m = soc_metrics(run)
+    assert m["rmse_pct"] < 5.0, m
+    assert m["rmse_pct"] < cc["rmse_pct"] / 4
+    assert np.all((run.estimate >= 0) & (run.estimate <= 1))
+
+
+def test_nan_and_absurd_measurements_are_skipped(us06) -> None:
+    model, seg = us06
+    ob = SocObserver(model, "ekf", 0.5)
+    for k in range(50):
+        v = math.nan if k % 2 else 99.0
+        ob.step(float(seg.current_a[k]), v, 25.0)
+    assert ob.state.skipped == 50
+    assert ob.state.soc == pytest.approx(0.5 + np.sum(seg.current_a[:50]) / 3600 / 2.85,
+                                         abs=1e-9)
+
+
+@pytest.mark.parametrize("observer", [1, 2, 3])
+def test_fmu_observer_state_round_trip(quick_fmu, us06, observer) -> None:
+    _, seg = us06
+    inst = Instance(quick_fmu, start={"soc0": 0.4})
+    inst.slave.reset()
+    inst.slave.setupExperiment(startTime=0.0)
+    inst.slave.enterInitializationMode()
+    inst.slave.setReal([inst.vr["soc0"]], [0.4])
+    inst.slave.setInteger([inst.vr["observer"]], [observer])
+    inst.slave.exitInitializationMode()
+    inst.t = 0.0
+    vr_meas = inst.vr["voltage_measured"]
+    try:
+        for k in range(100):
+            inst.slave.setReal([vr_meas], [float(seg.voltage_v[k])])
+            inst.step(float(seg.current_a[k]))
+        state = inst.slave.getFMUstate()
+        blob = inst.slave.serializeFMUstate(state)
+        ref = []
+        for k in range(100, 160):
+            inst.slave.setReal([vr_meas], [float(seg.voltage_v[k])])
+            inst.step(float(seg.current_a[k]))
+            ref.append(inst.get("soc", "soc_std", "voltage"))
+        assert ref[-1][0] > 0.6          # corrected towards the true SoC (≈ 0.98)
+        for restore in (state, inst.slave.deSerializeFMUstate(blob)):
+            inst.slave.setFMUstate(restore)
+            again = []
+            for k in range(100, 160):
+                inst.slave.setReal([vr_meas], [float(seg.voltage_v[k])])
+                inst.step(float(seg.current_a[k]))
+                again.append(inst.get("soc", "soc_std", "voltage"))
+            assert again == ref
+    finally:
+        inst.free()

@@ -1,0 +1,118 @@
+"""SoC observers judged on real records: `lmncell evaluate MODEL DATA --observer …`."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from fmu_src.model import LmnModel, load_model
+from fmu_src.observers import SocObserver
+from training.dataset import Segment, record_to_segments, start_soc
+from training.readers import read_record
+
+SETTLE_S = 600.0
+BAND = 0.02
+
+
+@dataclass
+class ObserverRun:
+    name: str
+    time_s: np.ndarray
+    soc_ref: np.ndarray
+    estimate: np.ndarray
+    std: np.ndarray
+    skipped: int
+
+
+def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
+                 start: int = 0) -> ObserverRun:
+    """The observer (or 'coulomb' counting) from sample `start` with the estimate soc0_est."""
+    k0 = start
+    if kind == "coulomb":
+        dq = np.cumsum(seg.current_a[k0:]) * model.sample_time_s / (3600 * model.capacity_ah)
+        est = soc0_est + dq
+        return ObserverRun(kind, seg.time_s[k0:], seg.soc_ref[k0:], est, np.zeros_like(est), 0)
+    temp = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
+    ob = SocObserver(model, kind, soc0_est, temperature_c=float(temp[k0]))
+    est, std = np.empty(len(seg) - k0), np.empty(len(seg) - k0)
+    for j, k in enumerate(range(k0, len(seg))):
+        est[j] = ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]), float(temp[k]))
+        std[j] = ob.soc_std
+    return ObserverRun(kind, seg.time_s[k0:], seg.soc_ref[k0:], est, std, ob.state.skipped)
+
+
+def soc_metrics(run: ObserverRun) -> dict:
+    """RMSE, MAE, max after the first 10 minutes (%), time until the error stays within 2 %,
+    share of time outside ±3σ (consistency), skipped measurements."""
+    t = run.time_s - run.time_s[0]
+    err = run.estimate - run.soc_ref
+    after = t >= SETTLE_S
+    outside = np.abs(err) > BAND
+    last_out = np.flatnonzero(outside)
+    settle = float(t[last_out[-1]] + (t[1] - t[0])) if last_out.size else 0.0
+    if last_out.size and last_out[-1] == err.size - 1:
+        settle = float("inf")
+    e = err[after] if after.any() else err
+    out3 = (np.abs(err) > 3 * run.std) if run.std.any() else np.ones_like(err, dtype=bool)
+    return {"rmse_pct": 100 * float(np.sqrt(np.mean(e * e))),
+            "mae_pct": 100 * float(np.mean(np.abs(e))),
+            "max_pct": 100 * float(np.max(np.abs(e))),
+            "time_to_2pct_s": settle,
+            "outside_3sigma_share": float(np.mean(out3)),
+            "skipped_measurements": run.skipped}
+
+
+def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
+    from training.plots import plt
+
+    fig, ax = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, constrained_layout=True)
+    r0 = runs[0]
+    t = (r0.time_s - r0.time_s[0]) / 60
+    ax[0].plot(t, 100 * r0.soc_ref, "k", lw=1.2, label="reference (counters)")
+    for r in runs:
+        ax[0].plot(t, 100 * r.estimate, lw=0.9, label=r.name)
+        if r.std.any():
+            ax[0].fill_between(t, 100 * (r.estimate - 3 * r.std), 100 * (r.estimate + 3 * r.std),
+                               alpha=0.2)
+        ax[1].plot(t, 100 * (r.estimate - r.soc_ref), lw=0.8, label=r.name)
+    ax[0].set(ylabel="SoC / %", title="SoC estimate with ±3σ band")
+    ax[0].legend(fontsize=8)
+    for b in (-2, 2):
+        ax[1].axhline(b, color="k", ls=":", lw=0.7)
+    ax[1].set(ylabel="estimate − reference / %", xlabel="time / min")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kind: str,
+                            soc0: float | None, soc0_est: float, start_at: float | None,
+                            plot_dir: str | Path | None = None, as_json: bool = False) -> list:
+    model = load_model(model_path)
+    results = []
+    for p in paths:
+        rec = read_record(p)
+        seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0),
+                                 model.capacity_ah)[0]
+        k0 = int(np.argmax(seg.soc_ref <= start_at)) if start_at is not None else 0
+        runs = [run_observer(model, seg, kind, soc0_est, k0),
+                run_observer(model, seg, "coulomb", soc0_est, k0)]
+        row = {"record": seg.name, "start_soc_true": float(seg.soc_ref[k0]),
+               "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}}
+        results.append(row)
+        if plot_dir is not None:
+            Path(plot_dir).mkdir(parents=True, exist_ok=True)
+            observer_figure(runs, Path(plot_dir) / f"soc_{kind}_{Path(p).stem}.png")
+    if as_json:
+        print(json.dumps(results, indent=1))
+    else:
+        for r in results:
+            for name in (kind, "coulomb"):
+                m = r[name]
+                print(f"{r['record'][:44]:44s} {name:8s} SoC RMSE {m['rmse_pct']:5.2f} %  MAE "
+                      f"{m['mae_pct']:5.2f} %  max {m['max_pct']:5.2f} %  within 2 % after "
+                      f"{m['time_to_2pct_s']:.0f} s  outside 3σ {100 * m['outside_3sigma_share']:.0f} %")
+    return results
