@@ -403,7 +403,8 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     t_start = time.perf_counter()
     with np.errstate(over="ignore", invalid="ignore"):
         sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
-                            bounds=(lower, np.full(x0.size, np.inf)), method="trf", x_scale="jac", max_nfev=cfg.oe_max_iterations,
+                            bounds=(lower, np.full(x0.size, np.inf)), method="trf",
+                            x_scale="jac", max_nfev=cfg.oe_max_iterations,
                             ftol=1e-8, xtol=1e-10, gtol=1e-10)
     theta, ocv_v = unpack(sol.x)
     theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])

@@ -114,5 +114,6 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
                 m = r[name]
                 print(f"{r['record'][:44]:44s} {name:8s} SoC RMSE {m['rmse_pct']:5.2f} %  MAE "
                       f"{m['mae_pct']:5.2f} %  max {m['max_pct']:5.2f} %  within 2 % after "
-                      f"{m['time_to_2pct_s']:.0f} s  outside 3σ {100 * m['outside_3sigma_share']:.0f} %")
+                      f"{m['time_to_2pct_s']:.0f} s  outside 3σ "
+                      f"{100 * m['outside_3sigma_share']:.0f} %")
     return results
