@@ -195,6 +195,8 @@ def fixed_point(model: LmnModel, soc0: float, temperature_c: float, h0: float) -
 def recursion(A: np.ndarray, b: np.ndarray, y_init: list[float]) -> np.ndarray:
     """Free-run ŷ(k) = Σ_l A(k,l)·ŷ(k−l) + b(k) from initial lags y_init = [ŷ(−1), ŷ(−2), …]."""
     na = A.shape[1]
+    if na == 0:
+        return b.copy()        # no output feedback: the recursion is the exogenous part
     n = b.size
     y = np.empty(n)
     lags = list(y_init)

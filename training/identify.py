@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from fmu_src.model import LmnModel
 from fmu_src.runtime import (
@@ -35,6 +35,7 @@ from fmu_src.runtime import (
     recursion,
     simulate_exo,
 )
+from training.baselines import hysteresis
 from training.config import TrainConfig
 from training.dataset import Segment
 from training.ocvfit import SMOOTHNESS, fit_ocv, hat_basis, second_difference
@@ -300,6 +301,14 @@ def one_step(model: LmnModel, design: Design) -> tuple[np.ndarray, np.ndarray]:
 
 
 # ----- output-error refinement -----------------------------------------------------------
+@dataclass
+class _Solution:
+    x: np.ndarray
+    cost: float
+    nfev: int
+    status: int
+
+
 def _sensitivity(A: np.ndarray, G: np.ndarray) -> np.ndarray:
     """S(k) = G(k) + Σ_l A(k,l)·S(k−l), S(k<0) = 0: ∂ŷ/∂params through the feedback."""
     n, na = A.shape
@@ -401,11 +410,20 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
         lower[M * p + 1:] = 0.0
     r0 = evaluate(x0)[0]
     t_start = time.perf_counter()
-    with np.errstate(over="ignore", invalid="ignore"):
-        sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
-                            bounds=(lower, np.full(x0.size, np.inf)), method="trf",
-                            x_scale="jac", max_nfev=cfg.oe_max_iterations,
-                            ftol=1e-8, xtol=1e-10, gtol=1e-10)
+    if na == 0:
+        # no output feedback: the free-run error is affine in the parameters, one bounded
+        # linear least-squares solve is the exact optimum
+        r_0, J_0 = evaluate(x0)
+        lin = lsq_linear(J_0, J_0 @ x0 - r_0, bounds=(lower, np.full(x0.size, np.inf)),
+                         method="bvls" if np.isfinite(lower).any() else "trf",
+                         lsq_solver="exact")
+        sol = _Solution(lin.x, float(0.5 * np.sum(evaluate(lin.x)[0] ** 2)), 2, lin.status)
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):
+            sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
+                                bounds=(lower, np.full(x0.size, np.inf)), method="trf",
+                                x_scale="jac", max_nfev=cfg.oe_max_iterations,
+                                ftol=1e-8, xtol=1e-10, gtol=1e-10)
     theta, ocv_v = unpack(sol.x)
     theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])
     out = copy.copy(model)
@@ -473,23 +491,22 @@ def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
 
 
 def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
-                  masks: list[np.ndarray], progress: Progress):
-    """Arrhenius E (or None), hysteresis γ (or None) and the OCV pre-fit, per the settings."""
+                  masks: list[np.ndarray], progress: Progress, socs: list[np.ndarray]):
+    """Arrhenius E (or None), hysteresis γ (or None) and the OCV pre-fit, per the settings.
+
+    socs: the coulomb-counted SoC of each segment as the runtime computes it."""
     taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
                   if t >= 2 * cfg.sample_time_s)
-    plain = [exo_series(base, s.current_a, s.temperature_c, s.soc0) for s in segs]
-    socs = [ex.soc for ex in plain]
     weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
     cur = [s.current_a for s in segs]
     volt = [s.voltage_v for s in segs]
     hyst_cache: dict[float, list[np.ndarray]] = {}
 
     def hyst_series(gamma: float) -> list[np.ndarray]:
+        # the runtime's hysteresis recursion (fmu_src.runtime.ExoStepper.update), per segment
         if gamma not in hyst_cache:
-            mg = copy.copy(base)
-            mg.hysteresis_gamma = gamma
-            col = mg.columns().index("h(k)") - mg.output_lags
-            hyst_cache[gamma] = [exo_series(mg, s.current_a, s.temperature_c, s.soc0).x[:, col]
+            hyst_cache[gamma] = [hysteresis(s.current_a, gamma, cfg.sample_time_s,
+                                            base.capacity_ah, initial_hysteresis(s.soc0))
                                  for s in segs]
         return hyst_cache[gamma]
 
@@ -528,13 +545,15 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     return best_gamma, e_k, best
 
 
-def partition_normalisation(cfg: TrainConfig, base: LmnModel,
-                            segs: list[Segment]) -> tuple[np.ndarray, np.ndarray]:
-    raw = np.vstack([exo_series(base, s.current_a, s.temperature_c, s.soc0).z for s in segs])
+def partition_normalisation(base: LmnModel, segs: list[Segment]
+                            ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Centre and half-range of the raw partition inputs, and each segment's SoC series."""
+    series = [exo_series(base, s.current_a, s.temperature_c, s.soc0) for s in segs]
+    raw = np.vstack([ex.z for ex in series])
     lo, hi = raw.min(axis=0), raw.max(axis=0)
     center = 0.5 * (lo + hi)
     scale = np.where(hi - lo > 1e-9, 0.5 * (hi - lo), 1.0)
-    return center, scale
+    return center, scale, [ex.soc for ex in series]
 
 
 def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
@@ -544,9 +563,9 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     d = len(cfg.partition)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,
                     np.zeros(d), np.ones(d))
-    center, scale = partition_normalisation(cfg, base, segs)
+    center, scale, socs = partition_normalisation(base, segs)
     masks = validation_masks(segs, cfg)
-    gamma, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress)
+    gamma, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs)
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale)

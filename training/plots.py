@@ -110,8 +110,25 @@ def record_figure(rec: Record, path: Path, soc: np.ndarray | None = None) -> Pat
     return path
 
 
+def write_local_model_table(model: LmnModel, path: Path) -> Path:
+    """CSV of each local model's operating point, resistances (mΩ) and time constants (s)."""
+    import csv
+
+    from training.interpret import local_model_table
+
+    rows = local_model_table(model)
+    with open(path, "w", newline="") as fh:
+        wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
+        wr.writeheader()
+        for r in rows:
+            wr.writerow({k: (" ".join(f"{x:.1f}" for x in v) if isinstance(v, list) else v)
+                         for k, v in r.items()})
+    return path
+
+
 def evaluation_figures(model: LmnModel, traces: list, out: Path) -> list[Path]:
     files = [fit_figure(t, out / f"fit_{_safe(t.segment.name)}.png") for t in traces]
+    files.append(write_local_model_table(model, out / "local_models.csv"))
     files.append(validity_figure(model, out / "validity.png"))
     training = model.extra.get("training", {})
     if training.get("curve"):

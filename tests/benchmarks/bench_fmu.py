@@ -123,7 +123,38 @@ def main() -> None:
               f"{a:.1f} µs/step, trivial {b:.1f} µs/step, ratio {a / b:.2f}")
     print(f"instantiate + initialise + free: LMNCell {instantiate_ms(lmn):.2f} ms, trivial "
           f"{instantiate_ms(trivial):.2f} ms (median of 50)")
+    observers_main(model_path, lmn)
     shutil.rmtree(out, ignore_errors=True)
+
+
+def observers_main(model_path: Path, fmu: Path) -> None:
+    """Per-step cost of each observer in the runtime and through the FMU (fmpy, h = Ts)."""
+    from fmu_src.observers import SocObserver
+
+    model = load_model(model_path)
+    for code, kind in ((1, "ekf"), (2, "fuzzy"), (3, "imm")):
+        ob = SocObserver(model, kind, 0.5)
+        t0 = time.perf_counter()
+        for k in range(5000):
+            ob.step(-1.0 - 0.5 * (k % 7), 3.7, 25.0)
+        rt = 1e6 * (time.perf_counter() - t0) / 5000
+        d = extract(str(fmu))
+        inst = Instance(fmu, start={"soc0": 0.5}, unzipped=d)
+        inst.slave.reset()
+        inst.slave.setupExperiment(startTime=0.0)
+        inst.slave.enterInitializationMode()
+        inst.slave.setInteger([inst.vr["observer"]], [code])
+        inst.slave.exitInitializationMode()
+        inst.t = 0.0
+        t0 = time.perf_counter()
+        for k in range(2000):
+            inst.slave.setReal([inst.vr["voltage_measured"]], [3.7])
+            inst.step(-1.0 - 0.5 * (k % 7), model.sample_time_s)
+            inst.get("soc", "soc_std")
+        fm = 1e6 * (time.perf_counter() - t0) / 2000
+        inst.free()
+        shutil.rmtree(d, ignore_errors=True)
+        print(f"observer {kind:5s}: runtime {rt:7.1f} µs/step, through fmpy {fm:7.1f} µs/step")
 
 
 if __name__ == "__main__":
