@@ -43,7 +43,12 @@ def fit_figure(trace, path: Path, title: str = "", zoom_s: float = 600.0) -> Pat
     ax = axes[2]
     for name, v in trace.voltage.items():
         ax.plot(t, 1e3 * (v - seg.voltage_v), color=COLORS.get(name), lw=0.6, label=name)
-    ax.set(ylabel="model − measured / mV", xlabel="time / h")
+    errs = np.concatenate([1e3 * (v - seg.voltage_v) for v in trace.voltage.values()])
+    lo, hi = np.percentile(errs, [0.5, 99.5])
+    span = max(hi - lo, 1.0)
+    ax.set(ylabel="model − measured / mV", xlabel="time / h",
+           ylim=(lo - 0.3 * span, hi + 0.3 * span),
+           title="error (axis clipped to the central 99 % of samples)")
     ax.axhline(0, color="k", lw=0.5)
     ax.legend(loc="lower left", ncol=5, fontsize=8)
     fig.savefig(path, dpi=90)
