@@ -57,6 +57,12 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
 
 
 def cmd_build_fmu(a: argparse.Namespace) -> int:
+    if a.native:
+        from lmncell_build.native_build import build_native_fmu
+
+        path = build_native_fmu(a.model, a.out)
+        print(f"wrote {path}")
+        return 0
     from lmncell_build.pythonfmu_build import build_fmu
 
     path = build_fmu(a.model, a.out)
@@ -119,6 +125,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU")
     s.add_argument("model")
     s.add_argument("--out", required=True, metavar="CELL.fmu")
+    s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
+                   "importer (linux64 binary built here with gcc, sources included)")
     s.set_defaults(func=cmd_build_fmu)
 
     s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy")

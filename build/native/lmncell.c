@@ -1,0 +1,792 @@
+/*
+ * LMNCell native FMU: FMI 2.0 co-simulation in plain C (no Python needed on the importing side).
+ *
+ * The model's numbers come from lmncell_model.h, generated from the model file. The code follows
+ * the Python runtime step by step, so that both give the same numbers:
+ *   - exo_update / features / blend / stepper_step  <->  fmu_src/runtime.py (ExoStepper, CellStepper)
+ *   - cosim_advance / model_step / check_range       <->  fmu_src/cosim.py (CellCosim)
+ *   - observer_step and friends                      <->  fmu_src/observers.py (SocObserver)
+ * Conventions: SI units, current > 0 charges the cell, SoC as a fraction.
+ */
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi2Functions.h"
+#include "lmncell_model.h"
+
+/* value references: the same as the pythonfmu FMU */
+enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, VR_SOC_STD,
+       VR_OUT_OF_RANGE, VR_SOC0, VR_CAPACITY, VR_OBSERVER };
+
+#define CHARGE 1
+#define DISCHARGE 2
+#define STEP_TOL 1e-9
+#define GATE_V 0.5
+#define FD_SOC 1e-4
+#define STATE_MAGIC 0x4C4D4E31u /* "LMN1" */
+
+/* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
+typedef struct {
+    unsigned magic;
+    /* inputs and parameters */
+    double current, voltage_measured, temperature, soc0, capacity;
+    int observer;
+    int initialized;
+    /* exogenous state (runtime.ExoState) */
+    double soc, lp[2 * NF + 1], h, past[NB + 1];
+    int direction;
+    /* network state (runtime.CellStepper) */
+    double lags[NA + 1], prev_lags[NA + 1], voltage;
+    double x[NEXO + 1], z[ND + 1];
+    int d;
+    /* co-simulation accumulators (cosim.CellCosim) */
+    double covered, charge, temp_int, volt_int, volt_time;
+    int out_of_range, steps;
+    /* observer (observers.SocObserver) */
+    double q, r, ob_soc, ob_var;
+    int skipped;
+    double mode_soc[NM], mode_var[NM], mode_prob[NM];
+    double fuzzy_gain[NM], fuzzy_var[NM];
+} State;
+
+typedef struct {
+    State s;
+    const fmi2CallbackFunctions *cb;
+    char name[128];
+    int logging;
+} Instance;
+
+static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt, ...) {
+    char buf[512];
+    va_list ap;
+    if (!in || !in->cb || !in->cb->logger) return;
+    va_start(ap, fmt);
+    vsnprintf(buf, sizeof buf, fmt, ap);
+    va_end(ap);
+    in->cb->logger(in->cb->componentEnvironment, in->name, st, cat, "%s", buf);
+}
+
+/* ----- model functions ------------------------------------------------------------------------ */
+static double ocv(double soc) { /* numpy.interp: linear, held beyond the ends */
+    int k;
+    if (soc <= OCV_SOC[0]) return OCV_V[0];
+    if (soc >= OCV_SOC[NOCV - 1]) return OCV_V[NOCV - 1];
+    for (k = 0; k < NOCV - 1; k++)
+        if (soc < OCV_SOC[k + 1]) break;
+    return OCV_V[k] + (OCV_V[k + 1] - OCV_V[k]) * (soc - OCV_SOC[k]) / (OCV_SOC[k + 1] - OCV_SOC[k]);
+}
+
+static double temperature_gain(double t) {
+#if HAS_ARRHENIUS
+    return exp(ARRHENIUS_K * (1.0 / (t + 273.15) - 1.0 / (REF_TEMPERATURE_C + 273.15)));
+#else
+    (void)t;
+    return 1.0;
+#endif
+}
+
+static double eta(double i) { return i > 0 ? ETA_CHARGE : ETA_DISCHARGE; }
+
+static void exo_init(State *s, double soc0, double h0) {
+    int k;
+    s->soc = soc0;
+    for (k = 0; k < 2 * NF + 1; k++) s->lp[k] = 0.0;
+    s->h = h0;
+    s->direction = INITIAL_DIRECTION;
+    for (k = 0; k < NB + 1; k++) s->past[k] = 0.0;
+}
+
+static double initial_hysteresis(double soc0) { return soc0 >= 0.95 ? 1.0 : 0.0; }
+
+static void exo_update(State *s, double i, double cap) {
+    int k;
+    double gain = TS / (3600.0 * cap);
+    s->soc += gain * eta(i) * i;
+    for (k = 0; k < 2 * NF; k++) s->lp[k] = LP_COEF[k] * s->lp[k] + (1.0 - LP_COEF[k]) * i;
+#if HAS_HYSTERESIS
+    {
+        double e = exp(-HYSTERESIS_GAMMA * fabs(i) * gain);
+        s->h = e * s->h + (1.0 - e) * (i > 0 ? 1.0 : (i < 0 ? -1.0 : 0.0));
+    }
+#endif
+    if (i > REST_CURRENT_A) s->direction = CHARGE;
+    else if (i < -REST_CURRENT_A) s->direction = DISCHARGE;
+}
+
+static void features(const State *s, double i, double t, double *x, double *z) {
+    int col = 0, k;
+    double g = temperature_gain(t);
+    x[col++] = g * i;
+    for (k = 0; k < NB - 1; k++) x[col++] = g * s->past[k];
+    for (k = 0; k < NF; k++) x[col++] = g * (s->lp[2 * k] - s->lp[2 * k + 1]);
+#if HAS_HYSTERESIS
+    x[col++] = s->h;
+#endif
+#if OCV_INPUT
+    x[col++] = ocv(s->soc);
+#endif
+#if SOC_INPUT
+    x[col++] = s->soc;
+#endif
+#if OFFSET
+    x[col++] = 1.0;
+#endif
+    (void)col;
+    for (k = 0; k < ND; k++) {
+        switch (PART_VAR[k]) {
+        case 0: z[k] = s->soc; break;
+        case 1: z[k] = i; break;
+        case 2: z[k] = NF > 0 ? s->lp[1] : i; break;
+        default: z[k] = t; break;
+        }
+    }
+}
+
+static void shift_past(State *s, double i) {
+    int k;
+    for (k = NB - 2; k > 0; k--) s->past[k] = s->past[k - 1];
+    if (NB > 1) s->past[0] = i;
+}
+
+/* validities Φ (runtime: LmnModel.validities) for raw partition inputs z and direction d */
+static void validities(const double *z_raw, int d, double *phi) {
+    double q[2 * NNODES + 1], zn[ND + 1];
+    int j, k, n;
+    for (k = 0; k < ND; k++) zn[k] = (z_raw[k] - PART_CENTER[k]) / PART_SCALE[k];
+    for (n = 0; n < NNODES; n++) {
+        double act = NODE_W[n][0];
+        for (k = 0; k < ND; k++) act += zn[k] * NODE_W[n][k + 1];
+        q[n] = 1.0 / (1.0 + exp(-act));
+        q[NNODES + n] = 1.0 - q[n];
+    }
+    q[2 * NNODES] = 1.0;
+    for (j = 0; j < NM; j++) {
+        double p = 1.0;
+        for (k = 0; k < DEPTH; k++) p *= q[PATH_INDEX[j][k]];
+#if GATING_CURRENT_SIGN
+        if (LEAF_GATE[j] != 0 && LEAF_GATE[j] != d) p = 0.0;
+#else
+        (void)d;
+#endif
+        phi[j] = p;
+    }
+}
+
+/* per-local-model exogenous outputs and blended network output for given features and lags */
+static double network(const double *x, const double *z, int d, const double *lags,
+                      double *phi, double *local) {
+    double out = 0.0;
+    int j, c;
+    validities(z, d, phi);
+    for (j = 0; j < NM; j++) {
+        double acc = 0.0;
+        for (c = 0; c < NEXO; c++) acc += x[c] * THETA[j][NA + c];
+        for (c = 0; c < NA; c++) acc += THETA[j][c] * lags[c];
+        local[j] = acc;
+        out += phi[j] * acc;
+    }
+    return out;
+}
+
+static double fixed_point(double soc0, double t, double h0) {
+    State tmp;
+    double phi[NM], local[NM], a = 0.0, b;
+    int j, c;
+    exo_init(&tmp, soc0, h0);
+    features(&tmp, 0.0, t, tmp.x, tmp.z);
+    validities(tmp.z, tmp.direction, phi);
+    b = 0.0;
+    for (j = 0; j < NM; j++) {
+        double acc = 0.0;
+        for (c = 0; c < NEXO; c++) acc += tmp.x[c] * THETA[j][NA + c];
+        b += phi[j] * acc;
+        for (c = 0; c < NA; c++) a += phi[j] * THETA[j][c];
+    }
+    (void)local;
+    return fabs(1.0 - a) > 1e-9 ? b / (1.0 - a) : 0.0;
+}
+
+static void stepper_init(State *s, double soc0, double t) {
+    int k;
+    double h0 = initial_hysteresis(soc0), y0;
+    exo_init(s, soc0, h0);
+    y0 = fixed_point(soc0, t, h0);
+    for (k = 0; k < NA + 1; k++) s->lags[k] = s->prev_lags[k] = y0;
+    s->voltage = RELATIVE_OCV ? ocv(soc0) + y0 : y0;
+    for (k = 0; k < NEXO + 1; k++) s->x[k] = 0.0;
+    for (k = 0; k < ND + 1; k++) s->z[k] = 0.0;
+    s->d = s->direction;
+}
+
+static void stepper_step(State *s, double i, double t) {
+    double phi[NM], local[NM], y;
+    int k;
+    exo_update(s, i, s->capacity);
+    features(s, i, t, s->x, s->z);
+    shift_past(s, i);
+    s->d = s->direction;
+    for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
+    y = network(s->x, s->z, s->d, s->prev_lags, phi, local);
+    for (k = NA - 1; k > 0; k--) s->lags[k] = s->lags[k - 1];
+    if (NA > 0) s->lags[0] = y;
+    s->voltage = RELATIVE_OCV ? y + ocv(s->soc) : y;
+}
+
+/* ----- observers ------------------------------------------------------------------------------ */
+static double clip01(double v) { return v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v); }
+
+/* network voltage and per-local-model voltages at a SoC for the step just predicted */
+static double outputs_at(const State *s, double soc, double *phi, double *uj) {
+    double x[NEXO + 1], z[ND + 1], local[NM], base, u;
+    int k;
+    memcpy(x, s->x, sizeof x);
+    memcpy(z, s->z, sizeof z);
+    for (k = 0; k < ND; k++)
+        if (PART_VAR[k] == 0) z[k] = soc;
+#if OCV_INPUT
+    x[OCV_COL] = ocv(soc);
+#endif
+#if SOC_INPUT
+    x[SOC_COL] = soc;
+#endif
+    u = network(x, z, s->d, s->prev_lags, phi, local);
+    base = RELATIVE_OCV ? ocv(soc) : 0.0;
+    for (k = 0; k < NM; k++) uj[k] = base + local[k];
+    return base + u;
+}
+
+static void fuzzy_design(State *s) {
+    int j;
+    for (j = 0; j < NM; j++) {
+        double c = fabs(LOCAL_SLOPE[j]) > 1e-6 ? LOCAL_SLOPE[j] : 1e-6;
+        double p = 0.5 * (s->q + sqrt(s->q * s->q + 4.0 * s->q * s->r / (c * c)));
+        double k = p * c / (c * c * p + s->r);
+        s->fuzzy_gain[j] = k;
+        s->fuzzy_var[j] = (1.0 - k * c) * p;
+    }
+}
+
+static void observer_init(State *s, double soc0) {
+    int j;
+    double var0 = SOC0_SIGMA * SOC0_SIGMA;
+    s->q = pow(CURRENT_SIGMA_A * TS / (3600.0 * s->capacity), 2) +
+           SOC_DRIFT_PER_SQRT_H * SOC_DRIFT_PER_SQRT_H * TS / 3600.0;
+    s->r = VOLTAGE_SIGMA_V * VOLTAGE_SIGMA_V;
+    s->ob_soc = soc0;
+    s->ob_var = var0;
+    s->skipped = 0;
+    for (j = 0; j < NM; j++) {
+        s->mode_soc[j] = soc0;
+        s->mode_var[j] = var0;
+        s->mode_prob[j] = 1.0 / NM;
+    }
+    fuzzy_design(s);
+}
+
+static void imm_predict(State *s, double dsoc) {
+    double trans[NM][NM], c[NM], x0[NM], p0[NM];
+    int i, j;
+    double p = IMM_STAY;
+    for (i = 0; i < NM; i++)
+        for (j = 0; j < NM; j++)
+            trans[i][j] = (i == j) ? (NM > 1 ? p : 1.0) : (1.0 - p) / (NM > 1 ? NM - 1 : 1);
+    for (j = 0; j < NM; j++) {
+        c[j] = 0.0;
+        for (i = 0; i < NM; i++) c[j] += trans[i][j] * s->mode_prob[i];
+        if (c[j] < 1e-300) c[j] = 1e-300;
+    }
+    for (j = 0; j < NM; j++) {
+        x0[j] = 0.0;
+        for (i = 0; i < NM; i++) x0[j] += trans[i][j] * s->mode_prob[i] / c[j] * s->mode_soc[i];
+    }
+    for (j = 0; j < NM; j++) {
+        p0[j] = 0.0;
+        for (i = 0; i < NM; i++) {
+            double dx = s->mode_soc[i] - x0[j];
+            p0[j] += trans[i][j] * s->mode_prob[i] / c[j] * (s->mode_var[i] + dx * dx);
+        }
+    }
+    for (j = 0; j < NM; j++) {
+        s->mode_soc[j] = x0[j] + dsoc;
+        s->mode_var[j] = p0[j] + s->q;
+        s->mode_prob[j] = c[j];
+    }
+}
+
+static double imm_update(State *s, double v) {
+    double phi[NM], uj[NM], ujh[NM], ujl[NM], lik[NM], sum = 0.0, x = 0.0, var = 0.0;
+    int j;
+    for (j = 0; j < NM; j++) {
+        double xs = clip01(s->mode_soc[j]);
+        double hi = xs + FD_SOC < 1.0 ? xs + FD_SOC : 1.0, lo = xs - FD_SOC > 0.0 ? xs - FD_SOC : 0.0;
+        double hj, sj, k, innov;
+        outputs_at(s, xs, phi, uj);
+        outputs_at(s, hi, phi, ujh);
+        outputs_at(s, lo, phi, ujl);
+        hj = (ujh[j] - ujl[j]) / (hi - lo);
+        sj = hj * hj * s->mode_var[j] + s->r;
+        k = s->mode_var[j] * hj / sj;
+        innov = v - uj[j];
+        s->mode_soc[j] = clip01(s->mode_soc[j] + k * innov);
+        s->mode_var[j] = (1.0 - k * hj) * s->mode_var[j];
+        if (s->mode_var[j] < 1e-12) s->mode_var[j] = 1e-12;
+        lik[j] = exp(-0.5 * innov * innov / sj) / sqrt(2.0 * M_PI * sj);
+    }
+    for (j = 0; j < NM; j++) sum += s->mode_prob[j] * lik[j];
+    for (j = 0; j < NM; j++) s->mode_prob[j] = sum > 0 ? s->mode_prob[j] * lik[j] / sum : 1.0 / NM;
+    for (j = 0; j < NM; j++) x += s->mode_prob[j] * s->mode_soc[j];
+    for (j = 0; j < NM; j++) {
+        double dx = s->mode_soc[j] - x;
+        var += s->mode_prob[j] * (s->mode_var[j] + dx * dx);
+    }
+    s->ob_var = var;
+    return x;
+}
+
+static void observer_step(State *s, double i, double v, double t) {
+    double soc, phi[NM], uj[NM];
+    int valid;
+    double before = s->ob_soc;
+    stepper_step(s, i, t);
+    s->ob_var += s->q;
+    if (s->observer == 3) imm_predict(s, s->soc - before);
+    valid = isfinite(v) && v >= V_MIN - GATE_V && v <= V_MAX + GATE_V;
+    if (!valid) {
+        s->skipped++;
+        s->ob_soc = clip01(s->soc);
+        s->soc = s->ob_soc;
+        return;
+    }
+    soc = s->soc;
+    if (s->observer == 1) {
+        double hi = soc + FD_SOC < 1.0 ? soc + FD_SOC : 1.0, lo = soc - FD_SOC > 0.0 ? soc - FD_SOC : 0.0;
+        double h = (outputs_at(s, hi, phi, uj) - outputs_at(s, lo, phi, uj)) / (hi - lo);
+        double innov = v - outputs_at(s, soc, phi, uj);
+        double k = s->ob_var * h / (h * h * s->ob_var + s->r);
+        soc += k * innov;
+        s->ob_var = (1.0 - k * h) * s->ob_var;
+        if (s->ob_var < 1e-12) s->ob_var = 1e-12;
+    } else if (s->observer == 2) {
+        double u = outputs_at(s, soc, phi, uj), kk = 0.0, var = 0.0;
+        int j;
+        for (j = 0; j < NM; j++) {
+            kk += phi[j] * s->fuzzy_gain[j];
+            var += phi[j] * s->fuzzy_var[j];
+        }
+        soc += kk * (v - u);
+        s->ob_var = var;
+    } else {
+        soc = imm_update(s, v);
+    }
+    s->ob_soc = clip01(soc);
+    s->soc = s->ob_soc;
+}
+
+/* ----- co-simulation engine (cosim.CellCosim) --------------------------------------------------- */
+static int check_range(Instance *in, double i, double t, double soc) {
+    State *s = &in->s;
+    int out = 0;
+    if (i < I_MIN - 0.05 * fabs(I_MIN) - 1e-3 || i > I_MAX + 0.05 * fabs(I_MAX) + 1e-3) out = 1;
+    if (soc < SOC_MIN - 0.02 || soc > SOC_MAX + 0.02) out = 1;
+#if HAS_TEMPERATURE_PARTITION
+    if (t < T_MIN - 2 || t > T_MAX + 2) out = 1;
+#else
+    (void)t;
+#endif
+    if (out && !s->out_of_range)
+        logf_(in, fmi2Warning, "logStatusWarning",
+              "current %.3f A, SoC %.3f or temperature %.1f degC outside the trained region "
+              "(current %.3f..%.3f A, SoC %.3f..%.3f); the model extrapolates", i, soc, t, I_MIN,
+              I_MAX, SOC_MIN, SOC_MAX);
+    return out;
+}
+
+static void model_step(Instance *in) {
+    State *s = &in->s;
+    double i = s->charge / TS, t = s->temp_int / TS;
+    s->out_of_range = check_range(in, i, t, s->observer ? s->ob_soc : s->soc);
+    if (s->observer) {
+        double v = s->volt_time >= TS * (1 - STEP_TOL) ? s->volt_int / s->volt_time : 0.0;
+        observer_step(s, i, v > 0 ? v : NAN, t);
+    } else {
+        stepper_step(s, i, t);
+    }
+    s->steps++;
+    s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
+}
+
+static fmi2Status cosim_advance(Instance *in, double h) {
+    State *s = &in->s;
+    double remaining = h;
+    if (!isfinite(s->current)) {
+        logf_(in, fmi2Error, "logStatusError", "input 'current' = %g: expected a finite number; "
+              "the step was not taken", s->current);
+        return fmi2Error;
+    }
+    if (!isfinite(s->temperature)) {
+        logf_(in, fmi2Error, "logStatusError", "input 'temperature' = %g: expected a finite "
+              "number; the step was not taken", s->temperature);
+        return fmi2Error;
+    }
+    if (!isfinite(s->voltage_measured)) {
+        logf_(in, fmi2Error, "logStatusError", "input 'voltage_measured' = %g: expected a finite "
+              "number (0 when not measured); the step was not taken", s->voltage_measured);
+        return fmi2Error;
+    }
+    if (!isfinite(h) || h <= 0) {
+        logf_(in, fmi2Error, "logStatusError", "communication step size %g: expected > 0 s", h);
+        return fmi2Error;
+    }
+    while (remaining > STEP_TOL * TS) {
+        double take = TS - s->covered < remaining ? TS - s->covered : remaining;
+        s->covered += take;
+        s->charge += s->current * take;
+        s->temp_int += s->temperature * take;
+        if (s->voltage_measured > 0) {
+            s->volt_int += s->voltage_measured * take;
+            s->volt_time += take;
+        }
+        remaining -= take;
+        if (s->covered >= TS * (1.0 - STEP_TOL)) model_step(in);
+    }
+    return fmi2OK;
+}
+
+static fmi2Status initialise(Instance *in) {
+    State *s = &in->s;
+    if (!(s->soc0 >= 0.0 && s->soc0 <= 1.0)) {
+        logf_(in, fmi2Error, "logStatusError", "parameter 'soc0' = %g: expected a fraction "
+              "within 0..1", s->soc0);
+        return fmi2Error;
+    }
+    if (!(isfinite(s->capacity) && s->capacity > 0)) {
+        logf_(in, fmi2Error, "logStatusError", "parameter 'capacity' = %g: expected > 0 Ah",
+              s->capacity);
+        return fmi2Error;
+    }
+    if (s->observer < 0 || s->observer > 3) {
+        logf_(in, fmi2Error, "logStatusError", "parameter 'observer' = %d: expected 0 none, 1 EKF, "
+              "2 fuzzy, 3 IMM", s->observer);
+        return fmi2Error;
+    }
+    stepper_init(s, s->soc0, isfinite(s->temperature) ? s->temperature : 25.0);
+    observer_init(s, s->soc0);
+    s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
+    s->out_of_range = 0;
+    s->steps = 0;
+    s->initialized = 1;
+    return fmi2OK;
+}
+
+static void defaults(State *s) {
+    memset(s, 0, sizeof *s);
+    s->magic = STATE_MAGIC;
+    s->temperature = 25.0;
+    s->soc0 = 1.0;
+    s->capacity = CAPACITY_AH;
+    s->voltage = RELATIVE_OCV ? ocv(1.0) : 0.0;
+}
+
+/* ----- FMI 2.0 co-simulation interface ---------------------------------------------------------- */
+const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
+const char *fmi2GetVersion(void) { return fmi2Version; }
+
+fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]) {
+    (void)n; (void)cats;
+    if (!c) return fmi2Error;
+    ((Instance *)c)->logging = on;
+    return fmi2OK;
+}
+
+fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,
+                              const fmi2CallbackFunctions *cb, fmi2Boolean vis, fmi2Boolean log) {
+    Instance *in;
+    (void)res; (void)vis;
+    if (type != fmi2CoSimulation || !guid || strcmp(guid, MODEL_GUID) != 0) {
+        if (cb && cb->logger)
+            cb->logger(cb->componentEnvironment, name ? name : "?", fmi2Error, "logStatusError",
+                       "fmi2Instantiate: wrong FMU type or GUID (expected %s)", MODEL_GUID);
+        return NULL;
+    }
+    in = (Instance *)calloc(1, sizeof(Instance));
+    if (!in) return NULL;
+    in->cb = cb;
+    in->logging = log;
+    snprintf(in->name, sizeof in->name, "%s", name ? name : "lmncell");
+    defaults(&in->s);
+    return in;
+}
+
+void fmi2FreeInstance(fmi2Component c) { free(c); }
+
+fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0,
+                               fmi2Boolean stopDef, fmi2Real t1) {
+    (void)tolDef; (void)tol; (void)t0; (void)stopDef; (void)t1;
+    return c ? fmi2OK : fmi2Error;
+}
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    if (!c) return fmi2Error;
+    return initialise((Instance *)c);
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
+
+fmi2Status fmi2Reset(fmi2Component c) {
+    if (!c) return fmi2Error;
+    defaults(&((Instance *)c)->s);
+    return fmi2OK;
+}
+
+static double output_real(const State *s, fmi2ValueReference vr, int *ok) {
+    *ok = 1;
+    switch (vr) {
+    case VR_CURRENT: return s->current;
+    case VR_VOLTAGE_MEASURED: return s->voltage_measured;
+    case VR_TEMPERATURE: return s->temperature;
+    case VR_VOLTAGE: return s->initialized ? s->voltage : (RELATIVE_OCV ? ocv(s->soc0) : NAN);
+    case VR_SOC: return s->initialized ? (s->observer ? s->ob_soc : s->soc) : s->soc0;
+    case VR_SOC_STD: return s->initialized && s->observer ? sqrt(s->ob_var > 0 ? s->ob_var : 0) : 0.0;
+    case VR_SOC0: return s->soc0;
+    case VR_CAPACITY: return s->capacity;
+    default: *ok = 0; return 0.0;
+    }
+}
+
+fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
+    Instance *in = (Instance *)c;
+    size_t k;
+    int ok;
+    if (!in) return fmi2Error;
+    for (k = 0; k < n; k++) {
+        v[k] = output_real(&in->s, vr[k], &ok);
+        if (!ok) {
+            logf_(in, fmi2Error, "logStatusError", "fmi2GetReal: no Real variable with value "
+                  "reference %u", vr[k]);
+            return fmi2Error;
+        }
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
+    Instance *in = (Instance *)c;
+    size_t k;
+    if (!in) return fmi2Error;
+    for (k = 0; k < n; k++) {
+        if (vr[k] != VR_OBSERVER) {
+            logf_(in, fmi2Error, "logStatusError", "fmi2GetInteger: no Integer variable with "
+                  "value reference %u", vr[k]);
+            return fmi2Error;
+        }
+        v[k] = in->s.observer;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
+    Instance *in = (Instance *)c;
+    size_t k;
+    if (!in) return fmi2Error;
+    for (k = 0; k < n; k++) {
+        if (vr[k] != VR_OUT_OF_RANGE) {
+            logf_(in, fmi2Error, "logStatusError", "fmi2GetBoolean: no Boolean variable with "
+                  "value reference %u", vr[k]);
+            return fmi2Error;
+        }
+        v[k] = in->s.out_of_range ? fmi2True : fmi2False;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {
+    (void)vr; (void)v;
+    if (!c) return fmi2Error;
+    if (n) {
+        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2GetString: the FMU has no String "
+              "variables");
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, const fmi2Real v[]) {
+    Instance *in = (Instance *)c;
+    State *s;
+    size_t k;
+    if (!in) return fmi2Error;
+    s = &in->s;
+    for (k = 0; k < n; k++) {
+        switch (vr[k]) {
+        case VR_CURRENT: s->current = v[k]; break;
+        case VR_VOLTAGE_MEASURED: s->voltage_measured = v[k]; break;
+        case VR_TEMPERATURE: s->temperature = v[k]; break;
+        case VR_SOC0:
+        case VR_CAPACITY:
+            if (s->initialized) {
+                logf_(in, fmi2Error, "logStatusError", "fmi2SetReal: parameter with value "
+                      "reference %u is fixed after initialisation", vr[k]);
+                return fmi2Error;
+            }
+            if (vr[k] == VR_SOC0) s->soc0 = v[k]; else s->capacity = v[k];
+            break;
+        default:
+            logf_(in, fmi2Error, "logStatusError", "fmi2SetReal: value reference %u is not a "
+                  "settable Real", vr[k]);
+            return fmi2Error;
+        }
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          const fmi2Integer v[]) {
+    Instance *in = (Instance *)c;
+    size_t k;
+    if (!in) return fmi2Error;
+    for (k = 0; k < n; k++) {
+        if (vr[k] != VR_OBSERVER || in->s.initialized) {
+            logf_(in, fmi2Error, "logStatusError", "fmi2SetInteger: value reference %u is not a "
+                  "settable Integer now", vr[k]);
+            return fmi2Error;
+        }
+        in->s.observer = v[k];
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                          const fmi2Boolean v[]) {
+    (void)vr; (void)v;
+    if (!c) return fmi2Error;
+    if (n) {
+        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2SetBoolean: no settable Boolean");
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                         const fmi2String v[]) {
+    (void)vr; (void)v;
+    if (!c) return fmi2Error;
+    return n ? fmi2Error : fmi2OK;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
+    Instance *in = (Instance *)c;
+    State *copy;
+    if (!in || !st) return fmi2Error;
+    copy = *st ? (State *)*st : (State *)malloc(sizeof(State));
+    if (!copy) return fmi2Error;
+    *copy = in->s;
+    *st = copy;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate st) {
+    Instance *in = (Instance *)c;
+    if (!in || !st || ((State *)st)->magic != STATE_MAGIC) return fmi2Error;
+    in->s = *(State *)st;
+    return fmi2OK;
+}
+
+fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *st) {
+    if (!c || !st) return fmi2Error;
+    free(*st);
+    *st = NULL;
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate st, size_t *size) {
+    (void)st;
+    if (!c || !size) return fmi2Error;
+    *size = sizeof(State);
+    return fmi2OK;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[], size_t size) {
+    if (!c || !st || size != sizeof(State)) return fmi2Error;
+    memcpy(b, st, sizeof(State));
+    return fmi2OK;
+}
+
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size,
+                                   fmi2FMUstate *st) {
+    Instance *in = (Instance *)c;
+    State tmp;
+    if (!in || !st || size != sizeof(State)) {
+        if (in) logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: %lu bytes, "
+                      "expected %lu (another model or version?)", (unsigned long)size,
+                      (unsigned long)sizeof(State));
+        return fmi2Error;
+    }
+    memcpy(&tmp, b, sizeof(State));
+    if (tmp.magic != STATE_MAGIC) return fmi2Error;
+    if (!*st) *st = malloc(sizeof(State));
+    if (!*st) return fmi2Error;
+    memcpy(*st, &tmp, sizeof(State));
+    return fmi2OK;
+}
+
+fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
+                                        const fmi2ValueReference z[], size_t nz,
+                                        const fmi2Real dv[], fmi2Real dz[]) {
+    (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)dz;
+    return fmi2Error;
+}
+
+fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                       const fmi2Integer order[], const fmi2Real v[]) {
+    (void)c; (void)vr; (void)n; (void)order; (void)v;
+    return fmi2Error;
+}
+
+fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
+                                        const fmi2Integer order[], fmi2Real v[]) {
+    (void)c; (void)vr; (void)n; (void)order; (void)v;
+    return fmi2Error;
+}
+
+fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
+    Instance *in = (Instance *)c;
+    (void)t; (void)noSetPrior;
+    if (!in) return fmi2Error;
+    if (!in->s.initialized) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DoStep called before initialisation");
+        return fmi2Error;
+    }
+    return cosim_advance(in, h);
+}
+
+fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Discard;
+}
+
+fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
+    (void)c; (void)k; (void)v;
+    return fmi2Discard;
+}
