@@ -1,0 +1,238 @@
+"""The native (C) LMNCell FMU (issue: native FMU)."""
+
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+from fmu_src.model import load_model
+from fmu_src.observers import SocObserver
+from fmu_src.runtime import CellStepper
+from training.dataset import record_to_segments
+from training.fmucheck import compare_fmu_with_pipeline
+from training.readers import read_record
+from tests.conftest import PAN_US06
+from tests.fmu_helpers import Instance
+
+HOST_C = Path(__file__).parent / "native" / "host.c"
+
+
+@pytest.fixture(scope="session")
+def native_fmu(quick_model, tmp_path_factory) -> Path:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell_build.native_build import build_native_fmu
+
+    return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
+
+
+@pytest.fixture(scope="module")
+def us06(quick_model):
+    return load_model(quick_model), record_to_segments(read_record(PAN_US06), 1.0, 1.0, 2.85)[0]
+
+
+def test_native_fmu_validates_and_ships_sources(native_fmu) -> None:
+    assert validate_fmu(str(native_fmu)) == []
+    with zipfile.ZipFile(native_fmu) as z:
+        names = set(z.namelist())
+    assert {"binaries/linux64/LMNCell.so", "sources/lmncell.c", "sources/lmncell_model.h",
+            "sources/buildDescription.xml", "documentation/index.html"} <= names
+
+
+def test_same_interface_as_pythonfmu(native_fmu, quick_fmu) -> None:
+    from fmpy import read_model_description
+
+    def interface(fmu):
+        md = read_model_description(str(fmu))
+        return [(v.name, v.valueReference, v.causality, v.unit) for v in md.modelVariables]
+
+    assert interface(native_fmu) == interface(quick_fmu)
+
+
+def test_native_equals_pipeline_on_a_real_record(quick_model, native_fmu) -> None:
+    res = compare_fmu_with_pipeline(quick_model, native_fmu, PAN_US06)
+    assert res["steps"] > 4000
+    assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+
+
+@pytest.mark.parametrize("observer, kind", [(1, "ekf"), (2, "fuzzy"), (3, "imm")])
+def test_native_observers_equal_the_runtime(native_fmu, us06, observer, kind) -> None:
+    model, seg = us06
+    n = 1500
+    ob = SocObserver(model, kind, 0.4, temperature_c=25.0)
+    inst = Instance(native_fmu, start={})
+    inst.slave.reset()
+    inst.slave.setupExperiment(startTime=0.0)
+    inst.slave.enterInitializationMode()
+    inst.slave.setReal([inst.vr["soc0"]], [0.4])
+    inst.slave.setInteger([inst.vr["observer"]], [observer])
+    inst.slave.exitInitializationMode()
+    inst.t = 0.0
+    try:
+        worst_v = worst_s = 0.0
+        for k in range(n):
+            ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]), 25.0)
+            inst.slave.setReal([inst.vr["voltage_measured"]], [float(seg.voltage_v[k])])
+            inst.step(float(seg.current_a[k]))
+            v, s, sd = inst.get("voltage", "soc", "soc_std")
+            worst_v = max(worst_v, abs(v - ob.stepper.voltage_v))
+            worst_s = max(worst_s, abs(s - ob.state.soc), abs(sd - ob.soc_std))
+        assert worst_v <= 1e-9 and worst_s <= 1e-12
+        assert abs(ob.state.soc - seg.soc_ref[n - 1]) < 0.05   # corrected from 0.4
+    finally:
+        inst.free()
+
+
+def test_nan_is_an_fmi_error_and_state_round_trips(native_fmu, capfd) -> None:
+    inst = Instance(native_fmu, start={"soc0": 0.8})
+    try:
+        inst.step(-1.0)
+        before = inst.get("voltage", "soc")
+        with pytest.raises(FMICallException) as err:
+            inst.step(math.nan)
+        assert err.value.status == 3                      # fmi2Error
+        assert "input 'current'" in capfd.readouterr().out
+        assert inst.get("voltage", "soc") == before
+        for i in np.linspace(-3, 2, 20):
+            inst.step(float(i), h=0.7)
+        state = inst.slave.getFMUstate()
+        blob = inst.slave.serializeFMUstate(state)
+        ref = []
+        for i in np.linspace(2, -4, 30):
+            inst.step(float(i), h=0.7)
+            ref.append(inst.get("voltage", "soc"))
+        for restore in (state, inst.slave.deSerializeFMUstate(blob)):
+            inst.slave.setFMUstate(restore)
+            again = []
+            for i in np.linspace(2, -4, 30):
+                inst.step(float(i), h=0.7)
+                again.append(inst.get("voltage", "soc"))
+            assert again == ref
+    finally:
+        inst.free()
+
+
+def test_many_instances_are_independent(native_fmu) -> None:
+    d = extract(str(native_fmu))
+    insts = [Instance(native_fmu, f"i{k}", {"soc0": 0.3 + 0.01 * k}, unzipped=d)
+             for k in range(50)]
+    try:
+        for _ in range(10):
+            for k, inst in enumerate(insts):
+                inst.step(-1.0 - 0.1 * k)
+        for k, inst in enumerate(insts):
+            expect = 0.3 + 0.01 * k - 10 * (1.0 + 0.1 * k) / 3600 / 2.85
+            assert inst.get("soc")[0] == pytest.approx(expect, abs=1e-12)
+    finally:
+        for inst in insts:
+            inst.free()
+        shutil.rmtree(d, ignore_errors=True)
+
+
+@pytest.fixture(scope="module")
+def host(tmp_path_factory) -> Path:
+    from lmncell_build.native_build import fmi_headers
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    exe = tmp_path_factory.mktemp("host") / "host"
+    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(HOST_C), "-o", str(exe),
+                    "-ldl"], check=True)
+    return exe
+
+
+def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: float,
+              observer: int = 0, volts: np.ndarray | None = None,
+              prefix: list[str] | None = None) -> subprocess.CompletedProcess:
+    d = tmp / "fmu"
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(d)
+        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    (tmp / "cur.txt").write_text("\n".join(repr(float(x)) for x in currents))
+    vfile = "-"
+    if volts is not None:
+        (tmp / "volt.txt").write_text("\n".join(repr(float(x)) for x in volts))
+        vfile = str(tmp / "volt.txt")
+    cmd = [*(prefix or []), str(host), str(d / "binaries/linux64/LMNCell.so"),
+           (d / "resources").as_uri(), guid, str(tmp / "cur.txt"), "1.0", str(soc0),
+           str(observer), vfile]
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+
+
+def _parse(out: str) -> dict:
+    m = re.search(r"steps (\d+) errors (\d+) voltage (\S+) soc (\S+) soc_std (\S+) libpython "
+                  r"(-?\d)", out)
+    assert m, out
+    return {"steps": int(m[1]), "errors": int(m[2]), "voltage": float(m[3]), "soc": float(m[4]),
+            "libpython": int(m[6])}
+
+
+def test_c_host_runs_a_drive_cycle_without_python(host, native_fmu, us06, tmp_path) -> None:
+    model, seg = us06
+    res = _parse(_run_host(host, native_fmu, seg.current_a, tmp_path, 1.0).stdout)
+    st = CellStepper(model, 1.0)
+    for i in seg.current_a:
+        st.step(float(i), 25.0)
+    assert res["steps"] == len(seg) and res["errors"] == 0
+    assert res["voltage"] == pytest.approx(st.voltage_v, abs=1e-9)
+    assert res["soc"] == pytest.approx(st.soc, abs=1e-12)
+    assert res["libpython"] == 0
+    with zipfile.ZipFile(native_fmu) as z:
+        z.extract("binaries/linux64/LMNCell.so", tmp_path / "ldd")
+    ldd = subprocess.run(["ldd", str(tmp_path / "ldd/binaries/linux64/LMNCell.so")],
+                         capture_output=True, text=True).stdout
+    assert "python" not in ldd.lower()
+
+
+def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:
+    if shutil.which("valgrind") is None:
+        pytest.skip("valgrind is not installed (Debian package valgrind)")
+    _, seg = us06
+    cur = np.resize(seg.current_a, 100_000) * 0.2
+    volts = np.resize(seg.voltage_v, 100_000)
+    out = _run_host(host, native_fmu, cur, tmp_path, 0.9, observer=1, volts=volts,
+                    prefix=["valgrind", "--leak-check=full", "--error-exitcode=9"])
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert _parse(out.stdout)["steps"] == 100_000
+    assert "ERROR SUMMARY: 0 errors" in out.stderr
+    assert "All heap blocks were freed" in out.stderr or "definitely lost: 0 bytes" in out.stderr
+
+
+def test_native_loads_in_libcosim(native_fmu) -> None:
+    pytest.importorskip("libcosimpy", reason="libcosimpy (DNV libcosim) is not installed")
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+
+    log_output_level(CosimLogLevel.ERROR)
+    ex = CosimExecution.from_step_size(step_size=int(1e9))
+    idx = ex.add_local_slave(CosimLocalSlave(fmu_path=str(native_fmu), instance_name="cell"))
+    obs = CosimObserver.create_last_value()
+    ex.add_observer(obs)
+    man = CosimManipulator.create_override()
+    ex.add_manipulator(man)
+    refs = {(v.name.decode() if isinstance(v.name, bytes) else v.name): v.reference
+            for v in ex.slave_variables(idx)}
+    ex.real_initial_value(idx, refs["soc0"], 0.8)
+    man.slave_real_values(idx, [refs["current"]], [-2.0])
+    ex.simulate_until(int(30e9))
+    v, soc = obs.last_real_values(idx, [refs["voltage"], refs["soc"]])
+    inst = Instance(native_fmu, start={"soc0": 0.8})
+    try:
+        for _ in range(30):
+            inst.step(-2.0)
+        assert (v, soc) == pytest.approx(tuple(inst.get("voltage", "soc")), abs=1e-12)
+    finally:
+        inst.free()
