@@ -18,11 +18,11 @@ from fmpy.validation import validate_fmu
 from fmu_src.model import load_model
 from fmu_src.observers import SocObserver
 from fmu_src.runtime import CellStepper
+from tests.conftest import PAN_US06
+from tests.fmu_helpers import Instance
 from training.dataset import record_to_segments
 from training.fmucheck import compare_fmu_with_pipeline
 from training.readers import read_record
-from tests.conftest import PAN_US06
-from tests.fmu_helpers import Instance
 
 HOST_C = Path(__file__).parent / "native" / "host.c"
 
