@@ -205,11 +205,12 @@ BUILD_DESCRIPTION = f"""<?xml version="1.0" encoding="UTF-8"?>
 """
 
 
-def compile_linux64(src_dir: Path, out: Path) -> None:
+def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) -> None:
     gcc = shutil.which("gcc") or shutil.which("cc")
     if gcc is None:
         raise NativeBuildError("no C compiler (gcc) found: install gcc to build the native FMU")
     cmd = [gcc, "-std=c99", "-O2", "-fPIC", "-shared", "-Wall", "-Wno-unused-function",
+           *(extra or []),
            "-fvisibility=default", f"-I{fmi_headers()}", f"-I{src_dir}",
            str(src_dir / "lmncell.c"), "-o", str(out), "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
@@ -217,8 +218,10 @@ def compile_linux64(src_dir: Path, out: Path) -> None:
         raise NativeBuildError(f"gcc failed ({' '.join(cmd)}):\n{res.stderr}")
 
 
-def build_native_fmu(model_path: str | Path, out: str | Path) -> Path:
-    """Generate, compile and zip the native FMU of a model file; returns its path."""
+def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = False) -> Path:
+    """Generate, compile and zip the native FMU of a model file; returns its path.
+
+    trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
     from lmncell_build.pythonfmu_build import documentation_html, model_hash
 
     model_path, out = Path(model_path), Path(out)
@@ -233,7 +236,7 @@ def build_native_fmu(model_path: str | Path, out: str | Path) -> Path:
         (src / "lmncell_model.h").write_text(model_header(model, guid), encoding="utf-8")
         (src / "buildDescription.xml").write_text(BUILD_DESCRIPTION, encoding="utf-8")
         binary = Path(tmp) / f"{MODEL_IDENTIFIER}.so"
-        compile_linux64(src, binary)
+        compile_linux64(src, binary, ["-DLMNCELL_TRIVIAL"] if trivial else None)
         with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
             z.writestr("modelDescription.xml", model_description(model, guid, version))
             z.write(binary, f"binaries/linux64/{MODEL_IDENTIFIER}.so")

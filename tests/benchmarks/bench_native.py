@@ -1,0 +1,82 @@
+"""Benchmark: the native LMNCell FMU per step in a plain C host and through fmpy, beside the
+pythonfmu FMU and the trivial-FMU floors (the same native FMU with the model step left out, and
+a trivial pythonfmu FMU).
+
+    python tests/benchmarks/bench_native.py [MODEL.json]
+
+Without a model file, a model is trained on the shipped Panasonic HWFET and HPPC records.
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+import zipfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT))
+
+from tests.benchmarks.bench_fmu import build_trivial, per_step_us  # noqa: E402
+
+
+def host_us(host: Path, fmu: Path, n: int, observer: int, tmp: Path) -> float:
+    d = tmp / f"x{observer}{fmu.stem}"
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(d)
+        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    cur = -1.0 - 0.5 * (np.arange(n) % 7)
+    (tmp / "c.txt").write_text("\n".join(repr(float(x)) for x in cur))
+    (tmp / "v.txt").write_text("\n".join("3.7" for _ in range(n)))
+    runs = []
+    for _ in range(5):
+        out = subprocess.run([str(host), str(d / "binaries/linux64/LMNCell.so"),
+                              (d / "resources").as_uri(), guid, str(tmp / "c.txt"), "1.0", "0.9",
+                              str(observer), str(tmp / "v.txt")], capture_output=True, text=True,
+                             check=True).stdout
+        runs.append(float(re.search(r"us_per_step (\S+)", out)[1]))
+    return float(np.median(runs))
+
+
+def main() -> None:
+    from lmncell_build.native_build import build_native_fmu, fmi_headers
+    from lmncell_build.pythonfmu_build import build_fmu
+
+    from training.pipeline import train_files
+
+    tmp = Path(tempfile.mkdtemp(prefix="lmncell_native_bench_"))
+    if len(sys.argv) > 1:
+        model = Path(sys.argv[1])
+    else:
+        model = tmp / "model.json"
+        d = ROOT / "data/panasonic_18650pf/25degC"
+        train_files([d / "drive_cycles/03-20-17_05.56_25degC_HWFTa_Pan18650PF.mat",
+                     d / "hppc/03-11-17_08.47_25degC_5Pulse_HPPC_Pan18650PF.mat"], model,
+                    capacity_ah=2.85, soc0=1.0, partition=["soc", "current"],
+                    progress=lambda _m: None)
+    native = build_native_fmu(model, tmp / "native.fmu")
+    floor = build_native_fmu(model, tmp / "floor.fmu", trivial=True)
+    py = build_fmu(model, tmp / "py.fmu")
+    py_floor = build_trivial(tmp)
+    host = tmp / "host"
+    subprocess.run(["gcc", "-std=c99", "-O2", f"-I{fmi_headers()}",
+                    str(ROOT / "tests/native/host.c"), "-o", str(host), "-ldl"], check=True)
+    n = 200_000
+    for obs, name in ((0, "LMN"), (1, "LMN + EKF")):
+        print(f"C host, {name}: {host_us(host, native, n, obs, tmp):.3f} µs/step "
+              f"(floor {host_us(host, floor, n, obs, tmp):.3f} µs/step; median of 5 × {n} steps)")
+    for h in (0.1, 1.0):
+        a, b = per_step_us(native, h, 5000), per_step_us(floor, h, 5000)
+        c, e = per_step_us(py, h, 3000), per_step_us(py_floor, h, 3000)
+        print(f"fmpy at h = {h} s: native {a:.2f} µs/step, native floor {b:.2f} (ratio "
+              f"{a / b:.2f}); pythonfmu {c:.2f}, pythonfmu floor {e:.2f}")
+    shutil.rmtree(tmp, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()
