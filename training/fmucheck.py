@@ -16,7 +16,8 @@ from training.readers import read_record
 def fmu_input(seg: Segment, ts: float) -> np.ndarray:
     """fmpy input signal: sample k holds the current of model step k+1 from time k·Ts."""
     n = len(seg)
-    sig = np.zeros(n + 1, dtype=[("time", float), ("current", float), ("temperature", float)])
+    sig = np.zeros(n + 1, dtype=[("time", float), ("current", float), ("temperature", float),
+                                 ("voltage_measured", float)])    # 0: not measured
     sig["time"] = ts * np.arange(n + 1)
     sig["current"][:n] = seg.current_a
     sig["current"][n] = seg.current_a[-1]
