@@ -166,7 +166,11 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
     canHandleVariableCommunicationStepSize="true" canInterpolateInputs="false"
     canBeInstantiatedOnlyOncePerProcess="false" canNotUseMemoryManagementFunctions="true"
     canGetAndSetFMUstate="true" canSerializeFMUstate="true"
-    providesDirectionalDerivative="false"/>
+    providesDirectionalDerivative="false">
+    <SourceFiles>
+      <File name="lmncell.c"/>
+    </SourceFiles>
+  </CoSimulation>
   <UnitDefinitions>
     <Unit name="1"/>
     <Unit name="A"><BaseUnit A="1"/></Unit>
