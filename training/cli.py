@@ -76,6 +76,12 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     return simulate_cycle_cli(a)
 
 
+def cmd_design(a: argparse.Namespace) -> int:
+    from training.design_cli import run_design
+
+    return run_design(a)
+
+
 def cmd_demo(a: argparse.Namespace) -> int:
     from training.demo import run_demo
 
@@ -139,6 +145,25 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="OUT.png")
     s.add_argument("--json", action="store_true")
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile")
+    s.add_argument("--capacity", type=_positive, required=True, help="Ah")
+    s.add_argument("--soc-profile", required=True, help="SoC points, e.g. 0.8,0.2,0.8 or 0.8:0.2")
+    s.add_argument("--max-c-rate", type=_positive, default=20.0, help="default 20")
+    s.add_argument("--max-current", type=_positive, default=100.0, help="cycler limit, A")
+    s.add_argument("--voltage-min", type=float, default=None, help="V (default 2.0 or model)")
+    s.add_argument("--voltage-max", type=float, default=None, help="V (default 3.6 or model)")
+    s.add_argument("--hold", type=_positive, default=10.0, help="minimum hold time, s")
+    s.add_argument("--sample-time", type=_positive, default=1.0, help="s")
+    s.add_argument("--sequence", type=_positive, default=300.0, help="sequence length, s")
+    s.add_argument("--duration", type=_positive, default=7200.0, help="total, s")
+    s.add_argument("--r0", type=_positive, default=0.010, help="design model R0, Ω")
+    s.add_argument("--model", help="take the OCV and voltage limits from a model file")
+    s.add_argument("--plot", metavar="DIR")
+    s.add_argument("--compare-virtual", action="store_true", help="prove the design on a "
+                   "virtual cell against a random programme")
+    s.add_argument("--out", required=True, metavar="P.csv")
+    s.set_defaults(func=cmd_design)
 
     s = sub.add_parser("demo", help="train, evaluate, build the FMU, drive it, write a report")
     s.add_argument("--out", default="lmncell-demo")
