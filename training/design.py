@@ -139,8 +139,8 @@ def _expand(levels: np.ndarray, per: int) -> np.ndarray:
 def design_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: float,
                     v0: np.ndarray, dsoc: float, i_max: float, index: int) -> Sequence:
     """The locally D-optimal sequence that moves SoC by dsoc from (soc0, v0)."""
-    ts, per = cyc.sample_time_s, int(round(cyc.hold_s / cyc.sample_time_s))
-    n_levels = int(round(spec.sequence_s / cyc.hold_s))
+    ts, per = cyc.sample_time_s, round(cyc.hold_s / cyc.sample_time_s)
+    n_levels = round(spec.sequence_s / cyc.hold_s)
     target_as = dsoc * cell.capacity_ah * 3600.0          # charge to move (A·s)
     mean = target_as / (n_levels * cyc.hold_s)
     if abs(mean) > i_max:
@@ -231,7 +231,7 @@ def allocate(profile: list[float], n_seq: int) -> tuple[list[float], list[int]]:
 def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
                      progress=print) -> Programme:
     """Chain locally optimal sequences through the SoC profile."""
-    n_seq = max(1, int(round(spec.duration_s / spec.sequence_s)))
+    n_seq = max(1, round(spec.duration_s / spec.sequence_s))
     if n_seq < len(spec.soc_profile) - 1:
         raise DataError(f"--duration {spec.duration_s:.0f} s gives {n_seq} sequence(s) of "
                         f"{spec.sequence_s:.0f} s, fewer than the {len(spec.soc_profile) - 1} "
@@ -271,11 +271,11 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
                      seed: int = 1) -> Programme:
     """The comparison: random pulses (fixed seed) of the same length, hold time, amplitude bands
     and SoC walk; their spread is reduced until the predicted voltage stays within the limits."""
-    n_seq = max(1, int(round(spec.duration_s / spec.sequence_s)))
+    n_seq = max(1, round(spec.duration_s / spec.sequence_s))
     i_max = min(cell.max_c_rate * cell.capacity_ah, cyc.max_current_a)
     rng = np.random.default_rng(seed)
-    per = int(round(cyc.hold_s / cyc.sample_time_s))
-    n_levels = int(round(spec.sequence_s / cyc.hold_s))
+    per = round(cyc.hold_s / cyc.sample_time_s)
+    n_levels = round(spec.sequence_s / cyc.hold_s)
     steps = allocate(spec.soc_profile, n_seq)[0]
     noise = [rng.uniform(-1, 1, n_levels) for _ in steps]
     lo_v = cell.voltage_min_v + spec.voltage_margin_v

@@ -33,7 +33,7 @@ def run_design(a) -> int:
         cell.voltage_max_v = a.voltage_max
     cyc = CyclerSpec(max_current_a=a.max_current, hold_s=a.hold, sample_time_s=a.sample_time)
     spec = DesignSpec(parse_profile(a.soc_profile), a.duration, a.sequence)
-    print(f"designing {int(round(spec.duration_s / spec.sequence_s))} sequences of "
+    print(f"designing {round(spec.duration_s / spec.sequence_s)} sequences of "
           f"{spec.sequence_s:.0f} s through SoC {spec.soc_profile} …", flush=True)
     prog = design_programme(cell, cyc, spec, progress=lambda m: print(m, flush=True))
     files = write_programme(prog, Path(a.out))
