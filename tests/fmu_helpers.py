@@ -12,7 +12,7 @@ class Instance:
     """An instantiated, initialised co-simulation FMU with name-based access."""
 
     def __init__(self, fmu: str | Path, name: str = "inst", start: dict | None = None,
-                 unzipped: str | None = None, logger=None) -> None:
+                 unzipped: str | None = None, logger=None, observer: int = 0) -> None:
         self.md = read_model_description(str(fmu))
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.dir = unzipped or extract(str(fmu))
@@ -29,6 +29,8 @@ class Instance:
         self.slave.enterInitializationMode()
         for k, v in (start or {}).items():
             self.slave.setReal([self.vr[k]], [float(v)])
+        if observer:
+            self.slave.setInteger([self.vr["observer"]], [observer])
         self.slave.exitInitializationMode()
         self.t = 0.0
 
@@ -44,3 +46,37 @@ class Instance:
     def free(self) -> None:
         self.slave.terminate()
         self.slave.freeInstance()
+
+
+def libcosim_run(fmu: str | Path, soc0: float, current_a: float, seconds: int) -> list[float]:
+    """Voltage and SoC after `seconds` 1-s steps at a constant current in DNV libcosim."""
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+    from libcosimpy.CosimSlave import CosimLocalSlave
+
+    log_output_level(CosimLogLevel.ERROR)
+    ex = CosimExecution.from_step_size(step_size=int(1e9))
+    idx = ex.add_local_slave(CosimLocalSlave(fmu_path=str(fmu), instance_name="cell"))
+    obs = CosimObserver.create_last_value()
+    ex.add_observer(obs)
+    man = CosimManipulator.create_override()
+    ex.add_manipulator(man)
+    refs = {(v.name.decode() if isinstance(v.name, bytes) else v.name): v.reference
+            for v in ex.slave_variables(idx)}
+    ex.real_initial_value(idx, refs["soc0"], soc0)
+    man.slave_real_values(idx, [refs["current"]], [current_a])
+    ex.simulate_until(int(seconds * 1e9))
+    return list(obs.last_real_values(idx, [refs["voltage"], refs["soc"]]))
+
+
+def fmpy_run(fmu: str | Path, soc0: float, current_a: float, seconds: int) -> list[float]:
+    """The same through fmpy."""
+    inst = Instance(fmu, start={"soc0": soc0})
+    try:
+        for _ in range(seconds):
+            inst.step(current_a)
+        return inst.get("voltage", "soc")
+    finally:
+        inst.free()

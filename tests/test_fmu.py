@@ -17,7 +17,7 @@ from fmpy.validation import validate_fmu
 from fmu_src.model import load_model
 from fmu_src.runtime import CellStepper
 from tests.conftest import PAN_HWFET, PAN_US06
-from tests.fmu_helpers import Instance
+from tests.fmu_helpers import Instance, fmpy_run, libcosim_run
 from training.dataset import record_to_segments
 from training.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
 from training.readers import read_record
@@ -188,34 +188,9 @@ def test_two_models_in_one_process(quick_model, quick_fmu, tmp_path) -> None:
 
 def test_libcosim_gives_the_same_outputs(quick_fmu) -> None:
     pytest.importorskip("libcosimpy", reason="libcosimpy (DNV libcosim) is not installed")
-    from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-    from libcosimpy.CosimManipulator import CosimManipulator
-    from libcosimpy.CosimObserver import CosimObserver
-    from libcosimpy.CosimSlave import CosimLocalSlave
+    assert libcosim_run(quick_fmu, 0.8, -2.0, 30) == pytest.approx(fmpy_run(quick_fmu, 0.8, -2.0, 30),
+                                                              abs=1e-12)
 
-    log_output_level(CosimLogLevel.ERROR)
-    ex = CosimExecution.from_step_size(step_size=int(1e9))
-    idx = ex.add_local_slave(CosimLocalSlave(fmu_path=str(quick_fmu), instance_name="cell"))
-    obs = CosimObserver.create_last_value()
-    ex.add_observer(obs)
-    man = CosimManipulator.create_override()
-    ex.add_manipulator(man)
-    refs = {(v.name.decode() if isinstance(v.name, bytes) else v.name): v.reference
-            for v in ex.slave_variables(idx)}
-    ex.real_initial_value(idx, refs["soc0"], 0.8)
-    man.slave_real_values(idx, [refs["current"]], [-2.0])
-    ex.simulate_until(int(30e9))
-    v_cosim, soc_cosim = obs.last_real_values(idx, [refs["voltage"], refs["soc"]])
-    inst = Instance(quick_fmu, start={"soc0": 0.8})
-    try:
-        for _ in range(30):
-            inst.step(-2.0)
-        v, soc = inst.get("voltage", "soc")
-    finally:
-        inst.free()
-    assert v_cosim == pytest.approx(v, abs=1e-12)
-    assert soc_cosim == pytest.approx(soc, abs=1e-12)
 
 
 def test_fmu_manipulation_toolbox_check(quick_fmu) -> None:

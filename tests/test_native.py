@@ -19,7 +19,7 @@ from fmu_src.model import load_model
 from fmu_src.observers import SocObserver
 from fmu_src.runtime import CellStepper
 from tests.conftest import PAN_US06
-from tests.fmu_helpers import Instance
+from tests.fmu_helpers import Instance, fmpy_run, libcosim_run
 from training.dataset import record_to_segments
 from training.fmucheck import compare_fmu_with_pipeline
 from training.readers import read_record
@@ -70,14 +70,7 @@ def test_native_observers_equal_the_runtime(native_fmu, us06, observer, kind) ->
     model, seg = us06
     n = 1500
     ob = SocObserver(model, kind, 0.4, temperature_c=25.0)
-    inst = Instance(native_fmu, start={})
-    inst.slave.reset()
-    inst.slave.setupExperiment(startTime=0.0)
-    inst.slave.enterInitializationMode()
-    inst.slave.setReal([inst.vr["soc0"]], [0.4])
-    inst.slave.setInteger([inst.vr["observer"]], [observer])
-    inst.slave.exitInitializationMode()
-    inst.t = 0.0
+    inst = Instance(native_fmu, start={"soc0": 0.4}, observer=observer)
     try:
         worst_v = worst_s = 0.0
         for k in range(n):
@@ -210,32 +203,9 @@ def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:
 
 def test_native_loads_in_libcosim(native_fmu) -> None:
     pytest.importorskip("libcosimpy", reason="libcosimpy (DNV libcosim) is not installed")
-    from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-    from libcosimpy.CosimManipulator import CosimManipulator
-    from libcosimpy.CosimObserver import CosimObserver
-    from libcosimpy.CosimSlave import CosimLocalSlave
+    assert libcosim_run(native_fmu, 0.8, -2.0, 30) == pytest.approx(fmpy_run(native_fmu, 0.8, -2.0, 30),
+                                                              abs=1e-12)
 
-    log_output_level(CosimLogLevel.ERROR)
-    ex = CosimExecution.from_step_size(step_size=int(1e9))
-    idx = ex.add_local_slave(CosimLocalSlave(fmu_path=str(native_fmu), instance_name="cell"))
-    obs = CosimObserver.create_last_value()
-    ex.add_observer(obs)
-    man = CosimManipulator.create_override()
-    ex.add_manipulator(man)
-    refs = {(v.name.decode() if isinstance(v.name, bytes) else v.name): v.reference
-            for v in ex.slave_variables(idx)}
-    ex.real_initial_value(idx, refs["soc0"], 0.8)
-    man.slave_real_values(idx, [refs["current"]], [-2.0])
-    ex.simulate_until(int(30e9))
-    v, soc = obs.last_real_values(idx, [refs["voltage"], refs["soc"]])
-    inst = Instance(native_fmu, start={"soc0": 0.8})
-    try:
-        for _ in range(30):
-            inst.step(-2.0)
-        assert (v, soc) == pytest.approx(tuple(inst.get("voltage", "soc")), abs=1e-12)
-    finally:
-        inst.free()
 
 
 def test_native_runs_in_the_ecos_host(native_fmu, quick_model, tmp_path) -> None:

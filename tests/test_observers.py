@@ -49,14 +49,7 @@ def test_nan_and_absurd_measurements_are_skipped(us06) -> None:
 @pytest.mark.parametrize("observer", [1, 2, 3])
 def test_fmu_observer_state_round_trip(quick_fmu, us06, observer) -> None:
     _, seg = us06
-    inst = Instance(quick_fmu, start={"soc0": 0.4})
-    inst.slave.reset()
-    inst.slave.setupExperiment(startTime=0.0)
-    inst.slave.enterInitializationMode()
-    inst.slave.setReal([inst.vr["soc0"]], [0.4])
-    inst.slave.setInteger([inst.vr["observer"]], [observer])
-    inst.slave.exitInitializationMode()
-    inst.t = 0.0
+    inst = Instance(quick_fmu, start={"soc0": 0.4}, observer=observer)
     vr_meas = inst.vr["voltage_measured"]
     try:
         for k in range(100):

@@ -139,13 +139,7 @@ def observers_main(model_path: Path, fmu: Path) -> None:
             ob.step(-1.0 - 0.5 * (k % 7), 3.7, 25.0)
         rt = 1e6 * (time.perf_counter() - t0) / 5000
         d = extract(str(fmu))
-        inst = Instance(fmu, start={"soc0": 0.5}, unzipped=d)
-        inst.slave.reset()
-        inst.slave.setupExperiment(startTime=0.0)
-        inst.slave.enterInitializationMode()
-        inst.slave.setInteger([inst.vr["observer"]], [code])
-        inst.slave.exitInitializationMode()
-        inst.t = 0.0
+        inst = Instance(fmu, start={"soc0": 0.5}, unzipped=d, observer=code)
         t0 = time.perf_counter()
         for k in range(2000):
             inst.slave.setReal([inst.vr["voltage_measured"]], [3.7])
