@@ -99,13 +99,22 @@ def predict(cell: CellSpec, current: np.ndarray, ts: float, soc0: float,
     return u, soc, vend
 
 
-def sensitivities(cell: CellSpec, current: np.ndarray, ts: float) -> np.ndarray:
-    """(N, p) relative sensitivities θ·∂u/∂θ of [R0, a, R_1, τ_1, R_2, τ_2, …], where a makes
-    the resistance current dependent, R0·(1 + a·|i|/I_max)·i (a = 0 in the nominal model; it
-    asks the design to spread the current amplitudes, which the network's current partition
-    needs)."""
-    i_ref = max(cell.max_c_rate * cell.capacity_ah, 1e-9)
-    cols = [cell.r0_ohm * current, cell.r0_ohm * np.abs(current / i_ref) * current]
+AMPLITUDE_KNOTS = (1 / 3, 2 / 3, 1.0)
+AMPLITUDE_KNOT_SPACING = 1 / 3
+
+
+def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
+                  i_ref: float | None = None) -> np.ndarray:
+    """(N, p) relative sensitivities θ·∂u/∂θ of [R0, a_1…a_K, R_1, τ_1, R_2, τ_2, …], where
+    the a_k make the resistance a piecewise-linear function of |i|/i_ref over AMPLITUDE_KNOTS
+    (all 0 in the nominal model): they ask the design to use several amplitude levels, as the
+    network's local models at different currents need. i_ref: the sequence's current bound."""
+    i_ref = max(float(np.abs(current).max()), 1e-9) if i_ref is None else i_ref
+    x = np.abs(current) / i_ref
+    cols = [cell.r0_ohm * current]
+    for knot in AMPLITUDE_KNOTS:   # piecewise-linear resistance over |i|: hat functions
+        hat = np.clip(1.0 - np.abs(x - knot) / AMPLITUDE_KNOT_SPACING, 0.0, None)
+        cols.append(cell.r0_ohm * hat * current)
     for r, tau in cell.rc:
         e = np.exp(-ts / tau)
         v = lfilter([r * (1 - e)], [1.0, -e], current)
@@ -116,8 +125,9 @@ def sensitivities(cell: CellSpec, current: np.ndarray, ts: float) -> np.ndarray:
     return np.column_stack(cols)
 
 
-def log_det_information(cell: CellSpec, current: np.ndarray, ts: float) -> float:
-    S = sensitivities(cell, current, ts)
+def log_det_information(cell: CellSpec, current: np.ndarray, ts: float,
+                        i_ref: float | None = None) -> float:
+    S = sensitivities(cell, current, ts, i_ref)
     sign, ld = np.linalg.slogdet(S.T @ S + 1e-12 * np.eye(S.shape[1]))
     return float(ld) if sign > 0 else -np.inf
 
@@ -170,14 +180,14 @@ def design_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: flo
             {"type": "ineq", "fun": lambda x: np.concatenate([volt(x) - lo_v, hi_v - volt(x)])},
             {"type": "ineq", "fun": lambda x: 10 * np.concatenate([soc_path(x) - soc_lo,
                                                                    soc_hi - soc_path(x)])}]
-    res = minimize(lambda x: -log_det_information(cell, _expand(x, per), ts) / 10.0,
+    res = minimize(lambda x: -log_det_information(cell, _expand(x, per), ts, i_max) / 10.0,
                    np.clip(x0, -i_max, i_max), method="SLSQP",
                    bounds=[(-i_max, i_max)] * n_levels, constraints=cons,
                    options={"maxiter": 200, "ftol": 1e-7})
     levels = exact_charge(np.clip(res.x, -i_max, i_max), target_as / cyc.hold_s, i_max)
     cur = _expand(levels, per)
     u, soc, _ = predict(cell, cur, ts, soc0, v0)
-    return Sequence(cur, u, soc, log_det_information(cell, cur, ts), bool(res.success))
+    return Sequence(cur, u, soc, log_det_information(cell, cur, ts, i_max), bool(res.success))
 
 
 def exact_charge(levels: np.ndarray, target_sum: float, i_max: float) -> np.ndarray:
