@@ -98,3 +98,17 @@ def test_bad_config_file(tmp_path) -> None:
     p.write_text("[train\n")
     with pytest.raises(ConfigError, match="c.toml: cannot read"):
         load_config(p)
+
+
+def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
+    from tests.conftest import A123_S1, DATA
+    from training.ocvfit import measured_ocv
+
+    tests = [str(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"),
+             str(DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz")]
+    m, _ = train_files([A123_S1], tmp_path / "m.json", capacity_ah=2.03, soc0=1.0,
+                       progress=lambda _m: None, max_local_models=2, ocv_tests=tests)
+    expect = measured_ocv(tests, 2.03, m.ocv_soc)
+    assert np.array_equal(m.ocv_v, expect)
+    mid = (m.ocv_soc > 0.2) & (m.ocv_soc < 0.8)
+    assert np.all((m.ocv_v[mid] > 3.2) & (m.ocv_v[mid] < 3.4))     # LFP plateau

@@ -37,7 +37,7 @@ def cmd_train(a: argparse.Namespace) -> int:
 
     partition = a.partition.split(",") if a.partition else None
     train_files(a.data, a.out, a.capacity, a.soc0, partition, a.baselines, a.config,
-                max_local_models=a.max_local_models)
+                max_local_models=a.max_local_models, ocv_tests=a.ocv_tests)
     return 0
 
 
@@ -112,6 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--baselines", action="store_true", help="also fit ARX and 2RC baselines")
     s.add_argument("--config", metavar="FILE.toml")
     s.add_argument("--max-local-models", type=int)
+    s.add_argument("--ocv-tests", nargs="+", metavar="FILE", help="slow OCV tests (discharge "
+                   "from full, charge from empty; or one file with both): fixes the OCV")
     s.set_defaults(func=cmd_train)
 
     s = sub.add_parser("evaluate", help="free-run error of a model on records")

@@ -38,6 +38,8 @@ class TrainConfig:
     soc_window / outside_weight: samples outside the SoC window get this weight in the fit.
     oe_refinement: final output-error (free-run) refinement of all local models and the OCV.
     max_pole: largest allowed local pole magnitude (stability repair).
+    ocv_tests: slow OCV tests ([discharge from full, charge from empty] or one file with both);
+    their mean branch becomes the model's OCV, fixed (empty: the OCV is estimated from the data).
     """
 
     sample_time_s: float = 1.0
@@ -65,6 +67,7 @@ class TrainConfig:
     lm_iterations: int = 15
     max_pole: float = 0.9995
     ocv_knots: int = 21
+    ocv_tests: list[str] = field(default_factory=list)
     rest_current_a: float = 0.01
 
     def check(self) -> TrainConfig:

@@ -22,6 +22,7 @@ import copy
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 from scipy.optimize import least_squares, lsq_linear
@@ -38,7 +39,7 @@ from fmu_src.runtime import (
 from training.baselines import hysteresis
 from training.config import TrainConfig
 from training.dataset import Segment
-from training.ocvfit import SMOOTHNESS, fit_ocv, hat_basis, second_difference
+from training.ocvfit import SMOOTHNESS, fit_ocv, hat_basis, measured_ocv, second_difference
 
 HYSTERESIS_CANDIDATES = (10.0, 30.0, 100.0, 300.0)
 HYSTERESIS_MIN_GAIN = 0.03
@@ -328,7 +329,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     for a relative-OCV model without OCV input, the OCV knots)."""
     M, p = model.theta.shape
     na = model.output_lags
-    with_ocv = model.relative_ocv and not model.ocv_input
+    with_ocv = model.relative_ocv and not model.ocv_input and not cfg.ocv_tests
     knots = model.ocv_soc
     K = knots.size if with_ocv else 0
     w_all = [np.sqrt(design.w_fit[a:b] + design.w_val[a:b]) for a, b in design.bounds]
@@ -510,10 +511,16 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
                                  for s in segs]
         return hyst_cache[gamma]
 
+    fixed = None
+    if cfg.ocv_tests:
+        fixed = measured_ocv(cfg.ocv_tests, base.capacity_ah, np.linspace(0, 1, cfg.ocv_knots))
+        progress(f"  OCV from slow tests {', '.join(Path(p).name for p in cfg.ocv_tests)}: "
+                 f"{fixed[0]:.3f} … {fixed[-1]:.3f} V (fixed)")
+
     def prefit(gamma: float | None, e_k: float | None):
         gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
         return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
-                       cfg.sample_time_s, taus, cfg.ocv_knots, gain)
+                       cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed)
 
     # temperature scaling first (the larger effect where temperatures differ), then hysteresis
     e_k: float | None = None

@@ -53,10 +53,15 @@ class OcvFit:
 def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.ndarray],
             weight: list[np.ndarray], hyst: list[np.ndarray] | None, ts: float,
             taus_s: list[float], n_knots: int,
-            gain: list[np.ndarray] | None = None) -> OcvFit:
+            gain: list[np.ndarray] | None = None,
+            fixed_ocv_v: np.ndarray | None = None) -> OcvFit:
     """Solve the pre-fit over several segments (lists of equal-length arrays per segment);
-    gain multiplies the current terms (the Arrhenius gain g(T))."""
+    gain multiplies the current terms (the Arrhenius gain g(T)); fixed_ocv_v: a measured OCV at
+    the knots, then only the other terms are fitted."""
     knots = np.linspace(0.0, 1.0, n_knots)
+    if fixed_ocv_v is not None:
+        return _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots,
+                                   gain, np.asarray(fixed_ocv_v, dtype=float))
     rows, targets, ws = [], [], []
     for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
         g = np.ones_like(i) if gain is None else gain[k]
@@ -96,3 +101,42 @@ def _monotone_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
     lo[1:n_knots] = 0.0
     sol = lsq_linear(M, rhs, bounds=(lo, np.full(p, np.inf)), method="bvls")
     return T @ sol.x
+
+
+def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, gain,
+                        ocv_v: np.ndarray) -> OcvFit:
+    rows, targets, ws = [], [], []
+    for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
+        g = np.ones_like(i) if gain is None else gain[k]
+        cols = [(g * i)[:, None]] + [(g * lowpass(i, tau, ts))[:, None] for tau in taus_s]
+        if hyst is not None:
+            cols.append(hyst[k][:, None])
+        rows.append(np.hstack(cols))
+        targets.append(u - np.interp(s, knots, ocv_v))
+        ws.append(w)
+    X, y, w = np.vstack(rows), np.concatenate(targets), np.concatenate(ws)
+    sw = np.sqrt(w)
+    coef = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
+    res = y - X @ coef
+    rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))
+    return OcvFit(knots, ocv_v.copy(), rmse, coef)
+
+
+def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarray:
+    """Mean of the charge and discharge branches of slow tests at the knots (V).
+
+    paths: [discharge test (starts full), charge test (starts empty)], or one file that holds
+    both (starts full)."""
+    from training.readers import read_record
+    from training.soc import ocv_from_slow_tests
+
+    recs = [read_record(p) for p in paths]
+    if len(recs) == 1:
+        curve = ocv_from_slow_tests(recs[0], recs[0], capacity_ah, 1.0, 1.0)
+    elif len(recs) == 2:
+        curve = ocv_from_slow_tests(recs[0], recs[1], capacity_ah)
+    else:
+        from training.records import DataError
+
+        raise DataError(f"ocv_tests: expected one or two files, got {len(recs)}")
+    return np.interp(knots, curve.soc, curve.mean_v)
