@@ -108,6 +108,11 @@ def run_demo(out: Path) -> Path:
             ("time_constants_s", "time constants / s", ".1f")]
     if "hysteresis_mv" in table[0]:
         cols.append(("hysteresis_mv", "hysteresis / mV", ".1f"))
+    if "rc_mohm_by_tau_s" in table[0]:
+        for row in table:
+            ladder = row["rc_mohm_by_tau_s"].items()
+            row["rc_text"] = ", ".join(f"{k} s: {v:.1f}" for k, v in ladder)
+        cols.append(("rc_text", "RC ladder, mΩ per time constant", ""))
     rep.table(table, cols, "Local models: operating point, instantaneous and static "
                            "resistance and time constants (the interpretation the LMN offers).")
 

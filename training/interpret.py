@@ -43,8 +43,29 @@ def local_model_table(model: LmnModel) -> list[dict]:
                "r_static_mohm": 1e3 * float(th[cur].sum()) / dc if abs(dc) > 1e-9 else np.inf,
                "time_constants_s": taus,
                "max_pole": float(np.abs(poles).max()) if poles.size else 0.0}
+        if na == 0 and model.filters:
+            row["rc_mohm_by_tau_s"] = rc_ladder(model, th)
+            row["r0_mohm"] = row["rc_mohm_by_tau_s"]["0"]   # current lags + sub-Ts filters
         if "h(k)" in cols:
             g = th[cols.index("h(k)")]
             row["hysteresis_mv"] = 1e3 * float(g) / dc if abs(dc) > 1e-9 else np.inf
         rows.append(row)
     return rows
+
+
+def rc_ladder(model: LmnModel, theta: np.ndarray) -> dict[str, float]:
+    """A feedback-free local model as an RC ladder: u − OCV ≈ R0·i + Σ_τ R_τ·LP_τ(i).
+
+    Each filter input v = LP_fast − LP_slow puts +g on its fast and −g on its slow time
+    constant; a time constant below the sample time counts as instantaneous (part of R0).
+    Returns mΩ per time constant in s ("0" = instantaneous R0, including the current lags)."""
+    cols = model.columns()
+    ts = model.sample_time_s
+    out: dict[float, float] = {0.0: float(sum(theta[k] for k, c in enumerate(cols)
+                                               if c.startswith("i(k")))}
+    for f, (fast, slow) in enumerate(model.filters):
+        g = float(theta[cols.index(f"v{f + 1}(k)")])
+        for tau, sign in ((fast, 1.0), (slow, -1.0)):
+            key = 0.0 if tau < ts else tau
+            out[key] = out.get(key, 0.0) + sign * g
+    return {f"{k:g}": 1e3 * v for k, v in sorted(out.items())}

@@ -126,8 +126,9 @@ def write_local_model_table(model: LmnModel, path: Path) -> Path:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
         wr.writeheader()
         for r in rows:
-            wr.writerow({k: (" ".join(f"{x:.1f}" for x in v) if isinstance(v, list) else v)
-                         for k, v in r.items()})
+            wr.writerow({k: (" ".join(f"{x:.1f}" for x in v) if isinstance(v, list) else
+                             " ".join(f"{a}s:{b:.2f}" for a, b in v.items())
+                             if isinstance(v, dict) else v) for k, v in r.items()})
     return path
 
 
