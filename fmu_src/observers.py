@@ -14,7 +14,7 @@ propagated deterministically from the current.
   probabilities updated by the innovation likelihoods, Markov mode switching, mixing.
 
 Noise: process q = (σ_i·Ts/(3600·Cn))² + σ_d²·Ts/3600 per step (σ_i: current-sensor error, A;
-σ_d: SoC random walk per √hour for capacity and model errors) and measurement r = σ_u² (σ_u: the
+σ_d: SoC random walk per √hour for capacity and model errors) and measurement r = σ_u² (σ_u: three times the
 model's free-run training RMSE unless given). A measurement that is NaN, ≤ 0
 (not measured) or more than GATE_V away from the model's voltage range is skipped and counted.
 SoC is kept within [0, 1] (the estimate is projected onto the interval after each update).
@@ -32,6 +32,7 @@ from .runtime import CellStepper
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5
+MODEL_ERROR_FACTOR = 3.0
 FD_SOC = 1e-4
 
 
@@ -42,15 +43,18 @@ class ObserverSettings:
     (V); soc0_sigma: standard deviation of the initial SoC guess; imm_stay: IMM mode persistence."""
 
     current_sigma_a: float = 0.05
-    soc_drift_per_sqrt_h: float = 0.02
+    soc_drift_per_sqrt_h: float = 0.05
     voltage_sigma_v: float | None = None
     soc0_sigma: float = 0.3
     imm_stay: float = 0.95
 
     @classmethod
     def for_model(cls, model: LmnModel) -> ObserverSettings:
+        """Defaults from the model: σ_u = MODEL_ERROR_FACTOR × its free-run training RMSE (the
+        error on new data is larger and correlated in time), at least 2 mV."""
         s = cls()
-        s.voltage_sigma_v = max(float(model.noise.get("residual_std_v", 0.01)), 0.002)
+        rmse = float(model.noise.get("residual_std_v", 0.01))
+        s.voltage_sigma_v = max(MODEL_ERROR_FACTOR * rmse, 0.002)
         return s
 
 
