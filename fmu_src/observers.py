@@ -14,8 +14,8 @@ propagated deterministically from the current.
   probabilities updated by the innovation likelihoods, Markov mode switching, mixing.
 
 Noise: process q = (σ_i·Ts/(3600·Cn))² + σ_d²·Ts/3600 per step (σ_i: current-sensor error, A;
-σ_d: SoC random walk per √hour for capacity and model errors) and measurement r = σ_u² (σ_u: three times the
-model's free-run training RMSE unless given). A measurement that is NaN, ≤ 0
+σ_d: SoC random walk per √hour for capacity and model errors) and measurement r = σ_u²
+(σ_u: three times the model's free-run training RMSE unless given). A measurement that is NaN, ≤ 0
 (not measured) or more than GATE_V away from the model's voltage range is skipped and counted.
 SoC is kept within [0, 1] (the estimate is projected onto the interval after each update).
 """
