@@ -392,6 +392,3 @@ def save_model(model: LmnModel, path: str | Path) -> Path:
                     encoding="utf-8")
     return path
 
-
-def is_finite_number(x: float) -> bool:
-    return isinstance(x, (int, float)) and math.isfinite(x)

@@ -117,13 +117,12 @@ class SocObserver:
         ocv = float(m.ocv(soc)) if m.relative_ocv else 0.0
         return ocv + float(phi @ local), phi, ocv + local
 
-    def _slope(self, soc: float) -> float:
+    def _slopes(self, soc: float) -> tuple[float, np.ndarray]:
+        """∂u/∂SoC of the network and of each local model (central difference)."""
         hi, lo = min(soc + FD_SOC, 1.0), max(soc - FD_SOC, 0.0)
-        return (self._outputs_at(hi)[0] - self._outputs_at(lo)[0]) / (hi - lo)
-
-    def _local_slopes(self, soc: float) -> np.ndarray:
-        hi, lo = min(soc + FD_SOC, 1.0), max(soc - FD_SOC, 0.0)
-        return (self._outputs_at(hi)[2] - self._outputs_at(lo)[2]) / (hi - lo)
+        u_hi, _, loc_hi = self._outputs_at(hi)
+        u_lo, _, loc_lo = self._outputs_at(lo)
+        return (u_hi - u_lo) / (hi - lo), (loc_hi - loc_lo) / (hi - lo)
 
     # ----- one step ------------------------------------------------------------------------
     def step(self, current_a: float, voltage_measured_v: float,
@@ -144,7 +143,7 @@ class SocObserver:
             return s.soc
         soc = st.soc
         if self.kind == "ekf":
-            h = self._slope(soc)
+            h = self._slopes(soc)[0]
             innov = voltage_measured_v - self._outputs_at(soc)[0]
             k = s.var * h / (h * h * s.var + self.r)
             soc += k * innov
@@ -187,7 +186,7 @@ class SocObserver:
         lik = np.empty(xs.size)
         for j in range(xs.size):
             u_j = self._outputs_at(_clip01(xs[j]))[2][j]
-            h_j = self._local_slopes(_clip01(xs[j]))[j]
+            h_j = self._slopes(_clip01(xs[j]))[1][j]
             sj = h_j * h_j * ps[j] + self.r
             k = ps[j] * h_j / sj
             innov = v_meas - u_j

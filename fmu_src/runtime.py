@@ -40,9 +40,6 @@ class ExoState:
     direction: int
     past_current: list[float]  # i(k−1) … i(k−nb+1)
 
-    def copy(self) -> ExoState:
-        return ExoState(self.soc, list(self.lp), self.h, self.direction, list(self.past_current))
-
     def as_list(self) -> list[float]:
         return [self.soc, *self.lp, self.h, float(self.direction), *self.past_current]
 
@@ -150,7 +147,6 @@ class ExoSeries:
     z: np.ndarray          # (N, d), normalised
     direction: np.ndarray  # (N,)
     soc: np.ndarray        # (N,)
-    final_state: ExoState
 
 
 def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray | None,
@@ -177,7 +173,7 @@ def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray
         stepper.features(s, cur[k], tl[k], X[k], Z[k])
         stepper.shift(s, cur[k])
         D[k], S[k] = s.direction, s.soc
-    return ExoSeries(X, model.normalise(Z), D, S, s)
+    return ExoSeries(X, model.normalise(Z), D, S)
 
 
 def fixed_point(model: LmnModel, soc0: float, temperature_c: float, h0: float) -> float:

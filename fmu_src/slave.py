@@ -51,7 +51,6 @@ class LmnCellSlave(Fmi2Slave):
         self.capacity = float(m.capacity_ah)
         self.observer = 0
         self._cosim: CellCosim | None = None
-        self._failed = False
         reg = self.register_variable
         reg(Real("current", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
                  description="cell current held over the step, > 0 charges [A]"))

@@ -80,3 +80,28 @@ def fmpy_run(fmu: str | Path, soc0: float, current_a: float, seconds: int) -> li
         return inst.get("voltage", "soc")
     finally:
         inst.free()
+
+
+def assert_state_round_trips(inst: Instance, currents, h: float = 1.0, volts=None,
+                             outputs: tuple[str, ...] = ("voltage", "soc")) -> list:
+    """Save the FMU state (directly and serialized), run on, restore each and run the same
+    inputs again: the outputs must be identical. Returns the reference outputs."""
+    def run() -> list:
+        out = []
+        for k, i in enumerate(currents):
+            if volts is not None:
+                inst.slave.setReal([inst.vr["voltage_measured"]], [float(volts[k])])
+            inst.step(float(i), h=h)
+            out.append(inst.get(*outputs))
+        return out
+
+    state = inst.slave.getFMUstate()
+    blob = inst.slave.serializeFMUstate(state)
+    t0 = inst.t
+    ref = run()
+    for restore in (state, inst.slave.deSerializeFMUstate(blob)):
+        inst.slave.setFMUstate(restore)
+        inst.t = t0
+        assert run() == ref
+    inst.slave.freeFMUstate(state)
+    return ref

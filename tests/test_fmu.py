@@ -17,7 +17,7 @@ from fmpy.validation import validate_fmu
 from fmu_src.model import load_model
 from fmu_src.runtime import CellStepper
 from tests.conftest import PAN_HWFET, PAN_US06
-from tests.fmu_helpers import Instance, fmpy_run, libcosim_run
+from tests.fmu_helpers import Instance, assert_state_round_trips, fmpy_run, libcosim_run
 from training.dataset import record_to_segments
 from training.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
 from training.readers import read_record
@@ -86,21 +86,7 @@ def test_state_round_trips_exactly(quick_fmu) -> None:
     try:
         for i in np.linspace(-3, 2, 37):
             inst.step(float(i), h=0.7)
-        state = inst.slave.getFMUstate()
-        blob = inst.slave.serializeFMUstate(state)
-        ref = []
-        for i in np.linspace(2, -5, 50):
-            inst.step(float(i), h=0.7)
-            ref.append(inst.get("voltage", "soc"))
-        for restore in (state, inst.slave.deSerializeFMUstate(blob)):
-            inst.slave.setFMUstate(restore)
-            inst.t = 37 * 0.7
-            again = []
-            for i in np.linspace(2, -5, 50):
-                inst.step(float(i), h=0.7)
-                again.append(inst.get("voltage", "soc"))
-            assert again == ref
-        inst.slave.freeFMUstate(state)
+        assert_state_round_trips(inst, np.linspace(2, -5, 50), h=0.7)
     finally:
         inst.free()
 

@@ -19,7 +19,7 @@ from fmu_src.model import load_model
 from fmu_src.observers import SocObserver
 from fmu_src.runtime import CellStepper
 from tests.conftest import PAN_US06
-from tests.fmu_helpers import Instance, fmpy_run, libcosim_run
+from tests.fmu_helpers import Instance, assert_state_round_trips, fmpy_run, libcosim_run
 from training.dataset import record_to_segments
 from training.fmucheck import compare_fmu_with_pipeline
 from training.readers import read_record
@@ -98,19 +98,7 @@ def test_nan_is_an_fmi_error_and_state_round_trips(native_fmu, capfd) -> None:
         assert inst.get("voltage", "soc") == before
         for i in np.linspace(-3, 2, 20):
             inst.step(float(i), h=0.7)
-        state = inst.slave.getFMUstate()
-        blob = inst.slave.serializeFMUstate(state)
-        ref = []
-        for i in np.linspace(2, -4, 30):
-            inst.step(float(i), h=0.7)
-            ref.append(inst.get("voltage", "soc"))
-        for restore in (state, inst.slave.deSerializeFMUstate(blob)):
-            inst.slave.setFMUstate(restore)
-            again = []
-            for i in np.linspace(2, -4, 30):
-                inst.step(float(i), h=0.7)
-                again.append(inst.get("voltage", "soc"))
-            assert again == ref
+        assert_state_round_trips(inst, np.linspace(2, -4, 30), h=0.7)
     finally:
         inst.free()
 

@@ -131,7 +131,8 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     speed = np.tile(speed, repeat)
     cell_power = power / (vehicle.n_series * vehicle.n_parallel)
     md = read_model_description(str(fmu))
-    h = step_s or (md.defaultExperiment.stepSize and float(md.defaultExperiment.stepSize)) or 1.0
+    default = md.defaultExperiment
+    h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipped = extract(str(fmu))
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,

@@ -371,9 +371,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             if not np.isfinite(r).all():
                 r = np.where(np.isfinite(r), r, 1e3)
             res.append(r)
-            ylag = np.empty((y.size, na))
-            for l in range(1, na + 1):
-                ylag[:, l - 1] = np.concatenate([np.full(l, y0), y[:-l]])
+            ylag = _lags(np.concatenate([[y0], y]), na)[1:]    # y(k−l), y0 before the start
             Xs = np.hstack([ylag, ex.x])
             G = (Phi[:, :, None] * Xs[:, None, :]).reshape(y.size, M * p)
             S = _sensitivity(A, G)

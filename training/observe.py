@@ -10,6 +10,7 @@ import numpy as np
 
 from fmu_src.model import LmnModel, load_model
 from fmu_src.observers import SocObserver
+from fmu_src.runtime import exo_series
 from training.dataset import Segment, record_to_segments, start_soc
 from training.readers import read_record
 
@@ -32,8 +33,7 @@ def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
     """The observer (or 'coulomb' counting) from sample `start` with the estimate soc0_est."""
     k0 = start
     if kind == "coulomb":
-        dq = np.cumsum(seg.current_a[k0:]) * model.sample_time_s / (3600 * model.capacity_ah)
-        est = soc0_est + dq
+        est = exo_series(model, seg.current_a[k0:], None, soc0_est).soc
         return ObserverRun(kind, seg.time_s[k0:], seg.soc_ref[k0:], est, np.zeros_like(est), 0)
     temp = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
     ob = SocObserver(model, kind, soc0_est, temperature_c=float(temp[k0]))

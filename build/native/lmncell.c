@@ -193,7 +193,7 @@ static double network(const double *x, const double *z, int d, const double *lag
 
 static double fixed_point(double soc0, double t, double h0) {
     State tmp;
-    double phi[NM], local[NM], a = 0.0, b;
+    double phi[NM], a = 0.0, b;
     int j, c;
     exo_init(&tmp, soc0, h0);
     features(&tmp, 0.0, t, tmp.x, tmp.z);
@@ -205,7 +205,6 @@ static double fixed_point(double soc0, double t, double h0) {
         b += phi[j] * acc;
         for (c = 0; c < NA; c++) a += phi[j] * THETA[j][c];
     }
-    (void)local;
     return fabs(1.0 - a) > 1e-9 ? b / (1.0 - a) : 0.0;
 }
 
