@@ -43,6 +43,7 @@ from training.ocvfit import SMOOTHNESS, fit_ocv, hat_basis, measured_ocv, second
 
 HYSTERESIS_CANDIDATES = (10.0, 30.0, 100.0, 300.0)
 HYSTERESIS_MIN_GAIN = 0.03
+SELECTION_R_KNOTS = 6
 VALIDATION_BLOCKS = 5   # 'auto' keeps hysteresis only if it cuts the pre-fit RMSE by 3 %
 
 Progress = Callable[[str], None]
@@ -515,24 +516,27 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         progress(f"  OCV from slow tests {', '.join(Path(p).name for p in cfg.ocv_tests)}: "
                  f"{fixed[0]:.3f} … {fixed[-1]:.3f} V (fixed)")
 
-    def prefit(gamma: float | None, e_k: float | None):
+    def prefit(gamma: float | None, e_k: float | None, r_knots: int = 1):
         gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
         return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
-                       cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed)
+                       cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed, r_knots)
 
     # temperature scaling first (the larger effect where temperatures differ), then hysteresis
     e_k: float | None = None
     if isinstance(cfg.temperature_scaling, (int, float)):
         e_k = float(cfg.temperature_scaling)
     elif cfg.temperature_scaling == "auto" and _temperature_span(segs) > 5.0:
-        best = prefit(None, None)
-        progress(f"  OCV pre-fit without temperature scaling: RMSE {1e3 * best.rmse_v:.2f} mV")
+        # resistances scheduled over SoC, as the LMN's SoC partition will have them: with one
+        # resistance for all SoC, the rise of resistance towards empty (while the cell warms up)
+        # would decide E instead of the temperature
+        best = prefit(None, None, SELECTION_R_KNOTS)
+        progress(f"  pre-fit without temperature scaling: RMSE {1e3 * best.rmse_v:.2f} mV")
         for cand in ARRHENIUS_CANDIDATES_K:
-            fit = prefit(None, cand)
+            fit = prefit(None, cand, SELECTION_R_KNOTS)
+            progress(f"  pre-fit with E = {cand:g} K: RMSE {1e3 * fit.rmse_v:.2f} mV")
             if fit.rmse_v < best.rmse_v:
                 e_k, best = cand, fit
-        progress(f"  temperature scaling: {'off' if e_k is None else f'E = {e_k:g} K'} "
-                 f"(pre-fit RMSE {1e3 * best.rmse_v:.2f} mV)")
+        progress(f"  temperature scaling: {'off' if e_k is None else f'E = {e_k:g} K'}")
     if cfg.hysteresis == "off":
         return None, e_k, prefit(None, e_k)
     if cfg.hysteresis != "auto":

@@ -54,19 +54,18 @@ def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.n
             weight: list[np.ndarray], hyst: list[np.ndarray] | None, ts: float,
             taus_s: list[float], n_knots: int,
             gain: list[np.ndarray] | None = None,
-            fixed_ocv_v: np.ndarray | None = None) -> OcvFit:
+            fixed_ocv_v: np.ndarray | None = None, r_knots: int = 1) -> OcvFit:
     """Solve the pre-fit over several segments (lists of equal-length arrays per segment);
     gain multiplies the current terms (the Arrhenius gain g(T)); fixed_ocv_v: a measured OCV at
-    the knots, then only the other terms are fitted."""
+    the knots, then only the other terms are fitted; r_knots > 1 lets each current term's
+    resistance vary piecewise-linearly over that many SoC knots."""
     knots = np.linspace(0.0, 1.0, n_knots)
     if fixed_ocv_v is not None:
         return _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots,
-                                   gain, np.asarray(fixed_ocv_v, dtype=float))
+                                   gain, np.asarray(fixed_ocv_v, dtype=float), r_knots)
     rows, targets, ws = [], [], []
     for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
-        g = np.ones_like(i) if gain is None else gain[k]
-        cols = [hat_basis(s, knots), (g * i)[:, None]]
-        cols += [(g * lowpass(i, tau, ts))[:, None] for tau in taus_s]
+        cols = [hat_basis(s, knots), _current_columns(s, i, gain, k, ts, taus_s, r_knots)]
         if hyst is not None:
             cols.append(hyst[k][:, None])
         rows.append(np.hstack(cols))
@@ -103,12 +102,22 @@ def _monotone_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
     return T @ sol.x
 
 
+def _current_columns(soc: np.ndarray, current: np.ndarray, gain: list[np.ndarray] | None,
+                     k: int, ts: float, taus_s: list[float], r_knots: int) -> np.ndarray:
+    """g·i and g·LP_τ(i) (A), each times the SoC hat functions when r_knots > 1."""
+    g = np.ones_like(current) if gain is None else gain[k]
+    terms = np.column_stack([g * current] + [g * lowpass(current, tau, ts) for tau in taus_s])
+    if r_knots <= 1:
+        return terms
+    B = hat_basis(soc, np.linspace(0.0, 1.0, r_knots))
+    return (terms[:, :, None] * B[:, None, :]).reshape(len(current), -1)
+
+
 def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, gain,
-                        ocv_v: np.ndarray) -> OcvFit:
+                        ocv_v: np.ndarray, r_knots: int = 1) -> OcvFit:
     rows, targets, ws = [], [], []
     for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
-        g = np.ones_like(i) if gain is None else gain[k]
-        cols = [(g * i)[:, None]] + [(g * lowpass(i, tau, ts))[:, None] for tau in taus_s]
+        cols = [_current_columns(s, i, gain, k, ts, taus_s, r_knots)]
         if hyst is not None:
             cols.append(hyst[k][:, None])
         rows.append(np.hstack(cols))
@@ -126,13 +135,14 @@ def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarr
     """Mean of the charge and discharge branches of slow tests at the knots (V).
 
     paths: [discharge test (starts full), charge test (starts empty)], or one file that holds
-    both (starts full)."""
+    both (full → empty → full; its current offset is balanced out and its SoC is a fraction of
+    its own capacity, see training.soc.ocv_from_round_trip)."""
     from training.readers import read_record
-    from training.soc import ocv_from_slow_tests
+    from training.soc import ocv_from_round_trip, ocv_from_slow_tests
 
     recs = [read_record(p) for p in paths]
     if len(recs) == 1:
-        curve = ocv_from_slow_tests(recs[0], recs[0], capacity_ah, 1.0, 1.0)
+        curve = ocv_from_round_trip(recs[0]).curve
     elif len(recs) == 2:
         curve = ocv_from_slow_tests(recs[0], recs[1], capacity_ah)
     else:
