@@ -112,3 +112,27 @@ def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
     assert np.array_equal(m.ocv_v, expect)
     mid = (m.ocv_soc > 0.2) & (m.ocv_soc < 0.8)
     assert np.all((m.ocv_v[mid] > 3.2) & (m.ocv_v[mid] < 3.4))     # LFP plateau
+
+
+def test_arrhenius_energy_is_found_where_resistance_also_rises_towards_empty() -> None:
+    """A synthetic cell with R(SoC, T) = R(SoC)·exp(E(1/T − 1/T_ref)), E = 3000 K, that warms up
+    while it empties (so a SoC trend and a temperature trend overlap): the chosen E is 3000 K."""
+    from training.dataset import Segment
+    from training.identify import train_lmn
+    from training.ocvfit import lowpass
+
+    rng = np.random.default_rng(7)
+    cap, ts, n = 2.0, 1.0, 8000
+    segs = []
+    for k, t_amb in enumerate((15.0, 25.0, 35.0)):
+        levels = rng.choice([-3.0, -1.5, -0.5, 0.0, 1.5], size=n // 20)
+        i = np.repeat(levels, 20)
+        soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
+        temp = t_amb + 8.0 * (1.0 - soc) + 2.0 * np.sin(np.arange(n) / 900.0)
+        g = np.exp(3000.0 * (1 / (temp + 273.15) - 1 / 298.15))
+        r0 = 0.02 + 0.04 * (1.0 - soc) ** 2
+        u = 3.3 + 0.8 * soc + g * (r0 * i + 0.01 * lowpass(i, 60.0, ts))
+        segs.append(Segment(f"synthetic{k}", np.arange(1, n + 1) * ts, i, u, temp, 1.0, soc,
+                            np.ones(n)))
+    cfg = load_config(max_local_models=1, oe_refinement=False, hysteresis="off")
+    assert train_lmn(segs, cfg, cap).info["arrhenius_k"] == 3000.0
