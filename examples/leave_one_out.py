@@ -18,21 +18,13 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import tempfile
 from pathlib import Path
 
+from training.metrics import pooled
 from training.pipeline import evaluate_model, train_files
 
 MODELS = ("lmn", "arx", "ecm2rc", "ecm2rc_hyst")
-
-
-def pooled_rmse(rows: list[dict], model: str, window: bool) -> float:
-    """RMSE (mV) over all segments of one record, each weighted by its sample count."""
-    key, count = ("window_rmse_mv", "window_samples") if window else ("rmse_mv", "samples")
-    num = sum(r[model][count] * r[model][key] ** 2 for r in rows if r[model][count] > 0)
-    den = sum(r[model][count] for r in rows)
-    return math.sqrt(num / den) if den else float("nan")
 
 
 def main() -> None:
@@ -60,7 +52,8 @@ def main() -> None:
         names = [m for m in MODELS if m in rows[0]]
         cells = []
         for m in names:
-            w, whole = pooled_rmse(rows, m, True), pooled_rmse(rows, m, False)
+            per_segment = [r[m] for r in rows]
+            w, whole = pooled(per_segment, "window_"), pooled(per_segment)
             means.setdefault(m, []).append(w)
             cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
         print(f"{Path(held).name[:40]:40s} M={model.n_local_models:2d} E={model.arrhenius_k}  "

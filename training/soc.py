@@ -95,13 +95,12 @@ def _branch(rec: Record, capacity_ah: float, soc0: float, grid: np.ndarray,
 
 
 def ocv_from_slow_tests(discharge: Record, charge: Record, capacity_ah: float,
-                        discharge_soc0: float = 1.0, charge_soc0: float = 0.0,
                         points: int = 101) -> OcvCurve:
     """Charge and discharge OCV branches from slow (C/20, C/30) tests; beyond the measured SoC
     range of a branch its last value is held."""
     grid = np.linspace(0.0, 1.0, points)
-    return OcvCurve(grid, _branch(discharge, capacity_ah, discharge_soc0, grid, -1.0),
-                    _branch(charge, capacity_ah, charge_soc0, grid, +1.0))
+    return OcvCurve(grid, _branch(discharge, capacity_ah, 1.0, grid, -1.0),
+                    _branch(charge, capacity_ah, 0.0, grid, +1.0))
 
 
 @dataclass
