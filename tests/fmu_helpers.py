@@ -105,3 +105,17 @@ def assert_state_round_trips(inst: Instance, currents, h: float = 1.0, volts=Non
         assert run() == ref
     inst.slave.freeFMUstate(state)
     return ref
+
+
+def refuse_bad_current(inst: Instance, bad: float, capfd) -> tuple[int, str]:
+    """Step with a bad current: the call must fail and leave voltage and SoC as they were.
+    Returns the FMI status of the failure and the text the FMU logged meanwhile."""
+    import pytest
+    from fmpy.fmi1 import FMICallException
+
+    capfd.readouterr()
+    before = inst.get("voltage", "soc")
+    with pytest.raises(FMICallException) as err:
+        inst.step(bad)
+    assert inst.get("voltage", "soc") == before   # nothing advanced
+    return err.value.status, capfd.readouterr().out
