@@ -85,8 +85,7 @@ class SocObserver:
         self.stepper = CellStepper(model, soc0_est, capacity_ah, temperature_c)
         cap = capacity_ah or model.capacity_ah
         ts = model.sample_time_s
-        self.q = ((self.settings.current_sigma_a * ts / (3600.0 * cap)) ** 2
-                  + self.settings.soc_drift_per_sqrt_h ** 2 * ts / 3600.0)
+        self.q = process_variance(self.settings, cap, ts)
         self.r = self.settings.voltage_sigma_v ** 2
         v = model.limits.get("voltage_v", [0.0, 10.0])
         self.v_range = (v[0] - GATE_V, v[1] + GATE_V)
@@ -215,23 +214,49 @@ class SocObserver:
 
 
 def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.ndarray]:
-    """Steady-state Kalman gain and variance of each local model at its centre (offline).
+    """Steady-state Kalman gain and variance of each local model at its centre.
 
-    For x(k+1) = x(k) + w, y = c_j·x + v, the predicted variance solves P = P − P²c²/(c²P + r)
-    + q, i.e. P = (q + sqrt(q² + 4·q·r/c²))/2; K = P·c/(c²P + r). c_j = ∂u_j/∂SoC at the centre.
+    The offline design stored in the model file (``observers.fuzzy``) is used when it was made
+    for the same q and r; otherwise (other settings or capacity) it is designed here the same way.
     """
     stored = model.extra.get("observers", {}).get("fuzzy")
-    if stored and len(stored.get("gains", [])) == model.n_local_models:
-        return np.asarray(stored["gains"]), np.asarray(stored["variances"])
-    slopes = local_ocv_slopes(model)
+    if (stored and len(stored.get("gains", [])) == model.n_local_models
+            and math.isclose(stored.get("q", -1.0), q, rel_tol=1e-12)
+            and math.isclose(stored.get("r", -1.0), r, rel_tol=1e-12)):
+        return np.asarray(stored["gains"], dtype=float), np.asarray(stored["variances"],
+                                                                     dtype=float)
+    return design_fuzzy_gains(local_ocv_slopes(model), q, r)
+
+
+def design_fuzzy_gains(slopes: np.ndarray, q: float, r: float) -> tuple[np.ndarray, np.ndarray]:
+    """For x(k+1) = x(k) + w, y = c_j·x + v, the predicted variance solves P = P − P²c²/(c²P + r)
+    + q, i.e. P = (q + sqrt(q² + 4·q·r/c²))/2; K = P·c/(c²P + r). c_j = ∂u_j/∂SoC at the centre
+    (V per unit SoC), q (SoC²) and r (V²) per step."""
     gains, variances = [], []
-    for c in slopes:
+    for c in np.asarray(slopes, dtype=float).tolist():
         c = c if abs(c) > 1e-6 else 1e-6
         p = 0.5 * (q + math.sqrt(q * q + 4.0 * q * r / (c * c)))
         k = p * c / (c * c * p + r)
         gains.append(k)
         variances.append((1.0 - k * c) * p)
     return np.asarray(gains), np.asarray(variances)
+
+
+def offline_fuzzy_design(model: LmnModel) -> dict:
+    """The fuzzy observer's local Kalman filters for the model file's default settings."""
+    settings = ObserverSettings.for_model(model)
+    q = process_variance(settings, model.capacity_ah, model.sample_time_s)
+    r = float(settings.voltage_sigma_v) ** 2
+    slopes = local_ocv_slopes(model)
+    gains, variances = design_fuzzy_gains(slopes, q, r)
+    return {"q": q, "r": r, "ocv_slopes_v": slopes.tolist(), "gains": gains.tolist(),
+            "variances": variances.tolist()}
+
+
+def process_variance(settings: ObserverSettings, capacity_ah: float, ts: float) -> float:
+    """q (SoC² per step) from the current-sensor error and the SoC random walk."""
+    return ((settings.current_sigma_a * ts / (3600.0 * capacity_ah)) ** 2
+            + settings.soc_drift_per_sqrt_h ** 2 * ts / 3600.0)
 
 
 def local_ocv_slopes(model: LmnModel) -> np.ndarray:

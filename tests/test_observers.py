@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fmu_src.model import load_model
-from fmu_src.observers import SocObserver
+from fmu_src.observers import SocObserver, design_fuzzy_gains, local_ocv_slopes
 from tests.conftest import PAN_US06
 from tests.fmu_helpers import Instance, assert_state_round_trips
 from training.dataset import record_to_segments
@@ -33,6 +33,23 @@ def test_observer_converges_from_a_wrong_start(us06, kind) -> None:
     assert m["rmse_pct"] < 5.0, m
     assert m["rmse_pct"] < cc["rmse_pct"] / 4
     assert np.all((run.estimate >= 0) & (run.estimate <= 1))
+
+
+def test_fuzzy_design_is_stored_in_the_model_file_and_used(us06) -> None:
+    model, _ = us06
+    stored = model.extra["observers"]["fuzzy"]
+    m = model.n_local_models
+    assert len(stored["gains"]) == len(stored["variances"]) == len(stored["ocv_slopes_v"]) == m
+    gains, variances = design_fuzzy_gains(local_ocv_slopes(model), stored["q"], stored["r"])
+    assert np.allclose(gains, stored["gains"], rtol=1e-12)
+    assert np.allclose(variances, stored["variances"], rtol=1e-12)
+    ob = SocObserver(model, "fuzzy", 0.5)
+    assert ob.q == pytest.approx(stored["q"], rel=1e-12)
+    assert np.array_equal(ob.fuzzy_gains[0], np.asarray(stored["gains"]))
+    # with another capacity the filters are designed again for the new process noise
+    other = SocObserver(model, "fuzzy", 0.5, capacity_ah=0.5 * model.capacity_ah)
+    assert other.q > ob.q
+    assert not np.allclose(other.fuzzy_gains[0], stored["gains"])
 
 
 def test_nan_and_absurd_measurements_are_skipped(us06) -> None:

@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.model import LmnModel, load_model, model_from_dict, model_to_dict, save_model
+from fmu_src.observers import offline_fuzzy_design
 from fmu_src.runtime import exo_series, initial_hysteresis, simulate
 from training import __version__
 from training.baselines import Ecm2rc, fit_ecm2rc
@@ -105,6 +106,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
             "train_metrics": train_metrics,
         },
     }
+    model.extra["observers"] = {"fuzzy": offline_fuzzy_design(model)}
     if baseline_docs:
         model.extra["baselines"] = baseline_docs
     save_model(model, out)
