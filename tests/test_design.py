@@ -75,3 +75,55 @@ def test_bad_design_inputs() -> None:
     with pytest.raises(DataError, match="above the"):
         design_programme(CellSpec(capacity_ah=2.3, max_c_rate=1.0), CyclerSpec(),
                          DesignSpec([1.0, 0.0], duration_s=600), progress=lambda _m: None)
+
+
+def test_random_programme_has_the_designs_amplitude_bands_and_limits() -> None:
+    cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
+    spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)
+    d = design_programme(cell, cyc, spec, progress=lambda _m: None)
+    r = random_programme(cell, cyc, spec, seed=3)
+    assert r.current_a.size == d.current_a.size
+    u, soc, _ = predict(cell, r.current_a, 1.0, 0.8, np.zeros(2))
+    assert u.min() >= 2.0 + spec.voltage_margin_v - 1e-9
+    assert u.max() <= 3.6 - spec.voltage_margin_v + 1e-9
+    assert abs(soc[3599] - 0.2) <= 0.02 and abs(soc[-1] - 0.8) <= 0.02
+    # sequence by sequence: at most the designed band, and a spread reduced only where the
+    # voltage limit needs it (most sequences use over half of their band, as the design does)
+    seq_r, seq_d = r.current_a.reshape(24, 300), d.current_a.reshape(24, 300)
+    assert np.all(np.abs(seq_r).max(axis=1) <= np.abs(seq_d).max(axis=1) + 1e-9)
+    ratio = np.abs(seq_r).max(axis=1) / np.abs(seq_d).max(axis=1)
+    assert np.median(ratio) > 0.5
+
+
+def test_designed_sequences_use_several_current_levels() -> None:
+    cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
+    spec = DesignSpec([0.6, 0.5], duration_s=600, sequence_s=300)
+    d = design_programme(cell, cyc, spec, progress=lambda _m: None)
+    band = np.abs(d.current_a[:300]).max()
+    levels = np.unique(np.round(np.abs(d.current_a[:300]) / band, 1))
+    assert levels.size >= 4, levels
+
+
+def test_virtual_ocv_test_gives_the_virtual_cells_ocv(tmp_path) -> None:
+    from training.design import DEFAULT_OCV_SOC, DEFAULT_OCV_V, _virtual_ocv_test
+    from training.ocvfit import measured_ocv
+    from training.virtual_cell import VirtualCell
+
+    path = _virtual_ocv_test(VirtualCell(capacity_ah=2.3), 2.3, tmp_path)
+    knots = np.linspace(0.1, 0.9, 9)
+    ocv = measured_ocv([str(path)], 2.3, knots)
+    assert np.max(np.abs(ocv - np.interp(knots, DEFAULT_OCV_SOC, DEFAULT_OCV_V))) < 0.005
+
+
+@pytest.mark.slow
+def test_virtual_cell_proof_reports_every_programme() -> None:
+    from training.design import compare_on_virtual_cell
+
+    cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
+    spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)
+    d = design_programme(cell, cyc, spec, progress=lambda _m: None)
+    out = compare_on_virtual_cell(d, cell, cyc, spec, progress=lambda _m: None, seeds=(1, 2))
+    assert set(out["programmes"]) == {"designed", "random_seed_1", "random_seed_2"}
+    for row in out["programmes"].values():
+        assert 0.5 < row["ev_discharge_4c_rmse_mv"] < 50
+    assert out["covariance_det_ratio_random_over_designed"] > 1.0
