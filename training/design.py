@@ -17,12 +17,16 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
 from training.records import DataError, Record, RecordMeta
+
+if TYPE_CHECKING:
+    from training.virtual_cell import VirtualCell
 
 # A123 26650 LFP, mean of the C/30 charge and discharge OCV at 25 °C (shipped data), 0…100 % SoC
 DEFAULT_OCV_SOC = tuple(np.linspace(0.0, 1.0, 11))
@@ -53,6 +57,11 @@ class CyclerSpec:
     max_current_a: float = 100.0
     hold_s: float = 10.0
     sample_time_s: float = 1.0
+
+
+def current_limit(cell: CellSpec, cyc: CyclerSpec) -> float:
+    """The programme's current bound (A): the cell's C-rate limit or the cycler's, the lower."""
+    return min(cell.max_c_rate * cell.capacity_ah, cyc.max_current_a)
 
 
 @dataclass
@@ -249,7 +258,7 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
         raise DataError(f"--duration {spec.duration_s:.0f} s gives {n_seq} sequence(s) of "
                         f"{spec.sequence_s:.0f} s, fewer than the {len(spec.soc_profile) - 1} "
                         "legs of the SoC profile")
-    i_max = min(cell.max_c_rate * cell.capacity_ah, cyc.max_current_a)
+    i_max = current_limit(cell, cyc)
     steps, counts = allocate(spec.soc_profile, n_seq)
     soc, v = spec.soc_profile[0], np.zeros(len(cell.rc))
     parts, starts, lds, t0 = [], [], [], 0
@@ -287,7 +296,7 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     whose predicted voltage leaves the limits has its spread reduced (that sequence only, as the
     design's constraint acts)."""
     n_seq = max(1, round(spec.duration_s / spec.sequence_s))
-    i_max = min(cell.max_c_rate * cell.capacity_ah, cyc.max_current_a)
+    i_max = current_limit(cell, cyc)
     rng = np.random.default_rng(seed)
     per = round(cyc.hold_s / cyc.sample_time_s)
     n_levels = round(spec.sequence_s / cyc.hold_s)
@@ -396,7 +405,7 @@ VIRTUAL_OCV_TEST_C_RATE = 1 / 20
 RANDOM_SEEDS = (1, 2, 3, 4, 5)
 
 
-def _virtual_ocv_test(vc, capacity_ah: float, folder: Path) -> Path:
+def _virtual_ocv_test(vc: VirtualCell, capacity_ah: float, folder: Path) -> Path:
     """A slow full → empty → full test (C/20, 1 s) run on the virtual cell, as a BDF file."""
     from training.readers import write_bdf
 
@@ -430,7 +439,7 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
 
     vc = VirtualCell(capacity_ah=cell.capacity_ah)
     soc0 = float(spec.soc_profile[0])
-    i_max = float(designed.settings["max_current_a"])
+    i_max = current_limit(cell, cyc)
 
     def segment(name: str, cur: np.ndarray, s0: float) -> Segment:
         u, soc = vc.run(cur, s0)
