@@ -10,6 +10,7 @@ from tests.conftest import PAN_HWFET
 from training.config import ConfigError, load_config
 from training.dataset import record_to_segments
 from training.identify import (
+    _robust_linear_solve,
     build_design,
     optimise_split,
     poles,
@@ -42,6 +43,22 @@ def test_lm_split_reduces_the_global_loss(design) -> None:
     assert res.loss < loss0
     assert all(b <= a for a, b in zip(res.loss_history, res.loss_history[1:], strict=False))
     assert res.loss_history[-1] < res.loss_history[0]   # the LM steps themselves improved it
+
+
+def test_huber_refinement_is_not_pulled_by_a_burst_of_large_errors() -> None:
+    # a straight line with 5 % of the samples 50 σ off (like the voltage collapse near empty):
+    # least squares is dragged away, the Huber solution stays at the line
+    rng = np.random.default_rng(0)
+    t = np.linspace(0.0, 1.0, 2000)
+    J = np.column_stack([np.ones_like(t), t])
+    b = 0.3 + 2.0 * t + 0.01 * rng.standard_normal(t.size)
+    b[-100:] -= 0.5
+    bounds = (np.full(2, -np.inf), np.full(2, np.inf))
+    plain = _robust_linear_solve(J, b, b.size, bounds, load_config(robust_loss="none")).x
+    huber = _robust_linear_solve(J, b, b.size, bounds, load_config(robust_loss="huber")).x
+    err_plain, err_huber = np.abs(plain - [0.3, 2.0]).max(), np.abs(huber - [0.3, 2.0]).max()
+    assert err_plain > 0.1
+    assert err_huber < err_plain / 4
 
 
 def test_stabilise_pulls_poles_inside() -> None:
@@ -83,6 +100,7 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
     ({"max_local_models": 0}, "'max_local_models'"),
     ({"output": "volts"}, "'output'"),
     ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
+    ({"robust_loss": "cauchy"}, "'robust_loss'"),
     ({"no_such_setting": 1}, "unknown setting"),
 ])
 def test_bad_configuration(kw, message) -> None:

@@ -37,6 +37,9 @@ class TrainConfig:
     (the last record given), or "none" (then stop = "aicc").
     soc_window / outside_weight: samples outside the SoC window get this weight in the fit.
     oe_refinement: final output-error (free-run) refinement of all local models and the OCV.
+    robust_loss: "huber" (the refinement's loss is quadratic within 1.345 robust standard
+    deviations of the residual and linear beyond, so that the few samples a local linear model
+    cannot follow, such as the voltage collapse near empty, do not dominate it) or "none".
     max_pole: largest allowed local pole magnitude (stability repair).
     ocv_tests: slow OCV tests ([discharge from full, charge from empty] or one file with both);
     their mean branch becomes the model's OCV, fixed (empty: the OCV is estimated from the data).
@@ -64,6 +67,7 @@ class TrainConfig:
     outside_weight: float = 1.0
     oe_refinement: bool = True
     oe_max_iterations: int = 25
+    robust_loss: str = "huber"
     lm_iterations: int = 15
     max_pole: float = 0.9995
     ocv_knots: int = 21
@@ -110,6 +114,8 @@ class TrainConfig:
             raise bad("soc_window", "expected [low, high] with 0 ≤ low < high ≤ 1")
         if not 0 <= self.outside_weight <= 1:
             raise bad("outside_weight", "expected 0…1")
+        if self.robust_loss not in ("huber", "none"):
+            raise bad("robust_loss", "expected 'huber' or 'none'")
         if not 0.9 < self.max_pole < 1:
             raise bad("max_pole", "expected 0.9 < max_pole < 1")
         if self.ocv_knots < 3:

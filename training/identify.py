@@ -409,21 +409,25 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     if with_ocv:
         lower[M * p + 1:] = 0.0
     r0 = evaluate(x0)[0]
+    n_res = int(sum(w.size for w in w_all))
     t_start = time.perf_counter()
+    upper = np.full(x0.size, np.inf)
     if na == 0:
-        # no output feedback: the free-run error is affine in the parameters, one bounded
-        # linear least-squares solve is the exact optimum
+        # no output feedback: the free-run error is affine in the parameters; (iteratively
+        # reweighted) bounded linear least squares gives the exact optimum
         r_0, J_0 = evaluate(x0)
-        lin = lsq_linear(J_0, J_0 @ x0 - r_0, bounds=(lower, np.full(x0.size, np.inf)),
-                         method="bvls" if np.isfinite(lower).any() else "trf",
-                         lsq_solver="exact")
-        sol = _Solution(lin.x, float(0.5 * np.sum(evaluate(lin.x)[0] ** 2)), 2, lin.status)
+        sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg)
+        sol.cost = float(0.5 * np.sum(evaluate(sol.x)[0] ** 2))
     else:
+        robust = {}
+        if cfg.robust_loss == "huber":
+            robust = {"loss": "huber",
+                      "f_scale": HUBER_K * max(_robust_scale(r0[:n_res]), 1e-6)}
         with np.errstate(over="ignore", invalid="ignore"):
             sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
-                                bounds=(lower, np.full(x0.size, np.inf)), method="trf",
+                                bounds=(lower, upper), method="trf",
                                 x_scale="jac", max_nfev=cfg.oe_max_iterations,
-                                ftol=1e-8, xtol=1e-10, gtol=1e-10)
+                                ftol=1e-8, xtol=1e-10, gtol=1e-10, **robust)
     theta, ocv_v = unpack(sol.x)
     theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])
     out = copy.copy(model)
@@ -439,6 +443,44 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
+
+
+HUBER_K = 1.345      # Huber threshold in robust standard deviations (95 % efficiency)
+IRLS_ITERATIONS = 8
+
+
+def _robust_scale(r: np.ndarray) -> float:
+    """Standard deviation of the bulk of the residuals: 1.4826·median|r| (zero-weight samples,
+    whose residuals are exactly 0, are left out)."""
+    r = np.abs(r[r != 0.0])
+    return float(1.4826 * np.median(r)) if r.size else 0.0
+
+
+def _robust_linear_solve(J: np.ndarray, b: np.ndarray, n_res: int,
+                         bounds: tuple[np.ndarray, np.ndarray], cfg: TrainConfig) -> _Solution:
+    """min Σ ρ(J·x − b) over the first n_res rows (data) plus plain squares of the rest
+    (regularisation), ρ = squares ("none") or Huber ("huber", by iteratively reweighted least
+    squares with the scale fixed from the unweighted solution). Deterministic."""
+    method = "bvls" if np.isfinite(bounds[0]).any() else "trf"
+
+    def solve(weights: np.ndarray):
+        sw = np.sqrt(weights)
+        return lsq_linear(J * sw[:, None], b * sw, bounds=bounds, method=method,
+                          lsq_solver="exact")
+
+    weights = np.ones(b.size)
+    lin = solve(weights)
+    if cfg.robust_loss == "huber":
+        scale = HUBER_K * max(_robust_scale((J @ lin.x - b)[:n_res]), 1e-6)
+        for _ in range(IRLS_ITERATIONS):
+            r = np.abs(J[:n_res] @ lin.x - b[:n_res])
+            new = np.ones(b.size)
+            new[:n_res] = np.minimum(1.0, scale / np.maximum(r, 1e-300))
+            if np.max(np.abs(new - weights)) < 1e-3:
+                break
+            weights = new
+            lin = solve(weights)
+    return _Solution(lin.x, 0.0, 2, lin.status)
 
 
 # ----- the whole identification ----------------------------------------------------------
