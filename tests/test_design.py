@@ -81,7 +81,7 @@ def test_random_programme_has_the_designs_amplitude_bands_and_limits() -> None:
     cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
     spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)
     d = design_programme(cell, cyc, spec, progress=lambda _m: None)
-    r = random_programme(cell, cyc, spec, seed=3)
+    r = random_programme(cell, cyc, spec, seed=3, kind="aprbs")
     assert r.current_a.size == d.current_a.size
     u, soc, _ = predict(cell, r.current_a, 1.0, 0.8, np.zeros(2))
     assert u.min() >= 2.0 + spec.voltage_margin_v - 1e-9
@@ -123,7 +123,20 @@ def test_virtual_cell_proof_reports_every_programme() -> None:
     spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)
     d = design_programme(cell, cyc, spec, progress=lambda _m: None)
     out = compare_on_virtual_cell(d, cell, cyc, spec, progress=lambda _m: None, seeds=(1, 2))
-    assert set(out["programmes"]) == {"designed", "random_seed_1", "random_seed_2"}
+    assert set(out["programmes"]) == {"designed", "prbs_seed_1", "prbs_seed_2", "aprbs_seed_1",
+                                      "aprbs_seed_2"}
     for row in out["programmes"].values():
         assert 0.5 < row["ev_discharge_4c_rmse_mv"] < 50
-    assert out["covariance_det_ratio_random_over_designed"] > 1.0
+    assert out["covariance_det_ratio_prbs_over_designed"] > 1.0
+    assert out["covariance_det_ratio_aprbs_over_designed"] > 1.0
+
+
+@pytest.mark.parametrize("kind", ["prbs", "aprbs"])
+def test_random_levels_have_zero_mean_and_unit_peak(kind) -> None:
+    from training.design import random_levels
+
+    z = random_levels(np.random.default_rng(4), 30, kind)
+    assert abs(z.mean()) < 1e-12 and np.isclose(np.abs(z).max(), 1.0)
+    assert np.unique(np.round(z, 9)).size == (2 if kind == "prbs" else 30)
+    with pytest.raises(ValueError, match="expected one of"):
+        random_levels(np.random.default_rng(4), 30, "sine")

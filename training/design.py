@@ -289,12 +289,28 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     return Programme(time_s, cur, u, socs, starts, points, lds, settings)
 
 
+RANDOM_KINDS = ("prbs", "aprbs")
+
+
+def random_levels(rng: np.random.Generator, n: int, kind: str) -> np.ndarray:
+    """n random levels with zero mean and max |z| = 1: "prbs" two levels (random signs, a
+    pseudo-random binary sequence), "aprbs" uniformly distributed amplitudes."""
+    if kind == "prbs":
+        z = np.where(rng.uniform(0.0, 1.0, n) < 0.5, -1.0, 1.0)
+    elif kind == "aprbs":
+        z = rng.uniform(-1.0, 1.0, n)
+    else:
+        raise ValueError(f"random programme kind {kind!r}: expected one of {RANDOM_KINDS}")
+    z = z - z.mean()
+    return z / max(float(np.abs(z).max()), 1e-12)
+
+
 def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
-                     seed: int = 1) -> Programme:
-    """The comparison: uniformly random levels (fixed seed, zero mean around the charge-moving
-    mean) of the same length, hold time, amplitude bands and SoC walk as the design; a sequence
-    whose predicted voltage leaves the limits has its spread reduced (that sequence only, as the
-    design's constraint acts)."""
+                     seed: int = 1, kind: str = "aprbs") -> Programme:
+    """The comparison: random levels (PRBS or APRBS, fixed seed, zero mean around the
+    charge-moving mean) of the same length, hold time, amplitude bands and SoC walk as the
+    design; a sequence whose predicted voltage leaves the limits has its spread reduced (that
+    sequence only, as the design's constraint acts)."""
     n_seq = max(1, round(spec.duration_s / spec.sequence_s))
     i_max = current_limit(cell, cyc)
     rng = np.random.default_rng(seed)
@@ -305,8 +321,7 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     soc, v = spec.soc_profile[0], np.zeros(len(cell.rc))
     parts = []
     for k, dsoc in enumerate(allocate(spec.soc_profile, n_seq)[0]):
-        z = rng.uniform(-1, 1, n_levels)
-        z = (z - z.mean()) / np.abs(z - z.mean()).max()      # the sequence's charge exactly
+        z = random_levels(rng, n_levels, kind)      # zero mean: the sequence's charge exactly
         mean = dsoc * cell.capacity_ah * 3600.0 / (n_levels * cyc.hold_s)
         band = amplitude_band(spec, i_max, k, mean)
         for spread in np.linspace(1.0, 0.0, 21):
@@ -319,7 +334,7 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     cur = np.concatenate(parts)
     u, socs, _ = predict(cell, cur, cyc.sample_time_s, spec.soc_profile[0], np.zeros(len(cell.rc)))
     time_s = cyc.sample_time_s * np.arange(1, cur.size + 1)
-    return Programme(time_s, cur, u, socs, [], [], [], {"random_seed": seed})
+    return Programme(time_s, cur, u, socs, [], [], [], {"random_seed": seed, "kind": kind})
 
 
 # ----- output -----------------------------------------------------------------------------------
@@ -422,7 +437,8 @@ def _virtual_ocv_test(vc: VirtualCell, capacity_ah: float, folder: Path) -> Path
 
 def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec,
                             spec: DesignSpec, progress=print,
-                            seeds: tuple[int, ...] = RANDOM_SEEDS) -> dict:
+                            seeds: tuple[int, ...] = RANDOM_SEEDS,
+                            kinds: tuple[str, ...] = RANDOM_KINDS) -> dict:
     """Train an LMN on the designed programme and on random programmes (one per seed) run on
     the virtual cell, each with the same slow OCV test run on that cell; validate all free-run on
     two drive profiles run on the same cell: an EV drive cycle discharging from SoC 0.7 (peak 4C)
@@ -453,7 +469,8 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
                                       hev_profile_current(cell.capacity_ah,
                                                           i_max / cell.capacity_ah), mid)}
     programmes = [("designed", designed.current_a)] + [
-        (f"random_seed_{s}", random_programme(cell, cyc, spec, s).current_a) for s in seeds]
+        (f"{kind}_seed_{s}", random_programme(cell, cyc, spec, s, kind).current_a)
+        for kind in kinds for s in seeds]
     out: dict = {"validation": {k: v.name for k, v in vals.items()}, "programmes": {}}
     with tempfile.TemporaryDirectory() as tmp:
         ocv_test = _virtual_ocv_test(vc, cell.capacity_ah, Path(tmp))
@@ -470,16 +487,17 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
             out["programmes"][name] = row
             progress(f"  {name}: {res.chosen_m} local models, validation RMSE "
                      + ", ".join(f"{k} {row[f'{k}_rmse_mv']:.2f} mV" for k in vals))
-    rand = [r for n, r in out["programmes"].items() if n != "designed"]
     des = out["programmes"]["designed"]
-    for key in vals:
-        med = float(np.median([r[f"{key}_rmse_mv"] for r in rand]))
-        out[f"{key}_designed_vs_random_median_mv"] = [des[f"{key}_rmse_mv"], med]
-        out[f"{key}_random_programmes_beaten"] = sum(des[f"{key}_rmse_mv"] < r[f"{key}_rmse_mv"]
-                                                    for r in rand)
-    ld = np.median([r["log_det_information"] for r in rand])
-    out["covariance_det_ratio_random_over_designed"] = float(np.exp(des["log_det_information"]
-                                                                    - ld))
+    for kind in kinds:
+        rand = [r for n, r in out["programmes"].items() if n.startswith(f"{kind}_")]
+        for key in vals:
+            med = float(np.median([r[f"{key}_rmse_mv"] for r in rand]))
+            out[f"{key}_designed_vs_{kind}_median_mv"] = [des[f"{key}_rmse_mv"], med]
+            out[f"{key}_{kind}_programmes_beaten"] = sum(
+                des[f"{key}_rmse_mv"] < r[f"{key}_rmse_mv"] for r in rand)
+        ld = np.median([r["log_det_information"] for r in rand])
+        out[f"covariance_det_ratio_{kind}_over_designed"] = float(
+            np.exp(des["log_det_information"] - ld))
     out["virtual_cell"] = ("built-in nonlinear ECM with hysteresis (training.virtual_cell; "
                            "pybamm not installed here)")
     return out
