@@ -17,6 +17,7 @@ from training.identify import (
     skeleton,
     stabilise,
     validation_masks,
+    with_soc_reference_weights,
     wls,
 )
 from training.pipeline import train_files
@@ -61,6 +62,26 @@ def test_huber_refinement_is_not_pulled_by_a_burst_of_large_errors() -> None:
     assert err_huber < err_plain / 4
 
 
+def test_soc_reference_weights_follow_the_ocv_slope() -> None:
+    # an NCA-like OCV: steep near empty (6 V per unit SoC), flat in the middle (0.5)
+    rec = read_record(PAN_HWFET)
+    segs = record_to_segments(rec, 1.0, 1.0, 2.85)
+    knots = np.array([0.0, 0.1, 0.5, 1.0])
+    ocv = np.array([2.8, 3.4, 3.6, 4.15])
+    socs = [s.soc_ref for s in segs]
+    cfg = load_config(soc_reference_sigma=0.003, model_error_sigma_v=0.005)
+    out = with_soc_reference_weights(segs, socs, knots, ocv, cfg)
+    w, soc = out[0].weight, socs[0]
+    assert (soc < 0.05).any()
+    assert np.allclose(w[soc < 0.05], 1 / (1 + (6.0 * 0.003 / 0.005) ** 2))     # 0.07
+    mid = (soc > 0.295) & (soc < 0.305)
+    assert np.allclose(w[mid], 1 / (1 + (0.5 * 0.003 / 0.005) ** 2), atol=0.05)  # 0.92
+    assert w[(soc > 0.05) & (soc < 0.1)].mean() < w[(soc > 0.2) & (soc < 0.3)].mean()
+    assert np.array_equal(segs[0].weight, np.ones(len(segs[0])))       # input left unchanged
+    off = with_soc_reference_weights(segs, socs, knots, ocv, load_config(soc_reference_sigma=0))
+    assert np.array_equal(off[0].weight, segs[0].weight)
+
+
 def test_stabilise_pulls_poles_inside() -> None:
     theta = np.array([2.1, -1.05, 0.0, 0.3, 0.1])   # poles beyond the unit circle
     assert np.abs(poles(theta, 2)).max() > 1
@@ -101,6 +122,8 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
     ({"output": "volts"}, "'output'"),
     ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
     ({"robust_loss": "cauchy"}, "'robust_loss'"),
+    ({"soc_reference_sigma": -0.01}, "'soc_reference_sigma'"),
+    ({"model_error_sigma_v": 0.0}, "'model_error_sigma_v'"),
     ({"no_such_setting": 1}, "unknown setting"),
 ])
 def test_bad_configuration(kw, message) -> None:

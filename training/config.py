@@ -36,6 +36,10 @@ class TrainConfig:
     validation: "block" (the middle validation_fraction of every record's time), "record"
     (the last record given), or "none" (then stop = "aicc").
     soc_window / outside_weight: samples outside the SoC window get this weight in the fit.
+    soc_reference_sigma / model_error_sigma_v: each sample's weight is also multiplied by
+    σ_u²/(σ_u² + (dOCV/dSoC·σ_SoC)²), σ_SoC the uncertainty of the coulomb-counted SoC reference
+    (fraction), σ_u a typical model error (V): where the OCV is steep (near empty and full) a
+    small SoC error is a large voltage error, and those samples count less (0 switches it off).
     oe_refinement: final output-error (free-run) refinement of all local models and the OCV.
     robust_loss: "huber" (the refinement's loss is quadratic within 1.345 robust standard
     deviations of the residual and linear beyond, so that the few samples a local linear model
@@ -65,6 +69,8 @@ class TrainConfig:
     validation_fraction: float = 0.2
     soc_window: list[float] = field(default_factory=lambda: [0.0, 1.0])
     outside_weight: float = 1.0
+    soc_reference_sigma: float = 0.003
+    model_error_sigma_v: float = 0.005
     oe_refinement: bool = True
     oe_max_iterations: int = 25
     robust_loss: str = "huber"
@@ -112,6 +118,10 @@ class TrainConfig:
         lo, hi = self.soc_window
         if not 0 <= lo < hi <= 1:
             raise bad("soc_window", "expected [low, high] with 0 ≤ low < high ≤ 1")
+        if not 0 <= self.soc_reference_sigma < 0.1:
+            raise bad("soc_reference_sigma", "expected 0 ≤ σ < 0.1 (a SoC fraction)")
+        if not self.model_error_sigma_v > 0:
+            raise bad("model_error_sigma_v", "expected > 0 V")
         if not 0 <= self.outside_weight <= 1:
             raise bad("outside_weight", "expected 0…1")
         if self.robust_loss not in ("huber", "none"):

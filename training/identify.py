@@ -19,6 +19,7 @@ Nothing is random: the same data and settings give the same model.
 from __future__ import annotations
 
 import copy
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -596,6 +597,29 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     return best_gamma, e_k, best
 
 
+def ocv_slope(ocv_soc: np.ndarray, ocv_v: np.ndarray, soc: np.ndarray) -> np.ndarray:
+    """dOCV/dSoC (V per unit SoC) of the piecewise-linear OCV, interpolated between the
+    segments' midpoints."""
+    return np.interp(soc, 0.5 * (ocv_soc[1:] + ocv_soc[:-1]), np.diff(ocv_v) / np.diff(ocv_soc))
+
+
+def with_soc_reference_weights(segs: list[Segment], socs: list[np.ndarray],
+                               ocv_soc: np.ndarray, ocv_v: np.ndarray,
+                               cfg: TrainConfig) -> list[Segment]:
+    """The segments with their fit weights multiplied by σ_u²/(σ_u² + (dOCV/dSoC·σ_SoC)²):
+    inverse-variance weighting of the voltage target, whose uncertainty from the coulomb-counted
+    SoC (σ_SoC = soc_reference_sigma) grows with the OCV slope, i.e. near empty and full.
+    socs: each segment's SoC as the model counts it."""
+    if cfg.soc_reference_sigma <= 0:
+        return segs
+    out = []
+    for seg, soc in zip(segs, socs, strict=True):
+        spread = ocv_slope(ocv_soc, ocv_v, soc) * cfg.soc_reference_sigma
+        w = 1.0 / (1.0 + (spread / cfg.model_error_sigma_v) ** 2)
+        out.append(dataclasses.replace(seg, weight=seg.weight * w))
+    return out
+
+
 def partition_normalisation(base: LmnModel, segs: list[Segment]
                             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Centre and half-range of the raw partition inputs, and each segment's SoC series."""
@@ -621,6 +645,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale)
     base.arrhenius_k = e_k
+    segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     design = build_design(base, segs, masks)
     X, y, w = design.X, design.y, design.w_fit
     n_eff = float(w.sum())

@@ -20,7 +20,7 @@ from training import __version__
 from training.baselines import Ecm2rc, fit_ecm2rc
 from training.config import TrainConfig, load_config
 from training.dataset import Segment, estimate_capacity, file_sha256, record_to_segments, start_soc
-from training.identify import train_lmn
+from training.identify import train_lmn, with_soc_reference_weights
 from training.metrics import WINDOW, pooled, record_metrics
 from training.readers import read_record
 from training.records import DataError, Record
@@ -150,9 +150,10 @@ def fit_baselines(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnMod
                   "fit": {"seconds": arx.info["seconds"]}}
     socs = [exo_series(lmn, s.current_a, s.temperature_c, s.soc0).soc for s in segs]
     h0s = [initial_hysteresis(s.soc0) for s in segs]
+    weighted = with_soc_reference_weights(segs, socs, lmn.ocv_soc, lmn.ocv_v, cfg)  # as the LMN
     for name, g in (("ecm2rc", None), ("ecm2rc_hyst", gamma or 100.0)):
         progress(f"baseline {name}: fitting on the free-run error")
-        ecm, info = fit_ecm2rc(segs, socs, lmn.ocv_soc, lmn.ocv_v, cap, cfg.sample_time_s, g,
+        ecm, info = fit_ecm2rc(weighted, socs, lmn.ocv_soc, lmn.ocv_v, cap, cfg.sample_time_s, g,
                                h0s)
         progress(f"  {name}: {info['seconds']:.1f} s, {info['evaluations']} evaluations")
         out[name] = {"kind": "ecm2rc", "model": ecm.to_dict(), "fit": info}
