@@ -13,9 +13,12 @@ Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charg
   ``hysteresis_gamma`` (null, or γ of h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ|i|Ts/(3600·Cn))),
   ``ocv_input``, ``soc_input`` (extra regressors), ``offset`` (constant 1),
   ``arrhenius_k`` (null, or E in K: the current and filter regressors are multiplied by
-  g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``).
-  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, OCV, SoC, 1
-  (absent ones left out); ``columns`` lists their names.
+  g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``),
+  ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
+  regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K).
+  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, OCV, SoC, 1,
+  then those of the temperature terms ``<column>*dT^1`` …, (absent ones left out); ``columns``
+  lists their names.
 - ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
   ``center`` and ``scale`` (z = (raw − center)/scale).
 - ``gating``: ``mode`` ``"none"`` or ``"current_sign"`` (separate charge and discharge trees;
@@ -47,6 +50,8 @@ import numpy as np
 FORMAT = "lmncell-model"
 VERSION = 1
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
+MAX_TEMPERATURE_TERMS = 3
+TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
 GATES = ("all", "charge", "discharge")
 
 
@@ -84,6 +89,7 @@ class LmnModel:
     initial_direction: str = "discharge"
     arrhenius_k: float | None = None
     reference_temperature_c: float = 25.0
+    temperature_terms: int = 0
     limits: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
@@ -155,6 +161,21 @@ class LmnModel:
             cols.append("ocv(k)")
         if self.soc_input:
             cols.append("soc(k)")
+        if self.offset:
+            cols.append("1")
+        for power in range(1, self.temperature_terms + 1):
+            cols += [f"{c}*dT^{power}" for c in self.temperature_term_sources()]
+        return cols
+
+    def temperature_term_sources(self) -> list[str]:
+        """Columns that also enter multiplied by dT, dT², … up to ``temperature_terms``
+        (dT = (T − T_ref)/TEMPERATURE_STEP_K): the current, filter and hysteresis regressors and
+        the offset (resistances, time-constant gains and the OCV offset varying smoothly with
+        temperature beyond the Arrhenius gain)."""
+        cols = ["i(k)" if l == 0 else f"i(k-{l})" for l in range(self.current_terms)]
+        cols += [f"v{f + 1}(k)" for f in range(len(self.filters))]
+        if self.hysteresis_gamma is not None:
+            cols.append("h(k)")
         if self.offset:
             cols.append("1")
         return cols
@@ -269,6 +290,11 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     if arrhenius is not None and not (isinstance(arrhenius, (int, float))
                                       and math.isfinite(arrhenius)):
         raise ModelFileError(f"{w}: 'arrhenius_k' is {arrhenius!r}, expected null or a number")
+    temperature_terms = reg.get("temperature_terms", 0)
+    if (not isinstance(temperature_terms, int) or isinstance(temperature_terms, bool)
+            or not 0 <= temperature_terms <= MAX_TEMPERATURE_TERMS):
+        raise ModelFileError(f"{w}: 'temperature_terms' is {temperature_terms!r}, expected an "
+                             f"integer 0…{MAX_TEMPERATURE_TERMS} (the degree in dT)")
     part = _get(doc, "partition", source, dict)
     variables = _get(part, "variables", f"{source}: partition", list)
     bad = [v for v in variables if v not in PARTITION_VARIABLES]
@@ -322,6 +348,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         initial_direction=str(gating.get("initial_direction", "discharge")),
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
+        temperature_terms=temperature_terms,
         limits=dict(doc.get("limits", {})), cell=dict(cell), noise=dict(doc.get("noise", {})),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
                if k in doc})
@@ -353,7 +380,8 @@ def model_to_dict(model: LmnModel) -> dict:
                        "hysteresis_gamma": model.hysteresis_gamma,
                        "ocv_input": model.ocv_input, "soc_input": model.soc_input,
                        "offset": model.offset, "arrhenius_k": model.arrhenius_k,
-                       "reference_temperature_c": model.reference_temperature_c},
+                       "reference_temperature_c": model.reference_temperature_c,
+                       "temperature_terms": model.temperature_terms},
         "partition": {"variables": model.partition_variables,
                       "center": model.partition_center.tolist(),
                       "scale": model.partition_scale.tolist()},

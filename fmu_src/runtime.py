@@ -2,7 +2,8 @@
 
 Step k covers (t_{k−1}, t_k] with t_k − t_{k−1} = Ts. Its input is the current held over the step
 (A, > 0 charges) and the temperature (°C); its output the terminal voltage (V) for that step.
-Current and filter regressors are multiplied by the Arrhenius gain g(T) where the model has one.
+Current and filter regressors are multiplied by the Arrhenius gain g(T) where the model has one;
+temperature terms repeat the current, filter, hysteresis and offset columns times dT, dT², ….
 Within a step, in this order: SoC(k) = SoC(k−1) + Ts·η(i)·i/(3600·Cn); the zero-DC-gain filters
 v = LP_fast(i) − LP_slow(i) (exact discretisation a = exp(−Ts/τ)); the hysteresis state
 h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ·|i|·Ts/(3600·Cn)) (→ +1 after charge, −1 after
@@ -20,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import LmnModel
+from .model import TEMPERATURE_STEP_K, LmnModel
 
 CHARGE, DISCHARGE = 1, 2
 
@@ -63,6 +64,9 @@ class ExoStepper:
         pv = model.partition_variables
         self._zi = {name: pv.index(name) for name in pv}
         self._inv_tref = 1.0 / (model.reference_temperature_c + 273.15)
+        exo_cols = model.columns()[model.output_lags:]
+        self._temperature_source_cols = [exo_cols.index(c)
+                                         for c in model.temperature_term_sources()]
 
     def temperature_gain(self, temperature_c: float) -> float:
         """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
@@ -122,6 +126,9 @@ class ExoStepper:
             col += 1
         if m.offset:
             x[col] = 1.0
+            col += 1
+        if m.temperature_terms:
+            self._temperature_terms(x, col, temperature_c)
         zi = self._zi
         if "soc" in zi:
             z[zi["soc"]] = s.soc
@@ -131,6 +138,17 @@ class ExoStepper:
             z[zi["filtered_current"]] = s.lp[1] if s.lp else current_a
         if "temperature" in zi:
             z[zi["temperature"]] = temperature_c
+
+    def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
+        """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
+        m = self.model
+        dt = (temperature_c - m.reference_temperature_c) / TEMPERATURE_STEP_K
+        power = 1.0
+        for _ in range(m.temperature_terms):
+            power *= dt
+            for c in self._temperature_source_cols:
+                x[col] = power * x[c]
+                col += 1
 
     def shift(self, s: ExoState, current_a: float) -> None:
         """After the features of step k: remember i(k) as a past current."""

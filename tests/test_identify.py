@@ -82,6 +82,25 @@ def test_soc_reference_weights_follow_the_ocv_slope() -> None:
     assert np.array_equal(off[0].weight, segs[0].weight)
 
 
+def test_temperature_terms_auto_follow_the_number_of_training_temperatures() -> None:
+    from training.dataset import Segment
+    from training.identify import temperature_degree, temperature_levels
+
+    def seg(t_c: float | None) -> Segment:
+        n = 10
+        temp = None if t_c is None else np.full(n, t_c) + np.linspace(0, 3, n)  # self-heating
+        return Segment("s", np.arange(n, dtype=float), np.zeros(n), np.full(n, 3.3), temp,
+                       0.5, np.full(n, 0.5), np.ones(n))
+
+    auto = load_config()
+    assert temperature_levels([seg(25), seg(27), seg(30)]) == [26.5]
+    assert temperature_degree(auto, [seg(25), seg(27), seg(None)]) == 0     # one chamber
+    assert temperature_degree(auto, [seg(5), seg(25)]) == 0
+    assert temperature_degree(auto, [seg(-5), seg(5), seg(45)]) == 1
+    assert temperature_degree(auto, [seg(-5), seg(5), seg(25), seg(45)]) == 2
+    assert temperature_degree(load_config(temperature_terms=0), [seg(-5), seg(45)]) == 0
+
+
 def test_stabilise_pulls_poles_inside() -> None:
     theta = np.array([2.1, -1.05, 0.0, 0.3, 0.1])   # poles beyond the unit circle
     assert np.abs(poles(theta, 2)).max() > 1
@@ -122,6 +141,8 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
     ({"output": "volts"}, "'output'"),
     ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
     ({"robust_loss": "cauchy"}, "'robust_loss'"),
+    ({"temperature_terms": 4}, "'temperature_terms'"),
+    ({"temperature_terms": "yes"}, "'temperature_terms'"),
     ({"soc_reference_sigma": -0.01}, "'soc_reference_sigma'"),
     ({"model_error_sigma_v": 0.0}, "'model_error_sigma_v'"),
     ({"no_such_setting": 1}, "unknown setting"),

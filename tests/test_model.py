@@ -13,12 +13,13 @@ from training.config import load_config
 from training.identify import Tree, skeleton
 
 
-def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3):
+def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
+                      temperature_terms: int = 0):
     """A model with a tree of n_splits random oblique splits and random stable local models."""
     rng = np.random.default_rng(0)
     cfg = load_config(partition=["soc", "current", "temperature"][:d], pre_partition=gating)
     base = skeleton(cfg, 2.0, np.linspace(0, 1, 5), np.linspace(3.0, 3.4, 5), 50.0,
-                    np.zeros(d), np.ones(d))
+                    np.zeros(d), np.ones(d), temperature_terms)
     p = len(base.columns())
     theta = rng.normal(0, 0.01, (len(base.roots), p))
     theta[:, :3] = [0.5, 0.2, 0.1]
@@ -43,20 +44,36 @@ def test_validities_sum_to_one(gating: str) -> None:
     assert np.allclose(Phi.sum(axis=1), 1.0, atol=1e-12)
 
 
-def test_batch_and_step_paths_agree() -> None:
-    m = random_tree_model("current_sign")
+@pytest.mark.parametrize("temperature_terms", [0, 2])
+def test_batch_and_step_paths_agree(temperature_terms: int) -> None:
+    m = random_tree_model("current_sign", temperature_terms=temperature_terms)
     rng = np.random.default_rng(2)
     cur = np.repeat(rng.normal(0, 2, 300), 5)
-    temp = np.full(cur.size, 20.0)
+    temp = 20.0 + 10.0 * np.sin(np.arange(cur.size) / 200.0)
     sim = simulate(m, cur, temp, 0.7)
-    st = CellStepper(m, 0.7, temperature_c=20.0)
-    steps = np.array([st.step(i, 20.0) for i in cur])
+    st = CellStepper(m, 0.7, temperature_c=float(temp[0]))
+    steps = np.array([st.step(i, t) for i, t in zip(cur, temp, strict=True)])
     assert np.max(np.abs(steps - sim.voltage_v)) <= 1e-12
     assert st.soc == pytest.approx(sim.soc[-1], abs=1e-15)
 
 
+def test_temperature_terms_are_the_source_columns_times_powers_of_dt() -> None:
+    m = random_tree_model(temperature_terms=2)
+    cols = m.columns()
+    assert cols[-2 * len(m.temperature_term_sources()):] == (
+        [f"{c}*dT^1" for c in m.temperature_term_sources()]
+        + [f"{c}*dT^2" for c in m.temperature_term_sources()])
+    st = CellStepper(m, 0.5, temperature_c=5.0)
+    st.step(-2.0, 5.0)                              # dT = (5 − 25)/10 = −2
+    x = st._x[0]
+    exo = cols[m.output_lags:]
+    for c in m.temperature_term_sources():
+        assert x[exo.index(f"{c}*dT^1")] == pytest.approx(-2.0 * x[exo.index(c)])
+        assert x[exo.index(f"{c}*dT^2")] == pytest.approx(4.0 * x[exo.index(c)])
+
+
 def test_model_round_trip_is_bit_identical(tmp_path) -> None:
-    m = random_tree_model()
+    m = random_tree_model(temperature_terms=2)
     p1, p2 = tmp_path / "a.json", tmp_path / "b.json"
     save_model(m, p1)
     m2 = load_model(p1)
@@ -78,6 +95,8 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
     (lambda d: d["tree"]["nodes"][0].update(weights=[1.0]), "tree node weights"),
     (lambda d: d.update(sample_time_s=-1), "'sample_time_s' is -1"),
     (lambda d: d["cell"].pop("capacity_ah"), "missing key 'capacity_ah'"),
+    (lambda d: d["regressors"].update(temperature_terms=5), "'temperature_terms' is 5"),
+    (lambda d: d["regressors"].update(temperature_terms=1), "theta has shape"),
 ])
 def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
     doc = model_to_dict(random_tree_model())

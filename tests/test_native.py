@@ -237,3 +237,25 @@ def test_fmpy_compile_rebuilds_from_the_shipped_sources(native_fmu, quick_model,
     assert validate_fmu(str(copy)) == []
     res = compare_fmu_with_pipeline(quick_model, copy, PAN_US06, max_steps=500)
     assert res["max_dv_v"] <= 1e-9
+
+
+def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
+    # a model with quadratic temperature terms (forced: the shipped records are all near 25 °C;
+    # the cell warms by several kelvin under load, so dT varies along the record)
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell_build.native_build import build_native_fmu
+
+    from tests.conftest import PAN_HPPC, PAN_HWFET
+    from training.pipeline import train_files
+
+    path = tmp_path / "t.json"
+    train_files([PAN_HWFET, PAN_HPPC], path, capacity_ah=2.85, soc0=1.0,
+                progress=lambda _m: None, max_local_models=2, oe_max_iterations=2,
+                hysteresis="off", temperature_terms=2)
+    model = load_model(path)
+    assert model.temperature_terms == 2 and "i(k)*dT^2" in model.columns()
+    fmu = build_native_fmu(path, tmp_path / "t.fmu")
+    res = compare_fmu_with_pipeline(path, fmu, PAN_US06)
+    assert res["steps"] > 4000
+    assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12

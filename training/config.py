@@ -27,6 +27,11 @@ class TrainConfig:
     hysteresis: "auto" (chosen by the OCV pre-fit), "off", or a γ value.
     temperature_scaling: "auto" (an Arrhenius gain on the current regressors, its E chosen by
     the OCV pre-fit when the training temperatures span more than 5 K), "off", or E in K.
+    temperature_terms: the degree n of the temperature terms (current, filter, hysteresis and
+    offset columns again times dT … dTⁿ, dT = (T − 25 °C)/10 K: resistances and OCV that change
+    smoothly with temperature, which interpolate between training temperatures where sigmoid
+    splits over temperature cannot); "auto": n = min(2, L − 2) for L ≥ 3 distinct training
+    temperatures (records whose median temperatures lie ≥ 7.5 K apart), else 0; or 0…3.
     output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
     partition: partition-space variables (soc, current, filtered_current, temperature).
@@ -59,6 +64,7 @@ class TrainConfig:
     temperature_scaling: str | float = "auto"
     output: str = "relative_ocv"
     ocv_input: bool = False
+    temperature_terms: str | int = "auto"
     soc_input: bool = False
     partition: list[str] = field(default_factory=lambda: ["soc"])
     pre_partition: str = "none"
@@ -100,6 +106,10 @@ class TrainConfig:
         if not (self.temperature_scaling in ("auto", "off")
                 or isinstance(self.temperature_scaling, (int, float))):
             raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
+        if not (self.temperature_terms == "auto" or (isinstance(self.temperature_terms, int)
+                and not isinstance(self.temperature_terms, bool)
+                and 0 <= self.temperature_terms <= 3)):
+            raise bad("temperature_terms", "expected 'auto' or a degree 0…3")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")
         unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]

@@ -56,7 +56,8 @@ def _quiet(_msg: str) -> None:
 
 # ----- model skeletons -------------------------------------------------------------------
 def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: np.ndarray,
-             gamma: float | None, center: np.ndarray, scale: np.ndarray) -> LmnModel:
+             gamma: float | None, center: np.ndarray, scale: np.ndarray,
+             temperature_terms: int = 0) -> LmnModel:
     """A model with the configured structure, one local model of zeros and no split."""
     d = len(cfg.partition)
     current_sign = cfg.pre_partition == "current_sign"
@@ -71,7 +72,7 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
         partition_center=center, partition_scale=scale, roots=roots,
         node_weights=np.zeros((0, d + 1)), node_children=[],
         theta=np.zeros((len(roots), 1)), gating_mode=cfg.pre_partition,
-        rest_current_a=cfg.rest_current_a)
+        rest_current_a=cfg.rest_current_a, temperature_terms=temperature_terms)
     m.theta = np.zeros((len(roots), len(m.columns())))
     m._build_paths()
     return m
@@ -620,6 +621,30 @@ def with_soc_reference_weights(segs: list[Segment], socs: list[np.ndarray],
     return out
 
 
+TEMPERATURE_LEVEL_GAP_K = 7.5
+
+
+def temperature_levels(segs: list[Segment]) -> list[float]:
+    """Distinct training temperatures (°C): the segments' median temperatures, a new level
+    wherever one lies TEMPERATURE_LEVEL_GAP_K or more above the previous level."""
+    medians = sorted(float(np.median(s.temperature_c)) for s in segs
+                     if s.temperature_c is not None)
+    levels: list[float] = []
+    for t in medians:
+        if not levels or t - levels[-1] >= TEMPERATURE_LEVEL_GAP_K:
+            levels.append(t)
+    return levels
+
+
+def temperature_degree(cfg: TrainConfig, segs: list[Segment]) -> int:
+    """The degree of the temperature terms: the setting, or for 'auto' min(2, L − 2) with L
+    distinct training temperatures: at least one temperature more than a polynomial through
+    them would need, so that they are fitted, not interpolated exactly (0 below three)."""
+    if cfg.temperature_terms != "auto":
+        return int(cfg.temperature_terms)
+    return min(2, max(len(temperature_levels(segs)) - 2, 0))
+
+
 def partition_normalisation(base: LmnModel, segs: list[Segment]
                             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Centre and half-range of the raw partition inputs, and each segment's SoC series."""
@@ -636,15 +661,19 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     """Identify an LMN from model-rate segments (see the module docstring)."""
     t_start = time.perf_counter()
     d = len(cfg.partition)
+    n_temp = temperature_degree(cfg, segs)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,
-                    np.zeros(d), np.ones(d))
+                    np.zeros(d), np.ones(d), n_temp)
     center, scale, socs = partition_normalisation(base, segs)
     masks = validation_masks(segs, cfg)
     gamma, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs)
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
-    base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale)
+    base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
     base.arrhenius_k = e_k
+    if n_temp:
+        progress(f"  temperature terms of degree {n_temp} (training temperatures "
+                 + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     design = build_design(base, segs, masks)
     X, y, w = design.X, design.y, design.w_fit
@@ -699,6 +728,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     model = stages[chosen].apply(base)
     progress(f"  chosen M={model.n_local_models} by {key}")
     info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
+            "temperature_terms": n_temp,
             "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
     if cfg.oe_refinement:
         model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)

@@ -134,6 +134,16 @@ static void features(const State *s, double i, double t, double *x, double *z) {
 #if OFFSET
     x[col++] = 1.0;
 #endif
+#if TEMPERATURE_TERMS > 0
+    {
+        double dt = (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K, power = 1.0;
+        int n, c;
+        for (n = 0; n < TEMPERATURE_TERMS; n++) {
+            power *= dt;
+            for (c = 0; c < NTSRC; c++) x[col++] = power * x[TSRC_COL[c]];
+        }
+    }
+#endif
     (void)col;
     for (k = 0; k < ND; k++) {
         switch (PART_VAR[k]) {
