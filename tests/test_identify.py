@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -120,6 +122,21 @@ def test_training_twice_gives_identical_files(tmp_path) -> None:
     assert strip == [ln for ln in b if "seconds" not in ln]
     ma, mb = load_model(tmp_path / "a.json"), load_model(tmp_path / "b.json")
     assert np.array_equal(ma.theta, mb.theta) and np.array_equal(ma.ocv_v, mb.ocv_v)
+
+
+@pytest.mark.parametrize("kw", [{"stop": "aicc"}, {"stop": "aicc", "validation": "none"}])
+def test_aicc_stop_writes_a_strict_json_model_and_its_curve(tmp_path, kw) -> None:
+    # the validation column of the curve is not computed with the AICc rule: null, not NaN
+    from training.plots import curve_figure
+
+    out = tmp_path / "m.json"
+    train_files([PAN_HWFET], out, capacity_ah=2.85, progress=lambda _m: None,
+                max_local_models=2, oe_max_iterations=2, hysteresis="off", **kw)
+    doc = json.loads(out.read_text(), parse_constant=lambda c: pytest.fail(f"{c} in JSON"))
+    curve = doc["training"]["curve"]
+    assert [c["validation_freerun_rmse_mv"] for c in curve] == [None, None]
+    assert all(c["aicc"] is not None for c in curve)
+    assert curve_figure(curve, tmp_path / "c.png", 2).exists()
 
 
 def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:

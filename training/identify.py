@@ -698,9 +698,9 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         fit_fr = freerun_rmse(model, segs, design, "fit")
         curve.append({"local_models": model.n_local_models,
                       "one_step_rmse_mv": 1e3 * float(np.sqrt(loss / n_eff)),
-                      "aicc": float(aicc(loss, n_eff, n_par)),
-                      "train_freerun_rmse_mv": 1e3 * fit_fr,
-                      "validation_freerun_rmse_mv": 1e3 * val})
+                      "aicc": finite_or_none(aicc(loss, n_eff, n_par)),
+                      "train_freerun_rmse_mv": finite_or_none(1e3 * fit_fr),
+                      "validation_freerun_rmse_mv": finite_or_none(1e3 * val)})
         stages.append(tree)
         progress(f"  M={model.n_local_models}: one-step {curve[-1]['one_step_rmse_mv']:.2f} mV, "
                  f"free-run train {1e3 * fit_fr:.2f} mV, validation {1e3 * val:.2f} mV "
@@ -719,7 +719,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             progress("  no leaf can be split further")
             break
     key = "validation_freerun_rmse_mv" if stop_stage == "validation" else "aicc"
-    scores = np.array([c[key] for c in curve])
+    scores = np.array([np.inf if c[key] is None else c[key] for c in curve], dtype=float)
     scores = np.where(np.isfinite(scores), scores, np.inf)
     if key == "aicc":
         chosen = int(np.argmin(scores))
@@ -732,10 +732,18 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
     if cfg.oe_refinement:
         model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
-        info["refined_validation_freerun_rmse_mv"] = 1e3 * freerun_rmse(model, segs, design)
-        info["refined_train_freerun_rmse_mv"] = 1e3 * freerun_rmse(model, segs, design, "fit")
+        info["refined_validation_freerun_rmse_mv"] = finite_or_none(
+            1e3 * freerun_rmse(model, segs, design))
+        info["refined_train_freerun_rmse_mv"] = finite_or_none(
+            1e3 * freerun_rmse(model, segs, design, "fit"))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
+
+
+def finite_or_none(value: float) -> float | None:
+    """The value, or None where it is NaN or infinite (not computed, e.g. no validation data):
+    the model file is strict JSON."""
+    return float(value) if np.isfinite(value) else None
 
 
 def _gate_weight(design: Design, gate: str) -> np.ndarray:

@@ -84,8 +84,11 @@ def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
     m = [c["local_models"] for c in curve]
     fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
     ax.plot(m, [c["one_step_rmse_mv"] for c in curve], "o-", label="one-step (training)")
-    ax.plot(m, [c["train_freerun_rmse_mv"] for c in curve], "s-", label="free-run (training)")
-    val = [c["validation_freerun_rmse_mv"] for c in curve]
+    def values(key: str) -> np.ndarray:
+        return np.array([np.nan if c[key] is None else c[key] for c in curve], dtype=float)
+
+    ax.plot(m, values("train_freerun_rmse_mv"), "s-", label="free-run (training)")
+    val = values("validation_freerun_rmse_mv")
     if np.isfinite(val).any():
         ax.plot(m, val, "^-", label="free-run (validation)")
     ax.axvline(chosen, color="k", ls="--", lw=0.8, label=f"chosen M = {chosen}")
