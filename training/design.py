@@ -8,7 +8,8 @@ voltage the design model predicts within the cell's limits. Solved with scipy's 
 deterministic start; sequences are designed one after the other, each from the state the previous
 one leaves (SoC and RC voltages). Current > 0 charges; SI units.
 
-Design model: u = OCV(SoC) + R0·i + Σ_m v_m, v_m(k) = e_m·v_m(k−1) + R_m·(1−e_m)·i(k).
+Design model: u = OCV(SoC) + c + R0·i + Σ_m v_m, v_m(k) = e_m·v_m(k−1) + R_m·(1−e_m)·i(k), with
+c the local OCV offset (0 nominal).
 """
 
 from __future__ import annotations
@@ -115,12 +116,18 @@ AMPLITUDE_KNOTS = tuple(k / 6 for k in range(1, 7))
 AMPLITUDE_KNOT_SPACING = 1 / 6
 
 
+OFFSET_SCALE_V = 0.01   # the local OCV offset's scale in the relative sensitivities
+
+
 def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
                   i_ref: float | None = None) -> np.ndarray:
-    """(N, p) relative sensitivities θ·∂u/∂θ of [R0, a_1…a_K, R_1, τ_1, R_2, τ_2, …], where
+    """(N, p) relative sensitivities θ·∂u/∂θ of [R0, a_1…a_K, R_1, τ_1, R_2, τ_2, …, c], where
     the a_k make the resistance a piecewise-linear function of |i|/i_ref over AMPLITUDE_KNOTS
     (all 0 in the nominal model): they ask the design to use several amplitude levels, as the
-    network's local models at different currents need. i_ref: the sequence's current bound."""
+    network's local models at different currents need; c is the local OCV offset (each local
+    model of the network has one), scaled by OFFSET_SCALE_V: it asks the design to separate the
+    offset from the resistances' drop under the sequence's mean current. i_ref: the sequence's
+    current bound."""
     i_ref = max(float(np.abs(current).max()), 1e-9) if i_ref is None else i_ref
     x = np.abs(current) / i_ref
     cols = [cell.r0_ohm * current]
@@ -134,6 +141,7 @@ def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
         e2 = np.exp(-ts / tau2)
         v2 = lfilter([r * (1 - e2)], [1.0, -e2], current)
         cols += [v, (v2 - v) / 0.01]
+    cols.append(np.full(current.size, OFFSET_SCALE_V))
     return np.column_stack(cols)
 
 
