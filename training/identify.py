@@ -197,7 +197,8 @@ def stabilise(theta: np.ndarray, na: int, max_pole: float, X: np.ndarray | None 
 
 # ----- one split -------------------------------------------------------------------------
 def _sigmoid(a: np.ndarray) -> np.ndarray:
-    return 1.0 / (1.0 + np.exp(-a))
+    with np.errstate(over="ignore"):        # exp(−a) → inf gives the correct limit 0
+        return 1.0 / (1.0 + np.exp(-a))
 
 
 @dataclass
