@@ -103,6 +103,19 @@ def test_temperature_terms_auto_follow_the_number_of_training_temperatures() -> 
     assert temperature_degree(load_config(temperature_terms=0), [seg(-5), seg(45)]) == 0
 
 
+def test_with_temperature_terms_no_split_uses_temperature(tmp_path) -> None:
+    from tests.conftest import PAN_HPPC
+
+    out = tmp_path / "m.json"
+    train_files([PAN_HWFET, PAN_HPPC], out, capacity_ah=2.85, soc0=1.0,
+                progress=lambda _m: None, partition=["soc", "temperature"], max_local_models=3,
+                oe_max_iterations=2, hysteresis="off", temperature_terms=1)
+    m = load_model(out)
+    assert m.n_local_models == 3
+    assert np.all(m.node_weights[:, 2] == 0.0)        # [bias, soc, temperature]
+    assert np.any(m.node_weights[:, 1] != 0.0)
+
+
 def test_stabilise_pulls_poles_inside() -> None:
     theta = np.array([2.1, -1.05, 0.0, 0.3, 0.1])   # poles beyond the unit circle
     assert np.abs(poles(theta, 2)).max() > 1

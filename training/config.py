@@ -32,6 +32,8 @@ class TrainConfig:
     smoothly with temperature, which interpolate between training temperatures where sigmoid
     splits over temperature cannot); "auto": n = min(2, L − 2) for L ≥ 3 distinct training
     temperatures (records whose median temperatures lie ≥ 7.5 K apart), else 0; or 0…3.
+    With temperature terms, "temperature" in the partition is not split along (its split
+    weights stay 0): the terms carry the temperature dependence.
     output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
     partition: partition-space variables (soc, current, filtered_current, temperature).

@@ -222,8 +222,10 @@ def _split_children(psi: np.ndarray, X: np.ndarray, y: np.ndarray, w: np.ndarray
 
 
 def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, Pj: np.ndarray,
-                   r_rest: np.ndarray, cfg: TrainConfig) -> SplitResult | None:
-    """Best initial orthogonal split of one leaf, then Levenberg–Marquardt on its weights ψ."""
+                   r_rest: np.ndarray, cfg: TrainConfig,
+                   fixed_axes: frozenset[int] = frozenset()) -> SplitResult | None:
+    """Best initial orthogonal split of one leaf, then Levenberg–Marquardt on its weights ψ.
+    fixed_axes: partition axes the split may not use (their weights stay 0)."""
     na, max_pole = cfg.output_lags, cfg.max_pole
     sel = Pj > 1e-6 * Pj.max()
     X, y, w, Z, Pj, r_rest = X[sel], y[sel], w[sel], Z[sel], Pj[sel], r_rest[sel]
@@ -233,6 +235,8 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
         return None
     best = None
     for axis in range(Z.shape[1]):
+        if axis in fixed_axes:
+            continue
         zc = Z[:, axis]
         order = np.argsort(zc, kind="stable")
         cum = np.cumsum(wl[order])
@@ -249,7 +253,8 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
     if best is None:
         return None
     psi, loss, axis, res = best
-    free = np.arange(psi.size) if cfg.oblique else np.array([0, axis + 1])
+    free = (np.array([0] + [a + 1 for a in range(Z.shape[1]) if a not in fixed_axes])
+            if cfg.oblique else np.array([0, axis + 1]))
     lam, history = 1e-2, [loss]
     ta, tb, ya, yb, phi, e, loss = res
     for _ in range(cfg.lm_iterations):
@@ -675,6 +680,11 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "
                  + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
+    fixed_axes = frozenset()
+    if n_temp and "temperature" in cfg.partition:
+        fixed_axes = frozenset({cfg.partition.index("temperature")})
+        progress("  temperature acts through the temperature terms, not through splits: "
+                 "sigmoid splits between a few training temperatures interpolate badly")
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     design = build_design(base, segs, masks)
     X, y, w = design.X, design.y, design.w_fit
@@ -712,7 +722,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         split = None
         for j in np.argsort(-leaf_err, kind="stable"):
             r_rest = y - (yhat - Phi[:, j] * (X @ model.theta[j]))
-            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg)
+            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg, fixed_axes)
             if split is not None:
                 tree = tree.split(int(j), split.psi, split.theta_a, split.theta_b)
                 break
