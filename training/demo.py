@@ -1,7 +1,8 @@
 """`lmncell demo`: the paper's story on the shipped A123 data, from measurements to a validated FMU.
 
-Training: the dynamic tests at −5, 5 and 45 °C (temperature through an Arrhenius gain, the
-20–80 % SoC window weighted fully, the rest at OUTSIDE_WEIGHT). Validation: the 25 °C test, a
+Training: the dynamic tests at −5, 5 and 45 °C (temperature through an Arrhenius gain and, with
+three training temperatures, linear temperature terms; the 20–80 % SoC window weighted fully, the
+rest at OUTSIDE_WEIGHT). Validation: the 25 °C test, a
 temperature the training never saw. Then the pythonfmu FMU, the WLTC and US06 scenarios through
 fmpy, FMU against pipeline, and report.html with its figures.
 """
@@ -94,6 +95,11 @@ def run_demo(out: Path) -> Path:
     tr = model.extra["training"]
 
     rep.section("Identification")
+    info = tr["info"]
+    rep.text(f"Temperature: Arrhenius gain E = {info.get('arrhenius_k')} K on the current "
+             f"regressors; temperature terms of degree {info.get('temperature_terms', 0)} "
+             "(every local model's gains and offset also vary with dT = (T − 25 °C)/10 K), "
+             "which interpolate between the training temperatures.")
     rep.figure(plots.curve_figure(tr["curve"], out / "fig_local_models_curve.png",
                                   model.n_local_models),
                "Error against the number of local models: the free-run validation error "
