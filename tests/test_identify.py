@@ -116,6 +116,25 @@ def test_with_temperature_terms_no_split_uses_temperature(tmp_path) -> None:
     assert np.any(m.node_weights[:, 1] != 0.0)
 
 
+def test_record_weights_favour_the_weighted_record(tmp_path) -> None:
+    from tests.conftest import PAN_HPPC
+    from training.records import DataError
+
+    kw = dict(capacity_ah=2.85, soc0=1.0, progress=lambda _m: None, max_local_models=2,
+              oe_max_iterations=2, hysteresis="off")
+    rmse = {}
+    for name, weights in (("hwfet", [1.0, 0.01]), ("hppc", [0.01, 1.0])):
+        train_files([PAN_HWFET, PAN_HPPC], tmp_path / f"{name}.json", record_weights=weights,
+                    **kw)
+        doc = json.loads((tmp_path / f"{name}.json").read_text())
+        assert doc["training"]["settings"]["record_weights"] == weights
+        rmse[name] = [m["rmse_mv"] for m in doc["training"]["train_metrics"]]
+    # first segment: the HWFET record; its error is lower where it carries the weight
+    assert rmse["hwfet"][0] < rmse["hppc"][0]
+    with pytest.raises(DataError, match="'record_weights' has 1 value"):
+        train_files([PAN_HWFET, PAN_HPPC], tmp_path / "x.json", record_weights=[1.0], **kw)
+
+
 def test_stabilise_pulls_poles_inside() -> None:
     theta = np.array([2.1, -1.05, 0.0, 0.3, 0.1])   # poles beyond the unit circle
     assert np.abs(poles(theta, 2)).max() > 1
@@ -171,6 +190,9 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
     ({"output": "volts"}, "'output'"),
     ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
     ({"robust_loss": "cauchy"}, "'robust_loss'"),
+    ({"record_weights": [1.0, -1.0]}, "'record_weights'"),
+    ({"record_weights": [float("nan")]}, "'record_weights'"),
+    ({"record_weights": [0.0, 0.0]}, "'record_weights'"),
     ({"temperature_terms": 4}, "'temperature_terms'"),
     ({"temperature_terms": "yes"}, "'temperature_terms'"),
     ({"soc_reference_sigma": -0.01}, "'soc_reference_sigma'"),

@@ -43,6 +43,9 @@ class TrainConfig:
     validation: "block" (the middle validation_fraction of every record's time), "record"
     (the last record given), or "none" (then stop = "aicc").
     soc_window / outside_weight: samples outside the SoC window get this weight in the fit.
+    record_weights: one weight ≥ 0 per data file, in the order given (empty: all 1); every
+    sample of that file's segments is weighted by it in every fit (e.g. 2 for a record whose
+    use matters twice as much, 0 to keep a record for the ranges and plots only).
     soc_reference_sigma / model_error_sigma_v: each sample's weight is also multiplied by
     σ_u²/(σ_u² + (dOCV/dSoC·σ_SoC)²), σ_SoC the uncertainty of the coulomb-counted SoC reference
     (fraction), σ_u a typical model error (V): where the OCV is steep (near empty and full) a
@@ -87,6 +90,7 @@ class TrainConfig:
     ocv_knots: int = 21
     ocv_tests: list[str] = field(default_factory=list)
     rest_current_a: float = 0.01
+    record_weights: list[float] = field(default_factory=list)
 
     def check(self) -> TrainConfig:
         """Raise ConfigError for settings that cannot work; return self."""
@@ -134,6 +138,11 @@ class TrainConfig:
             raise bad("soc_reference_sigma", "expected 0 ≤ σ < 0.1 (a SoC fraction)")
         if not self.model_error_sigma_v > 0:
             raise bad("model_error_sigma_v", "expected > 0 V")
+        if any(not (isinstance(w, (int, float)) and not isinstance(w, bool) and 0 <= w < 1e6)
+               for w in self.record_weights) or (self.record_weights
+                                                 and max(self.record_weights) <= 0):
+            raise bad("record_weights", "expected finite weights ≥ 0, one per data file, "
+                      "not all 0")
         if not 0 <= self.outside_weight <= 1:
             raise bad("outside_weight", "expected 0…1")
         if self.robust_loss not in ("huber", "none"):

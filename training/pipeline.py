@@ -38,6 +38,9 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
     """Read files, fix capacity and start SoC, split and resample to the model rate."""
     if not paths:
         raise DataError("no data files given")
+    if cfg.record_weights and len(cfg.record_weights) != len(paths):
+        raise DataError(f"setting 'record_weights' has {len(cfg.record_weights)} value(s) for "
+                        f"{len(paths)} data file(s): expected one weight per file, in order")
     records = []
     for p in paths:
         progress(f"reading {p}")
@@ -47,9 +50,12 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
         progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
                  "(a lower bound; give --capacity for a measured value)")
     segs: list[Segment] = []
-    for rec in records:
-        segs += record_to_segments(rec, cfg.sample_time_s, start_soc(rec, soc0), capacity_ah,
-                                   tuple(cfg.soc_window), cfg.outside_weight)
+    weights = cfg.record_weights or [1.0] * len(records)
+    for rec, weight in zip(records, weights, strict=True):
+        for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, soc0), capacity_ah,
+                                      tuple(cfg.soc_window), cfg.outside_weight):
+            seg.weight = seg.weight * float(weight)
+            segs.append(seg)
     return segs, records, float(capacity_ah)
 
 
