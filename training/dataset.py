@@ -19,7 +19,9 @@ class Segment:
 
     Sample k is the step ending at time_s[k]: current_a (A, > 0 charges) and voltage_v (V) are the
     means over the step; soc_ref is the reference SoC at time_s[k]; soc0 the SoC at the start of
-    the first step; temperature_c in °C (None if unknown); weight the fit weight of each sample.
+    the first step; temperature_c in °C (None if unknown); weight the fit weight of each sample
+    (SoC window, record weight and, in training, the SoC-reference weight); record_weight the
+    weight of the record it belongs to alone.
     """
 
     name: str
@@ -30,6 +32,7 @@ class Segment:
     soc0: float
     soc_ref: np.ndarray
     weight: np.ndarray
+    record_weight: float = 1.0
 
     def __len__(self) -> int:
         return int(self.time_s.size)

@@ -544,10 +544,14 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
                   masks: list[np.ndarray], progress: Progress, socs: list[np.ndarray]):
     """Arrhenius E (or None), hysteresis γ (or None) and the OCV pre-fit, per the settings.
 
-    socs: the coulomb-counted SoC of each segment as the runtime computes it."""
+    socs: the coulomb-counted SoC of each segment as the runtime computes it. Every training
+    sample counts at its record's weight (not the SoC window's)."""
     taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
                   if t >= 2 * cfg.sample_time_s)
-    weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
+    # every sample at its record's weight: the SoC window focuses the network's local models,
+    # but the OCV is a property of the whole SoC range (with the window's weights the A123 OCV
+    # came out 40–90 mV low below 10 % SoC, where the observers read the SoC)
+    weights = [s.record_weight * ~m for s, m in zip(segs, masks, strict=True)]
     cur = [s.current_a for s in segs]
     volt = [s.voltage_v for s in segs]
     hyst_cache: dict[float, list[np.ndarray]] = {}

@@ -55,6 +55,7 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
         for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, soc0), capacity_ah,
                                       tuple(cfg.soc_window), cfg.outside_weight):
             seg.weight = seg.weight * float(weight)
+            seg.record_weight = float(weight)
             segs.append(seg)
     return segs, records, float(capacity_ah)
 
