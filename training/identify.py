@@ -544,14 +544,15 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
                   masks: list[np.ndarray], progress: Progress, socs: list[np.ndarray]):
     """Arrhenius E (or None), hysteresis γ (or None) and the OCV pre-fit, per the settings.
 
-    socs: the coulomb-counted SoC of each segment as the runtime computes it. Every training
-    sample counts at its record's weight (not the SoC window's)."""
+    socs: the coulomb-counted SoC of each segment as the runtime computes it. E and γ are
+    chosen with the fit weights (SoC window included), as the network will use them; the OCV
+    is then fitted with every sample at its record's weight: the window focuses the local
+    models, but the OCV is a property of the whole SoC range (with the window's weights the
+    A123 OCV came out 40–90 mV low below 10 % SoC, where the observers read the SoC)."""
     taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
                   if t >= 2 * cfg.sample_time_s)
-    # every sample at its record's weight: the SoC window focuses the network's local models,
-    # but the OCV is a property of the whole SoC range (with the window's weights the A123 OCV
-    # came out 40–90 mV low below 10 % SoC, where the observers read the SoC)
-    weights = [s.record_weight * ~m for s, m in zip(segs, masks, strict=True)]
+    fit_weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
+    ocv_weights = [s.record_weight * ~m for s, m in zip(segs, masks, strict=True)]
     cur = [s.current_a for s in segs]
     volt = [s.voltage_v for s in segs]
     hyst_cache: dict[float, list[np.ndarray]] = {}
@@ -570,12 +571,22 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         progress(f"  OCV from slow tests {', '.join(Path(p).name for p in cfg.ocv_tests)}: "
                  f"{fixed[0]:.3f} … {fixed[-1]:.3f} V (fixed)")
 
-    def prefit(gamma: float | None, e_k: float | None, r_knots: int = 1):
+    def prefit(gamma: float | None, e_k: float | None, r_knots: int = 1,
+               weights: list[np.ndarray] = fit_weights):
         gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
         return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
                        cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed, r_knots)
 
-    # temperature scaling first (the larger effect where temperatures differ), then hysteresis
+    e_k = _choose_arrhenius(cfg, segs, prefit, progress)
+    gamma = _choose_hysteresis(cfg, e_k, prefit, progress)
+    return gamma, e_k, prefit(gamma, e_k, weights=ocv_weights)
+
+
+def _choose_arrhenius(cfg: TrainConfig, segs: list[Segment], prefit,
+                      progress: Progress) -> float | None:
+    """Arrhenius E (K) per the setting; 'auto' picks the candidate with the lowest pre-fit
+    RMSE once the training temperatures span more than 5 K (chosen before hysteresis: the
+    larger effect where temperatures differ)."""
     e_k: float | None = None
     if isinstance(cfg.temperature_scaling, (int, float)):
         e_k = float(cfg.temperature_scaling)
@@ -591,10 +602,17 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
             if fit.rmse_v < best.rmse_v:
                 e_k, best = cand, fit
         progress(f"  temperature scaling: {'off' if e_k is None else f'E = {e_k:g} K'}")
+    return e_k
+
+
+def _choose_hysteresis(cfg: TrainConfig, e_k: float | None, prefit,
+                       progress: Progress) -> float | None:
+    """Hysteresis rate γ per the setting; 'auto' keeps the best candidate only if it cuts the
+    pre-fit RMSE by HYSTERESIS_MIN_GAIN."""
     if cfg.hysteresis == "off":
-        return None, e_k, prefit(None, e_k)
+        return None
     if cfg.hysteresis != "auto":
-        return float(cfg.hysteresis), e_k, prefit(float(cfg.hysteresis), e_k)
+        return float(cfg.hysteresis)
     best_gamma, best = None, prefit(None, e_k)
     base_rmse = best.rmse_v
     for g in HYSTERESIS_CANDIDATES:
@@ -604,8 +622,8 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         if fit.rmse_v < best.rmse_v:
             best_gamma, best = g, fit
     if best_gamma is not None and best.rmse_v > (1 - HYSTERESIS_MIN_GAIN) * base_rmse:
-        return None, e_k, prefit(None, e_k)
-    return best_gamma, e_k, best
+        return None
+    return best_gamma
 
 
 def ocv_slope(ocv_soc: np.ndarray, ocv_v: np.ndarray, soc: np.ndarray) -> np.ndarray:
