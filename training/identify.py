@@ -40,7 +40,14 @@ from fmu_src.runtime import (
 from training.baselines import hysteresis
 from training.config import TrainConfig
 from training.dataset import Segment
-from training.ocvfit import SMOOTHNESS, fit_ocv, hat_basis, measured_ocv, second_difference
+from training.ocvfit import (
+    SMOOTHNESS,
+    OcvFit,
+    fit_ocv,
+    hat_basis,
+    measured_ocv,
+    second_difference,
+)
 
 HYSTERESIS_CANDIDATES = (10.0, 30.0, 100.0, 300.0)
 HYSTERESIS_MIN_GAIN = 0.03
@@ -582,7 +589,7 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     return gamma, e_k, prefit(gamma, e_k, weights=ocv_weights)
 
 
-def _choose_arrhenius(cfg: TrainConfig, segs: list[Segment], prefit,
+def _choose_arrhenius(cfg: TrainConfig, segs: list[Segment], prefit: Callable[..., OcvFit],
                       progress: Progress) -> float | None:
     """Arrhenius E (K) per the setting; 'auto' picks the candidate with the lowest pre-fit
     RMSE once the training temperatures span more than 5 K (chosen before hysteresis: the
@@ -605,7 +612,7 @@ def _choose_arrhenius(cfg: TrainConfig, segs: list[Segment], prefit,
     return e_k
 
 
-def _choose_hysteresis(cfg: TrainConfig, e_k: float | None, prefit,
+def _choose_hysteresis(cfg: TrainConfig, e_k: float | None, prefit: Callable[..., OcvFit],
                        progress: Progress) -> float | None:
     """Hysteresis rate γ per the setting; 'auto' keeps the best candidate only if it cuts the
     pre-fit RMSE by HYSTERESIS_MIN_GAIN."""
