@@ -152,6 +152,13 @@ class LmnModel:
 
     def columns(self) -> list[str]:
         """Names of the local-model regressor columns, in order."""
+        cols = self._plain_columns()
+        for power in range(1, self.temperature_terms + 1):
+            cols += [f"{c}*dT^{power}" for c in self.temperature_term_sources()]
+        return cols
+
+    def _plain_columns(self) -> list[str]:
+        """The columns without the temperature terms."""
         cols = [f"y(k-{l})" for l in range(1, self.output_lags + 1)]
         cols += ["i(k)" if l == 0 else f"i(k-{l})" for l in range(self.current_terms)]
         cols += [f"v{f + 1}(k)" for f in range(len(self.filters))]
@@ -163,8 +170,6 @@ class LmnModel:
             cols.append("soc(k)")
         if self.offset:
             cols.append("1")
-        for power in range(1, self.temperature_terms + 1):
-            cols += [f"{c}*dT^{power}" for c in self.temperature_term_sources()]
         return cols
 
     def temperature_term_sources(self) -> list[str]:
@@ -172,13 +177,14 @@ class LmnModel:
         (dT = (T − T_ref)/TEMPERATURE_STEP_K): the current, filter and hysteresis regressors and
         the offset (resistances, time-constant gains and the OCV offset varying smoothly with
         temperature beyond the Arrhenius gain)."""
-        cols = ["i(k)" if l == 0 else f"i(k-{l})" for l in range(self.current_terms)]
-        cols += [f"v{f + 1}(k)" for f in range(len(self.filters))]
-        if self.hysteresis_gamma is not None:
-            cols.append("h(k)")
-        if self.offset:
-            cols.append("1")
-        return cols
+        return [c for c in self._plain_columns()[self.output_lags:]
+                if c not in ("ocv(k)", "soc(k)")]
+
+    def temperature_source_indices(self) -> list[int]:
+        """Positions of temperature_term_sources() among the exogenous columns (those after the
+        output lags), as the step fills them."""
+        exo = self.columns()[self.output_lags:]
+        return [exo.index(c) for c in self.temperature_term_sources()]
 
     def ocv(self, soc: np.ndarray | float) -> np.ndarray | float:
         """Open-circuit voltage (V) at SoC (fraction), linear between knots, held beyond."""

@@ -64,9 +64,7 @@ class ExoStepper:
         pv = model.partition_variables
         self._zi = {name: pv.index(name) for name in pv}
         self._inv_tref = 1.0 / (model.reference_temperature_c + 273.15)
-        exo_cols = model.columns()[model.output_lags:]
-        self._temperature_source_cols = [exo_cols.index(c)
-                                         for c in model.temperature_term_sources()]
+        self._temperature_source_cols = model.temperature_source_indices()
 
     def temperature_gain(self, temperature_c: float) -> float:
         """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""

@@ -7,7 +7,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fmu_src.model import PARTITION_VARIABLES
+from fmu_src.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES
 
 
 class ConfigError(ValueError):
@@ -114,8 +114,9 @@ class TrainConfig:
             raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
         if not (self.temperature_terms == "auto" or (isinstance(self.temperature_terms, int)
                 and not isinstance(self.temperature_terms, bool)
-                and 0 <= self.temperature_terms <= 3)):
-            raise bad("temperature_terms", "expected 'auto' or a degree 0…3")
+                and 0 <= self.temperature_terms <= MAX_TEMPERATURE_TERMS)):
+            raise bad("temperature_terms",
+                      f"expected 'auto' or a degree 0…{MAX_TEMPERATURE_TERMS}")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")
         unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]
