@@ -20,7 +20,14 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.model import TEMPERATURE_STEP_K, LmnModel, load_model
-from fmu_src.observers import ObserverSettings, local_ocv_slopes
+from fmu_src.observers import (
+    FD_CURRENT_A,
+    FD_HYSTERESIS,
+    FD_SOC,
+    HYSTERESIS_PRIOR_VAR,
+    ObserverSettings,
+    local_ocv_slopes,
+)
 
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
@@ -95,7 +102,14 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define T_MIN {float(t_lim[0])!r}", f"#define T_MAX {float(t_lim[1])!r}",
         f"#define HAS_TEMPERATURE_PARTITION {int('temperature' in m.partition_variables)}",
         f"#define CURRENT_SIGMA_A {settings.current_sigma_a!r}",
-        f"#define SOC_DRIFT_PER_SQRT_H {settings.soc_drift_per_sqrt_h!r}",
+        f"#define EKF_DRIFT_PER_SQRT_H {settings.drift('ekf')!r}",
+        f"#define SOC_ONLY_DRIFT_PER_SQRT_H {settings.drift('fuzzy')!r}",
+        f"#define HYST_DRIFT_PER_SQRT_H {settings.hysteresis_drift_per_sqrt_h!r}",
+        f"#define HISTORY_CURRENT_SIGMA_A {settings.history_current_sigma_a!r}",
+        f"#define HYST_PRIOR_UNKNOWN {HYSTERESIS_PRIOR_VAR[0]!r}",
+        f"#define HYST_PRIOR_ASSUMED {HYSTERESIS_PRIOR_VAR[1]!r}",
+        f"#define FD_SOC {FD_SOC!r}", f"#define FD_CURRENT_A {FD_CURRENT_A!r}",
+        f"#define FD_HYSTERESIS {FD_HYSTERESIS!r}",
         f"#define VOLTAGE_SIGMA_V {float(settings.voltage_sigma_v)!r}",
         f"#define SOC0_SIGMA {settings.soc0_sigma!r}", f"#define IMM_STAY {settings.imm_stay!r}",
         "#ifndef M_PI", "#define M_PI 3.14159265358979323846", "#endif",

@@ -31,7 +31,9 @@ Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charg
 - ``local_models``: ``theta`` (M rows of the columns above).
 - ``limits``: the ranges seen in training (``current_a``, ``soc``, ``temperature_c``,
   ``voltage_v``).
-- ``noise``: ``residual_std_v`` of the free-run training error (observer defaults).
+- ``noise``: ``residual_std_v`` of the free-run training error and (optional)
+  ``recent_current_rms_a``, the RMS of the training current low-passed over 150 s (observer
+  defaults).
 - ``observers`` (optional): ``fuzzy``, the fuzzy observer's offline design for the default
   settings: ``q`` (SoC² per step), ``r`` (V²), and per local model ``ocv_slopes_v`` (∂u_j/∂SoC at
   its centre, V), steady-state Kalman ``gains`` (1/V) and ``variances`` (SoC²).

@@ -6,8 +6,15 @@ voltage averaged over the step; the model's prediction for it is the LMN output 
 SoC. The state estimated is SoC; the LMN's other states (filters, hysteresis, output lags) are
 propagated deterministically from the current.
 
-- EKF: the gain uses H = ∂u/∂SoC of the whole network at the current operating point (OCV slope,
-  local models' SoC inputs and the validity functions' dependence on SoC, by central difference).
+- EKF: the state is ξ = [SoC, the filters' low-pass states (A), the hysteresis state h (models
+  with hysteresis)], the LMN's dynamic state; the output lags of a model with na > 0 follow the
+  network deterministically. The prediction is the runtime's own step, with the Jacobian
+  F = diag(1, a_k, e_h); the gain uses H = ∂u/∂ξ of the whole network at the current operating
+  point (OCV slope, local models' SoC inputs, the validity functions' dependence on SoC, the
+  filter and hysteresis regressors), by central differences through the runtime's features().
+  A start "at rest" (default) knows the low-pass states (0); with history_current_sigma_a > 0 they
+  start unknown, as if the cell had carried a steady unknown current of that spread (prior
+  σ²·11ᵀ): the EKF then estimates the relaxation under way when it starts under load.
 - Fuzzy: time-invariant (steady-state) Kalman gains K_j designed offline for each local model at
   its centre, blended online with the validity functions: K = Σ Φ_j·K_j.
 - IMM: one filter per local model (its measurement model is that local model alone), mode
@@ -15,9 +22,15 @@ propagated deterministically from the current.
 
 Noise: process q = (σ_i·Ts/(3600·Cn))² + σ_d²·Ts/3600 per step (σ_i: current-sensor error, A;
 σ_d: SoC random walk per √hour for capacity and model errors) and measurement r = σ_u²
-(σ_u: three times the model's free-run training RMSE unless given). A measurement that is NaN, ≤ 0
-(not measured) or more than GATE_V away from the model's voltage range is skipped and counted.
-SoC is kept within [0, 1] (the estimate is projected onto the interval after each update).
+(σ_u: three times the model's free-run training RMSE unless given). σ_d defaults to
+EKF_DRIFT_PER_SQRT_H for the EKF (it estimates the dynamic state, so the walk only stands for a
+capacity error of about 1.5 % at 1/3 C) and SOC_ONLY_DRIFT_PER_SQRT_H for the fuzzy observer and
+the IMM, whose SoC also absorbs the error of the hysteresis and filter states they do not
+estimate. In the EKF the current-sensor error drives SoC and the low-pass states together
+(Q = σ_i²·g·gᵀ, g = [Ts·η/(3600·Cn), 1 − a_k, 0]) and h walks by σ_h per √hour.
+A measurement that is NaN, ≤ 0 (not measured) or more than GATE_V away from the model's voltage
+range is skipped and counted. SoC is kept within [0, 1] (the estimate is projected onto the
+interval after each update), h within [−1, 1].
 """
 
 from __future__ import annotations
@@ -28,33 +41,53 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .model import LmnModel
-from .runtime import CellStepper
+from .runtime import CellStepper, ExoState
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5
 MODEL_ERROR_FACTOR = 3.0
 FD_SOC = 1e-4
+FD_CURRENT_A = 1e-3
+FD_HYSTERESIS = 1e-4
+EKF_DRIFT_PER_SQRT_H = 0.005
+SOC_ONLY_DRIFT_PER_SQRT_H = 0.05
+HYSTERESIS_PRIOR_VAR = (1.0 / 3.0, 0.05)   # h0 unknown (0): uniform on [−1, 1]; h0 = ±1 assumed
 
 
 @dataclass
 class ObserverSettings:
     """current_sigma_a: current-sensor error (A); soc_drift_per_sqrt_h: SoC random walk for
-    capacity and model errors (fraction per √hour); voltage_sigma_v: measurement and model error
-    (V); soc0_sigma: standard deviation of the initial SoC guess; imm_stay: IMM mode persistence."""
+    capacity and model errors (fraction per √hour; None: the kind's default, see the module);
+    voltage_sigma_v: measurement and model error (V); soc0_sigma: standard deviation of the
+    initial SoC guess; imm_stay: IMM mode persistence; hysteresis_drift_per_sqrt_h: random walk
+    of the EKF's hysteresis state (per √hour); history_current_sigma_a: spread of the unknown
+    steady current before the start (A), 0 for a start at rest."""
 
     current_sigma_a: float = 0.05
-    soc_drift_per_sqrt_h: float = 0.05
+    soc_drift_per_sqrt_h: float | None = None
     voltage_sigma_v: float | None = None
     soc0_sigma: float = 0.3
     imm_stay: float = 0.95
+    hysteresis_drift_per_sqrt_h: float = 0.06
+    history_current_sigma_a: float = 0.0
+
+    def drift(self, kind: str) -> float:
+        """The SoC random walk (per √hour) of an observer kind."""
+        if self.soc_drift_per_sqrt_h is not None:
+            return self.soc_drift_per_sqrt_h
+        return EKF_DRIFT_PER_SQRT_H if kind == "ekf" else SOC_ONLY_DRIFT_PER_SQRT_H
 
     @classmethod
-    def for_model(cls, model: LmnModel) -> ObserverSettings:
+    def for_model(cls, model: LmnModel, at_rest: bool = True) -> ObserverSettings:
         """Defaults from the model: σ_u = MODEL_ERROR_FACTOR × its free-run training RMSE (the
-        error on new data is larger and correlated in time), at least 2 mV."""
+        error on new data is larger and correlated in time), at least 2 mV; for a start under
+        load (at_rest False) the load history's spread is the training current's RMS low-passed
+        over 150 s (noise.recent_current_rms_a; 0, a start taken as rested, without it)."""
         s = cls()
         rmse = float(model.noise.get("residual_std_v", 0.01))
         s.voltage_sigma_v = max(MODEL_ERROR_FACTOR * rmse, 0.002)
+        if not at_rest:
+            s.history_current_sigma_a = float(model.noise.get("recent_current_rms_a", 0.0))
         return s
 
 
@@ -67,9 +100,15 @@ class ObserverState:
     soc: float
     var: float
     skipped: int = 0
+    cov: list[float] = field(default_factory=list)      # EKF: P of ξ, row by row
     mode_soc: list[float] = field(default_factory=list)
     mode_var: list[float] = field(default_factory=list)
     mode_prob: list[float] = field(default_factory=list)
+
+    def covariance(self) -> np.ndarray:
+        """The EKF's covariance P of ξ as a square matrix."""
+        n = math.isqrt(len(self.cov))
+        return np.asarray(self.cov, dtype=float).reshape(n, n)
 
 
 class SocObserver:
@@ -85,43 +124,81 @@ class SocObserver:
         self.stepper = CellStepper(model, soc0_est, capacity_ah, temperature_c)
         cap = capacity_ah or model.capacity_ah
         ts = model.sample_time_s
-        self.q = process_variance(self.settings, cap, ts)
+        self.q = process_variance(self.settings, cap, ts, kind)
         self.r = self.settings.voltage_sigma_v ** 2
         v = model.limits.get("voltage_v", [0.0, 10.0])
         self.v_range = (v[0] - GATE_V, v[1] + GATE_V)
         m = model.n_local_models
         var0 = self.settings.soc0_sigma ** 2
-        self.state = ObserverState(soc0_est, var0, 0, [soc0_est] * m, [var0] * m,
-                                   [1.0 / m] * m)
+        cov = initial_covariance(self.settings, len(self.stepper.state.lp),
+                                 self.stepper.state.h if model.hysteresis_gamma is not None
+                                 else None) if kind == "ekf" else np.zeros((0, 0))
+        self.state = ObserverState(soc0_est, var0, 0, cov.ravel().tolist(), [soc0_est] * m,
+                                   [var0] * m, [1.0 / m] * m)
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
+        self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
 
     # ----- measurement model ---------------------------------------------------------------
-    def _outputs_at(self, soc: float) -> tuple[float, np.ndarray, np.ndarray]:
-        """Network voltage, validities and per-local-model voltages at a SoC, for the step just
-        predicted (exogenous features and lags as the stepper holds them)."""
+    def _state_vector(self) -> np.ndarray:
+        """ξ = [SoC, low-pass states…, h (with hysteresis)] of the stepper."""
+        s = self.stepper.state
+        h = [s.h] if self.model.hysteresis_gamma is not None else []
+        return np.array([s.soc, *s.lp, *h])
+
+    def _outputs_for(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Network voltage (n,), validities (n, M) and per-local-model voltages (n, M) for the
+        step just predicted, with rows of ξ replacing the stepper's SoC, low-pass states and h
+        (columns beyond a row's length keep the stepper's values). Features come from the
+        runtime's own ExoStepper.features with the step's current, temperature and past currents."""
         m, st = self.model, self.stepper
-        x, z = st._x.copy(), st._z.copy()
-        pv = m.partition_variables
-        if "soc" in pv:
-            z[0, pv.index("soc")] = soc
-        cols = m.columns()
-        if m.ocv_input:
-            x[0, cols.index("ocv(k)") - m.output_lags] = float(m.ocv(soc))
-        if m.soc_input:
-            x[0, cols.index("soc(k)") - m.output_lags] = soc
-        phi = m.validities(m.normalise(z), st._d)[0]
+        current, temperature, past = self._step_inputs
+        states = np.atleast_2d(states)
+        n, nlp = states.shape[0], len(st.state.lp)
+        x = np.zeros((n, m.n_exo))
+        z = np.zeros((n, len(m.partition_variables)))
+        base = st.state
+        for r in range(n):
+            row = states[r]
+            lp = row[1:1 + nlp].tolist() if row.size > 1 else list(base.lp)
+            h = float(row[1 + nlp]) if row.size > 1 + nlp else base.h
+            cand = ExoState(float(row[0]), lp, h, base.direction, past)
+            st.exo.features(cand, current, temperature, x[r], z[r])
+        d = np.full(n, base.direction, dtype=np.intp)
+        phi = m.validities(m.normalise(z), d)
         na = m.output_lags
         lag_part = m.theta[:, :na] @ np.asarray(st.prev_lags) if na else 0.0
-        local = x[0] @ m.theta[:, na:].T + lag_part
-        ocv = float(m.ocv(soc)) if m.relative_ocv else 0.0
-        return ocv + float(phi @ local), phi, ocv + local
+        local = x @ m.theta[:, na:].T + lag_part
+        ocv = np.asarray(m.ocv(states[:, 0]), dtype=float) if m.relative_ocv else np.zeros(n)
+        return ocv + np.sum(phi * local, axis=1), phi, ocv[:, None] + local
+
+    def _outputs_at(self, soc: float) -> tuple[float, np.ndarray, np.ndarray]:
+        """Network voltage, validities and per-local-model voltages at a SoC (other states as
+        the stepper holds them)."""
+        u, phi, local = self._outputs_for(np.array([[soc]]))
+        return float(u[0]), phi[0], local[0]
 
     def _slopes(self, soc: float) -> tuple[float, np.ndarray]:
         """∂u/∂SoC of the network and of each local model (central difference)."""
         hi, lo = min(soc + FD_SOC, 1.0), max(soc - FD_SOC, 0.0)
-        u_hi, _, loc_hi = self._outputs_at(hi)
-        u_lo, _, loc_lo = self._outputs_at(lo)
-        return (u_hi - u_lo) / (hi - lo), (loc_hi - loc_lo) / (hi - lo)
+        u, _, loc = self._outputs_for(np.array([[hi], [lo]]))
+        return (u[0] - u[1]) / (hi - lo), (loc[0] - loc[1]) / (hi - lo)
+
+    def _jacobian(self, xi: np.ndarray) -> tuple[float, np.ndarray]:
+        """u(ξ) and H = ∂u/∂ξ by central differences (SoC kept within [0, 1])."""
+        n = xi.size
+        steps = np.full(n, FD_CURRENT_A)
+        steps[0] = FD_SOC
+        if self.model.hysteresis_gamma is not None:
+            steps[-1] = FD_HYSTERESIS
+        rows = np.tile(xi, (2 * n + 1, 1))
+        for k in range(n):
+            rows[1 + 2 * k, k] += steps[k]
+            rows[2 + 2 * k, k] -= steps[k]
+        rows[:, 0] = np.clip(rows[:, 0], 0.0, 1.0)
+        u = self._outputs_for(rows)[0]
+        diag = np.arange(n)
+        width = rows[1::2][diag, diag] - rows[2::2][diag, diag]
+        return float(u[0]), (u[1::2] - u[2::2]) / width
 
     # ----- one step ------------------------------------------------------------------------
     def step(self, current_a: float, voltage_measured_v: float,
@@ -129,8 +206,12 @@ class SocObserver:
         """Predict with the current held over the step, correct with the mean measured voltage
         over it; returns the SoC estimate."""
         st, s = self.stepper, self.state
+        self._step_inputs = (current_a, temperature_c, list(st.state.past_current))
         st.step(current_a, temperature_c)
-        s.var += self.q
+        if self.kind == "ekf":
+            self._ekf_predict(current_a)
+        else:
+            s.var += self.q
         if self.kind == "imm":
             self._imm_predict(st.soc - s.soc)
         valid = (math.isfinite(voltage_measured_v)
@@ -142,11 +223,7 @@ class SocObserver:
             return s.soc
         soc = st.soc
         if self.kind == "ekf":
-            h = self._slopes(soc)[0]
-            innov = voltage_measured_v - self._outputs_at(soc)[0]
-            k = s.var * h / (h * h * s.var + self.r)
-            soc += k * innov
-            s.var = max((1.0 - k * h) * s.var, 1e-12)
+            soc = self._ekf_update(voltage_measured_v)
         elif self.kind == "fuzzy":
             u, phi, _ = self._outputs_at(soc)
             gains, variances = self.fuzzy_gains
@@ -157,6 +234,47 @@ class SocObserver:
         s.soc = _clip01(soc)
         st.state.soc = s.soc
         return s.soc
+
+    def _ekf_predict(self, current_a: float) -> None:
+        """P ← F·P·Fᵀ + Q for the step the stepper just took."""
+        s, exo, cfg = self.state, self.stepper.exo, self.settings
+        p = s.covariance()
+        n = p.shape[0]
+        f = np.ones(n)
+        f[1:1 + len(exo.coef)] = exo.coef
+        g = np.zeros(n)
+        g[0] = exo.soc_gain * exo.eta(current_a)
+        g[1:1 + len(exo.coef)] = [1.0 - a for a in exo.coef]
+        q = cfg.current_sigma_a ** 2 * np.outer(g, g)
+        q[0, 0] += cfg.drift("ekf") ** 2 * self.model.sample_time_s / 3600.0
+        if self.model.hysteresis_gamma is not None:
+            f[-1] = math.exp(-exo.gamma * abs(current_a) * exo.soc_gain)
+            q[-1, -1] += cfg.hysteresis_drift_per_sqrt_h ** 2 * self.model.sample_time_s / 3600.0
+        p = f[:, None] * p * f[None, :] + q
+        s.cov = p.ravel().tolist()
+        s.var = float(p[0, 0])
+
+    def _ekf_update(self, v_meas: float) -> float:
+        """Correct ξ with one voltage (Joseph form); writes the low-pass states and h back to
+        the stepper and returns the unclipped SoC."""
+        s, st = self.state, self.stepper
+        xi = self._state_vector()
+        n = xi.size
+        p = s.covariance()
+        u, h = self._jacobian(xi)
+        ph = p @ h
+        k = ph / (float(h @ ph) + self.r)
+        xi = xi + k * (v_meas - u)
+        ikh = np.eye(n) - np.outer(k, h)
+        p = ikh @ p @ ikh.T + self.r * np.outer(k, k)
+        p = 0.5 * (p + p.T)
+        s.cov = p.ravel().tolist()
+        s.var = max(float(p[0, 0]), 1e-12)
+        nlp = len(st.state.lp)
+        st.state.lp = xi[1:1 + nlp].tolist()
+        if self.model.hysteresis_gamma is not None:
+            st.state.h = min(1.0, max(-1.0, float(xi[-1])))
+        return float(xi[0])
 
     @property
     def soc_std(self) -> float:
@@ -203,13 +321,14 @@ class SocObserver:
     def get_state(self) -> dict:
         s = self.state
         return {"stepper": self.stepper.get_state(), "soc": s.soc, "var": s.var,
-                "skipped": s.skipped, "mode_soc": list(s.mode_soc),
+                "skipped": s.skipped, "cov": list(s.cov), "mode_soc": list(s.mode_soc),
                 "mode_var": list(s.mode_var), "mode_prob": list(s.mode_prob)}
 
     def set_state(self, d: dict) -> None:
         self.stepper.set_state(list(d["stepper"]))
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
-                                   list(d["mode_soc"]), list(d["mode_var"]),
+                                   [float(v) for v in d["cov"]], list(d["mode_soc"]),
+                                   list(d["mode_var"]),
                                    list(d["mode_prob"]))
 
 
@@ -245,7 +364,7 @@ def design_fuzzy_gains(slopes: np.ndarray, q: float, r: float) -> tuple[np.ndarr
 def offline_fuzzy_design(model: LmnModel) -> dict:
     """The fuzzy observer's local Kalman filters for the model file's default settings."""
     settings = ObserverSettings.for_model(model)
-    q = process_variance(settings, model.capacity_ah, model.sample_time_s)
+    q = process_variance(settings, model.capacity_ah, model.sample_time_s, "fuzzy")
     r = float(settings.voltage_sigma_v) ** 2
     slopes = local_ocv_slopes(model)
     gains, variances = design_fuzzy_gains(slopes, q, r)
@@ -253,10 +372,25 @@ def offline_fuzzy_design(model: LmnModel) -> dict:
             "variances": variances.tolist()}
 
 
-def process_variance(settings: ObserverSettings, capacity_ah: float, ts: float) -> float:
-    """q (SoC² per step) from the current-sensor error and the SoC random walk."""
+def process_variance(settings: ObserverSettings, capacity_ah: float, ts: float,
+                     kind: str) -> float:
+    """q (SoC² per step) from the current-sensor error and the SoC random walk of the kind."""
     return ((settings.current_sigma_a * ts / (3600.0 * capacity_ah)) ** 2
-            + settings.soc_drift_per_sqrt_h ** 2 * ts / 3600.0)
+            + settings.drift(kind) ** 2 * ts / 3600.0)
+
+
+def initial_covariance(settings: ObserverSettings, n_lowpass: int,
+                       h0: float | None) -> np.ndarray:
+    """P0 of the EKF's ξ = [SoC, low-pass states, h]: σ_SoC0², a steady unknown current of
+    spread history_current_sigma_a before the start (all low-pass states equal: σ²·11ᵀ), and
+    HYSTERESIS_PRIOR_VAR for h0 unknown (0) or assumed (±1)."""
+    n = 1 + n_lowpass + (0 if h0 is None else 1)
+    p = np.zeros((n, n))
+    p[0, 0] = settings.soc0_sigma ** 2
+    p[1:1 + n_lowpass, 1:1 + n_lowpass] = settings.history_current_sigma_a ** 2
+    if h0 is not None:
+        p[-1, -1] = HYSTERESIS_PRIOR_VAR[0] if h0 == 0.0 else HYSTERESIS_PRIOR_VAR[1]
+    return p
 
 
 def local_ocv_slopes(model: LmnModel) -> np.ndarray:

@@ -41,3 +41,15 @@ def quick_fmu(quick_model, tmp_path_factory) -> Path:
     from lmncell_build.pythonfmu_build import build_fmu
 
     return build_fmu(quick_model, tmp_path_factory.mktemp("fmu") / "pan.fmu")
+
+
+@pytest.fixture(scope="session")
+def a123_model(tmp_path_factory) -> Path:
+    """A small LMN with the one-state hysteresis, trained on the shipped A123 25 °C dynamic
+    record (capacity 2.2 Ah, about the measured one): for observers that estimate h."""
+    from training.pipeline import train_files
+
+    out = tmp_path_factory.mktemp("a123") / "a123.json"
+    train_files([A123_S1], out, capacity_ah=2.2, soc0=1.0, progress=lambda _m: None,
+                max_local_models=2, oe_max_iterations=2)
+    return out

@@ -8,8 +8,13 @@ import numpy as np
 import pytest
 
 from fmu_src.model import load_model
-from fmu_src.observers import SocObserver, design_fuzzy_gains, local_ocv_slopes
-from tests.conftest import PAN_US06
+from fmu_src.observers import (
+    ObserverSettings,
+    SocObserver,
+    design_fuzzy_gains,
+    local_ocv_slopes,
+)
+from tests.conftest import A123_S1, PAN_US06
 from tests.fmu_helpers import Instance, assert_state_round_trips
 from training.dataset import record_to_segments
 from training.observe import run_observer, soc_metrics
@@ -78,3 +83,40 @@ def test_fmu_observer_state_round_trip(quick_fmu, us06, observer) -> None:
         assert ref[-1][0] > 0.6          # corrected towards the true SoC (≈ 0.98)
     finally:
         inst.free()
+
+
+def test_ekf_estimates_soc_and_the_dynamic_state_of_a_hysteresis_model(a123_model) -> None:
+    # started under load where the reference first reaches 0.6, guess 0.3, load history unknown
+    model = load_model(a123_model)
+    assert model.hysteresis_gamma is not None
+    seg = record_to_segments(read_record(A123_S1), 1.0, 1.0, 2.2)[0]
+    k0 = int(np.argmax(seg.soc_ref <= 0.6))
+    settings = ObserverSettings.for_model(model, at_rest=False)
+    assert settings.history_current_sigma_a == model.noise["recent_current_rms_a"] > 0
+    ob = SocObserver(model, "ekf", 0.3, settings=settings)
+    n_lp = 2 * len(model.filters)
+    assert ob.state.covariance().shape == (2 + n_lp, 2 + n_lp)       # SoC, low-pass states, h
+    open_loop = SocObserver(model, "ekf", 0.3, settings=settings).stepper
+    dh = dlp = 0.0
+    for k in range(k0, k0 + 3600):
+        ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]))
+        open_loop.step(float(seg.current_a[k]))
+        assert -1.0 <= ob.stepper.state.h <= 1.0 and 0.0 <= ob.state.soc <= 1.0
+        dh = max(dh, abs(ob.stepper.state.h - open_loop.state.h))
+        dlp = max(dlp, np.max(np.abs(np.subtract(ob.stepper.state.lp, open_loop.state.lp))))
+    p = ob.state.covariance()
+    assert np.allclose(p, p.T) and np.linalg.eigvalsh(p).min() > -1e-12
+    assert abs(ob.state.soc - seg.soc_ref[k0 + 3599]) < 0.05
+    # the voltage corrected the hysteresis and filter states, not only SoC
+    print(f"largest correction of h {dh:.3g}, of a low-pass state {dlp:.3g} A")
+    assert dh > 0.01 and dlp > 0.01
+
+
+def test_ekf_started_at_rest_knows_the_filter_states(us06) -> None:
+    # at rest the low-pass states are 0 with no spread: only the current-sensor noise opens them
+    model, _ = us06
+    ob = SocObserver(model, "ekf", 0.5)
+    p0 = ob.state.covariance()
+    assert np.all(p0[1:, :] == 0) and p0[0, 0] == pytest.approx(0.3 ** 2)
+    loaded = SocObserver(model, "ekf", 0.5, settings=ObserverSettings.for_model(model, False))
+    assert loaded.state.covariance()[1:, 1:].min() > 0

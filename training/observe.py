@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 
 from fmu_src.model import LmnModel, load_model
-from fmu_src.observers import SocObserver
+from fmu_src.observers import ObserverSettings, SocObserver
 from fmu_src.runtime import exo_series
 from training.dataset import Segment, record_to_segments, start_soc
 from training.readers import read_record
@@ -30,13 +30,16 @@ class ObserverRun:
 
 def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
                  start: int = 0) -> ObserverRun:
-    """The observer (or 'coulomb' counting) from sample `start` with the estimate soc0_est."""
+    """The observer (or 'coulomb' counting) from sample `start` with the estimate soc0_est. A
+    start at sample 0 is at rest (records begin rested); a later one is under load, with the
+    filters' load history unknown to the observer (ObserverSettings.for_model, at_rest)."""
     k0 = start
     if kind == "coulomb":
         est = exo_series(model, seg.current_a[k0:], None, soc0_est).soc
         return ObserverRun(kind, seg.time_s[k0:], seg.soc_ref[k0:], est, np.zeros_like(est), 0)
     temp = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
-    ob = SocObserver(model, kind, soc0_est, temperature_c=float(temp[k0]))
+    settings = ObserverSettings.for_model(model, at_rest=k0 == 0)
+    ob = SocObserver(model, kind, soc0_est, temperature_c=float(temp[k0]), settings=settings)
     est, std = np.empty(len(seg) - k0), np.empty(len(seg) - k0)
     for j, k in enumerate(range(k0, len(seg))):
         est[j] = ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]), float(temp[k]))

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy.signal import lfilter
 
 from fmu_src.model import LmnModel, load_model, model_from_dict, model_to_dict, save_model
 from fmu_src.observers import offline_fuzzy_design
@@ -80,6 +81,19 @@ def simulate_segment(model: LmnModel, seg: Segment, capacity_ah: float | None = 
                     initial_hysteresis(seg.soc0))
 
 
+HISTORY_TAU_S = 150.0
+
+
+def _recent_current_rms(segs: list[Segment], ts: float) -> float:
+    """RMS over the training samples of the current low-passed with HISTORY_TAU_S (A): how far
+    the mean current of the last minutes typically is from rest, the spread an observer gives
+    an unknown load history (ObserverSettings.history_current_sigma_a)."""
+    a = np.exp(-ts / HISTORY_TAU_S)
+    lp = [lfilter([1.0 - a], [1.0, -a], s.current_a) for s in segs]
+    both = np.concatenate(lp)
+    return float(np.sqrt(np.mean(both * both)))
+
+
 def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | None = None,
                 soc0: float | None = None, partition: list[str] | None = None,
                 baselines: bool = False, config: str | Path | None = None,
@@ -96,7 +110,8 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
                   "voltage_max_v": model.limits["voltage_v"][1]}
     train_metrics = [{"segment": s.name, **_metrics(model, s)} for s in segs]
-    model.noise = {"residual_std_v": 1e-3 * pooled(train_metrics)}
+    model.noise = {"residual_std_v": 1e-3 * pooled(train_metrics),
+                   "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s)}
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),

@@ -25,7 +25,7 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define DISCHARGE 2
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
-#define FD_SOC 1e-4
+#define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
 #define STATE_MAGIC 0x4C4D4E31u /* "LMN1" */
 
 /* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
@@ -48,6 +48,8 @@ typedef struct {
     /* observer (observers.SocObserver) */
     double q, r, ob_soc, ob_var;
     int skipped;
+    double ob_p[NX][NX];                       /* EKF covariance of [SoC, lp…, h] */
+    double ob_i, ob_t, ob_past[NB + 1];        /* the step's current, temperature, past currents */
     double mode_soc[NM], mode_var[NM], mode_prob[NM];
     double fuzzy_gain[NM], fuzzy_var[NM];
 } State;
@@ -247,24 +249,120 @@ static void stepper_step(State *s, double i, double t) {
 /* ----- observers ------------------------------------------------------------------------------ */
 static double clip01(double v) { return v < 0.0 ? 0.0 : (v > 1.0 ? 1.0 : v); }
 
-/* network voltage and per-local-model voltages at a SoC for the step just predicted */
-static double outputs_at(const State *s, double soc, double *phi, double *uj) {
+/* network voltage and per-local-model voltages for the step just predicted, with
+   xi = [SoC, lp…, h] (its first nxi entries) replacing the stepper's states
+   (observers.SocObserver._outputs_for) */
+static double outputs_for(const State *s, const double *xi, int nxi, double *phi, double *uj) {
+    State tmp;
     double x[NEXO + 1], z[ND + 1], local[NM], base, u;
     int k;
-    memcpy(x, s->x, sizeof x);
-    memcpy(z, s->z, sizeof z);
-    for (k = 0; k < ND; k++)
-        if (PART_VAR[k] == 0) z[k] = soc;
-#if OCV_INPUT
-    x[OCV_COL] = ocv(soc);
-#endif
-#if SOC_INPUT
-    x[SOC_COL] = soc;
-#endif
+    tmp.soc = xi[0];
+    for (k = 0; k < 2 * NF + 1; k++) tmp.lp[k] = (nxi > 1 && k < 2 * NF) ? xi[1 + k] : s->lp[k];
+    tmp.h = nxi > 1 + 2 * NF ? xi[1 + 2 * NF] : s->h;
+    for (k = 0; k < NB + 1; k++) tmp.past[k] = s->ob_past[k];
+    features(&tmp, s->ob_i, s->ob_t, x, z);
     u = network(x, z, s->d, s->prev_lags, phi, local);
-    base = RELATIVE_OCV ? ocv(soc) : 0.0;
+    base = RELATIVE_OCV ? ocv(xi[0]) : 0.0;
     for (k = 0; k < NM; k++) uj[k] = base + local[k];
     return base + u;
+}
+
+static double outputs_at(const State *s, double soc, double *phi, double *uj) {
+    return outputs_for(s, &soc, 1, phi, uj);
+}
+
+/* EKF (observers.SocObserver._ekf_predict / _ekf_update) */
+static void ekf_init(State *s) {
+    int a, b;
+    for (a = 0; a < NX; a++)
+        for (b = 0; b < NX; b++)
+            s->ob_p[a][b] = (a >= 1 && a < 1 + 2 * NF && b >= 1 && b < 1 + 2 * NF)
+                                ? HISTORY_CURRENT_SIGMA_A * HISTORY_CURRENT_SIGMA_A : 0.0;
+    s->ob_p[0][0] = SOC0_SIGMA * SOC0_SIGMA;
+#if HAS_HYSTERESIS
+    s->ob_p[NX - 1][NX - 1] = s->h == 0.0 ? HYST_PRIOR_UNKNOWN : HYST_PRIOR_ASSUMED;
+#endif
+}
+
+static void ekf_predict(State *s, double i) {
+    double f[NX], g[NX], gain = TS / (3600.0 * s->capacity);
+    int a, b;
+    f[0] = 1.0;
+    g[0] = gain * eta(i);
+    for (a = 0; a < 2 * NF; a++) {
+        f[1 + a] = LP_COEF[a];
+        g[1 + a] = 1.0 - LP_COEF[a];
+    }
+#if HAS_HYSTERESIS
+    f[NX - 1] = exp(-HYSTERESIS_GAMMA * fabs(i) * gain);
+    g[NX - 1] = 0.0;
+#endif
+    for (a = 0; a < NX; a++)
+        for (b = 0; b < NX; b++)
+            s->ob_p[a][b] = f[a] * s->ob_p[a][b] * f[b] + CURRENT_SIGMA_A * CURRENT_SIGMA_A * (g[a] * g[b]);
+    s->ob_p[0][0] += EKF_DRIFT_PER_SQRT_H * EKF_DRIFT_PER_SQRT_H * TS / 3600.0;
+#if HAS_HYSTERESIS
+    s->ob_p[NX - 1][NX - 1] += HYST_DRIFT_PER_SQRT_H * HYST_DRIFT_PER_SQRT_H * TS / 3600.0;
+#endif
+    s->ob_var = s->ob_p[0][0];
+}
+
+static double ekf_update(State *s, double v) {
+    double xi[NX], row[NX], hv[NX], ph[NX], k[NX], ikh[NX][NX], tmp[NX][NX], np_[NX][NX];
+    double phi[NM], uj[NM], u, hph = 0.0, innov;
+    int a, b, c;
+    xi[0] = s->soc;
+    for (a = 0; a < 2 * NF; a++) xi[1 + a] = s->lp[a];
+#if HAS_HYSTERESIS
+    xi[NX - 1] = s->h;
+#endif
+    u = outputs_for(s, xi, NX, phi, uj);
+    for (a = 0; a < NX; a++) {
+        double step = a == 0 ? FD_SOC : ((HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A);
+        double hi, lo, uh, ul;
+        memcpy(row, xi, sizeof row);
+        row[a] = xi[a] + step;
+        row[0] = clip01(row[0]);
+        hi = row[a];
+        uh = outputs_for(s, row, NX, phi, uj);
+        memcpy(row, xi, sizeof row);
+        row[a] = xi[a] - step;
+        row[0] = clip01(row[0]);
+        lo = row[a];
+        ul = outputs_for(s, row, NX, phi, uj);
+        hv[a] = (uh - ul) / (hi - lo);
+    }
+    for (a = 0; a < NX; a++) {
+        ph[a] = 0.0;
+        for (b = 0; b < NX; b++) ph[a] += s->ob_p[a][b] * hv[b];
+    }
+    for (a = 0; a < NX; a++) hph += hv[a] * ph[a];
+    innov = v - u;
+    for (a = 0; a < NX; a++) {
+        k[a] = ph[a] / (hph + s->r);
+        xi[a] += k[a] * innov;
+    }
+    for (a = 0; a < NX; a++)
+        for (b = 0; b < NX; b++) ikh[a][b] = (a == b ? 1.0 : 0.0) - k[a] * hv[b];
+    for (a = 0; a < NX; a++)
+        for (b = 0; b < NX; b++) {
+            tmp[a][b] = 0.0;
+            for (c = 0; c < NX; c++) tmp[a][b] += ikh[a][c] * s->ob_p[c][b];
+        }
+    for (a = 0; a < NX; a++)
+        for (b = 0; b < NX; b++) {
+            np_[a][b] = 0.0;
+            for (c = 0; c < NX; c++) np_[a][b] += tmp[a][c] * ikh[b][c];
+            np_[a][b] += s->r * (k[a] * k[b]);
+        }
+    for (a = 0; a < NX; a++)
+        for (b = 0; b < NX; b++) s->ob_p[a][b] = 0.5 * (np_[a][b] + np_[b][a]);
+    s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
+    for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
+#if HAS_HYSTERESIS
+    s->h = xi[NX - 1] < -1.0 ? -1.0 : (xi[NX - 1] > 1.0 ? 1.0 : xi[NX - 1]);
+#endif
+    return xi[0];
 }
 
 static void fuzzy_design(State *s) {
@@ -281,8 +379,8 @@ static void fuzzy_design(State *s) {
 static void observer_init(State *s, double soc0) {
     int j;
     double var0 = SOC0_SIGMA * SOC0_SIGMA;
-    s->q = pow(CURRENT_SIGMA_A * TS / (3600.0 * s->capacity), 2) +
-           SOC_DRIFT_PER_SQRT_H * SOC_DRIFT_PER_SQRT_H * TS / 3600.0;
+    double drift = s->observer == 1 ? EKF_DRIFT_PER_SQRT_H : SOC_ONLY_DRIFT_PER_SQRT_H;
+    s->q = pow(CURRENT_SIGMA_A * TS / (3600.0 * s->capacity), 2) + drift * drift * TS / 3600.0;
     s->r = VOLTAGE_SIGMA_V * VOLTAGE_SIGMA_V;
     s->ob_soc = soc0;
     s->ob_var = var0;
@@ -293,6 +391,7 @@ static void observer_init(State *s, double soc0) {
         s->mode_prob[j] = 1.0 / NM;
     }
     fuzzy_design(s);
+    ekf_init(s);
 }
 
 static void imm_predict(State *s, double dsoc) {
@@ -359,8 +458,13 @@ static void observer_step(State *s, double i, double v, double t) {
     double soc, phi[NM], uj[NM];
     int valid;
     double before = s->ob_soc;
+    int k;
+    s->ob_i = i;
+    s->ob_t = t;
+    for (k = 0; k < NB + 1; k++) s->ob_past[k] = s->past[k];
     stepper_step(s, i, t);
-    s->ob_var += s->q;
+    if (s->observer == 1) ekf_predict(s, i);
+    else s->ob_var += s->q;
     if (s->observer == 3) imm_predict(s, s->soc - before);
     valid = isfinite(v) && v >= V_MIN - GATE_V && v <= V_MAX + GATE_V;
     if (!valid) {
@@ -371,13 +475,7 @@ static void observer_step(State *s, double i, double v, double t) {
     }
     soc = s->soc;
     if (s->observer == 1) {
-        double hi = soc + FD_SOC < 1.0 ? soc + FD_SOC : 1.0, lo = soc - FD_SOC > 0.0 ? soc - FD_SOC : 0.0;
-        double h = (outputs_at(s, hi, phi, uj) - outputs_at(s, lo, phi, uj)) / (hi - lo);
-        double innov = v - outputs_at(s, soc, phi, uj);
-        double k = s->ob_var * h / (h * h * s->ob_var + s->r);
-        soc += k * innov;
-        s->ob_var = (1.0 - k * h) * s->ob_var;
-        if (s->ob_var < 1e-12) s->ob_var = 1e-12;
+        soc = ekf_update(s, v);
     } else if (s->observer == 2) {
         double u = outputs_at(s, soc, phi, uj), kk = 0.0, var = 0.0;
         int j;
