@@ -70,3 +70,7 @@ def test_missing_soc0_is_explained(tmp_path, capsys) -> None:
 def test_demo_runs(tmp_path) -> None:
     assert main(["demo", "--out", str(tmp_path)]) == 0
     assert (tmp_path / "report.html").exists()
+    assert (tmp_path / "fig_soc_observers.png").exists()
+    soc = json.loads((tmp_path / "summary.json").read_text())["soc_rmse_pct_from_0_6_with_0_3"]
+    assert set(soc) == {"ekf", "fuzzy", "imm", "coulomb"}
+    assert max(soc["ekf"], soc["fuzzy"], soc["imm"]) < 5.0 < soc["coulomb"]

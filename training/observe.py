@@ -91,6 +91,14 @@ def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
     return path
 
 
+def observer_runs(model: LmnModel, seg: Segment, kinds: list[str], soc0_est: float,
+                  start_at: float | None) -> list[ObserverRun]:
+    """Each observer kind and plain coulomb counting on a segment, started with soc0_est where
+    the reference first falls to start_at (under load), or at the segment start if None."""
+    k0 = int(np.argmax(seg.soc_ref <= start_at)) if start_at is not None else 0
+    return [run_observer(model, seg, kind, soc0_est, k0) for kind in [*kinds, "coulomb"]]
+
+
 def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kind: str,
                             soc0: float | None, soc0_est: float, start_at: float | None,
                             plot_dir: str | Path | None = None, as_json: bool = False) -> list:
@@ -100,10 +108,8 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
         rec = read_record(p)
         seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0),
                                  model.capacity_ah)[0]
-        k0 = int(np.argmax(seg.soc_ref <= start_at)) if start_at is not None else 0
-        runs = [run_observer(model, seg, kind, soc0_est, k0),
-                run_observer(model, seg, "coulomb", soc0_est, k0)]
-        row = {"record": seg.name, "start_soc_true": float(seg.soc_ref[k0]),
+        runs = observer_runs(model, seg, [kind], soc0_est, start_at)
+        row = {"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),
                "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}}
         results.append(row)
         if plot_dir is not None:
