@@ -3,8 +3,9 @@
 All three share the LMN step (fmu_src.runtime.CellStepper) and the SoC balance
 SoC(k+1) = SoC(k) + Ts·η(i)·i/(3600·Cn) as the prediction. The measurement is the terminal
 voltage averaged over the step; the model's prediction for it is the LMN output at the predicted
-SoC. The state estimated is SoC; the LMN's other states (filters, hysteresis, output lags) are
-propagated deterministically from the current.
+SoC. The fuzzy observer and the IMM estimate SoC only and propagate the LMN's other states
+(filters, hysteresis, output lags) deterministically from the current; the EKF estimates the
+filter and hysteresis states with SoC.
 
 - EKF: the state is ξ = [SoC, the filters' low-pass states (A), the hysteresis state h (models
   with hysteresis)], the LMN's dynamic state; the output lags of a model with na > 0 follow the
