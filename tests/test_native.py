@@ -17,7 +17,7 @@ from fmpy.validation import validate_fmu
 from fmu_src.model import load_model
 from fmu_src.observers import SocObserver
 from fmu_src.runtime import CellStepper
-from tests.conftest import PAN_US06
+from tests.conftest import A123_S1, PAN_US06
 from tests.fmu_helpers import (
     Instance,
     assert_state_round_trips,
@@ -104,8 +104,6 @@ def test_native_ekf_with_hysteresis_equals_the_runtime(a123_model, tmp_path) -> 
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
     from lmncell_build.native_build import build_native_fmu
-
-    from tests.conftest import A123_S1
 
     model = load_model(a123_model)
     fmu = build_native_fmu(a123_model, tmp_path / "a123.fmu")

@@ -25,6 +25,7 @@ from training.metrics import WINDOW
 from training.observe import observer_figure, observer_runs, soc_metrics
 from training.pipeline import evaluate_model, train_files
 from training.readers import read_record
+from training.records import Record
 from training.report import Report
 from training.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
 
@@ -150,7 +151,7 @@ def run_demo(out: Path) -> Path:
               "Free-run voltage error of the LMN and the baselines fitted on the same data; the "
               "last record was not used in training.")
 
-    soc_figures = _observer_section(rep, model, dyn / VALIDATE, capacity, out)
+    soc_figures = _observer_section(rep, model, val_rec, capacity, out)
 
     _say("building the FMU …")
     from lmncell_build.pythonfmu_build import build_fmu
@@ -205,12 +206,12 @@ def run_demo(out: Path) -> Path:
     return path
 
 
-def _observer_section(rep: Report, model: LmnModel, record: Path, capacity: float,
+def _observer_section(rep: Report, model: LmnModel, record: Record, capacity: float,
                       out: Path) -> dict:
     """SoC estimation on the unseen record: the three observers and coulomb counting started
     under load where the true SoC first reaches OBSERVER_START with the guess OBSERVER_GUESS."""
     _say("SoC observers (EKF, fuzzy, IMM) on the unseen 25 °C record from a wrong start …")
-    seg = record_to_segments(read_record(record), model.sample_time_s, 1.0, capacity)[0]
+    seg = record_to_segments(record, model.sample_time_s, 1.0, capacity)[0]
     runs = observer_runs(model, seg, ["ekf", "fuzzy", "imm"], OBSERVER_GUESS, OBSERVER_START)
     rows = [{"observer": r.name, **soc_metrics(r)} for r in runs]
     rep.section("SoC estimation")

@@ -12,7 +12,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.signal import lfilter
 
 from fmu_src.model import LmnModel, load_model, model_from_dict, model_to_dict, save_model
 from fmu_src.observers import offline_fuzzy_design
@@ -23,6 +22,7 @@ from training.config import TrainConfig, load_config
 from training.dataset import Segment, estimate_capacity, file_sha256, record_to_segments, start_soc
 from training.identify import train_lmn, with_soc_reference_weights
 from training.metrics import WINDOW, pooled, record_metrics
+from training.ocvfit import lowpass
 from training.readers import read_record
 from training.records import DataError, Record
 
@@ -88,9 +88,7 @@ def _recent_current_rms(segs: list[Segment], ts: float) -> float:
     """RMS over the training samples of the current low-passed with HISTORY_TAU_S (A): how far
     the mean current of the last minutes typically is from rest, the spread an observer gives
     an unknown load history (ObserverSettings.history_current_sigma_a)."""
-    a = np.exp(-ts / HISTORY_TAU_S)
-    lp = [lfilter([1.0 - a], [1.0, -a], s.current_a) for s in segs]
-    both = np.concatenate(lp)
+    both = np.concatenate([lowpass(s.current_a, HISTORY_TAU_S, ts) for s in segs])
     return float(np.sqrt(np.mean(both * both)))
 
 

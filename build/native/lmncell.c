@@ -307,8 +307,18 @@ static void ekf_predict(State *s, double i) {
     s->ob_var = s->ob_p[0][0];
 }
 
+/* network voltage with xi[a] moved by delta (SoC kept in [0, 1]); *at: the moved value */
+static double output_moved(const State *s, const double *xi, int a, double delta, double *at) {
+    double row[NX], phi[NM], uj[NM];
+    memcpy(row, xi, sizeof row);
+    row[a] = xi[a] + delta;
+    row[0] = clip01(row[0]);
+    *at = row[a];
+    return outputs_for(s, row, NX, phi, uj);
+}
+
 static double ekf_update(State *s, double v) {
-    double xi[NX], row[NX], hv[NX], ph[NX], k[NX], ikh[NX][NX], tmp[NX][NX], np_[NX][NX];
+    double xi[NX], hv[NX], ph[NX], k[NX], ikh[NX][NX], tmp[NX][NX], np_[NX][NX];
     double phi[NM], uj[NM], u, hph = 0.0, innov;
     int a, b, c;
     xi[0] = s->soc;
@@ -320,16 +330,8 @@ static double ekf_update(State *s, double v) {
     for (a = 0; a < NX; a++) {
         double step = a == 0 ? FD_SOC : ((HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A);
         double hi, lo, uh, ul;
-        memcpy(row, xi, sizeof row);
-        row[a] = xi[a] + step;
-        row[0] = clip01(row[0]);
-        hi = row[a];
-        uh = outputs_for(s, row, NX, phi, uj);
-        memcpy(row, xi, sizeof row);
-        row[a] = xi[a] - step;
-        row[0] = clip01(row[0]);
-        lo = row[a];
-        ul = outputs_for(s, row, NX, phi, uj);
+        uh = output_moved(s, xi, a, step, &hi);
+        ul = output_moved(s, xi, a, -step, &lo);
         hv[a] = (uh - ul) / (hi - lo);
     }
     for (a = 0; a < NX; a++) {
