@@ -25,8 +25,9 @@ class TrainConfig:
     filters: [tau_fast_s, tau_slow_s] pairs, each an input v = LP_fast(i) − LP_slow(i) (zero DC
     gain); the default ladder spans relaxation from seconds to about an hour.
     hysteresis: "auto" (chosen by the OCV pre-fit), "off", or a γ value.
-    temperature_scaling: "auto" (an Arrhenius gain on the current regressors, its E chosen by
-    the OCV pre-fit when the training temperatures span more than 5 K), "off", or E in K.
+    temperature_scaling: "auto" (an Arrhenius gain on the current regressors once the training
+    temperatures span more than 5 K; E chosen by the OCV pre-fit, or with temperature terms by
+    the root model's free-run error with those terms), "off", or E in K.
     temperature_terms: the degree n of the temperature terms (current, filter, hysteresis and
     offset columns again times dT … dTⁿ, dT = (T − 25 °C)/10 K: resistances and OCV that change
     smoothly with temperature, which interpolate between training temperatures where sigmoid
