@@ -727,9 +727,11 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     e_scores: dict[str, float] = {}
     if (n_temp and cfg.temperature_scaling == "auto" and e_k is not None
             and _within_record_span(segs) <= CHAMBER_SPAN_K):
-        e_k, e_scores = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg, progress)
+        e_k, e_scores, design = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg,
+                                                                        progress)
         base.arrhenius_k = e_k
-    design = build_design(base, segs, masks)
+    else:
+        design = build_design(base, segs, masks)
     X, y, w = design.X, design.y, design.w_fit
     n_eff = float(w.sum())
     tree = root_tree(base, design, cfg)
@@ -793,33 +795,31 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
 def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
                                             masks: list[np.ndarray], cfg: TrainConfig,
                                             progress: Progress
-                                            ) -> tuple[float, dict[str, float]]:
+                                            ) -> tuple[float, dict[str, float], Design]:
     """Arrhenius E (K) for records at constant chamber temperatures with temperature terms:
     the candidate whose root model (with those terms, fitted by weighted least squares) has
-    the lowest training free-run RMSE; also each candidate's RMSE (mV) by str(E).
+    the lowest training free-run RMSE; also each candidate's RMSE (mV) by str(E), and the
+    regression design built with the chosen E (for the construction that follows).
 
     There E is seen only between the temperature levels, together with the polynomial terms
     it works with, which the pre-fit (`_choose_arrhenius`) lacks: on the A123
     leave-one-temperature-out folds the pre-fit picked 2000–6000 K where 4000–5000 K
-    interpolated best (held-out 20–80 % RMSE 4.15 → 2.77, 9.32 → 4.60, 6.20 → 3.15 mV).
+    interpolated best (held-out 20–80 % RMSE 4.15 → 2.77, 9.32 → 4.60, 6.20 → 3.14 mV).
     Where temperature varies inside records (self-heating), the pre-fit's SoC-scheduled
     resistances separate E from the SoC trend and its choice stays."""
     scores: dict[float, float] = {}
+    e_k, best = ARRHENIUS_CANDIDATES_K[0], None
     for cand in ARRHENIUS_CANDIDATES_K:
         trial = dataclasses.replace(base, arrhenius_k=cand)
-        scores[cand] = root_freerun_rmse(trial, segs, masks, cfg)
+        design = build_design(trial, segs, masks)
+        scores[cand] = freerun_rmse(root_tree(trial, design, cfg).apply(trial), segs, design,
+                                    "fit")
         progress(f"  root model with temperature terms, E = {cand:g} K: free-run "
                  f"{1e3 * scores[cand]:.2f} mV")
-    e_k = min(scores, key=lambda c: scores[c])
+        if best is None or scores[cand] < scores[e_k]:      # the first of equal minima
+            e_k, best = cand, design
     progress(f"  temperature scaling with the temperature terms: E = {e_k:g} K")
-    return e_k, {f"{c:g}": 1e3 * v for c, v in scores.items()}
-
-
-def root_freerun_rmse(base: LmnModel, segs: list[Segment], masks: list[np.ndarray],
-                      cfg: TrainConfig) -> float:
-    """Training free-run RMSE (V) of the root local model(s) fitted by weighted least squares."""
-    design = build_design(base, segs, masks)
-    return freerun_rmse(root_tree(base, design, cfg).apply(base), segs, design, "fit")
+    return e_k, {f"{c:g}": 1e3 * v for c, v in scores.items()}, best
 
 
 def root_tree(base: LmnModel, design: Design, cfg: TrainConfig) -> Tree:
