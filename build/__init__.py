@@ -1,1 +1,1 @@
-"""LMNCell FMU build recipes (imported as ``lmncell_build``)."""
+"""LMNCell FMU builders (``lmncell.fmu``): the pythonfmu FMU and the native C FMU."""

@@ -18,9 +18,8 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-
-from fmu_src.model import TEMPERATURE_STEP_K, LmnModel, load_model
-from fmu_src.observers import (
+from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
+from lmncell.runtime.observers import (
     FD_CURRENT_A,
     FD_HYSTERESIS,
     FD_SOC,
@@ -158,7 +157,7 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
 
 
 def model_description(model: LmnModel, guid: str, version: str) -> str:
-    from training import __version__
+    from lmncell import __version__
 
     rows = []
     for name, vr, caus, var, typ, unit, start, desc in VARIABLES:
@@ -245,7 +244,7 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
     """Generate, compile and zip the native FMU of a model file; returns its path.
 
     trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
-    from lmncell_build.pythonfmu_build import documentation_html, model_hash
+    from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
 
     model_path, out = Path(model_path), Path(out)
     model = load_model(model_path)

@@ -1,10 +1,11 @@
 """Build recipe of the pythonfmu LMNCell FMU (`lmncell build-fmu MODEL.json --out CELL.fmu`).
 
-The FMU's resources hold the model file (`model.json`), a copy of the runtime package `fmu_src`
-renamed `lmncell_rt_<hash>` and a generated slave module `lmncell_<hash>` (hash: of the model
-file), so that two LMNCell FMUs in one process each run their own code. After pythonfmu has
-written the FMU, the model description is completed with units, `InitialUnknowns`, a default
-experiment at the model's sample time, version and generation tool.
+The FMU's resources hold the model file (`model.json`), a copy of the runtime package
+`lmncell.runtime` (`fmu_src/`) renamed `lmncell_rt_<hash>` and a generated slave module
+`lmncell_<hash>` (hash: of the model file), so that two LMNCell FMUs in one process each run
+their own code. After pythonfmu has written the FMU, the model description is completed with
+units, `InitialUnknowns`, a default experiment at the model's sample time, version and
+generation tool.
 """
 
 from __future__ import annotations
@@ -18,10 +19,10 @@ import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
-import fmu_src
-from fmu_src.model import LmnModel, load_model
+import lmncell.runtime as runtime_package
+from lmncell.runtime.model import LmnModel, load_model
 
-RUNTIME_DIR = Path(fmu_src.__file__).resolve().parent
+RUNTIME_DIR = Path(runtime_package.__file__).resolve().parent
 UNITS = {"current": "A", "voltage_measured": "V", "temperature": "degC", "voltage": "V",
          "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1"}
 UNIT_BASE = {"A": {"A": "1"}, "V": {"kg": "1", "m": "2", "s": "-3", "A": "-1"},
@@ -93,7 +94,7 @@ def _indent(elem: ET.Element) -> None:
 
 def patch_model_description(xml_text: str, model: LmnModel, module_hash: str) -> str:
     """Add units, InitialUnknowns, default experiment, version and generation tool."""
-    from training import __version__
+    from lmncell import __version__
 
     root = ET.fromstring(xml_text)
     root.set("generationTool", f"LMNCell {__version__} (PythonFMU 0.7.0)")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from training.drive import CYCLES, load_vehicle, plot_cycle, run_cycle
+from lmncell.scenarios.drive import CYCLES, load_vehicle, plot_cycle, run_cycle
 
 
 def main(fmu: str, out_dir: str = "drive_cycles_out") -> None:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import sys
 
-from training.fmucheck import compare_fmu_with_pipeline
+from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
 
 
 def main(model: str, fmu: str, record: str, soc0: str | None = None) -> None:

@@ -21,8 +21,9 @@ import json
 import tempfile
 from pathlib import Path
 
-from training.metrics import pooled
-from training.pipeline import evaluate_model, train_files
+from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.evaluation.metrics import pooled
+from lmncell.identification.train import train_files
 
 MODELS = ("lmn", "arx", "ecm2rc", "ecm2rc_hyst")
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from .model import LmnModel
 from .observers import OBSERVER_NAMES, SocObserver
-from .runtime import CellStepper
+from .step import CellStepper
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 

@@ -1,6 +1,6 @@
 """SoC observers on the LMN (numpy + stdlib): extended Kalman filter, fuzzy observer, IMM.
 
-All three share the LMN step (fmu_src.runtime.CellStepper) and the SoC balance
+All three share the LMN step (lmncell.runtime.step.CellStepper) and the SoC balance
 SoC(k+1) = SoC(k) + Ts·η(i)·i/(3600·Cn) as the prediction. The measurement is the terminal
 voltage averaged over the step; the model's prediction for it is the LMN output at the predicted
 SoC. The fuzzy observer and the IMM estimate SoC only and propagate the LMN's other states
@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .model import LmnModel
-from .runtime import CellStepper, ExoState
+from .step import CellStepper, ExoState
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5

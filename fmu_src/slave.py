@@ -1,4 +1,4 @@
-"""pythonfmu adapter: the LMNCell FMU's slave class, a thin layer over fmu_src.cosim.
+"""pythonfmu adapter: the LMNCell FMU's slave class, a thin layer over lmncell.runtime.cosim.
 
 The build copies this package into the FMU's resources under a name unique to the model and
 generates a one-line module that subclasses LmnCellSlave, so that two LMNCell FMUs in one

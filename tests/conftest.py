@@ -16,6 +16,18 @@ A123_S1 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s1.csv.gz"
 A123_S2 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s2.csv.gz"
 
 
+def import_or_skip(name: str, reason: str):
+    """Import an optional host package or skip the test with a reason. Also catches OSError:
+    ecospy raises it at import when its system library (Debian libtbb12) is missing, which
+    pytest.importorskip does not catch."""
+    import importlib
+
+    try:
+        return importlib.import_module(name)
+    except (ImportError, OSError) as exc:
+        pytest.skip(f"{reason}: {type(exc).__name__}: {exc}")
+
+
 def shared_or_skip(rel: str = "") -> Path:
     path = SHARED / rel
     if not path.exists():
@@ -27,7 +39,7 @@ def shared_or_skip(rel: str = "") -> Path:
 def quick_model(tmp_path_factory) -> Path:
     """A small LMN trained on the shipped Panasonic HWFET and HPPC records (≤ 3 local models;
     the HPPC rests pin down the OCV). The US06 record stays unseen."""
-    from training.pipeline import train_files
+    from lmncell.identification.train import train_files
 
     out = tmp_path_factory.mktemp("model") / "pan.json"
     train_files([PAN_HWFET, PAN_HPPC], out, capacity_ah=2.85, soc0=1.0,
@@ -38,7 +50,7 @@ def quick_model(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def quick_fmu(quick_model, tmp_path_factory) -> Path:
-    from lmncell_build.pythonfmu_build import build_fmu
+    from lmncell.fmu.pythonfmu_build import build_fmu
 
     return build_fmu(quick_model, tmp_path_factory.mktemp("fmu") / "pan.fmu")
 
@@ -47,7 +59,7 @@ def quick_fmu(quick_model, tmp_path_factory) -> Path:
 def a123_model(tmp_path_factory) -> Path:
     """A small LMN with the one-state hysteresis, trained on the shipped A123 25 °C dynamic
     record (capacity 2.2 Ah, about the measured one): for observers that estimate h."""
-    from training.pipeline import train_files
+    from lmncell.identification.train import train_files
 
     out = tmp_path_factory.mktemp("a123") / "a123.json"
     train_files([A123_S1], out, capacity_ah=2.2, soc0=1.0, progress=lambda _m: None,

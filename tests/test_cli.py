@@ -6,9 +6,9 @@ import csv
 import json
 
 import pytest
+from lmncell.cli import main
 
 from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
-from training.cli import main
 
 
 def test_inspect_reads_every_shared_file(capsys) -> None:

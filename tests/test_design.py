@@ -6,9 +6,10 @@ import csv
 
 import numpy as np
 import pytest
-
-from training.cli import main
-from training.design import (
+from lmncell.cli import main
+from lmncell.data.readers import read_record
+from lmncell.data.records import DataError
+from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
     DesignSpec,
@@ -18,8 +19,6 @@ from training.design import (
     predict,
     random_programme,
 )
-from training.readers import read_record
-from training.records import DataError
 
 
 @pytest.fixture(scope="module")
@@ -105,9 +104,9 @@ def test_designed_sequences_use_several_current_levels() -> None:
 
 
 def test_virtual_ocv_test_gives_the_virtual_cells_ocv(tmp_path) -> None:
-    from training.design import DEFAULT_OCV_SOC, DEFAULT_OCV_V, _virtual_ocv_test
-    from training.ocvfit import measured_ocv
-    from training.virtual_cell import VirtualCell
+    from lmncell.design.optimal import DEFAULT_OCV_SOC, DEFAULT_OCV_V, _virtual_ocv_test
+    from lmncell.design.virtual_cell import VirtualCell
+    from lmncell.identification.ocvfit import measured_ocv
 
     path = _virtual_ocv_test(VirtualCell(capacity_ah=2.3), 2.3, tmp_path)
     knots = np.linspace(0.1, 0.9, 9)
@@ -117,7 +116,7 @@ def test_virtual_ocv_test_gives_the_virtual_cells_ocv(tmp_path) -> None:
 
 @pytest.mark.slow
 def test_virtual_cell_proof_reports_every_programme() -> None:
-    from training.design import compare_on_virtual_cell
+    from lmncell.design.optimal import compare_on_virtual_cell
 
     cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
     spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)
@@ -133,7 +132,7 @@ def test_virtual_cell_proof_reports_every_programme() -> None:
 
 @pytest.mark.parametrize("kind", ["prbs", "aprbs"])
 def test_random_levels_have_zero_mean_and_unit_peak(kind) -> None:
-    from training.design import random_levels
+    from lmncell.design.optimal import random_levels
 
     z = random_levels(np.random.default_rng(4), 30, kind)
     assert abs(z.mean()) < 1e-12 and np.isclose(np.abs(z).max(), 1.0)

@@ -12,10 +12,13 @@ import numpy as np
 import pytest
 from fmpy import extract
 from fmpy.validation import validate_fmu
+from lmncell.data.dataset import record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
+from lmncell.runtime.model import load_model
+from lmncell.runtime.step import CellStepper
 
-from fmu_src.model import load_model
-from fmu_src.runtime import CellStepper
-from tests.conftest import PAN_HWFET, PAN_US06
+from tests.conftest import PAN_HWFET, PAN_US06, import_or_skip
 from tests.fmu_helpers import (
     Instance,
     assert_state_round_trips,
@@ -23,9 +26,6 @@ from tests.fmu_helpers import (
     libcosim_run,
     refuse_bad_current,
 )
-from training.dataset import record_to_segments
-from training.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
-from training.readers import read_record
 
 
 def test_fmpy_validate_reports_no_problem(quick_fmu) -> None:
@@ -152,7 +152,7 @@ def test_out_of_range_flag(quick_fmu) -> None:
 
 def test_two_models_in_one_process(quick_model, quick_fmu, tmp_path) -> None:
     """Different models, unique module names: each FMU runs its own code and parameters."""
-    from lmncell_build.pythonfmu_build import build_fmu
+    from lmncell.fmu.pythonfmu_build import build_fmu
 
     doc = quick_model.read_text().replace('"sample_time_s": 1.0', '"sample_time_s": 2.0')
     other = tmp_path / "other.json"
@@ -177,7 +177,7 @@ def test_two_models_in_one_process(quick_model, quick_fmu, tmp_path) -> None:
 
 
 def test_libcosim_gives_the_same_outputs(quick_fmu) -> None:
-    pytest.importorskip("libcosimpy", reason="libcosimpy (DNV libcosim) is not installed")
+    import_or_skip("libcosimpy", "libcosimpy (DNV libcosim) is not installed")
     assert libcosim_run(quick_fmu, 0.8, -2.0, 30) == pytest.approx(fmpy_run(quick_fmu, 0.8, -2.0, 30),
                                                               abs=1e-12)
 

@@ -6,24 +6,18 @@ import json
 
 import numpy as np
 import pytest
+from lmncell.config import ConfigError, load_config
+from lmncell.data.dataset import record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.identification.construction import validation_masks
+from lmncell.identification.prefit import with_soc_reference_weights
+from lmncell.identification.refinement import _robust_linear_solve
+from lmncell.identification.splitting import optimise_split
+from lmncell.identification.train import train_files
+from lmncell.identification.tree import build_design, poles, skeleton, stabilise, wls
+from lmncell.runtime.model import load_model
 
-from fmu_src.model import load_model
 from tests.conftest import PAN_HWFET
-from training.config import ConfigError, load_config
-from training.dataset import record_to_segments
-from training.identify import (
-    _robust_linear_solve,
-    build_design,
-    optimise_split,
-    poles,
-    skeleton,
-    stabilise,
-    validation_masks,
-    with_soc_reference_weights,
-    wls,
-)
-from training.pipeline import train_files
-from training.readers import read_record
 
 
 @pytest.fixture(scope="module")
@@ -85,8 +79,8 @@ def test_soc_reference_weights_follow_the_ocv_slope() -> None:
 
 
 def test_temperature_terms_auto_follow_the_number_of_training_temperatures() -> None:
-    from training.dataset import Segment
-    from training.identify import temperature_degree, temperature_levels
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.prefit import temperature_degree, temperature_levels
 
     def seg(t_c: float | None) -> Segment:
         n = 10
@@ -130,8 +124,9 @@ def test_ocv_prefit_does_not_depend_on_the_soc_window_weights(tmp_path) -> None:
 
 
 def test_record_weights_favour_the_weighted_record(tmp_path) -> None:
+    from lmncell.data.records import DataError
+
     from tests.conftest import PAN_HPPC
-    from training.records import DataError
 
     kw = dict(capacity_ah=2.85, soc0=1.0, progress=lambda _m: None, max_local_models=2,
               oe_max_iterations=2, hysteresis="off")
@@ -172,7 +167,7 @@ def test_training_twice_gives_identical_files(tmp_path) -> None:
 @pytest.mark.parametrize("kw", [{"stop": "aicc"}, {"stop": "aicc", "validation": "none"}])
 def test_aicc_stop_writes_a_strict_json_model_and_its_curve(tmp_path, kw) -> None:
     # the validation column of the curve is not computed with the AICc rule: null, not NaN
-    from training.plots import curve_figure
+    from lmncell.report.plots import curve_figure
 
     out = tmp_path / "m.json"
     train_files([PAN_HWFET], out, capacity_ah=2.85, progress=lambda _m: None,
@@ -228,8 +223,9 @@ def test_bad_config_file(tmp_path) -> None:
 
 
 def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
+    from lmncell.identification.ocvfit import measured_ocv
+
     from tests.conftest import A123_S1, DATA
-    from training.ocvfit import measured_ocv
 
     tests = [str(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"),
              str(DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz")]
@@ -244,9 +240,9 @@ def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
 def test_arrhenius_energy_is_found_where_resistance_also_rises_towards_empty() -> None:
     """A synthetic cell with R(SoC, T) = R(SoC)·exp(E(1/T − 1/T_ref)), E = 3000 K, that warms up
     while it empties (so a SoC trend and a temperature trend overlap): the chosen E is 3000 K."""
-    from training.dataset import Segment
-    from training.identify import train_lmn
-    from training.ocvfit import lowpass
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import train_lmn
+    from lmncell.identification.ocvfit import lowpass
 
     rng = np.random.default_rng(7)
     cap, ts, n = 2.0, 1.0, 8000
@@ -271,9 +267,10 @@ def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature
     is chosen on the root model's free-run error with those terms (every candidate's figure
     recorded); the true E is among the best there, a far-off E is clearly worse. (With the
     quadratic terms E is only weakly identified: 4000–6000 K fit equally well here.)"""
-    from training.dataset import Segment
-    from training.identify import ARRHENIUS_CANDIDATES_K, train_lmn
-    from training.ocvfit import lowpass
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import train_lmn
+    from lmncell.identification.ocvfit import lowpass
+    from lmncell.identification.prefit import ARRHENIUS_CANDIDATES_K
 
     rng = np.random.default_rng(3)
     cap, ts, n = 2.0, 1.0, 6000

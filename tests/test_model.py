@@ -6,11 +6,16 @@ import json
 
 import numpy as np
 import pytest
-
-from fmu_src.model import ModelFileError, load_model, model_from_dict, model_to_dict, save_model
-from fmu_src.runtime import CellStepper, simulate
-from training.config import load_config
-from training.identify import Tree, skeleton
+from lmncell.config import load_config
+from lmncell.identification.tree import Tree, skeleton
+from lmncell.runtime.model import (
+    ModelFileError,
+    load_model,
+    model_from_dict,
+    model_to_dict,
+    save_model,
+)
+from lmncell.runtime.step import CellStepper, simulate
 
 
 def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,

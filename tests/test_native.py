@@ -13,11 +13,14 @@ import numpy as np
 import pytest
 from fmpy import extract
 from fmpy.validation import validate_fmu
+from lmncell.data.dataset import record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
+from lmncell.runtime.model import load_model
+from lmncell.runtime.observers import SocObserver
+from lmncell.runtime.step import CellStepper
 
-from fmu_src.model import load_model
-from fmu_src.observers import SocObserver
-from fmu_src.runtime import CellStepper
-from tests.conftest import A123_S1, PAN_US06
+from tests.conftest import A123_S1, PAN_US06, import_or_skip
 from tests.fmu_helpers import (
     Instance,
     assert_state_round_trips,
@@ -25,9 +28,6 @@ from tests.fmu_helpers import (
     libcosim_run,
     refuse_bad_current,
 )
-from training.dataset import record_to_segments
-from training.fmucheck import compare_fmu_with_pipeline
-from training.readers import read_record
 
 HOST_C = Path(__file__).parent / "native" / "host.c"
 
@@ -36,7 +36,7 @@ HOST_C = Path(__file__).parent / "native" / "host.c"
 def native_fmu(quick_model, tmp_path_factory) -> Path:
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell_build.native_build import build_native_fmu
+    from lmncell.fmu.native_build import build_native_fmu
 
     return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
 
@@ -103,7 +103,7 @@ def test_native_ekf_with_hysteresis_equals_the_runtime(a123_model, tmp_path) -> 
     # the EKF's state then carries h as well as SoC and the low-pass states
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell_build.native_build import build_native_fmu
+    from lmncell.fmu.native_build import build_native_fmu
 
     model = load_model(a123_model)
     fmu = build_native_fmu(a123_model, tmp_path / "a123.fmu")
@@ -145,7 +145,7 @@ def test_many_instances_are_independent(native_fmu) -> None:
 
 @pytest.fixture(scope="module")
 def host(tmp_path_factory) -> Path:
-    from lmncell_build.native_build import fmi_headers
+    from lmncell.fmu.native_build import fmi_headers
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed")
@@ -213,7 +213,7 @@ def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:
 
 
 def test_native_loads_in_libcosim(native_fmu) -> None:
-    pytest.importorskip("libcosimpy", reason="libcosimpy (DNV libcosim) is not installed")
+    import_or_skip("libcosimpy", "libcosimpy (DNV libcosim) is not installed")
     assert libcosim_run(native_fmu, 0.8, -2.0, 30) == pytest.approx(fmpy_run(native_fmu, 0.8, -2.0, 30),
                                                               abs=1e-12)
 
@@ -221,7 +221,7 @@ def test_native_loads_in_libcosim(native_fmu) -> None:
 
 def test_native_runs_in_the_ecos_host(native_fmu, quick_model, tmp_path) -> None:
     """DNV's `ecos` command-line host (from the ecospy wheel; needs Debian's libtbb12)."""
-    ecospy = pytest.importorskip("ecospy", reason="ecospy is not installed")
+    ecospy = import_or_skip("ecospy", "ecospy cannot be loaded (needs Debian libtbb12)")
     # pip may install the wheel's binaries without the executable bit: run a private copy
     bins = tmp_path / "ecos_bin"
     shutil.copytree(Path(ecospy.__file__).parent / "binaries", bins)
@@ -265,10 +265,10 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
     # the cell warms by several kelvin under load, so dT varies along the record)
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell_build.native_build import build_native_fmu
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.identification.train import train_files
 
     from tests.conftest import PAN_HPPC, PAN_HWFET
-    from training.pipeline import train_files
 
     path = tmp_path / "t.json"
     train_files([PAN_HWFET, PAN_HPPC], path, capacity_ah=2.85, soc0=1.0,

@@ -6,19 +6,19 @@ import math
 
 import numpy as np
 import pytest
-
-from fmu_src.model import load_model
-from fmu_src.observers import (
+from lmncell.data.dataset import record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.evaluation.observe import run_observer, soc_metrics
+from lmncell.runtime.model import load_model
+from lmncell.runtime.observers import (
     ObserverSettings,
     SocObserver,
     design_fuzzy_gains,
     local_ocv_slopes,
 )
+
 from tests.conftest import A123_S1, PAN_US06
 from tests.fmu_helpers import Instance, assert_state_round_trips
-from training.dataset import record_to_segments
-from training.observe import run_observer, soc_metrics
-from training.readers import read_record
 
 
 @pytest.fixture(scope="module")

@@ -7,10 +7,10 @@ import warnings
 
 import numpy as np
 import pytest
+from lmncell.data.readers import DataWarning, detect_format, read_record, write_bdf
+from lmncell.data.records import DataError
 
 from tests.conftest import A123_S1, DATA, PAN_US06, shared_or_skip
-from training.readers import DataWarning, detect_format, read_record, write_bdf
-from training.records import DataError
 
 
 def test_every_shipped_file_reads() -> None:

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from lmncell.data.dataset import starts_rested_full
+from lmncell.data.readers import read_record
+from lmncell.data.resample import resample, resample_segment
+from lmncell.data.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
 
 from tests.conftest import A123_S1, A123_S2, DATA, PAN_US06
-from training.dataset import starts_rested_full
-from training.readers import read_record
-from training.resample import resample, resample_segment
-from training.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
 
 
 def test_a123_capacity_and_soc_run_from_full_to_empty() -> None:
@@ -50,8 +50,8 @@ def test_resampling_keeps_charge_and_means() -> None:
 def test_round_trip_ocv_removes_a_current_offset() -> None:
     """One slow full → empty → full test whose logged current reads 10 mA low (the Panasonic C/20
     quirk): the offset and the capacity are recovered and the mean branch is the true OCV."""
-    from training.records import Record, RecordMeta
-    from training.soc import ocv_from_round_trip
+    from lmncell.data.records import Record, RecordMeta
+    from lmncell.data.soc import ocv_from_round_trip
 
     cap, i_true, offset = 2.8, 0.14, -0.01
     half = int(cap / i_true * 3600 / 10)

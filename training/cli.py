@@ -6,9 +6,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from fmu_src.model import ModelFileError
-from training.config import ConfigError
-from training.records import DataError
+from lmncell.config import ConfigError
+from lmncell.data.records import DataError
+from lmncell.runtime.model import ModelFileError
 
 
 def _float01(text: str) -> float:
@@ -26,14 +26,14 @@ def _positive(text: str) -> float:
 
 
 def cmd_inspect(a: argparse.Namespace) -> int:
-    from training.summary import inspect_files
+    from lmncell.data.summary import inspect_files
 
     inspect_files(a.files, a.plot, a.capacity)
     return 0
 
 
 def cmd_train(a: argparse.Namespace) -> int:
-    from training.pipeline import train_files
+    from lmncell.identification.train import train_files
 
     partition = a.partition.split(",") if a.partition else None
     train_files(a.data, a.out, a.capacity, a.soc0, partition, a.baselines, a.config,
@@ -43,14 +43,14 @@ def cmd_train(a: argparse.Namespace) -> int:
 
 def cmd_evaluate(a: argparse.Namespace) -> int:
     if a.observer:
-        from training.observe import evaluate_observer_files
+        from lmncell.evaluation.observe import evaluate_observer_files
 
         if a.soc0_est is None:
             raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
         evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
                                 a.plot, a.json)
         return 0
-    from training.pipeline import evaluate_files
+    from lmncell.evaluation.evaluate import evaluate_files
 
     evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json)
     return 0
@@ -58,12 +58,12 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
 
 def cmd_build_fmu(a: argparse.Namespace) -> int:
     if a.native:
-        from lmncell_build.native_build import build_native_fmu
+        from lmncell.fmu.native_build import build_native_fmu
 
         path = build_native_fmu(a.model, a.out)
         print(f"wrote {path}")
         return 0
-    from lmncell_build.pythonfmu_build import build_fmu
+    from lmncell.fmu.pythonfmu_build import build_fmu
 
     path = build_fmu(a.model, a.out)
     print(f"wrote {path}")
@@ -71,19 +71,19 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
 
 
 def cmd_simulate(a: argparse.Namespace) -> int:
-    from training.drive import simulate_cycle_cli
+    from lmncell.scenarios.drive import simulate_cycle_cli
 
     return simulate_cycle_cli(a)
 
 
 def cmd_design(a: argparse.Namespace) -> int:
-    from training.design_cli import run_design
+    from lmncell.design.command import run_design
 
     return run_design(a)
 
 
 def cmd_demo(a: argparse.Namespace) -> int:
-    from training.demo import run_demo
+    from lmncell.report.demo import run_demo
 
     run_demo(Path(a.out))
     return 0

@@ -7,7 +7,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from fmu_src.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES
+from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES
 
 
 class ConfigError(ValueError):

@@ -21,8 +21,9 @@ from fmpy import extract
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(ROOT))
 
-from fmu_src.model import load_model  # noqa: E402
-from fmu_src.runtime import CellStepper  # noqa: E402
+from lmncell.runtime.model import load_model  # noqa: E402
+from lmncell.runtime.step import CellStepper  # noqa: E402
+
 from tests.fmu_helpers import Instance  # noqa: E402
 
 TRIVIAL = '''
@@ -93,9 +94,8 @@ def instantiate_ms(fmu: Path, n: int = 50) -> float:
 
 
 def main() -> None:
-    from lmncell_build.pythonfmu_build import build_fmu
-
-    from training.pipeline import train_files
+    from lmncell.fmu.pythonfmu_build import build_fmu
+    from lmncell.identification.train import train_files
 
     out = Path(tempfile.mkdtemp(prefix="lmncell_bench_"))
     if len(sys.argv) > 1:
@@ -129,7 +129,7 @@ def main() -> None:
 
 def observers_main(model_path: Path, fmu: Path) -> None:
     """Per-step cost of each observer in the runtime and through the FMU (fmpy, h = Ts)."""
-    from fmu_src.observers import SocObserver
+    from lmncell.runtime.observers import SocObserver
 
     model = load_model(model_path)
     for code, kind in ((1, "ekf"), (2, "fuzzy"), (3, "imm")):

@@ -15,13 +15,12 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from fmu_src.runtime import CellStepper, simulate
-from training.baselines import fit_ecm2rc
-from training.config import load_config
-from training.dataset import Segment, record_to_segments
-from training.identify import train_lmn
-from training.readers import read_record
+from lmncell.config import load_config
+from lmncell.data.dataset import Segment, record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.identification.baselines import fit_ecm2rc
+from lmncell.identification.construction import train_lmn
+from lmncell.runtime.step import CellStepper, simulate
 
 ROOT = Path(__file__).resolve().parents[2]
 FILES = [ROOT / "data/panasonic_18650pf/25degC/drive_cycles" / n for n in

@@ -44,10 +44,9 @@ def host_us(host: Path, fmu: Path, n: int, observer: int, tmp: Path) -> float:
 
 
 def main() -> None:
-    from lmncell_build.native_build import build_native_fmu, fmi_headers
-    from lmncell_build.pythonfmu_build import build_fmu
-
-    from training.pipeline import train_files
+    from lmncell.fmu.native_build import build_native_fmu, fmi_headers
+    from lmncell.fmu.pythonfmu_build import build_fmu
+    from lmncell.identification.train import train_files
 
     tmp = Path(tempfile.mkdtemp(prefix="lmncell_native_bench_"))
     if len(sys.argv) > 1:

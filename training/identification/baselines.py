@@ -15,11 +15,10 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+from lmncell.data.dataset import Segment
+from lmncell.identification.ocvfit import hat_basis, second_difference
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
-
-from training.dataset import Segment
-from training.ocvfit import hat_basis, second_difference
 
 SOC_KNOTS = np.linspace(0.0, 1.0, 6)
 N_R = SOC_KNOTS.size
@@ -77,7 +76,7 @@ class Ecm2rc:
 
 def hysteresis(current_a: np.ndarray, gamma: float, ts: float, capacity_ah: float,
                h0: float) -> np.ndarray:
-    """h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ|i|Ts/(3600·Cn)) (as in fmu_src.runtime)."""
+    """h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ|i|Ts/(3600·Cn)) (as in lmncell.runtime.step)."""
     e = np.exp(-gamma * np.abs(current_a) * ts / (3600.0 * capacity_ah)).tolist()
     s = np.sign(current_a).tolist()
     h = np.empty(len(e))

@@ -6,11 +6,10 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-
-from fmu_src.model import load_model
-from training.dataset import Segment, record_to_segments, start_soc
-from training.pipeline import simulate_segment
-from training.readers import read_record
+from lmncell.data.dataset import Segment, record_to_segments, start_soc
+from lmncell.data.readers import read_record
+from lmncell.evaluation.evaluate import simulate_segment
+from lmncell.runtime.model import load_model
 
 
 def fmu_input(seg: Segment, ts: float) -> np.ndarray:

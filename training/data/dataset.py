@@ -7,10 +7,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from training.records import DataError, Record
-from training.resample import resample_segment
-from training.soc import REST_CURRENT_A, coulomb_count, discharged_ah
+from lmncell.data.records import DataError, Record
+from lmncell.data.resample import resample_segment
+from lmncell.data.soc import REST_CURRENT_A, coulomb_count, discharged_ah
 
 
 @dataclass

@@ -17,16 +17,15 @@ from importlib import resources
 from pathlib import Path
 
 import numpy as np
-
-from training.records import DataError
+from lmncell.data.records import DataError
 
 G = 9.81
 CYCLES = {"udds": "udds.csv", "us06": "us06.csv", "hwfet": "hwfet.csv", "wltc": "wltc_3b.csv"}
 
 
 def data_dir() -> Path:
-    """The shipped data folder (repository `data/`)."""
-    return Path(__file__).resolve().parent.parent / "data"
+    """The shipped data folder (repository `data/`, beside the package's source folder)."""
+    return Path(__file__).resolve().parents[2] / "data"
 
 
 @dataclass
@@ -49,7 +48,7 @@ class Vehicle:
 def load_vehicle(path: str | Path | None = None) -> Vehicle:
     """A vehicle TOML file ([vehicle] and [pack] tables); None gives the default compact EV."""
     if path is None:
-        text = resources.files("training").joinpath("vehicles/compact_ev.toml").read_text()
+        text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
         where = "compact_ev.toml"
     else:
         where = str(path)
@@ -182,7 +181,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
 
 
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
-    from training.plots import plt
+    from lmncell.report.plots import plt
 
     t = res.time_s / 60.0
     fig, ax = plt.subplots(4, 1, figsize=(10, 8.5), sharex=True, constrained_layout=True)

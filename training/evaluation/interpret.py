@@ -5,8 +5,7 @@ from __future__ import annotations
 import itertools
 
 import numpy as np
-
-from fmu_src.model import LmnModel
+from lmncell.runtime.model import LmnModel
 
 
 def leaf_centres(model: LmnModel, points: int = 21) -> np.ndarray:

@@ -1,36 +1,36 @@
-"""Library functions behind `lmncell train` and `lmncell evaluate`."""
+"""Training from files: read, segment, identify the LMN (and baselines), write the model file.
+The library function behind `lmncell train` and `lmncell.train`."""
 
 from __future__ import annotations
 
 import copy
-import csv
-import json
 import platform
 import time
-from collections.abc import Callable
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from fmu_src.model import LmnModel, load_model, model_from_dict, model_to_dict, save_model
-from fmu_src.observers import offline_fuzzy_design
-from fmu_src.runtime import exo_series, initial_hysteresis, simulate
-from training import __version__
-from training.baselines import Ecm2rc, fit_ecm2rc
-from training.config import TrainConfig, load_config
-from training.dataset import Segment, estimate_capacity, file_sha256, record_to_segments, start_soc
-from training.identify import train_lmn, with_soc_reference_weights
-from training.metrics import WINDOW, pooled, record_metrics
-from training.ocvfit import lowpass
-from training.readers import read_record
-from training.records import DataError, Record
-
-Progress = Callable[[str], None]
-
-
-def _print(msg: str) -> None:
-    print(msg, flush=True)
+from lmncell import __version__
+from lmncell.config import TrainConfig, load_config
+from lmncell.data.dataset import (
+    Segment,
+    estimate_capacity,
+    file_sha256,
+    record_to_segments,
+    start_soc,
+)
+from lmncell.data.readers import read_record
+from lmncell.data.records import DataError, Record
+from lmncell.evaluation.evaluate import simulate_segment
+from lmncell.evaluation.metrics import pooled, record_metrics
+from lmncell.identification.baselines import fit_ecm2rc
+from lmncell.identification.construction import train_lmn
+from lmncell.identification.ocvfit import lowpass
+from lmncell.identification.prefit import with_soc_reference_weights
+from lmncell.progress import Progress
+from lmncell.progress import print_progress as _print
+from lmncell.runtime.model import LmnModel, model_to_dict, save_model
+from lmncell.runtime.observers import offline_fuzzy_design
+from lmncell.runtime.step import exo_series, initial_hysteresis
 
 
 def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float | None,
@@ -73,12 +73,6 @@ def _limits(segs: list[Segment], model: LmnModel) -> dict:
         t = np.concatenate(temps)
         lim["temperature_c"] = [float(t.min()), float(t.max())]
     return lim
-
-
-def simulate_segment(model: LmnModel, seg: Segment, capacity_ah: float | None = None):
-    """Free-run LMN simulation of a segment from its start SoC (coulomb counting in the model)."""
-    return simulate(model, seg.current_a, seg.temperature_c, seg.soc0, capacity_ah,
-                    initial_hysteresis(seg.soc0))
 
 
 HISTORY_TAU_S = 150.0
@@ -178,111 +172,3 @@ def fit_baselines(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnMod
         progress(f"  {name}: {info['seconds']:.1f} s, {info['evaluations']} evaluations")
         out[name] = {"kind": "ecm2rc", "model": ecm.to_dict(), "fit": info}
     return out
-
-
-# ----- evaluation ------------------------------------------------------------------------
-@dataclass
-class Trace:
-    """One evaluated segment: inputs, measured and simulated voltages of every model."""
-
-    segment: Segment
-    voltage: dict[str, np.ndarray]
-    soc_model: np.ndarray
-    validity: np.ndarray
-
-
-def baseline_voltage(kind: str, doc: dict, seg: Segment, soc: np.ndarray) -> np.ndarray:
-    if kind == "lmn":
-        return simulate_segment(model_from_dict(doc, "baseline"), seg).voltage_v
-    ecm = Ecm2rc.from_dict(doc)
-    return ecm.simulate(seg.current_a, seg.temperature_c, soc, initial_hysteresis(seg.soc0))
-
-
-def evaluate_model(model: LmnModel, paths: list[str | Path], soc0: float | None = None,
-                   capacity_ah: float | None = None) -> tuple[list[Trace], list[dict]]:
-    """Free-run simulation of each record's segments with the LMN and its baselines."""
-    traces, rows = [], []
-    cap = capacity_ah or model.capacity_ah
-    for p in paths:
-        rec = read_record(p)
-        for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), cap):
-            check_range(model, seg)
-            sim = simulate_segment(model, seg, cap)
-            volts = {"lmn": sim.voltage_v}
-            for name, b in model.extra.get("baselines", {}).items():
-                volts[name] = baseline_voltage(b["kind"], b["model"], seg, sim.soc)
-            traces.append(Trace(seg, volts, sim.soc, sim.validity))
-            row = {"record": seg.name}
-            for name, v in volts.items():
-                row[name] = record_metrics(seg.voltage_v, v, seg.soc_ref)
-            rows.append(row)
-    return traces, rows
-
-
-def check_range(model: LmnModel, seg: Segment) -> list[str]:
-    """Warnings for inputs outside what the model was trained on (they are not clamped)."""
-    import warnings
-
-    msgs = []
-    lim = model.limits
-    lo, hi = lim.get("current_a", [-np.inf, np.inf])
-    imin, imax = float(seg.current_a.min()), float(seg.current_a.max())
-    if imin < 1.1 * lo - 0.01 or imax > 1.1 * hi + 0.01:
-        msgs.append(f"{seg.name}: current {imin:.2f}…{imax:.2f} A exceeds the trained range "
-                    f"{lo:.2f}…{hi:.2f} A")
-    if seg.temperature_c is not None and "temperature_c" in lim:
-        tlo, thi = lim["temperature_c"]
-        if seg.temperature_c.min() < tlo - 2 or seg.temperature_c.max() > thi + 2:
-            msgs.append(f"{seg.name}: temperature {seg.temperature_c.min():.1f}…"
-                        f"{seg.temperature_c.max():.1f} °C outside the trained {tlo:.1f}…"
-                        f"{thi:.1f} °C")
-    for m in msgs:
-        warnings.warn(m, UserWarning, stacklevel=2)
-    return msgs
-
-
-def write_trace(trace: Trace, path: str | Path) -> Path:
-    """One row per model step: time_s (end of step), current_a, voltages, soc."""
-    path = Path(path)
-    seg = trace.segment
-    with open(path, "w", newline="") as fh:
-        wr = csv.writer(fh)
-        wr.writerow(["time_s", "current_a", "voltage_measured_v", "voltage_model_v", "soc"])
-        for row in zip(seg.time_s, seg.current_a, seg.voltage_v, trace.voltage["lmn"],
-                       trace.soc_model, strict=True):
-            wr.writerow([repr(float(x)) for x in row])
-    return path
-
-
-def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float | None = None,
-                   plot_dir: str | Path | None = None, trace: str | Path | None = None,
-                   as_json: bool = False, progress: Progress = _print) -> list[dict]:
-    """`lmncell evaluate`: figures per record for the LMN and its baselines."""
-    model = load_model(model_path)
-    traces, rows = evaluate_model(model, paths, soc0)
-    if trace is not None:
-        if len(traces) == 1:
-            write_trace(traces[0], trace)
-        else:
-            base = Path(trace)
-            for k, t in enumerate(traces):
-                write_trace(t, base.with_name(f"{base.stem}_{k}{base.suffix}"))
-    if plot_dir is not None:
-        from training import plots
-
-        Path(plot_dir).mkdir(parents=True, exist_ok=True)
-        files = plots.evaluation_figures(model, traces, Path(plot_dir))
-        progress(f"wrote {len(files)} figure(s) to {plot_dir}")
-    if as_json:
-        print(json.dumps(rows, indent=1))
-    else:
-        for r in rows:
-            for name, m in r.items():
-                if name == "record":
-                    continue
-                win = m["window_rmse_mv"]
-                win_txt = "  (none)" if win is None else f"{win:6.2f} mV"
-                progress(f"{r['record'][:48]:48s} {name:12s} RMSE {m['rmse_mv']:7.2f} mV  MAE "
-                         f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | {WINDOW[0]:.0%}–"
-                         f"{WINDOW[1]:.0%} SoC RMSE {win_txt}")
-    return rows

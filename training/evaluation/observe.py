@@ -7,12 +7,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-
-from fmu_src.model import LmnModel, load_model
-from fmu_src.observers import ObserverSettings, SocObserver
-from fmu_src.runtime import exo_series
-from training.dataset import Segment, record_to_segments, start_soc
-from training.readers import read_record
+from lmncell.data.dataset import Segment, record_to_segments, start_soc
+from lmncell.data.readers import read_record
+from lmncell.runtime.model import LmnModel, load_model
+from lmncell.runtime.observers import ObserverSettings, SocObserver
+from lmncell.runtime.step import exo_series
 
 SETTLE_S = 600.0
 BAND = 0.02
@@ -69,7 +68,7 @@ def soc_metrics(run: ObserverRun) -> dict:
 
 
 def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
-    from training.plots import plt
+    from lmncell.report.plots import plt
 
     fig, ax = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, constrained_layout=True)
     r0 = runs[0]

@@ -18,9 +18,8 @@ from datetime import datetime
 from pathlib import Path
 
 import numpy as np
-
-from training.records import DataError, Record, RecordMeta
-from training.resample import find_gaps
+from lmncell.data.records import DataError, Record, RecordMeta
+from lmncell.data.resample import find_gaps
 
 FORMATS = ("plett", "arbin", "panasonic", "bdf", "generic")
 PLETT_COLUMNS = ("time", "step", "current", "voltage", "chgAh", "disAh")

@@ -9,9 +9,8 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-
-from fmu_src.model import LmnModel
-from training.records import Record
+from lmncell.data.records import Record
+from lmncell.runtime.model import LmnModel
 
 COLORS = {"measured": "k", "lmn": "tab:red", "arx": "tab:gray", "ecm2rc": "tab:blue",
           "ecm2rc_hyst": "tab:green"}
@@ -122,7 +121,7 @@ def write_local_model_table(model: LmnModel, path: Path) -> Path:
     """CSV of each local model's operating point, resistances (mΩ) and time constants (s)."""
     import csv
 
-    from training.interpret import local_model_table
+    from lmncell.evaluation.interpret import local_model_table
 
     rows = local_model_table(model)
     with open(path, "w", newline="") as fh:

@@ -12,9 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-
-from training.baselines import hysteresis
-from training.design import DEFAULT_OCV_SOC, DEFAULT_OCV_V
+from lmncell.design.optimal import DEFAULT_OCV_SOC, DEFAULT_OCV_V
+from lmncell.identification.baselines import hysteresis
 
 
 @dataclass

@@ -136,9 +136,9 @@ def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarr
 
     paths: [discharge test (starts full), charge test (starts empty)], or one file that holds
     both (full → empty → full; its current offset is balanced out and its SoC is a fraction of
-    its own capacity, see training.soc.ocv_from_round_trip)."""
-    from training.readers import read_record
-    from training.soc import ocv_from_round_trip, ocv_from_slow_tests
+    its own capacity, see lmncell.data.soc.ocv_from_round_trip)."""
+    from lmncell.data.readers import read_record
+    from lmncell.data.soc import ocv_from_round_trip, ocv_from_slow_tests
 
     recs = [read_record(p) for p in paths]
     if len(recs) == 1:
@@ -146,7 +146,7 @@ def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarr
     elif len(recs) == 2:
         curve = ocv_from_slow_tests(recs[0], recs[1], capacity_ah)
     else:
-        from training.records import DataError
+        from lmncell.data.records import DataError
 
         raise DataError(f"ocv_tests: expected one or two files, got {len(recs)}")
     return np.interp(knots, curve.soc, curve.mean_v)

@@ -6,11 +6,10 @@ import math
 from pathlib import Path
 
 import numpy as np
-
-from training.dataset import starts_rested_full
-from training.readers import read_record
-from training.records import Record
-from training.soc import charge_throughput_ah
+from lmncell.data.dataset import starts_rested_full
+from lmncell.data.readers import read_record
+from lmncell.data.records import Record
+from lmncell.data.soc import charge_throughput_ah
 
 NOMINAL_AH = {"A123": 2.3, "Pan18650PF": 2.9}
 
@@ -82,7 +81,7 @@ def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
         print(format_summary(s), flush=True)
         out.append(s)
         if plot is not None:
-            from training.plots import record_figure
+            from lmncell.report.plots import record_figure
 
             target = Path(plot)
             if len(paths) > 1:

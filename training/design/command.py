@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from training.design import (
+from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
     DesignSpec,
@@ -20,7 +20,7 @@ from training.design import (
 def run_design(a) -> int:
     cell = CellSpec(capacity_ah=a.capacity, max_c_rate=a.max_c_rate, r0_ohm=a.r0)
     if a.model:
-        from fmu_src.model import load_model
+        from lmncell.runtime.model import load_model
 
         m = load_model(a.model)
         cell.ocv_soc, cell.ocv_v = tuple(m.ocv_soc), tuple(m.ocv_v)

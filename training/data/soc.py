@@ -9,8 +9,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-
-from training.records import DataError, Record
+from lmncell.data.records import DataError, Record
 
 REST_CURRENT_A = 0.02
 

@@ -11,8 +11,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-
-from training.records import DataError, Record
+from lmncell.data.records import DataError, Record
 
 
 def _cumulative(t: np.ndarray, x: np.ndarray) -> np.ndarray:

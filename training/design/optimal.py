@@ -21,13 +21,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+from lmncell.data.records import DataError, Record, RecordMeta
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
-from training.records import DataError, Record, RecordMeta
-
 if TYPE_CHECKING:
-    from training.virtual_cell import VirtualCell
+    from lmncell.design.virtual_cell import VirtualCell
 
 # A123 26650 LFP, mean of the C/30 charge and discharge OCV at 25 °C (shipped data), 0…100 % SoC
 DEFAULT_OCV_SOC = tuple(np.linspace(0.0, 1.0, 11))
@@ -348,7 +347,7 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
 # ----- output -----------------------------------------------------------------------------------
 def write_programme(prog: Programme, out: Path) -> list[Path]:
     """Cycler CSV (time_s,current_a: current held until the next row) and BDF CSV."""
-    from training.readers import write_bdf
+    from lmncell.data.readers import write_bdf
 
     out = Path(out)
     with open(out, "w") as fh:
@@ -368,7 +367,7 @@ def write_programme(prog: Programme, out: Path) -> list[Path]:
 
 def plot_programme(prog: Programme, out_dir: Path, index: int = 0) -> list[Path]:
     """Fig. 5 (one sequence) and Fig. 6 (the whole programme with charge and SoC)."""
-    from training.plots import plt
+    from lmncell.report.plots import plt
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -407,7 +406,7 @@ def plot_programme(prog: Programme, out_dir: Path, index: int = 0) -> list[Path]
 def drive_profile_current(capacity_ah: float, cycle: str = "udds", repeat: int = 3,
                           c_rate_peak: float = 4.0) -> np.ndarray:
     """Cell current (A, 1 s) of a vehicle drive cycle scaled so that its peak is c_rate_peak·C."""
-    from training.drive import load_cycle, load_vehicle, pack_power
+    from lmncell.scenarios.drive import load_cycle, load_vehicle, pack_power
 
     veh = load_vehicle()
     _, speed, grade = load_cycle(cycle)
@@ -430,7 +429,7 @@ RANDOM_SEEDS = (1, 2, 3, 4, 5)
 
 def _virtual_ocv_test(vc: VirtualCell, capacity_ah: float, folder: Path) -> Path:
     """A slow full → empty → full test (C/20, 1 s) run on the virtual cell, as a BDF file."""
-    from training.readers import write_bdf
+    from lmncell.data.readers import write_bdf
 
     n = round(3600.0 / VIRTUAL_OCV_TEST_C_RATE)
     i = VIRTUAL_OCV_TEST_C_RATE * capacity_ah
@@ -454,12 +453,12 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     linear design model's covariance-determinant ratio (random over designed)."""
     import tempfile
 
-    from training.config import load_config
-    from training.dataset import Segment
-    from training.identify import train_lmn
-    from training.metrics import record_metrics
-    from training.pipeline import simulate_segment
-    from training.virtual_cell import VirtualCell
+    from lmncell.config import load_config
+    from lmncell.data.dataset import Segment
+    from lmncell.design.virtual_cell import VirtualCell
+    from lmncell.evaluation.evaluate import simulate_segment
+    from lmncell.evaluation.metrics import record_metrics
+    from lmncell.identification.construction import train_lmn
 
     vc = VirtualCell(capacity_ah=cell.capacity_ah)
     soc0 = float(spec.soc_profile[0])
@@ -506,6 +505,6 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
         ld = np.median([r["log_det_information"] for r in rand])
         out[f"covariance_det_ratio_{kind}_over_designed"] = float(
             np.exp(des["log_det_information"] - ld))
-    out["virtual_cell"] = ("built-in nonlinear ECM with hysteresis (training.virtual_cell; "
+    out["virtual_cell"] = ("built-in nonlinear ECM with hysteresis (lmncell.design.virtual_cell; "
                            "pybamm not installed here)")
     return out

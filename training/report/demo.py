@@ -15,19 +15,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-from fmu_src.model import LmnModel, load_model
-from training.dataset import record_to_segments
-from training.drive import data_dir, load_vehicle, plot_cycle, run_cycle
-from training.fmucheck import compare_fmu_with_pipeline
-from training.interpret import local_model_table
-from training.metrics import WINDOW
-from training.observe import observer_figure, observer_runs, soc_metrics
-from training.pipeline import evaluate_model, train_files
-from training.readers import read_record
-from training.records import Record
-from training.report import Report
-from training.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
+from lmncell.data.dataset import record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.data.records import Record
+from lmncell.data.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
+from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
+from lmncell.evaluation.interpret import local_model_table
+from lmncell.evaluation.metrics import WINDOW
+from lmncell.evaluation.observe import observer_figure, observer_runs, soc_metrics
+from lmncell.identification.train import train_files
+from lmncell.report.html import Report
+from lmncell.runtime.model import LmnModel, load_model
+from lmncell.scenarios.drive import data_dir, load_vehicle, plot_cycle, run_cycle
 
 A123 = "a123_plett"
 TRAIN = ["A123_DYN_30_N05_s1.csv.gz", "A123_DYN_45_P05_s1.csv.gz", "A123_DYN_50_P45_s1.csv.gz"]
@@ -43,7 +43,7 @@ def _say(msg: str) -> None:
 
 def ocv_figure(out: Path) -> tuple[Path, float]:
     """Fig. 1: charge and discharge OCV branches of the 25 °C C/30 test."""
-    from training.plots import plt
+    from lmncell.report.plots import plt
 
     d = data_dir() / A123 / "ocv"
     s1, s2, s3 = (read_record(d / f"A123_OCV_P25_S{k}.csv.gz") for k in (1, 2, 3))
@@ -73,7 +73,7 @@ def run_demo(out: Path) -> Path:
     capacity = capacity_from_discharge(val_rec, empty)
     _say(f"capacity from the 25 °C full discharge (s1 + s2): {capacity:.4f} Ah")
 
-    from training import plots
+    from lmncell.report import plots
 
     rep.section("Data")
     rep.text("A123 26650 LFP cell, dynamic tests of G. L. Plett (Battery Management Systems, "
@@ -154,7 +154,7 @@ def run_demo(out: Path) -> Path:
     soc_figures = _observer_section(rep, model, val_rec, capacity, out)
 
     _say("building the FMU …")
-    from lmncell_build.pythonfmu_build import build_fmu
+    from lmncell.fmu.pythonfmu_build import build_fmu
 
     fmu = build_fmu(model_path, out / "A123_LMNCell.fmu")
     check = compare_fmu_with_pipeline(model_path, fmu, dyn / VALIDATE, soc0=1.0)
@@ -235,7 +235,7 @@ def _observer_section(rep: Report, model: LmnModel, record: Record, capacity: fl
 
 def _native(model_path: Path, out: Path, record: Path) -> str:
     """Build the native FMU where a C compiler exists and check it against the pipeline."""
-    from lmncell_build.native_build import NativeBuildError, build_native_fmu
+    from lmncell.fmu.native_build import NativeBuildError, build_native_fmu
 
     _say("building the native FMU (generated C, gcc) …")
     try:
@@ -251,7 +251,7 @@ def _native(model_path: Path, out: Path, record: Path) -> str:
 
 
 def _agreement_figure(check: dict, path: Path) -> Path:
-    from training.plots import plt
+    from lmncell.report.plots import plt
 
     t = (check["time_s"] - check["time_s"][0]) / 3600
     fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True, constrained_layout=True)

@@ -1,0 +1,1 @@
+"""Experiment design: D-optimal excitation programmes and the virtual cells that prove them."""

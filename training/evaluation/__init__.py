@@ -1,0 +1,1 @@
+"""Evaluation: free-run simulation, metrics, observers on records, FMU-vs-pipeline checks."""

@@ -1,0 +1,1 @@
+"""Identification of the local model network: OCV pre-fit, tree construction, baselines."""

@@ -1,0 +1,202 @@
+"""Incremental identification of the local model network (the paper's algorithm, generalised).
+
+1. OCV(SoC) and the hysteresis rate γ from a feedback-free pre-fit (prefit.py, ocvfit.py).
+2. Start with one local model fitted by (locally weighted) least squares on the one-step error.
+3. Repeat: take the local model with the largest weighted error (eq. 10–12), replace it by a node
+   and two children. The split starts deterministically as the best orthogonal split through the
+   leaf's weighted median along each partition axis; then the node's weights ψ are optimised by
+   Levenberg–Marquardt on the global loss (eq. 10) with the Jacobian of eq. 14–18, the two
+   children's parameters re-estimated by locally weighted least squares at every step. All other
+   nodes and local models stay as they are.
+4. After every split: one-step loss, AICc and free-run RMSE on the validation data are recorded;
+   the number of local models M is chosen from that curve.
+5. Final output-error refinement: all local models (and the OCV knots) by Levenberg–Marquardt on
+   the free-run simulation error, with sensitivities propagated through the output feedback.
+Local models with a pole outside max_pole are repaired (poles pulled in radially, the rest refit).
+Nothing is random: the same data and settings give the same model.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from lmncell.config import TrainConfig
+from lmncell.data.dataset import Segment
+from lmncell.identification.prefit import (
+    CHAMBER_SPAN_K,
+    _within_record_span,
+    choose_arrhenius_with_temperature_terms,
+    choose_prefit,
+    temperature_degree,
+    temperature_levels,
+    with_soc_reference_weights,
+)
+from lmncell.identification.refinement import refine_output_error
+from lmncell.identification.splitting import optimise_split
+from lmncell.identification.tree import (
+    Tree,
+    build_design,
+    freerun_rmse,
+    one_step,
+    root_tree,
+    skeleton,
+)
+from lmncell.runtime.model import LmnModel
+from lmncell.runtime.step import exo_series
+
+VALIDATION_BLOCKS = 5   # 'auto' keeps hysteresis only if it cuts the pre-fit RMSE by 3 %
+
+
+Progress = Callable[[str], None]
+
+
+def _quiet(_msg: str) -> None:
+    pass
+
+
+def aicc(loss: float, n: float, n_params: int) -> float:
+    """Corrected Akaike criterion of a least-squares fit (loss = weighted sum of squares)."""
+    if n - n_params - 1 <= 0 or loss <= 0:
+        return float("inf")
+    return n * np.log(loss / n) + 2 * n_params + 2 * n_params * (n_params + 1) / (n - n_params - 1)
+
+
+@dataclass
+class TrainResult:
+    model: LmnModel
+    curve: list[dict]
+    chosen_m: int
+    info: dict
+
+
+def validation_masks(segs: list[Segment], cfg: TrainConfig) -> list[np.ndarray]:
+    """Per segment, True on validation samples.
+
+    'block': VALIDATION_BLOCKS evenly spread time blocks that together hold validation_fraction
+    of each segment (so every SoC range is validated); 'record': the whole last segment.
+    """
+    masks = []
+    for k, seg in enumerate(segs):
+        mask = np.zeros(len(seg), dtype=bool)
+        if cfg.validation == "block":
+            n = len(seg)
+            width = cfg.validation_fraction * n / VALIDATION_BLOCKS
+            for b in range(VALIDATION_BLOCKS):
+                mid = (b + 0.5) * n / VALIDATION_BLOCKS
+                mask[int(mid - width / 2): int(mid + width / 2)] = True
+        elif cfg.validation == "record" and k == len(segs) - 1 and len(segs) > 1:
+            mask[:] = True
+        masks.append(mask)
+    return masks
+
+
+def partition_normalisation(base: LmnModel, segs: list[Segment]
+                            ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
+    """Centre and half-range of the raw partition inputs, and each segment's SoC series."""
+    series = [exo_series(base, s.current_a, s.temperature_c, s.soc0) for s in segs]
+    raw = np.vstack([ex.z for ex in series])
+    lo, hi = raw.min(axis=0), raw.max(axis=0)
+    center = 0.5 * (lo + hi)
+    scale = np.where(hi - lo > 1e-9, 0.5 * (hi - lo), 1.0)
+    return center, scale, [ex.soc for ex in series]
+
+
+def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
+              progress: Progress = _quiet) -> TrainResult:
+    """Identify an LMN from model-rate segments (see the module docstring)."""
+    t_start = time.perf_counter()
+    d = len(cfg.partition)
+    n_temp = temperature_degree(cfg, segs)
+    base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,
+                    np.zeros(d), np.ones(d), n_temp)
+    center, scale, socs = partition_normalisation(base, segs)
+    masks = validation_masks(segs, cfg)
+    gamma, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs)
+    progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
+             f"{1e3 * ocv.rmse_v:.2f} mV")
+    base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
+    base.arrhenius_k = e_k
+    if n_temp:
+        progress(f"  temperature terms of degree {n_temp} (training temperatures "
+                 + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
+    fixed_axes = frozenset()
+    if n_temp and "temperature" in cfg.partition:
+        fixed_axes = frozenset({cfg.partition.index("temperature")})
+        progress("  temperature acts through the temperature terms, not through splits: "
+                 "sigmoid splits between a few training temperatures interpolate badly")
+    segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
+    e_scores: dict[str, float] = {}
+    if (n_temp and cfg.temperature_scaling == "auto" and e_k is not None
+            and _within_record_span(segs) <= CHAMBER_SPAN_K):
+        e_k, e_scores, design = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg,
+                                                                        progress)
+        base.arrhenius_k = e_k
+    else:
+        design = build_design(base, segs, masks)
+    X, y, w = design.X, design.y, design.w_fit
+    n_eff = float(w.sum())
+    tree = root_tree(base, design, cfg)
+    stages: list[Tree] = []
+    curve: list[dict] = []
+    stop_stage = "validation" if cfg.stop == "validation" and cfg.validation != "none" else "aicc"
+    while True:
+        model = tree.apply(base)
+        Phi, yhat = one_step(model, design)
+        e = y - yhat
+        loss = float(np.sum(w * e * e))
+        n_par = model.theta.size + (d + 1) * len(tree.weights)
+        val = (freerun_rmse(model, segs, design, "val") if stop_stage == "validation"
+               else float("nan"))
+        fit_fr = freerun_rmse(model, segs, design, "fit")
+        curve.append({"local_models": model.n_local_models,
+                      "one_step_rmse_mv": 1e3 * float(np.sqrt(loss / n_eff)),
+                      "aicc": finite_or_none(aicc(loss, n_eff, n_par)),
+                      "train_freerun_rmse_mv": finite_or_none(1e3 * fit_fr),
+                      "validation_freerun_rmse_mv": finite_or_none(1e3 * val)})
+        stages.append(tree)
+        progress(f"  M={model.n_local_models}: one-step {curve[-1]['one_step_rmse_mv']:.2f} mV, "
+                 f"free-run train {1e3 * fit_fr:.2f} mV, validation {1e3 * val:.2f} mV "
+                 f"({time.perf_counter() - t_start:.1f} s)")
+        if model.n_local_models >= cfg.max_local_models:
+            break
+        leaf_err = np.sum(w[:, None] * Phi * e[:, None] ** 2, axis=0)
+        split = None
+        for j in np.argsort(-leaf_err, kind="stable"):
+            r_rest = y - (yhat - Phi[:, j] * (X @ model.theta[j]))
+            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg, fixed_axes)
+            if split is not None:
+                tree = tree.split(int(j), split.psi, split.theta_a, split.theta_b)
+                break
+        if split is None:
+            progress("  no leaf can be split further")
+            break
+    key = "validation_freerun_rmse_mv" if stop_stage == "validation" else "aicc"
+    scores = np.array([np.inf if c[key] is None else c[key] for c in curve], dtype=float)
+    scores = np.where(np.isfinite(scores), scores, np.inf)
+    if key == "aicc":
+        chosen = int(np.argmin(scores))
+    else:
+        chosen = int(np.flatnonzero(scores <= 1.02 * scores.min())[0])
+    model = stages[chosen].apply(base)
+    progress(f"  chosen M={model.n_local_models} by {key}")
+    info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
+            "arrhenius_root_freerun_rmse_mv": e_scores,
+            "temperature_terms": n_temp,
+            "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
+    if cfg.oe_refinement:
+        model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
+        info["refined_validation_freerun_rmse_mv"] = finite_or_none(
+            1e3 * freerun_rmse(model, segs, design))
+        info["refined_train_freerun_rmse_mv"] = finite_or_none(
+            1e3 * freerun_rmse(model, segs, design, "fit"))
+    info["seconds"] = time.perf_counter() - t_start
+    return TrainResult(model, curve, model.n_local_models, info)
+
+
+def finite_or_none(value: float) -> float | None:
+    """The value, or None where it is NaN or infinite (not computed, e.g. no validation data):
+    the model file is strict JSON."""
+    return float(value) if np.isfinite(value) else None

@@ -1,0 +1,94 @@
+"""One split of the tree: the worst leaf becomes a node with a sigmoid validity and two
+children. Only the new node's weights ψ (Levenberg–Marquardt) and the two children's parameters
+(locally weighted least squares at every step) are optimised; nothing else changes."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from lmncell.config import TrainConfig
+from lmncell.identification.tree import stabilise, wls
+
+
+def _sigmoid(a: np.ndarray) -> np.ndarray:
+    with np.errstate(over="ignore"):        # exp(−a) → inf gives the correct limit 0
+        return 1.0 / (1.0 + np.exp(-a))
+
+
+@dataclass
+class SplitResult:
+    psi: np.ndarray
+    theta_a: np.ndarray
+    theta_b: np.ndarray
+    loss: float
+    loss_history: list[float]
+
+
+def _split_children(psi: np.ndarray, X: np.ndarray, y: np.ndarray, w: np.ndarray, Pj: np.ndarray,
+                    Z1: np.ndarray, r_rest: np.ndarray, na: int, max_pole: float):
+    phi = _sigmoid(Z1 @ psi)
+    wa, wb = w * Pj * phi, w * Pj * (1.0 - phi)
+    ta = stabilise(wls(X, y, wa), na, max_pole, X, y, wa)
+    tb = stabilise(wls(X, y, wb), na, max_pole, X, y, wb)
+    ya, yb = X @ ta, X @ tb
+    e = r_rest - Pj * (phi * ya + (1.0 - phi) * yb)
+    return ta, tb, ya, yb, phi, e, float(np.sum(w * e * e))
+
+
+def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, Pj: np.ndarray,
+                   r_rest: np.ndarray, cfg: TrainConfig,
+                   fixed_axes: frozenset[int] = frozenset()) -> SplitResult | None:
+    """Best initial orthogonal split of one leaf, then Levenberg–Marquardt on its weights ψ.
+    fixed_axes: partition axes the split may not use (their weights stay 0)."""
+    na, max_pole = cfg.output_lags, cfg.max_pole
+    sel = Pj > 1e-6 * Pj.max()
+    X, y, w, Z, Pj, r_rest = X[sel], y[sel], w[sel], Z[sel], Pj[sel], r_rest[sel]
+    Z1 = np.hstack([np.ones((Z.shape[0], 1)), Z])
+    wl = w * Pj
+    if wl.sum() <= 0:
+        return None
+    best = None
+    for axis in range(Z.shape[1]):
+        if axis in fixed_axes:
+            continue
+        zc = Z[:, axis]
+        order = np.argsort(zc, kind="stable")
+        cum = np.cumsum(wl[order])
+        median = zc[order][np.searchsorted(cum, 0.5 * cum[-1])]
+        spread = float(np.sqrt(np.sum(wl * (zc - np.sum(wl * zc) / wl.sum())**2) / wl.sum()))
+        if spread < 1e-6:
+            continue
+        kappa = 2.0 / spread
+        psi = np.zeros(Z1.shape[1])
+        psi[0], psi[axis + 1] = -kappa * median, kappa
+        res = _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole)
+        if best is None or res[-1] < best[1]:
+            best = (psi, res[-1], axis, res)
+    if best is None:
+        return None
+    psi, loss, axis, res = best
+    free = (np.array([0] + [a + 1 for a in range(Z.shape[1]) if a not in fixed_axes])
+            if cfg.oblique else np.array([0, axis + 1]))
+    lam, history = 1e-2, [loss]
+    ta, tb, ya, yb, phi, e, loss = res
+    for _ in range(cfg.lm_iterations):
+        F = (Pj * (ya - yb) * phi * (1.0 - phi))[:, None] * Z1[:, free]
+        H = F.T @ (F * w[:, None])
+        g = F.T @ (w * e)
+        improved = False
+        for _try in range(8):
+            step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
+            cand = psi.copy()
+            cand[free] += step
+            new = _split_children(cand, X, y, w, Pj, Z1, r_rest, na, max_pole)
+            if new[-1] < loss:
+                psi, (ta, tb, ya, yb, phi, e, loss) = cand, new
+                lam = max(lam / 3.0, 1e-9)
+                improved = True
+                break
+            lam *= 4.0
+        history.append(loss)
+        if not improved or history[-2] - loss < 1e-6 * history[-2]:
+            break
+    return SplitResult(psi, ta, tb, loss, history)

@@ -1,0 +1,1 @@
+"""Reports: figures, the HTML report and the demo that writes one."""

@@ -1,0 +1,1 @@
+"""Scenarios: vehicle drive cycles turned into cell current and driven through an FMU."""
