@@ -5,39 +5,112 @@ from __future__ import annotations
 import argparse
 import sys
 from pathlib import Path
+from typing import Any
 
-from lmncell.config import ConfigError
+from lmncell import __version__
+from lmncell.config import ConfigError, parse_setting
 from lmncell.data.records import DataError
+from lmncell.runtime.cosim import InputError
 from lmncell.runtime.model import ModelFileError
+
+USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
+               IsADirectoryError, PermissionError)
+
+
+class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
+    """Shows an option's default where it has one (not for flags and unset options)."""
+
+    def _get_help_string(self, action: argparse.Action) -> str:
+        text = action.help or ""
+        if (action.default not in (None, False, [], argparse.SUPPRESS) and "default" not in text
+                and action.option_strings):
+            text += " (default: %(default)s)"
+        return text
 
 
 def _float01(text: str) -> float:
-    v = float(text)
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number within 0…1") from None
     if not 0.0 <= v <= 1.0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a SoC fraction within 0…1")
     return v
 
 
 def _positive(text: str) -> float:
-    v = float(text)
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a number > 0") from None
     if not v > 0:
         raise argparse.ArgumentTypeError(f"{text!r}: expected a value > 0")
     return v
 
 
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number ≥ 1") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number ≥ 1")
+    return v
+
+
+def _columns(text: str) -> dict[str, str]:
+    """time=COL,current=COL,voltage=COL[,temperature=COL] → {quantity: column name}."""
+    out: dict[str, str] = {}
+    for part in text.split(","):
+        key, sep, col = part.partition("=")
+        if not sep or not key.strip() or not col.strip():
+            raise argparse.ArgumentTypeError(
+                f"{text!r}: expected time=COL,current=COL,voltage=COL[,temperature=COL] "
+                f"(item {part!r} is not QUANTITY=COLUMN)")
+        out[key.strip()] = col.strip()
+    return out
+
+
+def _delimiter(text: str | None) -> str | None:
+    """The delimiter option: one character, or the words tab / \\t for a tab."""
+    return "\t" if text in ("tab", "\\t", "TAB") else text
+
+
+def read_options(a: argparse.Namespace) -> dict[str, Any]:
+    """The reader options of the command line, for lmncell.data.readers.read_record."""
+    extra = {"discharge_positive": a.discharge_positive or None,
+             "current_unit": a.current_unit, "sep": _delimiter(a.delimiter),
+             "decimal": a.decimal}
+    given = {k: v for k, v in extra.items() if v is not None}
+    if a.columns is None:
+        if given:
+            flags = {"discharge_positive": "--discharge-positive",
+                     "current_unit": "--current-unit", "sep": "--delimiter",
+                     "decimal": "--decimal"}
+            raise ConfigError(f"{', '.join(flags[k] for k in given)} need --columns "
+                              "time=COL,current=COL,voltage=COL (the generic CSV reader); the "
+                              "known formats are read without them")
+        return {}
+    return {"columns": a.columns, **given}
+
+
 def cmd_inspect(a: argparse.Namespace) -> int:
     from lmncell.data.summary import inspect_files
 
-    inspect_files(a.files, a.plot, a.capacity)
+    inspect_files(a.files, a.plot, a.capacity, read_options(a))
     return 0
 
 
 def cmd_train(a: argparse.Namespace) -> int:
     from lmncell.identification.train import train_files
 
+    settings = dict(parse_setting(s) for s in a.set)
+    for key, value in (("max_local_models", a.max_local_models), ("ocv_tests", a.ocv_tests)):
+        if value is not None:
+            settings[key] = value
     partition = a.partition.split(",") if a.partition else None
     train_files(a.data, a.out, a.capacity, a.soc0, partition, a.baselines, a.config,
-                max_local_models=a.max_local_models, ocv_tests=a.ocv_tests)
+                read_options=read_options(a), **settings)
     return 0
 
 
@@ -48,11 +121,12 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
         if a.soc0_est is None:
             raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
         evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
-                                a.plot, a.json)
+                                a.plot, a.json, read_options=read_options(a))
         return 0
     from lmncell.evaluation.evaluate import evaluate_files
 
-    evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json)
+    evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
+                   read_options=read_options(a))
     return 0
 
 
@@ -61,11 +135,10 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
         from lmncell.fmu.native_build import build_native_fmu
 
         path = build_native_fmu(a.model, a.out)
-        print(f"wrote {path}")
-        return 0
-    from lmncell.fmu.pythonfmu_build import build_fmu
+    else:
+        from lmncell.fmu.pythonfmu_build import build_fmu
 
-    path = build_fmu(a.model, a.out)
+        path = build_fmu(a.model, a.out)
     print(f"wrote {path}")
     return 0
 
@@ -89,95 +162,135 @@ def cmd_demo(a: argparse.Namespace) -> int:
     return 0
 
 
+def _add_reader_options(s: argparse.ArgumentParser) -> None:
+    g = s.add_argument_group("your own CSV files (generic reader; the known formats — Plett, "
+                             "Arbin, Panasonic .mat, BDF — are recognised without these)")
+    g.add_argument("--columns", type=_columns, metavar="time=COL,current=COL,voltage=COL"
+                   "[,temperature=COL]", help="the file's column names for time (s), current, "
+                   "voltage (V) and optionally cell temperature (°C)")
+    g.add_argument("--discharge-positive", action="store_true", help="the file counts "
+                   "discharge current as positive (LMNCell: current > 0 charges)")
+    g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "
+                   "(default: A)")
+    g.add_argument("--delimiter", metavar="CHAR", help="field delimiter, e.g. ';' or tab "
+                   "(default: ',')")
+    g.add_argument("--decimal", choices=[".", ","], help="decimal mark (default: '.')")
+
+
 def build_parser() -> argparse.ArgumentParser:
+    fmt = {"formatter_class": _HelpFormatter}
     p = argparse.ArgumentParser(prog="lmncell", description="Local model network cell models "
                                 "from cycler data, exported as FMI 2.0 FMUs. Current > 0 "
-                                "charges; SI units; SoC as a fraction.")
-    sub = p.add_subparsers(dest="command", required=True)
+                                "charges; SI units; SoC as a fraction 0…1.", **fmt)
+    p.add_argument("--version", action="version", version=f"lmncell {__version__}")
+    sub = p.add_subparsers(dest="command", metavar="COMMAND")
 
-    s = sub.add_parser("inspect", help="summarise cycler files")
-    s.add_argument("files", nargs="+")
-    s.add_argument("--plot", metavar="OUT.png")
-    s.add_argument("--capacity", type=_positive, help="Ah, for C-rates and SoC")
+    s = sub.add_parser("inspect", help="summarise cycler files (and plot them)", **fmt)
+    s.add_argument("files", nargs="+", help="data files (CSV, .mat, BDF; .gz too)")
+    s.add_argument("--plot", metavar="OUT.png", help="one figure of all files")
+    s.add_argument("--capacity", type=_positive, help="Ah, for C-rates and SoC (default: the "
+                   "discharged charge of a record that starts full)")
+    _add_reader_options(s)
     s.set_defaults(func=cmd_inspect)
 
-    s = sub.add_parser("train", help="identify an LMN from measurements")
-    s.add_argument("data", nargs="+")
-    s.add_argument("--out", required=True, metavar="MODEL.json")
+    s = sub.add_parser("train", help="identify an LMN from measurements", **fmt)
+    s.add_argument("data", nargs="+", help="training data files")
+    s.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
     s.add_argument("--capacity", type=_positive, help="Ah (default: from full discharges)")
     s.add_argument("--soc0", type=_float01, help="start SoC of every record (default: 1.0 for "
                    "records that start rested at full charge)")
     s.add_argument("--partition", help="comma list of soc, current, filtered_current, "
-                   "temperature")
+                   "temperature (default: soc)")
     s.add_argument("--baselines", action="store_true", help="also fit ARX and 2RC baselines")
-    s.add_argument("--config", metavar="FILE.toml")
-    s.add_argument("--max-local-models", type=int)
+    s.add_argument("--config", metavar="FILE.toml", help="training settings ([train] table)")
+    s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any training setting (lmncell.config.TrainConfig), VALUE in TOML "
+                   "syntax; repeatable, e.g. --set max_local_models=4 --set "
+                   "'partition=[\"soc\",\"current\"]'")
+    s.add_argument("--max-local-models", type=_positive_int, help="upper limit of M "
+                   "(default: 8)")
     s.add_argument("--ocv-tests", nargs="+", metavar="FILE", help="slow OCV tests (discharge "
                    "from full, charge from empty; or one file with both): fixes the OCV")
+    _add_reader_options(s)
     s.set_defaults(func=cmd_train)
 
-    s = sub.add_parser("evaluate", help="free-run error of a model on records")
-    s.add_argument("model")
-    s.add_argument("data", nargs="+")
-    s.add_argument("--soc0", type=_float01)
-    s.add_argument("--json", action="store_true")
-    s.add_argument("--plot", metavar="DIR")
-    s.add_argument("--trace", metavar="OUT.csv")
+    s = sub.add_parser("evaluate", help="free-run error of a model on records", **fmt)
+    s.add_argument("model", help="model file (JSON)")
+    s.add_argument("data", nargs="+", help="data files")
+    s.add_argument("--soc0", type=_float01, help="start SoC (default: 1.0 for records that "
+                   "start rested at full charge)")
+    s.add_argument("--json", action="store_true", help="print the metrics as JSON")
+    s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table")
+    s.add_argument("--trace", metavar="OUT.csv", help="write time, current, measured and "
+                   "model voltage and SoC per model step")
     s.add_argument("--observer", choices=["ekf", "fuzzy", "imm"],
                    help="judge a SoC observer instead of the voltage")
     s.add_argument("--soc0-est", type=_float01, help="the observer's start SoC guess")
     s.add_argument("--start-soc", type=_float01, help="start the observer where the reference "
-                   "SoC first falls to this value (under load)")
+                   "SoC first falls to this value (under load; default: the record's start)")
+    _add_reader_options(s)
     s.set_defaults(func=cmd_evaluate)
 
-    s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU")
-    s.add_argument("model")
-    s.add_argument("--out", required=True, metavar="CELL.fmu")
+    s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU",
+                       **fmt)
+    s.add_argument("model", help="model file (JSON)")
+    s.add_argument("--out", required=True, metavar="CELL.fmu", help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
                    "importer (linux64 binary built here with gcc, sources included)")
     s.set_defaults(func=cmd_build_fmu)
 
-    s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy")
-    s.add_argument("fmu")
-    s.add_argument("--cycle", choices=["wltc", "udds", "us06", "hwfet"], default="wltc")
-    s.add_argument("--vehicle", metavar="FILE.toml")
-    s.add_argument("--repeat", type=int, default=1)
-    s.add_argument("--soc0", type=_float01, default=0.9)
+    s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy",
+                       **fmt)
+    s.add_argument("fmu", help="an LMNCell FMU")
+    s.add_argument("--cycle", choices=["wltc", "udds", "us06", "hwfet"], default="wltc",
+                   help="speed trace")
+    s.add_argument("--vehicle", metavar="FILE.toml", help="vehicle and pack (default: the "
+                   "built-in compact EV)")
+    s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
+    s.add_argument("--soc0", type=_float01, default=0.9, help="start SoC")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts)")
-    s.add_argument("--plot", metavar="OUT.png")
-    s.add_argument("--json", action="store_true")
+    s.add_argument("--plot", metavar="OUT.png", help="figure of speed, current, voltage, SoC")
+    s.add_argument("--json", action="store_true", help="print the results as JSON")
     s.set_defaults(func=cmd_simulate)
 
-    s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile")
-    s.add_argument("--capacity", type=_positive, required=True, help="Ah")
+    s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile",
+                       **fmt)
+    s.add_argument("--capacity", type=_positive, required=True, help="cell capacity, Ah")
     s.add_argument("--soc-profile", required=True, help="SoC points, e.g. 0.8,0.2,0.8 or 0.8:0.2")
-    s.add_argument("--max-c-rate", type=_positive, default=20.0, help="default 20")
+    s.add_argument("--max-c-rate", type=_positive, default=20.0, help="current limit, C")
     s.add_argument("--max-current", type=_positive, default=100.0, help="cycler limit, A")
-    s.add_argument("--voltage-min", type=float, default=None, help="V (default 2.0 or model)")
-    s.add_argument("--voltage-max", type=float, default=None, help="V (default 3.6 or model)")
+    s.add_argument("--voltage-min", type=float, default=None, help="V (default: 2.0 or the "
+                   "model's)")
+    s.add_argument("--voltage-max", type=float, default=None, help="V (default: 3.6 or the "
+                   "model's)")
     s.add_argument("--hold", type=_positive, default=10.0, help="minimum hold time, s")
     s.add_argument("--sample-time", type=_positive, default=1.0, help="s")
     s.add_argument("--sequence", type=_positive, default=300.0, help="sequence length, s")
     s.add_argument("--duration", type=_positive, default=7200.0, help="total, s")
     s.add_argument("--r0", type=_positive, default=0.010, help="design model R0, Ω")
     s.add_argument("--model", help="take the OCV and voltage limits from a model file")
-    s.add_argument("--plot", metavar="DIR")
+    s.add_argument("--plot", metavar="DIR", help="write the programme's figures")
     s.add_argument("--compare-virtual", action="store_true", help="prove the design on a "
-                   "virtual cell against a random programme")
-    s.add_argument("--out", required=True, metavar="P.csv")
+                   "virtual cell against random programmes")
+    s.add_argument("--out", required=True, metavar="P.csv", help="cycler programme to write")
     s.set_defaults(func=cmd_design)
 
-    s = sub.add_parser("demo", help="train, evaluate, build the FMU, drive it, write a report")
-    s.add_argument("--out", default="lmncell-demo")
+    s = sub.add_parser("demo", help="train, evaluate, build the FMU, drive it, write a report",
+                       **fmt)
+    s.add_argument("--out", default="lmncell-demo", help="output folder")
     s.set_defaults(func=cmd_demo)
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if args.command is None:
+        parser.print_help()
+        return 0
     try:
         return int(args.func(args) or 0)
-    except (DataError, ModelFileError, ConfigError, FileNotFoundError) as exc:
+    except USER_ERRORS as exc:
         print(f"lmncell {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

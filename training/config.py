@@ -159,6 +159,20 @@ class TrainConfig:
         return dataclasses.asdict(self)
 
 
+def parse_setting(text: str) -> tuple[str, object]:
+    """One `KEY=VALUE` setting from the command line: VALUE as a TOML value (numbers, true,
+    false, "strings", [lists]) or, if it is none, as a plain string (auto, off)."""
+    key, sep, value = text.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise ConfigError(f"--set {text!r}: expected KEY=VALUE, e.g. max_local_models=4 or "
+                          "'partition=[\"soc\",\"current\"]'")
+    try:
+        return key, tomllib.loads(f"v = {value.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        return key, value.strip()
+
+
 def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
     """Defaults, then the [train] table (or top level) of a TOML file, then overrides."""
     values: dict = {}

@@ -52,19 +52,50 @@ def _open_text(path: Path) -> io.TextIOBase:
     return open(path, encoding="utf-8-sig", newline="")
 
 
+def _read_text(path: Path, first_line: bool = False) -> str:
+    """The file's text (or its first line), with a DataError for what is not UTF-8 text."""
+    try:
+        with _open_text(path) as fh:
+            return fh.readline() if first_line else fh.read()
+    except UnicodeDecodeError as exc:
+        raise DataError(f"{path}: not a text file (byte 0x{exc.object[exc.start]:02x} at "
+                        f"offset {exc.start} is not UTF-8); expected a CSV text file, a "
+                        "MATLAB .mat file or either gzip-compressed (.gz)") from None
+    except (gzip.BadGzipFile, EOFError, OSError) as exc:
+        raise DataError(f"{path}: cannot be read ({exc}); expected a CSV text file, a MATLAB "
+                        ".mat file or either gzip-compressed (.gz)") from None
+
+
+def check_readable(path: str | Path) -> Path:
+    """The path, if it names a readable, non-empty file; DataError naming the problem if not."""
+    path = Path(path)
+    if path.is_dir():
+        raise DataError(f"{path}: is a directory; expected a data file (give the files inside "
+                        "it, e.g. DIR/*.csv)")
+    if not path.exists():
+        raise DataError(f"{path}: no such file")
+    if not path.is_file():
+        raise DataError(f"{path}: not a regular file; expected a data file")
+    try:
+        with open(path, "rb") as fh:
+            fh.read(1)
+    except OSError as exc:
+        raise DataError(f"{path}: cannot be opened ({exc.strerror or exc})") from None
+    if path.stat().st_size == 0:
+        raise DataError(f"{path}: the file is empty")
+    return path
+
+
 def _mat_path(path: Path) -> bool:
     return path.name.endswith((".mat", ".mat.gz"))
 
 
 def detect_format(path: str | Path) -> str:
     """Name of the reader for a file, from its content (header line or MATLAB signature)."""
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: no such file")
+    path = check_readable(path)
     if _mat_path(path):
         return "panasonic"
-    with _open_text(path) as fh:
-        header = fh.readline().strip()
+    header = _read_text(path, first_line=True).strip()
     if not header:
         raise DataError(f"{path}: the file is empty; expected a header line")
     cols = [c.strip() for c in header.split(",")]
@@ -75,32 +106,45 @@ def detect_format(path: str | Path) -> str:
     if all(c in cols for c in (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)):
         return "bdf"
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
-                    f"{FORMATS[:4]} (use format='generic' with a column mapping)")
+                    f"{list(FORMATS[:4])}. Name your columns: on the command line "
+                    "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
+                    "--delimiter, --decimal, --current-unit, --discharge-positive as needed); "
+                    "in Python read_record(path, columns={...})")
 
 
-def _read_csv_columns(path: Path, sep: str = ",") -> dict[str, np.ndarray]:
-    """Every column of a CSV file as float arrays, with row numbers in errors."""
-    with _open_text(path) as fh:
-        text = fh.read()
-    lines = [ln for ln in text.splitlines() if ln.strip()]
+def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
+                      required: frozenset[str] | set[str] | None = None
+                      ) -> dict[str, np.ndarray]:
+    """Every column of a CSV file as float arrays, with row numbers in errors.
+
+    sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
+    every cell must be a number (default: the known formats' numeric columns)."""
+    if len(sep) != 1 or sep in (decimal, '"') or sep.isalnum():
+        raise DataError(f"{path}: delimiter {sep!r}; expected one character other than the "
+                        f"decimal mark {decimal!r}, a quote, a letter or a digit")
+    if decimal not in (".", ","):
+        raise DataError(f"{path}: decimal mark {decimal!r}; expected '.' or ','")
+    required = _NUMERIC_REQUIRED if required is None else required
+    lines = [ln for ln in _read_text(path).splitlines() if ln.strip()]
     if not lines:
         raise DataError(f"{path}: the file is empty; expected a header line and data rows")
-    header = [c.strip() for c in lines[0].split(sep)]
+    header = [c.strip() for c in next(csv.reader([lines[0]], delimiter=sep))]
     if len(lines) < 2:
         raise DataError(f"{path}: the file has a header but no data rows")
-    rows = list(csv.reader((ln.replace(sep, ",") for ln in lines[1:]), skipinitialspace=True))
+    rows = list(csv.reader(lines[1:], delimiter=sep, skipinitialspace=True))
     out: dict[str, np.ndarray] = {}
     for j, name in enumerate(header):
         col = np.empty(len(rows))
         for r, row in enumerate(rows):
             try:
-                col[r] = float(row[j])
+                cell = row[j].strip()
+                col[r] = float(cell.replace(",", ".") if decimal == "," else cell)
             except (ValueError, IndexError):
                 if j >= len(row):
                     raise DataError(f"{path}: row {r + 2} has {len(row)} fields, expected "
                                     f"{len(header)} (column '{name}' missing)") from None
                 col[r] = np.nan  # non-numeric cell (date strings etc.): checked where used
-                if name in _NUMERIC_REQUIRED:
+                if name in required:
                     raise DataError(f"{path}: column '{name}' row {r + 2}: {row[j]!r} is not "
                                     "a number") from None
         out[name] = col
@@ -199,7 +243,7 @@ def read_panasonic(path: Path) -> Record:
         back = np.flatnonzero(np.diff(t) < 0)
         if back.size:
             raise DataError(f"{path}: field 'Time' decreases at row {int(back[0]) + 1} "
-                            f"({t[back[0]]!r} s then {t[back[0] + 1]!r} s); expected "
+                            f"({float(t[back[0]])!r} s then {float(t[back[0] + 1])!r} s); expected "
                             "increasing time")
         notes.append(f"dropped {int((~keep).sum())} sample(s) with a repeated time stamp")
 
@@ -241,16 +285,35 @@ def read_bdf(path: Path) -> Record:
                   temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
 
 
-def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
-                 current_scale: float = 1.0, sep: str = ",") -> Record:
-    """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}.
+GENERIC_KEYS = ("time", "current", "voltage", "temperature")
+CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 
-    current_scale multiplies the current (0.001 for a file in mA); discharge_positive negates it.
+
+def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
+                 current_scale: float = 1.0, sep: str = ",", decimal: str = ".",
+                 current_unit: str | None = None) -> Record:
+    """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}
+    of LMNCell's quantities to the file's column names (time in s, voltage in V, temperature
+    in °C).
+
+    current_unit: "A" or "mA" (or current_scale, a factor to A); discharge_positive: the file
+    counts discharge current as positive (it is negated: LMNCell's current > 0 charges);
+    sep: the delimiter; decimal: "." or "," (decimal comma).
     """
     for key in ("time", "current", "voltage"):
         if key not in columns:
-            raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)})")
-    cols = _read_csv_columns(path, sep=sep)
+            raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
+                            "expected time, current and voltage (temperature optional)")
+    unknown = sorted(set(columns) - set(GENERIC_KEYS))
+    if unknown:
+        raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
+                        f"{list(GENERIC_KEYS)}")
+    if current_unit is not None:
+        if current_unit not in CURRENT_UNITS:
+            raise DataError(f"{path}: current unit {current_unit!r}; expected one of "
+                            f"{list(CURRENT_UNITS)}")
+        current_scale = CURRENT_UNITS[current_unit]
+    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=set(columns.values()))
     _require(path, cols, tuple(columns.values()))
     t = cols[columns["time"]]
     cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
@@ -291,13 +354,16 @@ def check_plausibility(rec: Record) -> None:
 def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Record:
     """Read one cycler file into a Record (SI units, current > 0 charges).
 
-    fmt: one of FORMATS, or None to choose by content. generic_kw go to read_generic.
+    fmt: one of FORMATS, or None to choose by content ("generic" when a column mapping
+    `columns` is given). generic_kw go to read_generic (columns, discharge_positive,
+    current_unit or current_scale, sep, decimal).
     """
-    path = Path(path)
-    if not path.is_file():
-        raise DataError(f"{path}: no such file")
-    if path.stat().st_size == 0:
-        raise DataError(f"{path}: the file is empty")
+    path = check_readable(path)
+    if fmt is None and generic_kw.get("columns"):
+        fmt = "generic"
+    if fmt != "generic" and generic_kw:
+        raise DataError(f"{path}: reader options {sorted(generic_kw)} need a column mapping "
+                        "(--columns / columns=...), which selects the generic CSV reader")
     if fmt is None:
         fmt = detect_format(path)
     if fmt == "generic":

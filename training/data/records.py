@@ -107,8 +107,8 @@ def _check_finite(name: str, values: np.ndarray, source: str) -> None:
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
         raise DataError(f"{source}: column '{name}' has {int(bad.sum())} NaN or infinite "
-                        f"value(s), first at row {row} (value {values[row]!r}); expected finite "
-                        "numbers")
+                        f"value(s), first at row {row} (value {float(values[row])!r}); expected "
+                        "finite numbers")
 
 
 def validate_record(rec: Record) -> None:
@@ -132,8 +132,8 @@ def validate_record(rec: Record) -> None:
         row = int(np.flatnonzero(dt <= 0)[0]) + 1
         kind = "repeated" if dt[row - 1] == 0 else "decreasing (a time reset?)"
         raise DataError(f"{src}: column 'time_s' is {kind} at row {row}: "
-                        f"{rec.time_s[row - 1]!r} s then {rec.time_s[row]!r} s; expected "
-                        "strictly increasing time")
+                        f"{float(rec.time_s[row - 1])!r} s then {float(rec.time_s[row])!r} s; "
+                        "expected strictly increasing time")
     if rec.soc_ref is not None and ((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05)).any():
         row = int(np.flatnonzero((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05))[0])
         raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected a "

@@ -27,7 +27,7 @@ def resample_segment(rec: Record, sample_time_s: float) -> Record:
     """One gap-free record on a fixed grid t0+Ts, t0+2Ts, … (means over each step)."""
     ts = float(sample_time_s)
     if not ts > 0:
-        raise DataError(f"{rec.meta.source}: sample_time_s={sample_time_s!r}; expected > 0 s")
+        raise DataError(f"{rec.meta.source}: sample_time_s={ts!r}; expected > 0 s")
     t = rec.time_s
     n = int(np.floor((t[-1] - t[0]) / ts + 1e-9))
     if n < 2:

@@ -31,9 +31,9 @@ def coulomb_count(rec: Record, soc0: float, capacity_ah: float,
                   use_counters: bool = True) -> np.ndarray:
     """SoC over the record from soc0 (fraction) and capacity (Ah)."""
     if not 0.0 <= soc0 <= 1.0:
-        raise DataError(f"{rec.meta.source}: soc0={soc0!r}; expected a fraction within 0…1")
+        raise DataError(f"{rec.meta.source}: soc0={float(soc0)!r}; expected a fraction within 0…1")
     if not capacity_ah > 0:
-        raise DataError(f"{rec.meta.source}: capacity_ah={capacity_ah!r}; expected > 0 Ah")
+        raise DataError(f"{rec.meta.source}: capacity_ah={float(capacity_ah)!r}; expected > 0 Ah")
     return soc0 + charge_throughput_ah(rec, use_counters) / capacity_ah
 
 

@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lmncell.data.dataset import starts_rested_full
@@ -72,23 +74,25 @@ def format_summary(s: dict) -> str:
 
 
 def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
-                  capacity_ah: float | None = None) -> list[dict]:
-    """Print a summary of every file; with plot, one figure per file (suffix _k for several)."""
+                  capacity_ah: float | None = None,
+                  read_options: Mapping[str, Any] | None = None) -> list[dict]:
+    """Print a summary of every file; with plot, one figure of all files (current, voltage
+    and, for records that start full, SoC over time) written to that path.
+    read_options go to read_record."""
     out = []
-    for k, p in enumerate(paths):
-        rec = read_record(p)
+    shown = []
+    for p in paths:
+        rec = read_record(p, **(read_options or {}))
         s = summarise(rec, capacity_ah)
         print(format_summary(s), flush=True)
         out.append(s)
-        if plot is not None:
-            from lmncell.report.plots import record_figure
+        soc = None
+        if s.get("soc_range"):
+            soc = 1.0 + charge_throughput_ah(rec) / s["capacity_ah_assumed"]
+        shown.append((rec, soc))
+    if plot is not None:
+        from lmncell.report.plots import records_figure
 
-            target = Path(plot)
-            if len(paths) > 1:
-                target = target.with_name(f"{target.stem}_{k}{target.suffix}")
-            soc = None
-            if s.get("soc_range"):
-                soc = 1.0 + charge_throughput_ah(rec) / s["capacity_ah_assumed"]
-            record_figure(rec, target, soc)
-            print(f"  plot: {target}")
+        records_figure(shown, Path(plot))
+        print(f"plot of {len(shown)} record(s): {plot}")
     return out

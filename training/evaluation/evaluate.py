@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc
@@ -44,12 +46,14 @@ def baseline_voltage(kind: str, doc: dict, seg: Segment, soc: np.ndarray) -> np.
 
 
 def evaluate_model(model: LmnModel, paths: list[str | Path], soc0: float | None = None,
-                   capacity_ah: float | None = None) -> tuple[list[Trace], list[dict]]:
-    """Free-run simulation of each record's segments with the LMN and its baselines."""
+                   capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None
+                   ) -> tuple[list[Trace], list[dict]]:
+    """Free-run simulation of each record's segments with the LMN and its baselines
+    (read_options go to read_record)."""
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
     for p in paths:
-        rec = read_record(p)
+        rec = read_record(p, **(read_options or {}))
         for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), cap):
             check_range(model, seg)
             sim = simulate_segment(model, seg, cap)
@@ -101,10 +105,11 @@ def write_trace(trace: Trace, path: str | Path) -> Path:
 
 def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float | None = None,
                    plot_dir: str | Path | None = None, trace: str | Path | None = None,
-                   as_json: bool = False, progress: Progress = _print) -> list[dict]:
+                   as_json: bool = False, progress: Progress = _print,
+                   read_options: Mapping[str, Any] | None = None) -> list[dict]:
     """`lmncell evaluate`: figures per record for the LMN and its baselines."""
     model = load_model(model_path)
-    traces, rows = evaluate_model(model, paths, soc0)
+    traces, rows = evaluate_model(model, paths, soc0, read_options=read_options)
     if trace is not None:
         if len(traces) == 1:
             write_trace(traces[0], trace)
@@ -117,7 +122,10 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float 
 
         Path(plot_dir).mkdir(parents=True, exist_ok=True)
         files = plots.evaluation_figures(model, traces, Path(plot_dir))
-        progress(f"wrote {len(files)} figure(s) to {plot_dir}")
+        figures = [f for f in files if f.suffix == ".png"]
+        tables = [f for f in files if f.suffix != ".png"]
+        progress(f"wrote {len(figures)} figure(s) and {len(tables)} table(s) to {plot_dir}: "
+                 + ", ".join(f.name for f in files))
     if as_json:
         print(json.dumps(rows, indent=1))
     else:

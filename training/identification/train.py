@@ -6,7 +6,9 @@ from __future__ import annotations
 import copy
 import platform
 import time
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lmncell import __version__
@@ -34,7 +36,8 @@ from lmncell.runtime.step import exo_series, initial_hysteresis
 
 
 def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float | None,
-                  soc0: float | None, progress: Progress = _print
+                  soc0: float | None, progress: Progress = _print,
+                  read_options: Mapping[str, Any] | None = None
                   ) -> tuple[list[Segment], list[Record], float]:
     """Read files, fix capacity and start SoC, split and resample to the model rate."""
     if not paths:
@@ -45,7 +48,7 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
     records = []
     for p in paths:
         progress(f"reading {p}")
-        records.append(read_record(p))
+        records.append(read_record(p, **(read_options or {})))
     if capacity_ah is None:
         capacity_ah = estimate_capacity(records)
         progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
@@ -89,11 +92,15 @@ def _recent_current_rms(segs: list[Segment], ts: float) -> float:
 def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | None = None,
                 soc0: float | None = None, partition: list[str] | None = None,
                 baselines: bool = False, config: str | Path | None = None,
-                progress: Progress = _print, **overrides) -> tuple[LmnModel, dict]:
-    """Train an LMN (and baselines if asked) on files and write the model file."""
+                progress: Progress = _print, read_options: Mapping[str, Any] | None = None,
+                **overrides) -> tuple[LmnModel, dict]:
+    """Train an LMN (and baselines if asked) on files and write the model file.
+
+    read_options go to read_record (a column mapping and its options for your own CSV);
+    overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
-    segs, records, cap = load_segments(paths, cfg, capacity_ah, soc0, progress)
+    segs, records, cap = load_segments(paths, cfg, capacity_ah, soc0, progress, read_options)
     n = sum(len(s) for s in segs)
     progress(f"training on {len(segs)} segment(s), {n} samples at Ts = {cfg.sample_time_s} s")
     result = train_lmn(segs, cfg, cap, progress)

@@ -100,18 +100,30 @@ def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
 
 def record_figure(rec: Record, path: Path, soc: np.ndarray | None = None) -> Path:
     """Current, voltage and SoC of a record over time (Fig. 6)."""
-    t = (rec.time_s - rec.time_s[0]) / 3600.0
-    soc = rec.soc_ref if soc is None else soc
-    n = 3 if soc is not None else 2
+    return records_figure([(rec, soc)], path)
+
+
+def records_figure(records: list[tuple[Record, np.ndarray | None]], path: Path) -> Path:
+    """Current, voltage and (where known) SoC of one or more records over time from each
+    record's start, in one figure; soc: a SoC series per record or None (then soc_ref)."""
+    socs = [rec.soc_ref if soc is None else soc for rec, soc in records]
+    n = 3 if any(s is not None for s in socs) else 2
     fig, axes = plt.subplots(n, 1, figsize=(10, 2.4 * n), sharex=True, constrained_layout=True)
-    axes[0].plot(t, rec.current_a, lw=0.5)
-    axes[0].set(ylabel="current / A", title=f"{rec.name} (current > 0 charges)")
-    axes[1].plot(t, rec.voltage_v, lw=0.5, color="k")
+    one = len(records) == 1
+    for (rec, _), soc in zip(records, socs, strict=True):
+        t = (rec.time_s - rec.time_s[0]) / 3600.0
+        axes[0].plot(t, rec.current_a, lw=0.5, label=rec.name)
+        axes[1].plot(t, rec.voltage_v, lw=0.5, color="k" if one else None)
+        if soc is not None:
+            axes[2].plot(t, 100 * soc, color="tab:green" if one else None)
+    title = records[0][0].name if one else f"{len(records)} records"
+    axes[0].set(ylabel="current / A", title=f"{title} (current > 0 charges)")
+    if not one:
+        axes[0].legend(fontsize=7, loc="best")
     axes[1].set(ylabel="voltage / V")
-    if soc is not None:
-        axes[2].plot(t, 100 * soc, color="tab:green")
+    if n == 3:
         axes[2].set(ylabel="SoC / %")
-    axes[-1].set(xlabel="time / h")
+    axes[-1].set(xlabel="time from the record's start / h")
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return path

@@ -1,0 +1,168 @@
+"""The package a newcomer installs: one import name, the Python API, own CSV data through the
+command line, clear errors for files that are not data."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lmncell.cli import build_parser, main, read_options
+from lmncell.data.readers import read_record, write_bdf
+
+from tests.conftest import A123_S1, PAN_US06
+
+HEADER = "Zeit [s];Strom [mA];Spannung [V];Zelltemp [°C]\n"
+
+
+def _user_csv(path: Path, time_s, current_a, voltage_v, temp_c) -> Path:
+    """A cycler export as some testers write it: made-up column names, ';' separators, decimal
+    commas, current in mA and discharge counted positive."""
+    with open(path, "w", encoding="utf-8") as fh:
+        fh.write(HEADER)
+        for t, i, u, c in zip(time_s, current_a, voltage_v, temp_c, strict=True):
+            cells = [repr(float(t)), repr(float(-1000.0 * i)), repr(float(u)), repr(float(c))]
+            fh.write(";".join(x.replace(".", ",") for x in cells) + "\n")
+    return path
+
+
+@pytest.fixture()
+def user_data(tmp_path):
+    rng = np.random.default_rng(3)
+    n = 600
+    t = np.arange(n) * 1.0
+    i = np.round(rng.uniform(-3, 2, n), 3)            # A, > 0 charges (what LMNCell uses)
+    u = np.round(3.6 + 0.02 * i + 0.001 * np.cumsum(i) / n, 6)
+    c = np.round(25 + 0.004 * t, 3)
+    csv_path = _user_csv(tmp_path / "my cycler export.csv", t, i, u, c)
+    from lmncell.data.records import Record, RecordMeta
+
+    ref = Record(t, i, u, RecordMeta(source="ref", fmt="bdf", sign_note="none",
+                                     sample_time_s=1.0), temperature_c=c)
+    bdf = write_bdf(ref, tmp_path / "same.bdf.csv")
+    return csv_path, bdf
+
+
+CLI_OPTIONS = ["--columns", "time=Zeit [s],current=Strom [mA],voltage=Spannung [V],"
+               "temperature=Zelltemp [°C]", "--delimiter", ";", "--decimal", ",",
+               "--current-unit", "mA", "--discharge-positive"]
+
+
+def test_own_csv_through_the_cli_equals_the_bdf_record(user_data, capsys) -> None:
+    csv_path, bdf = user_data
+    args = build_parser().parse_args(["inspect", str(csv_path), *CLI_OPTIONS])
+    mine, ref = read_record(csv_path, **read_options(args)), read_record(bdf)
+    for name in ("time_s", "current_a", "voltage_v", "temperature_c"):
+        np.testing.assert_allclose(getattr(mine, name), getattr(ref, name), rtol=1e-12,
+                                   atol=1e-12, err_msg=name)
+    assert main(["inspect", str(csv_path), *CLI_OPTIONS]) == 0
+    mine_txt = capsys.readouterr().out
+    assert main(["inspect", str(bdf)]) == 0
+    ref_txt = capsys.readouterr().out
+    def figures(text: str) -> list[str]:       # all but the file name and the sign note
+        return [ln.split("; sign:")[0] for ln in text.splitlines()[1:]]
+
+    assert figures(mine_txt) == figures(ref_txt)
+    assert "current negated (file: discharge > 0)" in mine_txt
+
+
+def test_own_csv_trains_and_evaluates_from_the_cli(user_data, tmp_path, capsys) -> None:
+    csv_path, _ = user_data
+    model = tmp_path / "m.json"
+    assert main(["train", str(csv_path), *CLI_OPTIONS, "--out", str(model), "--capacity", "2",
+                 "--soc0", "0.5", "--set", "max_local_models=1",
+                 "--set", "hysteresis=off"]) == 0
+    assert main(["evaluate", str(model), str(csv_path), *CLI_OPTIONS, "--soc0", "0.5",
+                 "--json"]) == 0
+    assert '"rmse_mv"' in capsys.readouterr().out
+
+
+def test_reader_options_without_columns_and_bad_settings_are_refused(user_data, capsys):
+    csv_path, _ = user_data
+    assert main(["inspect", str(csv_path), "--decimal", ","]) == 2
+    assert "--decimal need --columns" in capsys.readouterr().err
+    assert main(["inspect", str(csv_path)]) == 2
+    assert "--columns time=COL" in capsys.readouterr().err
+    assert main(["train", str(csv_path), *CLI_OPTIONS, "--out", "x.json",
+                 "--set", "no_such_setting=1"]) == 2
+    assert "unknown setting(s) ['no_such_setting']" in capsys.readouterr().err
+    assert main(["inspect", str(csv_path), "--columns", "time=Zeit [s],current=Strom [mA],"
+                 "voltage=Spannung [V]", "--delimiter", ";"]) == 2
+    err = capsys.readouterr().err
+    assert "'Zeit [s]' row 2: '0,0' is not a number" in err   # the decimal comma not given
+
+
+def test_files_that_are_not_data_give_clear_errors(tmp_path, capsys) -> None:
+    binary = tmp_path / "scope.csv"
+    binary.write_bytes(bytes(range(256)) * 8)
+    assert main(["inspect", str(binary)]) == 2
+    assert "scope.csv: not a text file" in capsys.readouterr().err
+    assert main(["inspect", str(tmp_path)]) == 2
+    assert "is a directory" in capsys.readouterr().err
+    assert main(["inspect", str(tmp_path / "absent.csv")]) == 2
+    assert "absent.csv: no such file" in capsys.readouterr().err
+    if os.geteuid() != 0:                       # root reads files whatever their mode
+        locked = tmp_path / "locked.csv"
+        locked.write_text("a,b\n1,2\n")
+        locked.chmod(0)
+        assert main(["inspect", str(locked)]) == 2
+        assert "cannot be opened" in capsys.readouterr().err
+
+
+def test_messages_print_plain_numbers(tmp_path, capsys) -> None:
+    bad = tmp_path / "back.bdf.csv"
+    bad.write_text("Test Time / s,Voltage / V,Current / A\n0,3.6,0\n2,3.6,0\n1,3.6,0\n")
+    assert main(["inspect", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "2.0 s then 1.0 s" in err and "np.float64" not in err
+
+
+def test_bare_command_prints_help_and_version(capsys) -> None:
+    assert main([]) == 0
+    assert "usage: lmncell" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as exc:
+        main(["--version"])
+    assert exc.value.code == 0 and "lmncell 0." in capsys.readouterr().out
+
+
+def test_one_package_installed_not_generic_names(tmp_path) -> None:
+    """After `pip install`, `import lmncell` works from anywhere and no generic top-level
+    name (training, fmu_src) is importable."""
+    code = ("import importlib.util, lmncell; "
+            "print([n for n in ('training', 'fmu_src', 'lmncell_build') "
+            "if importlib.util.find_spec(n)])")
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
+                         capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_python_api_end_to_end(tmp_path) -> None:
+    import lmncell
+
+    rec = lmncell.read_record(PAN_US06)
+    model = lmncell.train([PAN_US06], tmp_path / "m.json", capacity_ah=2.85,
+                          progress=lambda _m: None, max_local_models=1, hysteresis="off")
+    assert lmncell.load_model(tmp_path / "m.json").n_local_models == model.n_local_models
+    current = np.full(600, -2.85)                          # 1C discharge for 10 minutes
+    sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=1.0)
+    assert sim.voltage_v.shape == sim.soc.shape == (600,)
+    assert np.isclose(sim.soc[-1], 1.0 - 600 / 3600 * model.efficiency_discharge, atol=2e-3)
+    assert np.all(np.diff(sim.voltage_v[5:]) < 1e-3)       # the voltage falls under load
+    rows = lmncell.evaluate(model, [PAN_US06])
+    assert rows[0]["lmn"]["rmse_mv"] > 0 and "window_rmse_mv" in rows[0]["lmn"]
+    with pytest.raises(lmncell.api.DataError, match="soc0"):
+        lmncell.simulate(model, current, soc0=1.5)
+    assert rec.current_a.size > 0
+    fmu = lmncell.build_fmu(tmp_path / "m.json", tmp_path / "m.fmu")
+    assert fmu.stat().st_size > 1000
+
+
+def test_api_reads_a123(tmp_path) -> None:
+    import lmncell
+
+    rec = lmncell.read_record(A123_S1)
+    assert rec.meta.fmt == "plett" and rec.current_a.min() < 0

@@ -1,0 +1,101 @@
+"""The Python API of LMNCell: read data, train a model, simulate and evaluate it, build an FMU.
+
+    import lmncell
+    rec = lmncell.read_record("cell.csv", columns={"time": "t", "current": "I", "voltage": "U"})
+    model = lmncell.train(["cycle1.mat", "cycle2.mat"], "cell.json", capacity_ah=2.85)
+    sim = lmncell.simulate(model, current_a, soc0=1.0)          # sim.voltage_v, sim.soc
+    rows = lmncell.evaluate(model, ["cycle3.mat"])              # whole record and 20–80 % SoC
+    lmncell.build_fmu("cell.json", "cell.fmu")                  # native=True: C, no Python
+
+Units are SI (s, A, V, Ah, °C); current > 0 charges the cell; SoC is a fraction 0…1.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lmncell.data.readers import read_record
+from lmncell.data.records import DataError, Record
+from lmncell.progress import Progress, print_progress
+from lmncell.runtime.model import LmnModel, load_model
+from lmncell.runtime.step import SimResult
+from lmncell.runtime.step import simulate as _simulate_runtime
+
+__all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_model",
+           "read_record", "simulate", "train"]
+
+
+def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | None = None,
+          soc0: float | None = None, *, ocv_tests: Sequence[str | Path] | None = None,
+          baselines: bool = False, config: str | Path | None = None,
+          read_options: Mapping[str, Any] | None = None, progress: Progress = print_progress,
+          **settings: Any) -> LmnModel:
+    """Identify an LMN from cycler files and write it to `out` (model file, JSON).
+
+    capacity_ah: the cell's capacity (default: the charge of the full discharges found);
+    soc0: every record's start SoC (default: 1.0 for records that start rested at full
+    charge); ocv_tests: slow OCV test files that fix the OCV; settings: training settings of
+    lmncell.config.TrainConfig (e.g. max_local_models=4, partition=["soc", "current"]);
+    read_options: a column mapping and reader options for your own CSV (see read_record).
+    Returns the model (also written to `out`)."""
+    if ocv_tests:
+        settings["ocv_tests"] = [str(p) for p in ocv_tests]
+    from lmncell.identification.train import train_files
+
+    model, _ = train_files(list(paths), out, capacity_ah, soc0, baselines=baselines,
+                           config=config, progress=progress, read_options=read_options,
+                           **settings)
+    return model
+
+
+def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
+             temperature_c: np.ndarray | float | None = None, soc0: float = 1.0,
+             capacity_ah: float | None = None) -> SimResult:
+    """Free-run simulation of a current profile sampled at the model's sample time
+    (model.sample_time_s; each value held over one step, > 0 charges).
+
+    temperature_c: cell temperature per step or one value (°C; default 25 °C); soc0: the SoC
+    before the first step. Returns arrays `voltage_v` (V, the mean over each step) and `soc`
+    (after each step), plus the network output `y` and the local models' `validity`."""
+    if not isinstance(model, LmnModel):
+        model = load_model(model)
+    current = np.asarray(current_a, dtype=float).ravel()
+    if current.size == 0 or not np.isfinite(current).all():
+        raise DataError("simulate: current_a must be a non-empty array of finite values (A)")
+    if not 0.0 <= float(soc0) <= 1.0:
+        raise DataError(f"simulate: soc0 = {float(soc0)!r}; expected a fraction within 0…1")
+    temp = None
+    if temperature_c is not None:
+        temp = np.broadcast_to(np.asarray(temperature_c, dtype=float), current.shape).copy()
+        if not np.isfinite(temp).all():
+            raise DataError("simulate: temperature_c must be finite (°C)")
+    return _simulate_runtime(model, current, temp, float(soc0), capacity_ah)
+
+
+def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
+             soc0: float | None = None,
+             read_options: Mapping[str, Any] | None = None) -> list[dict]:
+    """Free-run error of a model (and its baselines) on records: one row per segment with,
+    per model, RMSE, MAE and maximum error in mV over the whole record and RMSE over the
+    20–80 % SoC window (`rmse_mv`, `window_rmse_mv`, …)."""
+    if not isinstance(model, LmnModel):
+        model = load_model(model)
+    from lmncell.evaluation.evaluate import evaluate_model
+
+    _, rows = evaluate_model(model, list(paths), soc0, read_options=read_options)
+    return rows
+
+
+def build_fmu(model_path: str | Path, out: str | Path, native: bool = False) -> Path:
+    """Package a model file as an FMI 2.0 co-simulation FMU: pythonfmu (the importer needs
+    Python with numpy) or, with native=True, generated C compiled here (no Python needed)."""
+    if native:
+        from lmncell.fmu.native_build import build_native_fmu
+
+        return build_native_fmu(model_path, out)
+    from lmncell.fmu.pythonfmu_build import build_fmu as _build
+
+    return _build(model_path, out)
