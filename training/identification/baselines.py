@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -100,10 +101,15 @@ def _unpack(x: np.ndarray, k: int, with_h: bool, gamma: float | None, cap: float
                   gamma if with_h else None, cap, ts)
 
 
+PROGRESS_EVERY_S = 3.0   # seconds between progress lines of a fit
+
+
 def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
                ocv_v: np.ndarray, capacity_ah: float, ts: float, gamma: float | None,
-               h0s: list[float], max_nfev: int = 60) -> tuple[Ecm2rc, dict]:
-    """Least squares on the free-run error over all segments (log-parameterised R and τ)."""
+               h0s: list[float], max_nfev: int = 60,
+               progress: Callable[[str], None] | None = None) -> tuple[Ecm2rc, dict]:
+    """Least squares on the free-run error over all segments (log-parameterised R and τ);
+    progress, if given, gets a line every PROGRESS_EVERY_S seconds."""
     k = ocv_soc.size
     with_h = gamma is not None
     x0 = np.concatenate([ocv_v, np.log(np.full(3 * N_R, 0.01)),
@@ -115,7 +121,15 @@ def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
     hs = [hysteresis(s.current_a, gamma, ts, capacity_ah, h0) if with_h else None
           for s, h0 in zip(segs, h0s, strict=True)]
 
+    calls, last = [0], [time.perf_counter()]
+
     def residuals(x: np.ndarray) -> np.ndarray:
+        calls[0] += 1
+        now = time.perf_counter()
+        if progress is not None and now - last[0] >= PROGRESS_EVERY_S:
+            last[0] = now
+            progress(f"  … {now - t0:.0f} s, {calls[0]} simulations of the records "
+                     f"(at most {max_nfev} iterations)")
         m = _unpack(x, k, with_h, gamma, capacity_ah, ts, ocv_soc)
         parts = [sw * (m.simulate(s.current_a, s.temperature_c, soc, h0, h) - s.voltage_v)
                  for s, soc, sw, h0, h in zip(segs, socs, w, h0s, hs, strict=True)]

@@ -175,7 +175,7 @@ def fit_baselines(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnMod
     for name, g in (("ecm2rc", None), ("ecm2rc_hyst", gamma or 100.0)):
         progress(f"baseline {name}: fitting on the free-run error")
         ecm, info = fit_ecm2rc(weighted, socs, lmn.ocv_soc, lmn.ocv_v, cap, cfg.sample_time_s, g,
-                               h0s)
+                               h0s, progress=progress)
         progress(f"  {name}: {info['seconds']:.1f} s, {info['evaluations']} evaluations")
         out[name] = {"kind": "ecm2rc", "model": ecm.to_dict(), "fit": info}
     return out

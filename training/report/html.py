@@ -3,8 +3,14 @@
 from __future__ import annotations
 
 import html
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
+
+
+def _inline(text: str) -> str:
+    """Escaped text with `code spans` as <code>."""
+    return re.sub(r"`([^`]+)`", r"<code>\1</code>", html.escape(text))
 
 
 @dataclass
@@ -18,14 +24,19 @@ class Report:
     def section(self, heading: str) -> None:
         self.sections.append((heading, []))
 
+    def lead(self, heading: str, body: str) -> None:
+        """A section with one paragraph placed before all others (the headline figures)."""
+        self.sections.insert(0, (heading, [f"<p>{_inline(body)}</p>"]))
+
     def text(self, body: str) -> None:
-        self.sections[-1][1].append(f"<p>{html.escape(body)}</p>")
+        """A paragraph; `text in backticks` is set as code."""
+        self.sections[-1][1].append(f"<p>{_inline(body)}</p>")
 
     def figure(self, path: Path, caption: str) -> None:
         rel = Path(path).relative_to(self.out)
         self.sections[-1][1].append(
             f'<figure><img src="{html.escape(str(rel))}" alt="{html.escape(caption)}">'
-            f"<figcaption>{html.escape(caption)}</figcaption></figure>")
+            f"<figcaption>{_inline(caption)}</figcaption></figure>")
 
     def table(self, rows: list[dict], columns: list[tuple[str, str, str]],
               caption: str = "") -> None:
@@ -44,7 +55,7 @@ class Report:
                     txt = str(v)
                 cells.append(f"<td>{html.escape(txt)}</td>")
             body += "<tr>" + "".join(cells) + "</tr>"
-        cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
+        cap = f"<caption>{_inline(caption)}</caption>" if caption else ""
         self.sections[-1][1].append(f"<table>{cap}<tr>{head}</tr>{body}</table>")
 
     def write(self) -> Path:

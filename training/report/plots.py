@@ -20,28 +20,45 @@ def _safe(name: str) -> str:
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
 
 
+def _baselines_first(voltages: dict[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
+    """The LMN last, so that it is drawn on top of the baselines."""
+    return sorted(voltages.items(), key=lambda kv: kv[0] == "lmn")
+
+
+def _style(name: str) -> dict:
+    """Baselines thin and faint behind; the LMN (and the measurement) in front."""
+    if name == "lmn":
+        return {"lw": 0.9, "zorder": 4}
+    return {"lw": 0.6, "alpha": 0.55, "zorder": 2}
+
+
+def _voltage_lines(ax, t: np.ndarray, measured: np.ndarray,
+                   voltages: dict[str, np.ndarray]) -> None:
+    for name, v in _baselines_first(voltages):
+        ax.plot(t, v, color=COLORS.get(name), label=name, **_style(name))
+    ax.plot(t, measured, color="k", lw=1.0, label="measured", zorder=3)
+
+
 def fit_figure(trace, path: Path, title: str = "", zoom_s: float = 600.0) -> Path:
     """Measured vs simulated voltage over the record, a zoom, and the error (Fig. 7–10)."""
     seg = trace.segment
     t = (seg.time_s - seg.time_s[0]) / 3600.0
     fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), constrained_layout=True)
     ax = axes[0]
-    ax.plot(t, seg.voltage_v, color="k", lw=0.8, label="measured")
-    for name, v in trace.voltage.items():
-        ax.plot(t, v, color=COLORS.get(name), lw=0.7, label=name)
+    _voltage_lines(ax, t, seg.voltage_v, trace.voltage)
     ax.set(ylabel="voltage / V", title=title or seg.name)
     ax.legend(loc="lower left", ncol=5, fontsize=8)
     k0 = int(np.argmax(np.abs(seg.current_a)))
     lo = max(0, k0 - int(zoom_s / 2 / max(np.median(np.diff(seg.time_s)), 1e-9)))
     hi = min(len(t), lo + int(zoom_s / max(np.median(np.diff(seg.time_s)), 1e-9)))
     ax = axes[1]
-    ax.plot(t[lo:hi] * 60, seg.voltage_v[lo:hi], color="k", lw=1.0, label="measured")
-    for name, v in trace.voltage.items():
-        ax.plot(t[lo:hi] * 60, v[lo:hi], color=COLORS.get(name), lw=0.8, label=name)
+    _voltage_lines(ax, t[lo:hi] * 60, seg.voltage_v[lo:hi],
+                   {k: v[lo:hi] for k, v in trace.voltage.items()})
     ax.set(ylabel="voltage / V", xlabel="time / min", title="zoom around the largest current")
     ax = axes[2]
-    for name, v in trace.voltage.items():
-        ax.plot(t, 1e3 * (v - seg.voltage_v), color=COLORS.get(name), lw=0.6, label=name)
+    for name, v in _baselines_first(trace.voltage):
+        ax.plot(t, 1e3 * (v - seg.voltage_v), color=COLORS.get(name), label=name,
+                **_style(name))
     errs = np.concatenate([1e3 * (v - seg.voltage_v) for v in trace.voltage.values()])
     lo, hi = np.percentile(errs, [0.5, 99.5])
     span = max(hi - lo, 1.0)
@@ -82,11 +99,17 @@ def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
     """One-step and free-run RMSE against the number of local models."""
     m = [c["local_models"] for c in curve]
     fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
-    ax.plot(m, [c["one_step_rmse_mv"] for c in curve], "o-", label="one-step (training)")
+
     def values(key: str) -> np.ndarray:
         return np.array([np.nan if c[key] is None else c[key] for c in curve], dtype=float)
 
-    ax.plot(m, values("train_freerun_rmse_mv"), "s-", label="free-run (training)")
+    one, free = values("one_step_rmse_mv"), values("train_freerun_rmse_mv")
+    if np.allclose(one, free, rtol=1e-6, equal_nan=True):
+        ax.plot(m, free, "s-", label="training: one-step = free-run (local models without "
+                                     "output feedback)")
+    else:
+        ax.plot(m, one, "o-", label="one-step (training)")
+        ax.plot(m, free, "s-", label="free-run (training)")
     val = values("validation_freerun_rmse_mv")
     if np.isfinite(val).any():
         ax.plot(m, val, "^-", label="free-run (validation)")
