@@ -5,7 +5,6 @@ from __future__ import annotations
 import csv
 import json
 
-import pytest
 from lmncell.cli import main
 
 from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
@@ -64,13 +63,3 @@ def test_missing_soc0_is_explained(tmp_path, capsys) -> None:
     assert main(["train", str(rec), "--out", str(tmp_path / "m.json"),
                  "--capacity", "2.0"]) == 2
     assert "give --soc0" in capsys.readouterr().err
-
-
-@pytest.mark.slow
-def test_demo_runs(tmp_path) -> None:
-    assert main(["demo", "--out", str(tmp_path)]) == 0
-    assert (tmp_path / "report.html").exists()
-    assert (tmp_path / "fig_soc_observers.png").exists()
-    soc = json.loads((tmp_path / "summary.json").read_text())["soc_rmse_pct_from_0_6_with_0_3"]
-    assert set(soc) == {"ekf", "fuzzy", "imm", "coulomb"}
-    assert max(soc["ekf"], soc["fuzzy"], soc["imm"]) < 5.0 < soc["coulomb"]

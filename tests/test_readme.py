@@ -1,0 +1,68 @@
+"""The main job (`lmncell demo`) on the shipped data, and the README's claims against it: the
+generated figures block and the FMU's variable table."""
+
+from __future__ import annotations
+
+import json
+import re
+import zipfile
+from pathlib import Path
+from xml.etree import ElementTree as ET
+
+import pytest
+from lmncell.cli import main
+from lmncell.report.readme import figures_block, numbers, render_figures
+
+from tests.conftest import ROOT
+
+README = ROOT / "README.md"
+
+
+@pytest.fixture(scope="module")
+def demo(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("demo")
+    assert main(["demo", "--out", str(out)]) == 0
+    return out
+
+
+def test_demo_writes_report_figures_and_summary(demo) -> None:
+    html = (demo / "report.html").read_text(encoding="utf-8")
+    for fig in re.findall(r'<img src="([^"]+)"', html):
+        assert (demo / fig).stat().st_size > 5_000, fig
+    assert "`" not in html                                  # code spans, not backticks
+    assert "RMSE whole record" in html and "RMSE 20–80 % SoC" in html
+    summary = json.loads((demo / "summary.json").read_text())
+    soc = summary["soc_rmse_pct_from_0_6_with_0_3"]
+    assert set(soc) == {"ekf", "fuzzy", "imm", "coulomb"}
+    assert max(soc["ekf"], soc["fuzzy"], soc["imm"]) < soc["coulomb"] / 3
+    assert summary["fmu_max_dv_v"] < 1e-9
+    whole, window = summary["validation_rmse_mv"], summary["validation_window_rmse_mv"]
+    assert set(whole) == set(window) and all(whole[k] >= window[k] for k in whole)
+
+
+def test_readme_figures_are_the_demo_figures(demo) -> None:
+    """The README's figures block is what `python -m lmncell.report.readme` renders from this
+    code's demo (numbers within 2 % or 0.05: last digits may differ between BLAS builds)."""
+    summary = json.loads((demo / "summary.json").read_text())
+    mine = numbers(figures_block(README.read_text(encoding="utf-8")))
+    now = numbers(render_figures(summary))
+    assert len(mine) == len(now), "regenerate: python -m lmncell.report.readme SUMMARY README"
+    for a, b in zip(mine, now, strict=True):
+        assert a == pytest.approx(b, rel=0.02, abs=0.05), (
+            f"README says {a}, the demo gives {b}: run `lmncell demo` and "
+            "`python -m lmncell.report.readme lmncell-demo/summary.json README.md`")
+
+
+def test_readme_fmu_table_lists_the_fmu_variables(demo) -> None:
+    fmu = next(demo.glob("*_LMNCell.fmu"))
+    with zipfile.ZipFile(fmu) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    actual = {}
+    for sv in root.iter("ScalarVariable"):
+        unit = next(iter(sv)).get("unit", "–")
+        actual[sv.get("name")] = (sv.get("causality"), unit)
+    text = README.read_text(encoding="utf-8")
+    table = text[text.index("| variable | causality |"):]
+    rows = re.findall(r"^\| `(\w+)` \| (\w+) \| ([^|]+) \|", table, flags=re.M)
+    documented = {name: (causality, unit.strip()) for name, causality, unit in rows}
+    assert documented == actual
