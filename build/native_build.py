@@ -85,6 +85,10 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define ARRHENIUS_K {float(m.arrhenius_k or 0.0)!r}",
         f"#define REF_TEMPERATURE_C {m.reference_temperature_c!r}",
         f"#define TEMPERATURE_TERMS {m.temperature_terms}",
+        f"#define HAS_THERMAL {int(m.thermal is not None)}",
+        f"#define THERMAL_R_K_PER_W {(m.thermal.resistance_k_per_w if m.thermal else 1.0)!r}",
+        f"#define THERMAL_TAU_S {(m.thermal.time_constant_s if m.thermal else 1.0)!r}",
+        f"#define THERMAL_OFFSET_K {(m.thermal.offset_k if m.thermal else 0.0)!r}",
         f"#define TEMPERATURE_STEP_K {TEMPERATURE_STEP_K!r}",
         f"#define NTSRC {len(tsrc)}",
         f"static const int TSRC_COL[NTSRC + 1] = {{{', '.join(map(str, [*tsrc, 0]))}}};",
@@ -138,7 +142,8 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
      "cell current held over the step, > 0 charges [A]"),
     ("voltage_measured", 1, "input", "continuous", "Real", "V", "0",
      "measured terminal voltage, mean over the step, for the observer; 0 = not measured [V]"),
-    ("temperature", 2, "input", "continuous", "Real", "degC", "25", "cell temperature [degC]"),
+    ("temperature", 2, "input", "continuous", "Real", "degC", "25",
+     "see temperature_description"),
     ("voltage", 3, "output", "continuous", "Real", "V", None,
      "model terminal voltage of the last completed model step [V]"),
     ("soc", 4, "output", "continuous", "Real", "1", None,
@@ -153,7 +158,21 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
     ("observer", 9, "parameter", "fixed", "Integer", None, "0",
      "SoC observer: 0 none (coulomb counting), 1 EKF, 2 fuzzy observer, 3 IMM; uses "
      "voltage_measured"),
+    ("temperature_is_cell", 10, "parameter", "fixed", "Boolean", None, "false",
+     "true: the input 'temperature' is the measured cell temperature; false (default): the "
+     "ambient temperature, the cell temperature follows the model's thermal model"),
+    ("cell_temperature", 11, "output", "continuous", "Real", "degC", None,
+     "cell temperature at the end of the last completed model step (the next step's) [degC]"),
 ]
+
+
+def temperature_description(model: LmnModel) -> str:
+    """The `temperature` input's description: ambient or cell, as the pythonfmu FMU says."""
+    from lmncell.runtime.thermal import TEMPERATURE_DESCRIPTION
+
+    if model.thermal is not None:
+        return TEMPERATURE_DESCRIPTION
+    return "cell temperature (this model has no thermal model) [degC]"
 
 
 def model_description(model: LmnModel, guid: str, version: str) -> str:
@@ -163,6 +182,8 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
     for name, vr, caus, var, typ, unit, start, desc in VARIABLES:
         if name == "capacity":
             start = repr(float(model.capacity_ah))
+        if name == "temperature":
+            desc = temperature_description(model)
         attrs = (f'name="{name}" valueReference="{vr}" description="{html.escape(desc)}" '
                  f'causality="{caus}" variability="{var}"')
         if caus == "output":

@@ -24,7 +24,7 @@ from lmncell.runtime.model import LmnModel, load_model
 
 RUNTIME_DIR = Path(runtime_package.__file__).resolve().parent
 UNITS = {"current": "A", "voltage_measured": "V", "temperature": "degC", "voltage": "V",
-         "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1"}
+         "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1", "cell_temperature": "degC"}
 UNIT_BASE = {"A": {"A": "1"}, "V": {"kg": "1", "m": "2", "s": "-3", "A": "-1"},
              "degC": {"K": "1", "offset": "273.15"}, "Ah": {"s": "1", "A": "1",
                                                              "factor": "3600"}, "1": {}}

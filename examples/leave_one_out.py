@@ -2,8 +2,8 @@
 held-out record free-run, and compare the LMN with its baselines fitted on the same files.
 
 Usage:
-    python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 1] [--set KEY=JSON ...]
-        [--ocv-tests FILE] [--no-baselines]
+    python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 1] [--set KEY=VALUE ...]
+        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
     P=../shared/data/panasonic_18650pf/25degC
@@ -11,16 +11,20 @@ Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV 
         --set 'partition=["soc","current"]' --ocv-tests $P/ocv_and_capacity/*C20_OCV*.mat
 
 Per held-out record (all its segments pooled) it prints the free-run RMSE in mV over the 20–80 %
-SoC window and over the whole record, for the LMN and each baseline, and the mean over the folds.
+SoC window and over the whole record, for the LMN and each baseline, driven by the measured cell
+temperature and, where the record has one beside a chamber temperature, by the chamber
+temperature only (the LMN's thermal model computes the cell temperature); then the means over
+the folds. --hold-out PATTERN holds out only the records whose name contains PATTERN (e.g.
+10degC: train on all, test each 10 °C record left out in turn).
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import tempfile
 from pathlib import Path
 
+from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import evaluate_model
 from lmncell.evaluation.metrics import pooled
 from lmncell.identification.train import train_files
@@ -33,34 +37,43 @@ def main() -> None:
     ap.add_argument("capacity_ah", type=float)
     ap.add_argument("records", nargs="+")
     ap.add_argument("--soc0", type=float, default=1.0)
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=JSON",
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a training setting, e.g. 'partition=[\"soc\",\"current\"]'")
     ap.add_argument("--ocv-tests", nargs="*", default=[])
     ap.add_argument("--no-baselines", action="store_true")
+    ap.add_argument("--hold-out", default="", metavar="PATTERN",
+                    help="hold out only records whose name contains PATTERN")
     a = ap.parse_args()
-    settings = {k: json.loads(v) for k, v in (s.split("=", 1) for s in a.set)}
+    settings = dict(parse_setting(s) for s in a.set)
     if a.ocv_tests:
         settings["ocv_tests"] = a.ocv_tests
-    means: dict[str, list[float]] = {}
+    means: dict[str, list[tuple[float, float]]] = {}
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
-    for held in a.records:
+    for held in [p for p in a.records if a.hold_out in Path(p).name]:
         train = [p for p in a.records if p != held]
         model, _ = train_files(train, Path(tmp) / "model.json",
                                capacity_ah=a.capacity_ah, soc0=a.soc0,
                                baselines=not a.no_baselines, progress=lambda _m: None,
                                **settings)
-        _, rows = evaluate_model(model, [held], soc0=a.soc0)
-        names = [m for m in MODELS if m in rows[0]]
-        cells = []
-        for m in names:
-            per_segment = [r[m] for r in rows]
-            w, whole = pooled(per_segment, "window_"), pooled(per_segment)
-            means.setdefault(m, []).append(w)
-            cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
-        print(f"{Path(held).name[:40]:40s} M={model.n_local_models:2d} E={model.arrhenius_k}  "
-              + "  ".join(cells), flush=True)
-    print("mean 20–80 % RMSE over the folds (mV): "
-          + ", ".join(f"{m} {sum(v) / len(v):.2f}" for m, v in means.items()))
+        for ambient in (False, True):
+            _, rows = evaluate_model(model, [held], soc0=a.soc0, ambient=ambient)
+            if ambient and "cell_temperature_rmse_k" not in rows[0]:
+                continue                  # no measured cell temperature: one run says it all
+            names = [m for m in MODELS if m in rows[0]]
+            cells = []
+            mode = "ambient" if ambient else "cell"
+            for m in names:
+                per_segment = [r[m] for r in rows]
+                w, whole = pooled(per_segment, "window_"), pooled(per_segment)
+                means.setdefault(f"{m} ({mode} T)", []).append((w, whole))
+                cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
+            extra = (f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
+                     if "cell_temperature_rmse_k" in rows[0] else "")
+            print(f"{Path(held).name[:40]:40s} {mode:7s} M={model.n_local_models:2d} "
+                  f"E={model.arrhenius_k}  " + "  ".join(cells) + extra, flush=True)
+    print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(
+        f"{m} {sum(w for w, _ in v) / len(v):.2f} / {sum(x for _, x in v) / len(v):.2f}"
+        for m, v in means.items()))
 
 
 if __name__ == "__main__":

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from .model import LmnModel
 from .observers import OBSERVER_NAMES, SocObserver
-from .step import CellStepper
+from .step import CellStepper, CellThermal
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 
@@ -29,6 +29,7 @@ class Parameters:
     soc0: float
     capacity_ah: float
     observer: int = 0
+    temperature_is_cell: bool = False
 
 
 class CellCosim:
@@ -48,13 +49,16 @@ class CellCosim:
         if p.observer not in OBSERVER_NAMES:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")
+        self.thermal = CellThermal(self.model, p.temperature_is_cell)
+        t_cell = self.thermal.cell_temperature(temperature_c)
+        self.thermal.temperature_c = None        # the first step's ambient sets the start
         self.observer: SocObserver | None = None
         if p.observer:
             self.observer = SocObserver(self.model, OBSERVER_NAMES[p.observer], p.soc0,
-                                        p.capacity_ah, temperature_c)
+                                        p.capacity_ah, t_cell)
             self.stepper = self.observer.stepper
         else:
-            self.stepper = CellStepper(self.model, p.soc0, p.capacity_ah, temperature_c)
+            self.stepper = CellStepper(self.model, p.soc0, p.capacity_ah, t_cell)
         self.covered_s = 0.0
         self.charge_as = 0.0
         self.temp_int = 0.0
@@ -63,6 +67,8 @@ class CellCosim:
         self.out_of_range = False
         self.range_message = ""
         self.steps = 0
+        self._last_input_temperature = self.thermal.cell_temperature(temperature_c)
+        self.thermal.temperature_c = None
 
     @property
     def voltage_v(self) -> float:
@@ -71,6 +77,13 @@ class CellCosim:
     @property
     def soc(self) -> float:
         return self.observer.state.soc if self.observer else self.stepper.soc
+
+    @property
+    def cell_temperature_c(self) -> float:
+        """The cell temperature of the last step (°C); before the first step the rested cell
+        at the last `temperature` input given (nan if none yet)."""
+        t = self.thermal.temperature_c
+        return t if t is not None else self._last_input_temperature
 
     @property
     def soc_std(self) -> float:
@@ -130,7 +143,8 @@ class CellCosim:
     def _model_step(self) -> None:
         ts = self.model.sample_time_s
         i = self.charge_as / ts
-        temp = self.temp_int / ts
+        temp_input = self.temp_int / ts
+        temp = self.thermal.cell_temperature(temp_input)
         self.range_message = self.check_range(i, temp)
         self.out_of_range = bool(self.range_message)
         if self.observer:
@@ -138,6 +152,7 @@ class CellCosim:
             self.observer.step(i, v if v > 0 else math.nan, temp)
         else:
             self.stepper.step(i, temp)
+        self.thermal.update(temp_input, i, self.stepper)
         self.steps += 1
         self.covered_s = self.charge_as = self.temp_int = 0.0
         self.volt_int = self.volt_time = 0.0
@@ -149,12 +164,17 @@ class CellCosim:
                 "acc": [self.covered_s, self.charge_as, self.temp_int, self.volt_int,
                         self.volt_time],
                 "flags": [self.out_of_range, self.range_message, self.steps],
-                "params": [self.params.soc0, self.params.capacity_ah, self.params.observer]}
+                "thermal": [self.thermal.temperature_c, self._last_input_temperature],
+                "params": [self.params.soc0, self.params.capacity_ah, self.params.observer,
+                           self.params.temperature_is_cell]}
 
     def set_state(self, state: dict) -> None:
-        soc0, cap, obs = state["params"]
-        self.params = Parameters(float(soc0), float(cap), int(obs))
+        soc0, cap, obs, is_cell = state["params"]
+        self.params = Parameters(float(soc0), float(cap), int(obs), bool(is_cell))
         self.reset()
+        t_cell, t_last = state["thermal"]
+        self.thermal.temperature_c = None if t_cell is None else float(t_cell)
+        self._last_input_temperature = float(t_last)
         if self.observer:
             self.observer.set_state(state["observer"])
         else:

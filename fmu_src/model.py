@@ -1,6 +1,7 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charges, SoC 0…1):
+Format ``lmncell-model``, version 2 (version 1 files, which have no ``thermal`` key, are read
+too). Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
 - ``cell``: ``capacity_ah``, ``efficiency_charge``, ``efficiency_discharge`` (coulombic, η(i)),
@@ -37,6 +38,10 @@ Format ``lmncell-model``, version 1. Keys (units in the names, current > 0 charg
 - ``observers`` (optional): ``fuzzy``, the fuzzy observer's offline design for the default
   settings: ``q`` (SoC² per step), ``r`` (V²), and per local model ``ocv_slopes_v`` (∂u_j/∂SoC at
   its centre, V), steady-state Kalman ``gains`` (1/V) and ``variances`` (SoC²).
+- ``thermal`` (version 2; null or absent: no thermal model): the lumped thermal model of
+  thermal.py, ``resistance_k_per_w`` R (K/W), ``time_constant_s`` τ (s), ``offset_k`` (rested
+  cell above ambient, K). With it, the FMU's ``temperature`` input is the ambient temperature
+  and the model computes the cell temperature (unless ``temperature_is_cell`` is set).
 - ``baselines`` (optional) and ``training`` (metadata: files with hashes, settings, metrics).
 """
 
@@ -49,8 +54,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .thermal import ThermalModel
+
 FORMAT = "lmncell-model"
-VERSION = 1
+VERSION = 2
+READABLE_VERSIONS = (1, 2)
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -92,6 +100,7 @@ class LmnModel:
     arrhenius_k: float | None = None
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
+    thermal: ThermalModel | None = None
     limits: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
@@ -257,6 +266,20 @@ def _ref(val, where: str) -> tuple[str, int]:
     return val[0], val[1]
 
 
+def _thermal(doc: object, source: str) -> ThermalModel | None:
+    """The thermal model of a model document, or None (key absent or null)."""
+    if doc is None:
+        return None
+    keys = {"resistance_k_per_w", "time_constant_s", "offset_k"}
+    if not isinstance(doc, dict) or set(doc) != keys:
+        raise ModelFileError(f"{source}: 'thermal' must be null or an object with exactly the "
+                             f"keys {sorted(keys)}, got {doc!r}")
+    try:
+        return ThermalModel(**{k: doc[k] for k in keys}).check(source)
+    except ValueError as exc:
+        raise ModelFileError(str(exc)) from None
+
+
 def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     """Check a model document and build the runtime model; errors name the file and key."""
     if not isinstance(doc, dict):
@@ -265,9 +288,9 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     if fmt != FORMAT:
         raise ModelFileError(f"{source}: format is {fmt!r}, expected {FORMAT!r}")
     ver = doc.get("version")
-    if ver != VERSION:
-        raise ModelFileError(f"{source}: model file version {ver!r}; this LMNCell reads version "
-                             f"{VERSION} only (re-train or convert the model)")
+    if ver not in READABLE_VERSIONS or isinstance(ver, bool):
+        raise ModelFileError(f"{source}: model file version {ver!r}; this LMNCell reads versions "
+                             f"{list(READABLE_VERSIONS)} (re-train or convert the model)")
     ts = float(_get(doc, "sample_time_s", source, (int, float)))
     if not ts > 0:
         raise ModelFileError(f"{source}: 'sample_time_s' is {ts}, expected > 0")
@@ -357,6 +380,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
+        thermal=_thermal(doc.get("thermal"), source),
         limits=dict(doc.get("limits", {})), cell=dict(cell), noise=dict(doc.get("noise", {})),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
                if k in doc})
@@ -401,6 +425,7 @@ def model_to_dict(model: LmnModel) -> dict:
                            for k in range(model.node_weights.shape[0])]},
         "local_models": {"columns": model.columns(), "theta": model.theta.tolist()},
         "limits": model.limits, "noise": model.noise,
+        "thermal": None if model.thermal is None else model.thermal.to_dict(),
     }
     for key in ("observers", "baselines", "training"):
         if key in model.extra:

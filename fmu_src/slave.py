@@ -18,6 +18,7 @@ from pythonfmu.enums import Fmi2Status
 from .cosim import CellCosim, InputError, Parameters
 from .model import ModelFileError, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
+from .thermal import TEMPERATURE_DESCRIPTION
 
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never
@@ -50,6 +51,7 @@ class LmnCellSlave(Fmi2Slave):
         self.soc0 = 1.0
         self.capacity = float(m.capacity_ah)
         self.observer = 0
+        self.temperature_is_cell = False
         self._cosim: CellCosim | None = None
         reg = self.register_variable
         reg(Real("current", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
@@ -59,7 +61,9 @@ class LmnCellSlave(Fmi2Slave):
                  description="measured terminal voltage, mean over the step, for the observer; "
                              "0 = not measured [V]"))
         reg(Real("temperature", causality=Fmi2Causality.input,
-                 variability=Fmi2Variability.continuous, description="cell temperature [degC]"))
+                 variability=Fmi2Variability.continuous,
+                 description=TEMPERATURE_DESCRIPTION if m.thermal is not None else
+                 "cell temperature (this model has no thermal model) [degC]"))
         reg(Real("voltage", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
                  getter=lambda: self._out("voltage_v"),
@@ -86,6 +90,16 @@ class LmnCellSlave(Fmi2Slave):
                     variability=Fmi2Variability.fixed,
                     description="SoC observer: 0 none (coulomb counting), 1 EKF, 2 fuzzy "
                                 "observer, 3 IMM; uses voltage_measured"))
+        reg(Boolean("temperature_is_cell", causality=Fmi2Causality.parameter,
+                    variability=Fmi2Variability.fixed,
+                    description="true: the input 'temperature' is the measured cell "
+                                "temperature; false (default): the ambient temperature, the "
+                                "cell temperature follows the model's thermal model"))
+        reg(Real("cell_temperature", causality=Fmi2Causality.output,
+                 variability=Fmi2Variability.continuous,
+                 getter=self._cell_temperature,
+                 description="cell temperature at the end of the last completed model step "
+                             "(the next step's) [degC]"))
 
     def _dedupe_sys_path(self) -> None:
         """The wrapper inserts the resources folder into sys.path at every instantiation: keep
@@ -109,6 +123,13 @@ class LmnCellSlave(Fmi2Slave):
             return float(self._model.ocv(self.soc0)) if self._model.relative_ocv else math.nan
         return float(getattr(self._cosim, name))
 
+    def _cell_temperature(self) -> float:
+        if self._cosim is not None:
+            return float(self._cosim.cell_temperature_c)
+        t = float(self.temperature)
+        return t + (self._model.thermal.offset_k if self._model.thermal is not None
+                    and not self.temperature_is_cell else 0.0)
+
     def _error(self, msg: str) -> None:
         self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
 
@@ -121,7 +142,8 @@ class LmnCellSlave(Fmi2Slave):
         try:
             self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
                                                             float(self.capacity),
-                                                            int(self.observer)))
+                                                            int(self.observer),
+                                                            bool(self.temperature_is_cell)))
             self._cosim.reset(float(self.temperature) if math.isfinite(self.temperature)
                               else 25.0)
         except InputError as exc:
@@ -147,12 +169,12 @@ class LmnCellSlave(Fmi2Slave):
     # ----- FMU state: parameters, inputs and the whole engine state ------------------------
     def _get_fmu_state(self) -> dict:
         return {"inputs": [self.current, self.voltage_measured, self.temperature],
-                "params": [self.soc0, self.capacity, self.observer],
+                "params": [self.soc0, self.capacity, self.observer, self.temperature_is_cell],
                 "cosim": None if self._cosim is None else self._cosim.get_state()}
 
     def _set_fmu_state(self, state: dict) -> None:
         self.current, self.voltage_measured, self.temperature = state["inputs"]
-        self.soc0, self.capacity, self.observer = state["params"]
+        self.soc0, self.capacity, self.observer, self.temperature_is_cell = state["params"]
         if state["cosim"] is None:
             self._cosim = None
         else:

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import TEMPERATURE_STEP_K, LmnModel
+from .thermal import heat_w, next_temperature, rested_temperature
 
 CHARGE, DISCHARGE = 1, 2
 
@@ -318,3 +319,61 @@ class CellStepper:
                                         m.current_terms - 1)
         self.lags = list(values[n_exo_state:n_exo_state + m.output_lags])
         self.voltage_v = float(values[n_exo_state + m.output_lags])
+
+
+class CellThermal:
+    """The cell temperature the LMN is stepped with, from the `temperature` input.
+
+    With a thermal model in the model file and temperature_is_cell False, the input is the
+    ambient temperature and the cell temperature follows the lumped model (thermal.py) heated
+    by the step's i·(u − OCV); otherwise the input is the cell temperature itself. Used by the
+    FMU (cosim) and by simulate_ambient, so both step the same way."""
+
+    def __init__(self, model: LmnModel, temperature_is_cell: bool = False) -> None:
+        self.model = model
+        self.active = model.thermal is not None and not temperature_is_cell
+        self.temperature_c: float | None = None      # cell temperature at the step's start
+
+    def cell_temperature(self, input_c: float) -> float:
+        """The cell temperature for the next step, given the step's `temperature` input."""
+        if not self.active:
+            return input_c
+        if self.temperature_c is None:
+            self.temperature_c = rested_temperature(self.model.thermal, input_c)
+        return self.temperature_c
+
+    def update(self, input_c: float, current_a: float, stepper: CellStepper) -> None:
+        """After a step taken at cell_temperature(input_c): heat the cell for the next one."""
+        if not self.active:
+            self.temperature_c = input_c
+            return
+        m = self.model
+        q = heat_w(current_a, stepper.voltage_v, float(m.ocv(stepper.soc)))
+        self.temperature_c = next_temperature(m.thermal, self.cell_temperature(input_c),
+                                              input_c, q, m.sample_time_s)
+
+
+def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarray | float,
+                     soc0: float, capacity_ah: float | None = None,
+                     h0: float | None = None) -> tuple[SimResult, np.ndarray]:
+    """Free-run simulation driven by the ambient temperature: the cell temperature comes from
+    the model's thermal model (as in the FMU with temperature_is_cell = false). Returns the
+    simulation and the cell temperature used at each step (°C). Without a thermal model the
+    ambient temperature is taken as the cell temperature."""
+    current = np.asarray(current_a, dtype=float)
+    ambient = np.broadcast_to(np.asarray(ambient_c, dtype=float), current.shape)
+    thermal = CellThermal(model)
+    t_start = thermal.cell_temperature(float(ambient[0])) if current.size else 25.0
+    stepper = CellStepper(model, soc0, capacity_ah, t_start, h0)
+    n = current.size
+    u, soc, y = np.empty(n), np.empty(n), np.empty(n)
+    cell = np.empty(n)
+    phi = np.empty((n, model.n_local_models))
+    for k, (i, ta) in enumerate(zip(current.tolist(), ambient.tolist(), strict=True)):
+        cell[k] = thermal.cell_temperature(ta)
+        u[k] = stepper.step(i, cell[k])
+        soc[k] = stepper.soc
+        y[k] = u[k] - float(model.ocv(soc[k])) if model.relative_ocv else u[k]
+        phi[k] = stepper.validity
+        thermal.update(ta, i, stepper)
+    return SimResult(u, soc, y, phi), cell

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from pathlib import Path
 
 import pytest
@@ -53,6 +54,15 @@ def quick_fmu(quick_model, tmp_path_factory) -> Path:
     from lmncell.fmu.pythonfmu_build import build_fmu
 
     return build_fmu(quick_model, tmp_path_factory.mktemp("fmu") / "pan.fmu")
+
+
+@pytest.fixture(scope="session")
+def native_fmu(quick_model, tmp_path_factory) -> Path:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.fmu.native_build import build_native_fmu
+
+    return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
 
 
 @pytest.fixture(scope="session")

@@ -91,7 +91,13 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=2), "version 2; this LMNCell reads version 1"),
+    (lambda d: d.update(version=3), r"version 3; this LMNCell reads versions \[1, 2\]"),
+    (lambda d: d.update(version=True), "version True"),
+    (lambda d: d.update(thermal={"resistance_k_per_w": 2.0}), "'thermal' must be null"),
+    (lambda d: d.update(thermal={"resistance_k_per_w": -2.0, "time_constant_s": 900.0,
+                                 "offset_k": 0.0}), "thermal.resistance_k_per_w is -2.0"),
+    (lambda d: d.update(thermal={"resistance_k_per_w": 2.0, "time_constant_s": "x",
+                                 "offset_k": 0.0}), "thermal.time_constant_s is 'x'"),
     (lambda d: d.update(format="other"), "format is 'other'"),
     (lambda d: d["local_models"]["theta"][0].pop(), "inhomogeneous|theta"),
     (lambda d: d["local_models"]["theta"].pop(), "belong to no leaf|leaf"),
@@ -119,3 +125,12 @@ def test_not_json_is_refused(tmp_path) -> None:
         load_model(p)
     with pytest.raises(ModelFileError, match="expected a JSON object"):
         model_from_dict([1, 2], "list")
+
+
+def test_version_1_files_without_thermal_model_still_load(tmp_path) -> None:
+    doc = model_to_dict(random_tree_model())
+    doc["version"] = 1
+    del doc["thermal"]
+    p = tmp_path / "v1.json"
+    p.write_text(json.dumps(doc))
+    assert load_model(p).thermal is None

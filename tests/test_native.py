@@ -32,15 +32,6 @@ from tests.fmu_helpers import (
 HOST_C = Path(__file__).parent / "native" / "host.c"
 
 
-@pytest.fixture(scope="session")
-def native_fmu(quick_model, tmp_path_factory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell.fmu.native_build import build_native_fmu
-
-    return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
-
-
 @pytest.fixture(scope="module")
 def us06(quick_model):
     return load_model(quick_model), record_to_segments(read_record(PAN_US06), 1.0, 1.0, 2.85)[0]

@@ -126,7 +126,7 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
     from lmncell.evaluation.evaluate import evaluate_files
 
     evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
-                   read_options=read_options(a))
+                   read_options=read_options(a), ambient=a.ambient)
     return 0
 
 
@@ -223,6 +223,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table")
     s.add_argument("--trace", metavar="OUT.csv", help="write time, current, measured and "
                    "model voltage and SoC per model step")
+    s.add_argument("--ambient", action="store_true", help="drive the model with the ambient "
+                   "(chamber) temperature only, as a vehicle simulation does: the model's "
+                   "thermal model computes the cell temperature (default: the measured cell "
+                   "temperature)")
     s.add_argument("--observer", choices=["ekf", "fuzzy", "imm"],
                    help="judge a SoC observer instead of the voltage")
     s.add_argument("--soc0-est", type=_float01, help="the observer's start SoC guess")

@@ -3,7 +3,8 @@
  *
  * The model's numbers come from lmncell_model.h, generated from the model file. The code follows
  * the Python runtime step by step, so that both give the same numbers:
- *   - exo_update / features / blend / stepper_step  <->  fmu_src/runtime.py (ExoStepper, CellStepper)
+ *   - exo_update / features / blend / stepper_step  <->  fmu_src/step.py (ExoStepper, CellStepper)
+ *   - cell_temperature / thermal_update              <->  fmu_src/step.py (CellThermal), thermal.py
  *   - cosim_advance / model_step / check_range       <->  fmu_src/cosim.py (CellCosim)
  *   - observer_step and friends                      <->  fmu_src/observers.py (SocObserver)
  * Conventions: SI units, current > 0 charges the cell, SoC as a fraction.
@@ -19,7 +20,8 @@
 
 /* value references: the same as the pythonfmu FMU */
 enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, VR_SOC_STD,
-       VR_OUT_OF_RANGE, VR_SOC0, VR_CAPACITY, VR_OBSERVER };
+       VR_OUT_OF_RANGE, VR_SOC0, VR_CAPACITY, VR_OBSERVER, VR_TEMPERATURE_IS_CELL,
+       VR_CELL_TEMPERATURE };
 
 #define CHARGE 1
 #define DISCHARGE 2
@@ -33,8 +35,11 @@ typedef struct {
     unsigned magic;
     /* inputs and parameters */
     double current, voltage_measured, temperature, soc0, capacity;
-    int observer;
+    int observer, temperature_is_cell;
     int initialized;
+    /* thermal state (step.CellThermal): cell temperature at the next step's start */
+    double t_cell, t_last_input;
+    int t_cell_set;
     /* exogenous state (runtime.ExoState) */
     double soc, lp[2 * NF + 1], h, past[NB + 1];
     int direction;
@@ -513,9 +518,35 @@ static int check_range(Instance *in, double i, double t, double soc) {
     return out;
 }
 
+/* ----- cell temperature (step.CellThermal, thermal.py) ---------------------------------------- */
+static int thermal_active(const State *s) { return HAS_THERMAL && !s->temperature_is_cell; }
+
+static double cell_temperature(State *s, double input) {
+    if (!thermal_active(s)) return input;
+    if (!s->t_cell_set) {
+        s->t_cell = input + THERMAL_OFFSET_K;
+        s->t_cell_set = 1;
+    }
+    return s->t_cell;
+}
+
+static void thermal_update(State *s, double input, double i) {
+    double a, rest, q, t;
+    if (!thermal_active(s)) {
+        s->t_cell = input;
+        s->t_cell_set = 1;
+        return;
+    }
+    t = cell_temperature(s, input);
+    q = i * (s->voltage - ocv(s->soc));
+    a = exp(-TS / THERMAL_TAU_S);
+    rest = input + THERMAL_OFFSET_K;
+    s->t_cell = rest + a * (t - rest) + THERMAL_R_K_PER_W * (1.0 - a) * q;
+}
+
 static void model_step(Instance *in) {
     State *s = &in->s;
-    double i = s->charge / TS, t = s->temp_int / TS;
+    double i = s->charge / TS, ta = s->temp_int / TS, t = cell_temperature(s, ta);
     s->out_of_range = check_range(in, i, t, s->observer ? s->ob_soc : s->soc);
     if (s->observer) {
         double v = s->volt_time >= TS * (1 - STEP_TOL) ? s->volt_int / s->volt_time : 0.0;
@@ -523,6 +554,7 @@ static void model_step(Instance *in) {
     } else {
         stepper_step(s, i, t);
     }
+    thermal_update(s, ta, i);
     s->steps++;
     s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
 }
@@ -581,7 +613,10 @@ static fmi2Status initialise(Instance *in) {
               "2 fuzzy, 3 IMM", s->observer);
         return fmi2Error;
     }
-    stepper_init(s, s->soc0, isfinite(s->temperature) ? s->temperature : 25.0);
+    s->t_cell_set = 0;
+    s->t_last_input = cell_temperature(s, isfinite(s->temperature) ? s->temperature : 25.0);
+    s->t_cell_set = 0;
+    stepper_init(s, s->soc0, s->t_last_input);
     observer_init(s, s->soc0);
     s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
     s->out_of_range = 0;
@@ -663,6 +698,10 @@ static double output_real(const State *s, fmi2ValueReference vr, int *ok) {
     case VR_SOC_STD: return s->initialized && s->observer ? sqrt(s->ob_var > 0 ? s->ob_var : 0) : 0.0;
     case VR_SOC0: return s->soc0;
     case VR_CAPACITY: return s->capacity;
+    case VR_CELL_TEMPERATURE:
+        if (s->initialized && s->t_cell_set) return s->t_cell;
+        if (s->initialized) return s->t_last_input;
+        return s->temperature + (thermal_active(s) ? THERMAL_OFFSET_K : 0.0);
     default: *ok = 0; return 0.0;
     }
 }
@@ -703,12 +742,15 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     size_t k;
     if (!in) return fmi2Error;
     for (k = 0; k < n; k++) {
-        if (vr[k] != VR_OUT_OF_RANGE) {
+        if (vr[k] == VR_OUT_OF_RANGE) {
+            v[k] = in->s.out_of_range ? fmi2True : fmi2False;
+        } else if (vr[k] == VR_TEMPERATURE_IS_CELL) {
+            v[k] = in->s.temperature_is_cell ? fmi2True : fmi2False;
+        } else {
             logf_(in, fmi2Error, "logStatusError", "fmi2GetBoolean: no Boolean variable with "
                   "value reference %u", vr[k]);
             return fmi2Error;
         }
-        v[k] = in->s.out_of_range ? fmi2True : fmi2False;
     }
     return fmi2OK;
 }
@@ -771,11 +813,16 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                           const fmi2Boolean v[]) {
-    (void)vr; (void)v;
-    if (!c) return fmi2Error;
-    if (n) {
-        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2SetBoolean: no settable Boolean");
-        return fmi2Error;
+    Instance *in = (Instance *)c;
+    size_t k;
+    if (!in) return fmi2Error;
+    for (k = 0; k < n; k++) {
+        if (vr[k] != VR_TEMPERATURE_IS_CELL || in->s.initialized) {
+            logf_(in, fmi2Error, "logStatusError", "fmi2SetBoolean: value reference %u is not a "
+                  "settable Boolean now", vr[k]);
+            return fmi2Error;
+        }
+        in->s.temperature_is_cell = v[k] ? 1 : 0;
     }
     return fmi2OK;
 }

@@ -20,7 +20,9 @@ class Segment:
     means over the step; soc_ref is the reference SoC at time_s[k]; soc0 the SoC at the start of
     the first step; temperature_c in °C (None if unknown); weight the fit weight of each sample
     (SoC window, record weight and, in training, the SoC-reference weight); record_weight the
-    weight of the record it belongs to alone.
+    weight of the record it belongs to alone; ambient_c the chamber (ambient) temperature in °C
+    where the record has a measured cell temperature beside it (else None: then temperature_c,
+    if any, is the chamber's).
     """
 
     name: str
@@ -32,6 +34,7 @@ class Segment:
     soc_ref: np.ndarray
     weight: np.ndarray
     record_weight: float = 1.0
+    ambient_c: float | None = None
 
     def __len__(self) -> int:
         return int(self.time_s.size)
@@ -81,6 +84,9 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
     """Reference SoC by coulomb counting (tester counters where present), then each gap-free
     segment resampled to the model rate."""
     rec = rec.with_soc(coulomb_count(rec, soc0, capacity_ah))
+    chamber = rec.meta.chamber_temp_c
+    ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None
+               and np.isfinite(chamber) else None)
     temp = rec.temperature_or_chamber()
     if temp is not None and rec.temperature_c is None:
         rec.temperature_c = temp
@@ -93,7 +99,7 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
         w = np.where((rs.soc_ref >= lo) & (rs.soc_ref <= hi), 1.0, outside_weight)
         name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"
         out.append(Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
-                           float(seg.soc_ref[0]), rs.soc_ref, w))
+                           float(seg.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient))
     if not out:
         raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "
                         f"time {sample_time_s} s")

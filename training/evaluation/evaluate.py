@@ -5,6 +5,7 @@ function behind `lmncell evaluate` and `lmncell.evaluate`."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -19,7 +20,7 @@ from lmncell.identification.baselines import Ecm2rc
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
 from lmncell.runtime.model import LmnModel, load_model, model_from_dict
-from lmncell.runtime.step import initial_hysteresis, simulate
+from lmncell.runtime.step import initial_hysteresis, simulate, simulate_ambient
 
 
 def simulate_segment(model: LmnModel, seg: Segment, capacity_ah: float | None = None):
@@ -36,6 +37,7 @@ class Trace:
     voltage: dict[str, np.ndarray]
     soc_model: np.ndarray
     validity: np.ndarray
+    cell_temperature_c: np.ndarray | None = None   # what the LMN was stepped with (ambient runs)
 
 
 def baseline_voltage(kind: str, doc: dict, seg: Segment, soc: np.ndarray) -> np.ndarray:
@@ -45,25 +47,51 @@ def baseline_voltage(kind: str, doc: dict, seg: Segment, soc: np.ndarray) -> np.
     return ecm.simulate(seg.current_a, seg.temperature_c, soc, initial_hysteresis(seg.soc0))
 
 
+def ambient_of(seg: Segment) -> np.ndarray:
+    """The ambient temperature a vehicle simulation would give for a segment (°C per step):
+    the chamber temperature where the record has a measured cell temperature beside it, else
+    the record's own (chamber) temperature, else 25 °C."""
+    if seg.ambient_c is not None:
+        return np.full(len(seg), float(seg.ambient_c))
+    if seg.temperature_c is not None:
+        return np.asarray(seg.temperature_c, dtype=float)
+    return np.full(len(seg), 25.0)
+
+
 def evaluate_model(model: LmnModel, paths: list[str | Path], soc0: float | None = None,
-                   capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None
-                   ) -> tuple[list[Trace], list[dict]]:
+                   capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None,
+                   ambient: bool = False) -> tuple[list[Trace], list[dict]]:
     """Free-run simulation of each record's segments with the LMN and its baselines
-    (read_options go to read_record)."""
+    (read_options go to read_record).
+
+    ambient False: the measured cell temperature drives the models (the FMU with
+    temperature_is_cell = true); True: only the ambient (chamber) temperature, the LMN's thermal
+    model computes the cell temperature (the FMU's default) and the baselines, which have none,
+    take the ambient as the cell temperature."""
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
     for p in paths:
         rec = read_record(p, **(read_options or {}))
         for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), cap):
             check_range(model, seg)
-            sim = simulate_segment(model, seg, cap)
+            cell = None
+            if ambient:
+                amb = ambient_of(seg)
+                sim, cell = simulate_ambient(model, seg.current_a, amb, seg.soc0, cap,
+                                             initial_hysteresis(seg.soc0))
+                driven = dataclasses.replace(seg, temperature_c=amb)
+            else:
+                sim, driven = simulate_segment(model, seg, cap), seg
             volts = {"lmn": sim.voltage_v}
             for name, b in model.extra.get("baselines", {}).items():
-                volts[name] = baseline_voltage(b["kind"], b["model"], seg, sim.soc)
-            traces.append(Trace(seg, volts, sim.soc, sim.validity))
-            row = {"record": seg.name}
+                volts[name] = baseline_voltage(b["kind"], b["model"], driven, sim.soc)
+            traces.append(Trace(seg, volts, sim.soc, sim.validity, cell))
+            row = {"record": seg.name, "temperature_input": "ambient" if ambient else "cell"}
             for name, v in volts.items():
                 row[name] = record_metrics(seg.voltage_v, v, seg.soc_ref)
+            if cell is not None and seg.ambient_c is not None and seg.temperature_c is not None:
+                row["cell_temperature_rmse_k"] = float(np.sqrt(np.mean(
+                    (cell - seg.temperature_c) ** 2)))
             rows.append(row)
     return traces, rows
 
@@ -105,11 +133,12 @@ def write_trace(trace: Trace, path: str | Path) -> Path:
 
 def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float | None = None,
                    plot_dir: str | Path | None = None, trace: str | Path | None = None,
-                   as_json: bool = False, progress: Progress = _print,
+                   as_json: bool = False, progress: Progress = _print, ambient: bool = False,
                    read_options: Mapping[str, Any] | None = None) -> list[dict]:
     """`lmncell evaluate`: figures per record for the LMN and its baselines."""
     model = load_model(model_path)
-    traces, rows = evaluate_model(model, paths, soc0, read_options=read_options)
+    traces, rows = evaluate_model(model, paths, soc0, read_options=read_options,
+                                  ambient=ambient)
     if trace is not None:
         if len(traces) == 1:
             write_trace(traces[0], trace)
@@ -131,11 +160,14 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float 
     else:
         for r in rows:
             for name, m in r.items():
-                if name == "record":
+                if not isinstance(m, dict):
                     continue
                 win = m["window_rmse_mv"]
                 win_txt = "  (none)" if win is None else f"{win:6.2f} mV"
                 progress(f"{r['record'][:48]:48s} {name:12s} RMSE {m['rmse_mv']:7.2f} mV  MAE "
                          f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | {WINDOW[0]:.0%}–"
                          f"{WINDOW[1]:.0%} SoC RMSE {win_txt}")
+            if "cell_temperature_rmse_k" in r:
+                progress(f"{r['record'][:48]:48s} driven by the ambient temperature: cell "
+                         f"temperature RMSE {r['cell_temperature_rmse_k']:.2f} K")
     return rows

@@ -1,5 +1,6 @@
 """FMU against pipeline: the FMU driven by fmpy with a record's current must reproduce the
-pipeline's free-run voltage and SoC."""
+pipeline's free-run voltage and SoC, driven by the measured cell temperature
+(temperature_is_cell = true) or by the ambient temperature (the FMU's thermal model)."""
 
 from __future__ import annotations
 
@@ -8,37 +9,46 @@ from pathlib import Path
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc
 from lmncell.data.readers import read_record
-from lmncell.evaluation.evaluate import simulate_segment
+from lmncell.evaluation.evaluate import ambient_of, simulate_segment
 from lmncell.runtime.model import load_model
+from lmncell.runtime.step import initial_hysteresis, simulate_ambient
 
 
-def fmu_input(seg: Segment, ts: float) -> np.ndarray:
-    """fmpy input signal: sample k holds the current of model step k+1 from time k·Ts."""
+def fmu_input(seg: Segment, ts: float, temperature_c: np.ndarray | None = None) -> np.ndarray:
+    """fmpy input signal: sample k holds the current of model step k+1 from time k·Ts;
+    temperature_c replaces the segment's temperature (e.g. the ambient)."""
     n = len(seg)
     sig = np.zeros(n + 1, dtype=[("time", float), ("current", float), ("temperature", float),
                                  ("voltage_measured", float)])    # 0: not measured
     sig["time"] = ts * np.arange(n + 1)
     sig["current"][:n] = seg.current_a
     sig["current"][n] = seg.current_a[-1]
-    temp = seg.temperature_c if seg.temperature_c is not None else np.full(n, 25.0)
+    temp = temperature_c if temperature_c is not None else seg.temperature_c
+    temp = temp if temp is not None else np.full(n, 25.0)
     sig["temperature"][:n] = temp
     sig["temperature"][n] = temp[-1]
     return sig
 
 
-def run_fmu_on_segment(fmu: str | Path, seg: Segment, ts: float,
-                       step_s: float | None = None) -> np.ndarray:
-    """fmpy result (time, voltage, soc) of the FMU driven with the segment's current."""
+def run_fmu_on_segment(fmu: str | Path, seg: Segment, ts: float, step_s: float | None = None,
+                       ambient: bool = False) -> np.ndarray:
+    """fmpy result (time, voltage, soc, cell_temperature) of the FMU driven with the segment's
+    current and its measured temperature as the cell temperature or (ambient) its ambient."""
     from fmpy import simulate_fmu
 
     n = len(seg)
+    signal = fmu_input(seg, ts, ambient_of(seg) if ambient else None)
     return simulate_fmu(str(fmu), start_time=0.0, stop_time=n * ts, step_size=step_s or ts,
-                        output_interval=ts, input=fmu_input(seg, ts),
-                        start_values={"soc0": seg.soc0}, output=["voltage", "soc"])
+                        output_interval=ts, input=signal,
+                        start_values={"soc0": seg.soc0, "temperature_is_cell": not ambient},
+                        output=["voltage", "soc", "cell_temperature"])
 
 
 def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: str | Path,
-                              soc0: float | None = None, max_steps: int | None = None) -> dict:
+                              soc0: float | None = None, max_steps: int | None = None,
+                              ambient: bool = False) -> dict:
+    """Largest voltage and SoC differences between the FMU (through fmpy) and the pipeline on
+    a record's first segment; ambient: both driven by the ambient temperature only."""
     model = load_model(model_path)
     rec = read_record(record)
     seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), model.capacity_ah)[0]
@@ -46,12 +56,22 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
         seg = Segment(seg.name, seg.time_s[:max_steps], seg.current_a[:max_steps],
                       seg.voltage_v[:max_steps],
                       None if seg.temperature_c is None else seg.temperature_c[:max_steps],
-                      seg.soc0, seg.soc_ref[:max_steps], seg.weight[:max_steps])
-    sim = simulate_segment(model, seg)
-    res = run_fmu_on_segment(fmu, seg, model.sample_time_s)
+                      seg.soc0, seg.soc_ref[:max_steps], seg.weight[:max_steps],
+                      ambient_c=seg.ambient_c)
+    if ambient:
+        sim, cell = simulate_ambient(model, seg.current_a, ambient_of(seg), seg.soc0, None,
+                                     initial_hysteresis(seg.soc0))
+    else:
+        sim = simulate_segment(model, seg)
+        cell = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
+    res = run_fmu_on_segment(fmu, seg, model.sample_time_s, ambient=ambient)
     n = len(seg)
-    v, s = res["voltage"][1:n + 1], res["soc"][1:n + 1]
-    return {"record": seg.name, "steps": n,
+    v, s, t = res["voltage"][1:n + 1], res["soc"][1:n + 1], res["cell_temperature"][1:n + 1]
+    return {"record": seg.name, "steps": n, "ambient": ambient,
             "max_dv_v": float(np.max(np.abs(v - sim.voltage_v))),
             "max_dsoc": float(np.max(np.abs(s - sim.soc))),
-            "fmu_voltage_v": v, "pipeline_voltage_v": sim.voltage_v, "time_s": seg.time_s}
+            # the FMU shows the cell temperature at the end of each step: the next step's
+            "max_dtemperature_k": float(np.max(np.abs(t[:-1] - cell[1:]) if ambient
+                                               else np.abs(t - cell))),
+            "fmu_voltage_v": v, "pipeline_voltage_v": sim.voltage_v, "time_s": seg.time_s,
+            "fmu_cell_temperature_c": t}

@@ -28,6 +28,7 @@ from lmncell.identification.baselines import fit_ecm2rc
 from lmncell.identification.construction import train_lmn
 from lmncell.identification.ocvfit import lowpass
 from lmncell.identification.prefit import with_soc_reference_weights
+from lmncell.identification.thermal import fit_thermal
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
 from lmncell.runtime.model import LmnModel, model_to_dict, save_model
@@ -109,6 +110,12 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
                   "voltage_max_v": model.limits["voltage_v"][1]}
     train_metrics = [{"segment": s.name, **_metrics(model, s)} for s in segs]
+    model.thermal, thermal_info = fit_thermal(model, segs)
+    progress("thermal model: " + (
+        f"R = {model.thermal.resistance_k_per_w:.2f} K/W, τ = {model.thermal.time_constant_s:.0f}"
+        f" s, rested {model.thermal.offset_k:+.2f} K above ambient; cell temperature RMSE "
+        f"{thermal_info['rmse_k']:.2f} K on {len(thermal_info['segments'])} segment(s)"
+        if model.thermal is not None else f"off ({thermal_info['reason']})"))
     model.noise = {"residual_std_v": 1e-3 * pooled(train_metrics),
                    "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s)}
     baseline_docs = {}
@@ -124,7 +131,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
             "files": [{"path": str(p), "sha256": file_sha256(p)} for p in paths],
             "capacity_ah": cap, "settings": cfg.to_dict(), "curve": result.curve,
             "chosen_local_models": result.chosen_m, "info": result.info,
-            "train_metrics": train_metrics,
+            "train_metrics": train_metrics, "thermal": thermal_info,
         },
     }
     model.extra["observers"] = {"fuzzy": offline_fuzzy_design(model)}

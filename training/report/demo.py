@@ -167,7 +167,7 @@ def run_demo(out: Path) -> Path:
         role = "validation (unseen)" if r["record"].startswith(VALIDATE) else "training"
         temp = t.segment.temperature_c
         for name, m in r.items():
-            if name != "record":
+            if isinstance(m, dict):
                 flat.append({"record": r["record"], "data": role,
                              "temperature": "–" if temp is None else float(np.median(temp)),
                              "model": name, **m})
@@ -218,9 +218,9 @@ def run_demo(out: Path) -> Path:
     headline = {
         "local_models": model.n_local_models,
         "validation_record": val["record"],
-        "validation_rmse_mv": {k: v["rmse_mv"] for k, v in val.items() if k != "record"},
+        "validation_rmse_mv": {k: v["rmse_mv"] for k, v in val.items() if isinstance(v, dict)},
         "validation_window_rmse_mv": {k: v["window_rmse_mv"] for k, v in val.items()
-                                      if k != "record"},
+                                      if isinstance(v, dict)},
         "fmu_max_dv_v": check["max_dv_v"], "cycles": cycles,
         "soc_rmse_pct_from_0_6_with_0_3": soc_figures,
         "seconds": time.perf_counter() - t0,

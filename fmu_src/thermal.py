@@ -1,0 +1,69 @@
+"""Lumped thermal model of the cell (numpy-free; used by the runtime, the FMU and training).
+
+One thermal mass with heat capacity C (J/K) that exchanges heat with the ambient through a
+thermal resistance R (K/W); time constant τ = R·C. Heat: the irreversible loss of the step,
+q(k) = i(k)·(u(k) − OCV(SoC(k))) (W; ≥ 0 for a resistive cell whatever the sign of the current,
+current > 0 charges). Exact discretisation at the sample time Ts with the heat held over the step:
+
+    T(k) = T_amb(k) + offset + a·(T(k−1) − T_amb(k) − offset) + R·(1 − a)·q(k),  a = exp(−Ts/τ)
+
+`offset` (K) is the rested cell's temperature above the given ambient (a chamber set point that
+the chamber does not quite hold, or a thermocouple offset); identified with R and τ. The LMN's
+step k uses T(k−1), the cell temperature at the start of the step, so the loop model → heat →
+temperature → model has no algebraic loop. At the start of a record the cell is taken as rested
+at T_amb + offset.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+TEMPERATURE_DESCRIPTION = ("ambient temperature (the model computes the cell temperature); the "
+                           "measured cell temperature with temperature_is_cell = true [degC]")
+
+
+@dataclass(frozen=True)
+class ThermalModel:
+    """Parameters of the lumped model (see the module docstring)."""
+
+    resistance_k_per_w: float
+    time_constant_s: float
+    offset_k: float = 0.0
+
+    @property
+    def heat_capacity_j_per_k(self) -> float:
+        return self.time_constant_s / self.resistance_k_per_w
+
+    def check(self, where: str) -> ThermalModel:
+        """self, or ValueError naming `where` and the bad parameter."""
+        for name, value, positive in (("resistance_k_per_w", self.resistance_k_per_w, True),
+                                      ("time_constant_s", self.time_constant_s, True),
+                                      ("offset_k", self.offset_k, False)):
+            if not (isinstance(value, (int, float)) and math.isfinite(value)
+                    and (value > 0 or not positive)):
+                raise ValueError(f"{where}: thermal.{name} is {value!r}, expected a finite "
+                                 f"number{' > 0' if positive else ''}")
+        return self
+
+    def to_dict(self) -> dict:
+        return {"resistance_k_per_w": self.resistance_k_per_w,
+                "time_constant_s": self.time_constant_s, "offset_k": self.offset_k}
+
+
+def heat_w(current_a: float, voltage_v: float, ocv_v: float) -> float:
+    """Irreversible heat of a step (W): current times overpotential."""
+    return current_a * (voltage_v - ocv_v)
+
+
+def next_temperature(model: ThermalModel, temperature_c: float, ambient_c: float,
+                     heat: float, sample_time_s: float) -> float:
+    """The cell temperature at the end of a step (°C) from the one at its start."""
+    a = math.exp(-sample_time_s / model.time_constant_s)
+    rest = ambient_c + model.offset_k
+    return rest + a * (temperature_c - rest) + model.resistance_k_per_w * (1.0 - a) * heat
+
+
+def rested_temperature(model: ThermalModel | None, ambient_c: float) -> float:
+    """The temperature of a cell rested at ambient_c (°C)."""
+    return ambient_c + (model.offset_k if model is not None else 0.0)

@@ -1,0 +1,113 @@
+"""The lumped thermal model: identification, the runtime driven by the ambient temperature, and
+both FMUs against the pipeline with the ambient and with the measured cell temperature."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from lmncell.config import load_config
+from lmncell.data.dataset import Segment
+from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
+from lmncell.identification.thermal import fit_thermal, predicted_temperature
+from lmncell.identification.tree import skeleton
+from lmncell.runtime.model import load_model
+from lmncell.runtime.step import simulate, simulate_ambient
+from lmncell.runtime.thermal import ThermalModel, next_temperature
+
+from tests.conftest import PAN_HWFET, PAN_US06
+
+TRUE = ThermalModel(resistance_k_per_w=4.0, time_constant_s=900.0, offset_k=0.6)
+
+
+def _ocv_model():
+    return skeleton(load_config(), 2.85, np.array([0.0, 1.0]), np.array([3.0, 4.2]), None,
+                    np.zeros(1), np.ones(1))
+
+
+def _synthetic_segment(rng, n: int, ambient: float, start: float) -> Segment:
+    """Charge-neutral current blocks of 2…12 A with rests (SoC stays near 0.6), R0 = 30 mΩ, the
+    cell temperature from TRUE plus a thermocouple's 0.1 K resolution and 0.05 K noise."""
+    levels = rng.uniform(2, 12, n // 40) * np.where(np.arange(n // 40) % 2, 1.0, -1.0)
+    levels[rng.random(levels.size) < 0.3] = 0.0                # rests: the cell cools
+    blocks = np.repeat(levels, 20)
+    current = np.concatenate([blocks, np.zeros(n - blocks.size)])
+    soc = 0.6 + np.cumsum(current) / (3600 * 2.85)
+    voltage = 3.0 + 1.2 * soc + 0.03 * current
+    heat = current * (voltage - (3.0 + 1.2 * soc))
+    temp = predicted_temperature(TRUE, heat, ambient, start, 1.0)
+    temp = np.round(temp + rng.normal(0, 0.05, n), 1)
+    return Segment("synthetic", np.arange(n, dtype=float), current, voltage, temp, 1.0, soc,
+                   np.ones(n), ambient_c=ambient)
+
+
+def test_identification_recovers_known_parameters() -> None:
+    rng = np.random.default_rng(7)
+    segs = [_synthetic_segment(rng, 6000, 25.0, 25.6), _synthetic_segment(rng, 5000, 10.0, 22.0)]
+    fitted, info = fit_thermal(_ocv_model(), segs)
+    assert fitted is not None and info["used"] and info["rmse_k"] < 0.08
+    assert fitted.resistance_k_per_w == pytest.approx(TRUE.resistance_k_per_w, rel=0.03)
+    assert fitted.time_constant_s == pytest.approx(TRUE.time_constant_s, rel=0.05)
+    assert fitted.offset_k == pytest.approx(TRUE.offset_k, abs=0.05)
+
+
+def test_no_thermal_model_without_a_measured_rise() -> None:
+    rng = np.random.default_rng(1)
+    seg = _synthetic_segment(rng, 3000, 25.0, 25.6)
+    flat = dataclasses.replace(seg, temperature_c=np.full(len(seg), 25.0))
+    fitted, info = fit_thermal(_ocv_model(), [flat, dataclasses.replace(seg, ambient_c=None)])
+    assert fitted is None and "rises" in info["reason"]
+
+
+def test_step_recursion_is_the_exact_discretisation() -> None:
+    """Constant heat: T approaches ambient + offset + R·q with the time constant τ."""
+    t = 25.0 + TRUE.offset_k
+    for _ in range(900):
+        t = next_temperature(TRUE, t, 25.0, 2.0, 1.0)
+    steady = 25.0 + TRUE.offset_k + TRUE.resistance_k_per_w * 2.0
+    assert t == pytest.approx(steady - (steady - 25.6) * np.exp(-1.0), rel=1e-12)
+
+
+def test_trained_model_has_a_thermal_model_and_ambient_runs_use_it(quick_model) -> None:
+    model = load_model(quick_model)
+    assert model.thermal is not None
+    assert model.extra["training"]["thermal"]["rmse_k"] < 1.0
+    current = np.full(1200, -5.7)                       # 2C discharge, 20 minutes
+    sim, cell = simulate_ambient(model, current, 25.0, 1.0)
+    assert cell[0] == pytest.approx(25.0 + model.thermal.offset_k)
+    assert np.all(np.diff(cell) > 0) and cell[-1] > cell[0] + 2.0       # the cell warms up
+    same = simulate(model, current, cell, 1.0)           # the same temperatures given as cell's
+    np.testing.assert_allclose(sim.voltage_v, same.voltage_v, rtol=0, atol=1e-12)
+    warm = dataclasses.replace(model, arrhenius_k=4000.0)  # resistance falls as the cell warms
+    cold = dataclasses.replace(warm, thermal=None)
+    sim_cold, cell_cold = simulate_ambient(cold, current, 25.0, 1.0)
+    np.testing.assert_array_equal(cell_cold, 25.0)
+    sim_warm, _ = simulate_ambient(warm, current, 25.0, 1.0)
+    assert np.max(sim_warm.voltage_v - sim_cold.voltage_v) > 2e-3   # heating lifts the voltage
+
+
+@pytest.mark.parametrize("ambient", [True, False])
+@pytest.mark.parametrize("flavour", ["pythonfmu", "native"])
+def test_fmu_reproduces_the_pipeline(quick_model, quick_fmu, native_fmu, flavour,
+                                     ambient) -> None:
+    """ambient: the chamber temperature as `temperature` (thermal model on); else the measured
+    cell temperature with temperature_is_cell = true. Voltage within 1e-9 V."""
+    fmu = quick_fmu if flavour == "pythonfmu" else native_fmu
+    res = compare_fmu_with_pipeline(quick_model, fmu, PAN_US06, max_steps=2500, ambient=ambient)
+    assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+    assert res["max_dtemperature_k"] <= 1e-9
+    if ambient:
+        assert np.ptp(res["fmu_cell_temperature_c"]) > 1.0   # it did heat up
+
+
+def test_ambient_evaluation_of_a_held_out_record(quick_model) -> None:
+    from lmncell.evaluation.evaluate import evaluate_model
+
+    model = load_model(quick_model)
+    _, cell_rows = evaluate_model(model, [PAN_US06])
+    _, amb_rows = evaluate_model(model, [PAN_US06], ambient=True)
+    assert amb_rows[0]["temperature_input"] == "ambient"
+    assert amb_rows[0]["cell_temperature_rmse_k"] < 2.5
+    assert cell_rows[0]["lmn"]["rmse_mv"] > 0 and amb_rows[0]["lmn"]["rmse_mv"] > 0
+    assert PAN_HWFET.exists()

@@ -1,0 +1,65 @@
+"""Identification of the lumped thermal model (lmncell.runtime.thermal) from records that carry
+a measured cell (case) temperature beside a known ambient (chamber) temperature.
+
+The heat of each step is i·(u − OCV(SoC)) with the measured voltage and the model's OCV at the
+reference SoC; R (K/W), τ (s) and the rested offset (K) minimise the free-run temperature error
+of all such segments, each started at its measured temperature (a record may start warmer than
+its chamber). At run time the temperature the LMN sees at step k is the state at the start of
+the step, T(k−1); it is compared here with the measured mean over step k.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from lmncell.data.dataset import Segment
+from lmncell.runtime.model import LmnModel
+from lmncell.runtime.thermal import ThermalModel
+from scipy.optimize import least_squares
+from scipy.signal import lfilter
+
+MIN_RISE_K = 1.0      # records whose temperature rises less above ambient say nothing of heating
+
+
+def predicted_temperature(params: ThermalModel, heat: np.ndarray, ambient_c: float,
+                          start_c: float, ts: float) -> np.ndarray:
+    """T(k−1) for k = 0…n−1 (the temperature each step is taken at), from T(−1) = start_c."""
+    a = np.exp(-ts / params.time_constant_s)
+    rest = ambient_c + params.offset_k
+    b = params.resistance_k_per_w * (1.0 - a)
+    # x(k) = a·x(k−1) + b·q(k), x = T − rest, x(−1) = start − rest
+    x, _ = lfilter([b], [1.0, -a], heat, zi=[a * (start_c - rest)])
+    return rest + np.concatenate([[start_c - rest], x[:-1]])
+
+
+def step_heat(model: LmnModel, seg: Segment) -> np.ndarray:
+    """i·(u − OCV(SoC)) per step (W) with the measured voltage."""
+    return seg.current_a * (seg.voltage_v - model.ocv(seg.soc_ref))
+
+
+def fit_thermal(model: LmnModel, segs: list[Segment]) -> tuple[ThermalModel | None, dict]:
+    """The thermal model and a summary (RMSE in K, the segments used), or None and the reason."""
+    usable = [s for s in segs if s.ambient_c is not None and s.temperature_c is not None
+              and float(np.max(s.temperature_c - s.ambient_c)) >= MIN_RISE_K]
+    if not usable:
+        return None, {"used": False, "reason": "no record has a measured cell temperature that "
+                      f"rises {MIN_RISE_K} K above a known ambient temperature"}
+    ts = model.sample_time_s
+    heats = [step_heat(model, s) for s in usable]
+
+    def unpack(x: np.ndarray) -> ThermalModel:
+        return ThermalModel(float(np.exp(x[0])), float(np.exp(x[1])), float(x[2]))
+
+    def residuals(x: np.ndarray) -> np.ndarray:
+        p = unpack(x)
+        return np.concatenate([predicted_temperature(p, q, s.ambient_c, float(s.temperature_c[0]),
+                                                     ts) - s.temperature_c
+                               for s, q in zip(usable, heats, strict=True)])
+
+    x0 = np.array([np.log(5.0), np.log(1000.0), 0.0])
+    sol = least_squares(residuals, x0, method="trf", x_scale=np.array([1.0, 1.0, 1.0]),
+                        bounds=([np.log(0.05), np.log(10.0 * ts), -5.0],
+                                [np.log(200.0), np.log(1e6), 5.0]))
+    params = unpack(sol.x)
+    rmse = float(np.sqrt(np.mean(sol.fun ** 2)))
+    return params, {"used": True, "rmse_k": rmse, "segments": [s.name for s in usable],
+                    "heat_capacity_j_per_k": params.heat_capacity_j_per_k}
