@@ -18,6 +18,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
+from lmncell.fmu.interface import dependency_indices
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
     FD_CURRENT_A,
@@ -194,8 +195,11 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
         if start is not None:
             inner += f' start="{start}"'
         rows.append(f"    <ScalarVariable {attrs}>\n      {inner}/>\n    </ScalarVariable>")
+    names = [v[0] for v in VARIABLES]
     outputs = [k + 1 for k, v in enumerate(VARIABLES) if v[2] == "output"]
     unknowns = "\n".join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)
+    initial = "\n".join(f'      <Unknown index="{i}" dependencies="'
+                         f'{dependency_indices(names[i - 1], names)}"/>' for i in outputs)
     desc = html.escape(model.extra.get("description", "LMNCell model"))
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="LMNCell" guid="{guid}" description="{desc}"
@@ -230,7 +234,7 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
 {unknowns}
     </Outputs>
     <InitialUnknowns>
-{unknowns}
+{initial}
     </InitialUnknowns>
   </ModelStructure>
 </fmiModelDescription>
@@ -286,5 +290,5 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
             for f in sorted(src.iterdir()):
                 z.write(f, f"sources/{f.name}")
             z.write(model_path, "resources/model.json")
-            z.writestr("documentation/index.html", documentation_html(model, model_path))
+            z.writestr("documentation/index.html", documentation_html(model, model_path, "native"))
     return out

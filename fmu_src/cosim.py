@@ -18,6 +18,8 @@ from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
+MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
+MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
 
 
 class InputError(ValueError):
@@ -123,10 +125,16 @@ class CellCosim:
         if not math.isfinite(voltage_measured_v):
             raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
                              "finite number (0 when not measured)")
+        if abs(current_a) > MAX_C_RATE * self.params.capacity_ah:
+            raise InputError(f"input 'current' = {current_a!r} A: beyond {MAX_C_RATE:g} C of "
+                             f"{self.params.capacity_ah:g} Ah, not a current a cell carries")
+        if not MIN_TEMPERATURE_C <= temperature_c <= MAX_TEMPERATURE_C:
+            raise InputError(f"input 'temperature' = {temperature_c!r} °C: expected "
+                             f"{MIN_TEMPERATURE_C:g}…{MAX_TEMPERATURE_C:g} °C")
         ts = self.model.sample_time_s
         remaining = step_s
         taken = 0
-        while remaining > STEP_TOL * ts:
+        while remaining > 0.0:           # every positive step counts, however short
             take = min(ts - self.covered_s, remaining)
             self.covered_s += take
             self.charge_as += current_a * take

@@ -53,6 +53,8 @@ class LmnCellSlave(Fmi2Slave):
         self.observer = 0
         self.temperature_is_cell = False
         self._cosim: CellCosim | None = None
+        self._time = 0.0
+        self._terminated = False
         reg = self.register_variable
         reg(Real("current", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
                  description="cell current held over the step, > 0 charges [A]"))
@@ -74,7 +76,7 @@ class LmnCellSlave(Fmi2Slave):
                              "[1]"))
         reg(Real("soc_std", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
-                 getter=lambda: self._cosim.soc_std if self._cosim else 0.0,
+                 getter=lambda: self._out("soc_std"),
                  description="observer's SoC standard deviation (0 without observer) [1]"))
         reg(Boolean("out_of_range", causality=Fmi2Causality.output,
                     variability=Fmi2Variability.discrete,
@@ -97,7 +99,7 @@ class LmnCellSlave(Fmi2Slave):
                                 "cell temperature follows the model's thermal model"))
         reg(Real("cell_temperature", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
-                 getter=self._cell_temperature,
+                 getter=lambda: self._out("cell_temperature_c"),
                  description="cell temperature at the end of the last completed model step "
                              "(the next step's) [degC]"))
 
@@ -117,18 +119,21 @@ class LmnCellSlave(Fmi2Slave):
         sys.path[:] = kept
 
     def _out(self, name: str) -> float:
-        if self._cosim is None:
-            if name == "soc":
-                return float(self.soc0)
-            return float(self._model.ocv(self.soc0)) if self._model.relative_ocv else math.nan
-        return float(getattr(self._cosim, name))
+        """An output; before initialisation, the value exitInitializationMode will give with
+        the parameters and inputs set so far (nothing changed in between, nothing differs)."""
+        cosim = self._cosim if self._cosim is not None else self._initial_cosim()
+        return float(getattr(cosim, name))
 
-    def _cell_temperature(self) -> float:
-        if self._cosim is not None:
-            return float(self._cosim.cell_temperature_c)
-        t = float(self.temperature)
-        return t + (self._model.thermal.offset_k if self._model.thermal is not None
-                    and not self.temperature_is_cell else 0.0)
+    def _initial_cosim(self) -> CellCosim:
+        m = self._model
+        soc0 = min(max(float(self.soc0), 0.0), 1.0) if math.isfinite(self.soc0) else 1.0
+        cap = float(self.capacity)
+        cap = cap if math.isfinite(cap) and cap > 0 else float(m.capacity_ah)
+        observer = int(self.observer) if self.observer in OBSERVERS else 0
+        temp = float(self.temperature) if math.isfinite(self.temperature) else 25.0
+        cosim = CellCosim(m, Parameters(soc0, cap, observer, bool(self.temperature_is_cell)))
+        cosim.reset(temp)
+        return cosim
 
     def _error(self, msg: str) -> None:
         self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
@@ -150,9 +155,22 @@ class LmnCellSlave(Fmi2Slave):
             self._error(str(exc))
             raise
 
+    def setup_experiment(self, start_time: float, stop_time: float | None,
+                         tolerance: float | None) -> None:
+        self._time = float(start_time)
+
+    def terminate(self) -> None:
+        self._terminated = True
+
     def do_step(self, current_time: float, step_size: float) -> bool:
-        if self._cosim is None:
-            self._error("do_step called before initialisation")
+        if self._cosim is None or self._terminated:
+            self._error("do_step called " + ("after terminate" if self._terminated else
+                                             "before initialisation"))
+            return False
+        if not math.isfinite(current_time) or abs(current_time - self._time) > 1e-9 * max(
+                1.0, abs(self._time)):
+            self._error(f"do_step: currentCommunicationPoint {current_time!r} s is not the FMU's "
+                        f"time {self._time!r} s (steps must follow on from each other)")
             return False
         try:
             was = self._cosim.out_of_range
@@ -161,6 +179,7 @@ class LmnCellSlave(Fmi2Slave):
         except InputError as exc:
             self._error(f"t = {current_time} s: {exc}; the step was not taken")
             return False
+        self._time += step_size
         if self._cosim.out_of_range and not was:
             self.log(f"{self.instance_name}: t = {current_time} s: {self._cosim.range_message}",
                      Fmi2Status.warning)
@@ -169,11 +188,13 @@ class LmnCellSlave(Fmi2Slave):
     # ----- FMU state: parameters, inputs and the whole engine state ------------------------
     def _get_fmu_state(self) -> dict:
         return {"inputs": [self.current, self.voltage_measured, self.temperature],
+                "time": self._time,
                 "params": [self.soc0, self.capacity, self.observer, self.temperature_is_cell],
                 "cosim": None if self._cosim is None else self._cosim.get_state()}
 
     def _set_fmu_state(self, state: dict) -> None:
         self.current, self.voltage_measured, self.temperature = state["inputs"]
+        self._time = float(state["time"])
         self.soc0, self.capacity, self.observer, self.temperature_is_cell = state["params"]
         if state["cosim"] is None:
             self._cosim = None

@@ -28,7 +28,10 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
 #define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
-#define STATE_MAGIC 0x4C4D4E31u /* "LMN1" */
+#define STATE_MAGIC 0x4C4D4E32u /* "LMN2" */
+#define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
+#define MIN_TEMPERATURE_C -273.15
+#define MAX_TEMPERATURE_C 1000.0
 
 /* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
 typedef struct {
@@ -37,6 +40,7 @@ typedef struct {
     double current, voltage_measured, temperature, soc0, capacity;
     int observer, temperature_is_cell;
     int initialized;
+    double time;                               /* the FMU's time: where the next step starts */
     /* thermal state (step.CellThermal): cell temperature at the next step's start */
     double t_cell, t_last_input;
     int t_cell_set;
@@ -59,17 +63,22 @@ typedef struct {
     double fuzzy_gain[NM], fuzzy_var[NM];
 } State;
 
+/* FMI 2.0 co-simulation states (the standard's state machine) */
+enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_TERMINATED };
+
 typedef struct {
     State s;
     const fmi2CallbackFunctions *cb;
     char name[128];
     int logging;
+    int mode;
 } Instance;
 
 static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt, ...) {
     char buf[512];
     va_list ap;
     if (!in || !in->cb || !in->cb->logger) return;
+    if (st == fmi2Warning && !in->logging) return;   /* warnings only with logging on */
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
@@ -79,7 +88,7 @@ static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt,
 /* ----- model functions ------------------------------------------------------------------------ */
 static double ocv(double soc) { /* numpy.interp: linear, held beyond the ends */
     int k;
-    if (soc <= OCV_SOC[0]) return OCV_V[0];
+    if (!(soc > OCV_SOC[0])) return OCV_V[0]; /* NaN too: never index past the table */
     if (soc >= OCV_SOC[NOCV - 1]) return OCV_V[NOCV - 1];
     for (k = 0; k < NOCV - 1; k++)
         if (soc < OCV_SOC[k + 1]) break;
@@ -581,7 +590,19 @@ static fmi2Status cosim_advance(Instance *in, double h) {
         logf_(in, fmi2Error, "logStatusError", "communication step size %g: expected > 0 s", h);
         return fmi2Error;
     }
-    while (remaining > STEP_TOL * TS) {
+    if (fabs(s->current) > MAX_C_RATE * s->capacity) {
+        logf_(in, fmi2Error, "logStatusError", "input 'current' = %g A: beyond %g C of %g Ah, "
+              "not a current a cell carries; the step was not taken", s->current, MAX_C_RATE,
+              s->capacity);
+        return fmi2Error;
+    }
+    if (s->temperature < MIN_TEMPERATURE_C || s->temperature > MAX_TEMPERATURE_C) {
+        logf_(in, fmi2Error, "logStatusError", "input 'temperature' = %g degC: expected %g..%g "
+              "degC; the step was not taken", s->temperature, MIN_TEMPERATURE_C,
+              MAX_TEMPERATURE_C);
+        return fmi2Error;
+    }
+    while (remaining > 0.0) {          /* every positive step counts, however short */
         double take = TS - s->covered < remaining ? TS - s->covered : remaining;
         s->covered += take;
         s->charge += s->current * take;
@@ -593,7 +614,28 @@ static fmi2Status cosim_advance(Instance *in, double h) {
         remaining -= take;
         if (s->covered >= TS * (1.0 - STEP_TOL)) model_step(in);
     }
+    s->time += h;
     return fmi2OK;
+}
+
+static int outputs_finite(const State *s) {
+    return isfinite(s->voltage) && isfinite(s->soc) && isfinite(s->ob_soc) &&
+           isfinite(s->ob_var) && isfinite(s->t_cell);
+}
+
+/* the state right after initialisation, from the parameters and the temperature input */
+static void init_state(State *s) {
+    double t_in = isfinite(s->temperature) ? s->temperature : 25.0;
+    double soc0 = s->soc0 >= 0.0 && s->soc0 <= 1.0 ? s->soc0 : (s->soc0 > 1.0 ? 1.0 : 0.0);
+    s->t_cell_set = 0;
+    s->t_last_input = cell_temperature(s, t_in);
+    s->t_cell_set = 0;
+    stepper_init(s, soc0, s->t_last_input);
+    observer_init(s, soc0);
+    s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
+    s->out_of_range = 0;
+    s->steps = 0;
+    s->initialized = 1;
 }
 
 static fmi2Status initialise(Instance *in) {
@@ -613,15 +655,7 @@ static fmi2Status initialise(Instance *in) {
               "2 fuzzy, 3 IMM", s->observer);
         return fmi2Error;
     }
-    s->t_cell_set = 0;
-    s->t_last_input = cell_temperature(s, isfinite(s->temperature) ? s->temperature : 25.0);
-    s->t_cell_set = 0;
-    stepper_init(s, s->soc0, s->t_last_input);
-    observer_init(s, s->soc0);
-    s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
-    s->out_of_range = 0;
-    s->steps = 0;
-    s->initialized = 1;
+    init_state(s);
     return fmi2OK;
 }
 
@@ -659,6 +693,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     if (!in) return NULL;
     in->cb = cb;
     in->logging = log;
+    in->mode = MODE_INSTANTIATED;
     snprintf(in->name, sizeof in->name, "%s", name ? name : "lmncell");
     defaults(&in->s);
     return in;
@@ -666,29 +701,77 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
 
 void fmi2FreeInstance(fmi2Component c) { free(c); }
 
+static int in_mode(Instance *in, int allowed, const char *call);
+
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0,
                                fmi2Boolean stopDef, fmi2Real t1) {
-    (void)tolDef; (void)tol; (void)t0; (void)stopDef; (void)t1;
-    return c ? fmi2OK : fmi2Error;
-}
-
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
-
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    if (!c) return fmi2Error;
-    return initialise((Instance *)c);
-}
-
-fmi2Status fmi2Terminate(fmi2Component c) { return c ? fmi2OK : fmi2Error; }
-
-fmi2Status fmi2Reset(fmi2Component c) {
-    if (!c) return fmi2Error;
-    defaults(&((Instance *)c)->s);
+    Instance *in = (Instance *)c;
+    (void)tolDef; (void)tol; (void)stopDef; (void)t1;
+    if (!in || !in_mode(in, 1 << MODE_INSTANTIATED, "fmi2SetupExperiment")) return fmi2Error;
+    if (!isfinite(t0)) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2SetupExperiment: startTime %g is not finite",
+              t0);
+        return fmi2Error;
+    }
+    in->s.time = t0;
     return fmi2OK;
 }
 
-static double output_real(const State *s, fmi2ValueReference vr, int *ok) {
+static int in_mode(Instance *in, int allowed, const char *call) {
+    static const char *names[] = {"instantiated", "initialization mode", "step mode",
+                                  "terminated"};
+    if (allowed & (1 << in->mode)) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s is not allowed in %s", call, names[in->mode]);
+    return 0;
+}
+#define M_(m) (1 << (m))
+
+fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+    Instance *in = (Instance *)c;
+    if (!in || !in_mode(in, M_(MODE_INSTANTIATED), "fmi2EnterInitializationMode"))
+        return fmi2Error;
+    in->mode = MODE_INITIALIZATION;
+    return fmi2OK;
+}
+
+fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
+    Instance *in = (Instance *)c;
+    fmi2Status st;
+    if (!in || !in_mode(in, M_(MODE_INITIALIZATION), "fmi2ExitInitializationMode"))
+        return fmi2Error;
+    st = initialise(in);
+    if (st == fmi2OK) in->mode = MODE_STEP;
+    return st;
+}
+
+fmi2Status fmi2Terminate(fmi2Component c) {
+    Instance *in = (Instance *)c;
+    if (!in || !in_mode(in, M_(MODE_INITIALIZATION) | M_(MODE_STEP), "fmi2Terminate"))
+        return fmi2Error;
+    in->mode = MODE_TERMINATED;
+    return fmi2OK;
+}
+
+fmi2Status fmi2Reset(fmi2Component c) {
+    Instance *in = (Instance *)c;
+    if (!in) return fmi2Error;
+    defaults(&in->s);
+    in->mode = MODE_INSTANTIATED;
+    return fmi2OK;
+}
+
+static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
+    State tmp;
+    const State *s = s0;
     *ok = 1;
+    if (!s0->initialized && (vr == VR_VOLTAGE || vr == VR_SOC || vr == VR_SOC_STD ||
+                             vr == VR_CELL_TEMPERATURE)) {
+        tmp = *s0;                       /* what exitInitializationMode will give, unchanged */
+        if (!(tmp.observer >= 0 && tmp.observer <= 3)) tmp.observer = 0;
+        if (!(isfinite(tmp.capacity) && tmp.capacity > 0)) tmp.capacity = CAPACITY_AH;
+        init_state(&tmp);
+        s = &tmp;
+    }
     switch (vr) {
     case VR_CURRENT: return s->current;
     case VR_VOLTAGE_MEASURED: return s->voltage_measured;
@@ -770,7 +853,9 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     Instance *in = (Instance *)c;
     State *s;
     size_t k;
-    if (!in) return fmi2Error;
+    if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
+                        "fmi2SetReal"))
+        return fmi2Error;
     s = &in->s;
     for (k = 0; k < n; k++) {
         switch (vr[k]) {
@@ -799,7 +884,9 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
                           const fmi2Integer v[]) {
     Instance *in = (Instance *)c;
     size_t k;
-    if (!in) return fmi2Error;
+    if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
+                        "fmi2SetInteger"))
+        return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] != VR_OBSERVER || in->s.initialized) {
             logf_(in, fmi2Error, "logStatusError", "fmi2SetInteger: value reference %u is not a "
@@ -815,7 +902,9 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
                           const fmi2Boolean v[]) {
     Instance *in = (Instance *)c;
     size_t k;
-    if (!in) return fmi2Error;
+    if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
+                        "fmi2SetBoolean"))
+        return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] != VR_TEMPERATURE_IS_CELL || in->s.initialized) {
             logf_(in, fmi2Error, "logStatusError", "fmi2SetBoolean: value reference %u is not a "
@@ -849,6 +938,7 @@ fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate st) {
     Instance *in = (Instance *)c;
     if (!in || !st || ((State *)st)->magic != STATE_MAGIC) return fmi2Error;
     in->s = *(State *)st;
+    in->mode = in->s.initialized ? MODE_STEP : MODE_INSTANTIATED;
     return fmi2OK;
 }
 
@@ -913,16 +1003,30 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     Instance *in = (Instance *)c;
     (void)t; (void)noSetPrior;
     if (!in) return fmi2Error;
-    if (!in->s.initialized) {
-        logf_(in, fmi2Error, "logStatusError", "fmi2DoStep called before initialisation");
+    if (!in_mode(in, M_(MODE_STEP), "fmi2DoStep")) return fmi2Error;
+    if (!isfinite(t) || fabs(t - in->s.time) > 1e-9 * (fabs(in->s.time) > 1.0 ? fabs(in->s.time)
+                                                                              : 1.0)) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint %.17g s "
+              "is not the FMU's time %.17g s (steps must follow on from each other)", t,
+              in->s.time);
         return fmi2Error;
     }
 #ifdef LMNCELL_TRIVIAL
     /* benchmark floor only: the same FMU with the model step left out */
-    (void)h;
+    in->s.time += h;
     return fmi2OK;
 #else
-    return cosim_advance(in, h);
+    {
+        State before = in->s;
+        fmi2Status st = cosim_advance(in, h);
+        if (st == fmi2OK && !outputs_finite(&in->s)) {
+            in->s = before;
+            logf_(in, fmi2Error, "logStatusError", "t = %g s: the model produced a non-finite "
+                  "output (inputs far outside the trained region?); the step was not taken", t);
+            return fmi2Error;
+        }
+        return st;
+    }
 #endif
 }
 

@@ -1,0 +1,24 @@
+"""What both LMNCell FMUs declare alike: the initial unknowns' dependencies.
+
+In Initialization Mode an output already shows what exitInitializationMode will give; these are
+the variables that value is computed from (ModelStructure/InitialUnknowns). During stepping the
+outputs are those of the last completed model step: no input reaches them directly, so the
+Outputs list no dependencies.
+"""
+
+from __future__ import annotations
+
+INITIAL_DEPENDENCIES: dict[str, tuple[str, ...]] = {
+    # OCV(soc0) plus the network's rest output at soc0 and the starting cell temperature
+    "voltage": ("temperature", "soc0", "temperature_is_cell"),
+    "soc": ("soc0",),
+    "soc_std": ("observer",),
+    "out_of_range": (),
+    "cell_temperature": ("temperature", "temperature_is_cell"),
+}
+
+
+def dependency_indices(output: str, names: list[str]) -> str:
+    """The `dependencies` attribute of an output: 1-based indices of its initial dependencies
+    among the model variables `names` (in their order)."""
+    return " ".join(str(names.index(n) + 1) for n in INITIAL_DEPENDENCIES[output])

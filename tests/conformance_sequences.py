@@ -1,0 +1,94 @@
+"""FMI 2.0 call sequences for tests/test_conformance.py, each run in a child process so that a
+crash of the host is a test failure, not the end of the run:
+
+    python -m tests.conformance_sequences FMU SEQUENCE    → prints one JSON object
+
+Each sequence returns the statuses (0 OK … 4 fatal) and values the test then checks.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import sys
+
+from fmpy import extract, read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+
+from tests.fmu_helpers import Instance
+
+OK = 0
+
+
+def _status(call) -> int:
+    """The FMI status of a call (0 when it returned OK or warning-free)."""
+    try:
+        call()
+        return OK
+    except FMICallException as exc:
+        return int(exc.status)
+
+
+def _raw(fmu: str, logging: bool = True):
+    md = read_model_description(fmu)
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu),
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="raw")
+    slave.instantiate(loggingOn=logging)
+    return slave, {v.name: v.valueReference for v in md.modelVariables}
+
+
+def init_mode_outputs(fmu: str) -> dict:
+    """Row 2: outputs read in Initialization Mode equal those right after it."""
+    slave, vr = _raw(fmu)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.setReal([vr["soc0"], vr["temperature"]], [0.55, 31.0])
+    names = ["voltage", "soc", "soc_std", "cell_temperature"]
+    before = slave.getReal([vr[n] for n in names])
+    slave.exitInitializationMode()
+    after = slave.getReal([vr[n] for n in names])
+    slave.terminate()
+    slave.freeInstance()
+    return {"before": before, "after": after}
+
+
+def state_machine(fmu: str) -> dict:
+    """Row 4: calls out of order and a communication point that is not the FMU's time."""
+    out = {}
+    slave, _ = _raw(fmu)
+    out["exit_without_enter"] = _status(slave.exitInitializationMode)
+    slave.freeInstance()
+    inst = Instance(fmu)
+    out["first_step"] = _status(lambda: inst.slave.doStep(0.0, 1.0))
+    out["wrong_point"] = _status(lambda: inst.slave.doStep(5.0, 1.0))
+    out["right_point"] = _status(lambda: inst.slave.doStep(1.0, 1.0))
+    out["tiny_step"] = _status(lambda: inst.slave.doStep(2.0, 1e-12))
+    out["after_tiny"] = _status(lambda: inst.slave.doStep(2.0 + 1e-12, 1.0))
+    inst.slave.terminate()
+    out["step_after_terminate"] = _status(lambda: inst.slave.doStep(3.0 + 1e-12, 1.0))
+    inst.slave.freeInstance()
+    return out
+
+
+def impossible_inputs(fmu: str) -> dict:
+    """Row 5: a finite but absurd current and a temperature below absolute zero are refused;
+    the outputs stay finite and unchanged."""
+    inst = Instance(fmu)
+    inst.step(-2.0)
+    before = inst.get("voltage", "soc")
+    out = {"huge_current": _status(lambda: inst.step(1e308)), "after_huge": inst.get(
+        "voltage", "soc")}
+    out["below_zero_kelvin"] = _status(lambda: inst.step(-1.0, temperature=-300.0))
+    out["after_cold"] = inst.get("voltage", "soc")
+    out["before"] = before
+    out["still_steps"] = _status(lambda: inst.step(-1.0))
+    out["finite"] = all(math.isfinite(x) for x in inst.get("voltage", "soc", "soc_std"))
+    inst.free()
+    return out
+
+
+SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs)}
+
+if __name__ == "__main__":
+    print(json.dumps(SEQUENCES[sys.argv[2]](sys.argv[1])))

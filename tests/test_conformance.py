@@ -1,0 +1,74 @@
+"""FMI conformance of both FMUs (issue 18): call sequences run in child processes (a crash
+fails the test), the model description's InitialUnknowns, the documentation per flavour."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import zipfile
+from xml.etree import ElementTree as ET
+
+import pytest
+
+from tests.conftest import ROOT
+
+ERROR, DISCARD = 3, 2
+
+
+def _run(fmu, sequence: str) -> dict:
+    proc = subprocess.run([sys.executable, "-m", "tests.conformance_sequences", str(fmu),
+                           sequence], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, f"the host died ({proc.returncode}): {proc.stderr[-2000:]}"
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@pytest.fixture(params=["pythonfmu", "native"])
+def fmu(request, quick_fmu, native_fmu):
+    return quick_fmu if request.param == "pythonfmu" else native_fmu
+
+
+def test_outputs_in_initialization_mode_are_the_initial_outputs(fmu) -> None:
+    res = _run(fmu, "init_mode_outputs")
+    assert res["before"] == pytest.approx(res["after"], abs=1e-12)
+
+
+def test_initial_unknowns_name_their_dependencies(fmu) -> None:
+    with zipfile.ZipFile(fmu) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    names = [sv.get("name") for sv in root.iter("ScalarVariable")]
+    deps = {names[int(u.get("index")) - 1]: {names[int(i) - 1] for i in
+                                             u.get("dependencies").split()}
+            for u in root.find("ModelStructure/InitialUnknowns")}
+    assert deps["voltage"] == {"soc0", "temperature", "temperature_is_cell"}
+    assert deps["soc"] == {"soc0"} and deps["soc_std"] == {"observer"}
+    assert deps["cell_temperature"] == {"temperature", "temperature_is_cell"}
+    outputs = {names[int(u.get("index")) - 1] for u in root.find("ModelStructure/Outputs")}
+    assert outputs == set(deps)
+
+
+def test_state_machine(fmu, native_fmu) -> None:
+    res = _run(fmu, "state_machine")
+    assert res["first_step"] == 0 and res["right_point"] == 0
+    assert res["wrong_point"] in (ERROR, DISCARD)
+    assert res["tiny_step"] == 0 and res["after_tiny"] == 0      # a tiny step counts
+    assert res["step_after_terminate"] in (ERROR, DISCARD)
+    if fmu == native_fmu:   # pythonfmu 0.7 turns any refusal here into fmi2Fatal (issue 18)
+        assert res["exit_without_enter"] == ERROR
+
+
+def test_physically_impossible_inputs_are_refused(fmu) -> None:
+    res = _run(fmu, "impossible_inputs")
+    assert res["huge_current"] in (ERROR, DISCARD)
+    assert res["below_zero_kelvin"] in (ERROR, DISCARD)
+    assert res["after_huge"] == res["before"] and res["after_cold"] == res["before"]
+    assert res["still_steps"] == 0 and res["finite"]
+
+
+def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> None:
+    def doc(path) -> str:
+        with zipfile.ZipFile(path) as z:
+            return z.read("documentation/index.html").decode()
+
+    assert "needs Python 3 with numpy" in doc(quick_fmu)
+    assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
