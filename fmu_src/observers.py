@@ -192,7 +192,8 @@ class SocObserver:
         if self.model.hysteresis_gamma is not None:
             steps[-1] = FD_HYSTERESIS
         rows = np.tile(xi, (2 * n + 1, 1))
-        for k in range(n):
+        rows[:, 0] = min(max(float(xi[0]), 0.0), 1.0)   # differences around the clipped SoC:
+        for k in range(n):                                # beyond 0 or 1 both sides would clip
             rows[1 + 2 * k, k] += steps[k]
             rows[2 + 2 * k, k] -= steps[k]
         rows[:, 0] = np.clip(rows[:, 0], 0.0, 1.0)

@@ -88,7 +88,28 @@ def impossible_inputs(fmu: str) -> dict:
     return out
 
 
-SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs)}
+def observers_at_full(fmu: str) -> dict:
+    """Issue 19: each observer from SoC 1.0 with a ±2 A square wave that starts by charging,
+    the FMU's own voltage fed back as the measurement, then contradictory measurements."""
+    out = {}
+    for observer in (1, 2, 3):
+        inst = Instance(fmu, start={"soc0": 1.0}, observer=observer)
+        worst, finite = OK, True
+        v = inst.get("voltage")[0]
+        for k in range(600):
+            i = 2.0 if (k // 30) % 2 == 0 else -2.0
+            meas = v if k < 300 else (0.5 if k % 2 else 4.9)
+            inst.slave.setReal([inst.vr["voltage_measured"]], [meas])
+            worst = max(worst, _status(lambda i=i, inst=inst: inst.step(i)))
+            v, soc, sd = inst.get("voltage", "soc", "soc_std")
+            finite = finite and all(math.isfinite(x) for x in (v, soc, sd)) and 0 <= soc <= 1
+        out[str(observer)] = {"worst_status": worst, "finite": finite}
+        inst.free()
+    return out
+
+
+SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
+                                      observers_at_full)}
 
 if __name__ == "__main__":
     print(json.dumps(SEQUENCES[sys.argv[2]](sys.argv[1])))

@@ -65,6 +65,11 @@ def test_physically_impossible_inputs_are_refused(fmu) -> None:
     assert res["still_steps"] == 0 and res["finite"]
 
 
+def test_observers_stay_finite_from_full_charge(fmu) -> None:
+    for observer, res in _run(fmu, "observers_at_full").items():
+        assert res == {"worst_status": 0, "finite": True}, observer
+
+
 def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> None:
     def doc(path) -> str:
         with zipfile.ZipFile(path) as z:

@@ -16,6 +16,7 @@ from lmncell.runtime.observers import (
     design_fuzzy_gains,
     local_ocv_slopes,
 )
+from lmncell.runtime.step import CellStepper
 
 from tests.conftest import A123_S1, PAN_US06
 from tests.fmu_helpers import Instance, assert_state_round_trips
@@ -120,3 +121,24 @@ def test_ekf_started_at_rest_knows_the_filter_states(us06) -> None:
     assert np.all(p0[1:, :] == 0) and p0[0, 0] == pytest.approx(0.3 ** 2)
     loaded = SocObserver(model, "ekf", 0.5, settings=ObserverSettings.for_model(model, False))
     assert loaded.state.covariance()[1:, 1:].min() > 0
+
+
+@pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])
+@pytest.mark.parametrize("soc0", [0.0, 1.0])
+def test_no_observer_goes_non_finite_on_any_input(a123_model, kind, soc0) -> None:
+    """Square waves that push the true SoC past 0 and 1, then random currents with random,
+    contradictory voltages: estimate, σ and voltage stay finite and within bounds."""
+    model = load_model(a123_model)
+    rng = np.random.default_rng(11)
+    truth = CellStepper(model, soc0, temperature_c=25.0)
+    ob = SocObserver(model, kind, soc0, temperature_c=25.0)
+    for k in range(4000):
+        if k < 1000:
+            i = (2.0 if (k // 30) % 2 == 0 else -2.0) * (1 if soc0 == 1.0 else -1)
+            v = truth.step(i, 25.0)                  # consistent measurements
+        else:
+            i = float(rng.uniform(-40, 40))
+            v = float(rng.choice([rng.uniform(0.0, 5.0), np.nan, 1e3]))
+        ob.step(i, v, float(rng.uniform(-20, 60)))
+        assert np.isfinite(ob.state.soc) and 0.0 <= ob.state.soc <= 1.0, k
+        assert np.isfinite(ob.soc_std) and np.isfinite(ob.stepper.voltage_v), k

@@ -325,7 +325,8 @@ static void ekf_predict(State *s, double i) {
 static double output_moved(const State *s, const double *xi, int a, double delta, double *at) {
     double row[NX], phi[NM], uj[NM];
     memcpy(row, xi, sizeof row);
-    row[a] = xi[a] + delta;
+    row[0] = clip01(xi[0]);         /* around the clipped SoC: beyond 0 or 1 both sides clip */
+    row[a] += delta;
     row[0] = clip01(row[0]);
     *at = row[a];
     return outputs_for(s, row, NX, phi, uj);
