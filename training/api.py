@@ -25,7 +25,7 @@ from lmncell.runtime.step import SimResult
 from lmncell.runtime.step import simulate as _simulate_runtime
 
 __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_model",
-           "read_record", "simulate", "train"]
+           "read_record", "simulate", "sweep", "train"]
 
 
 def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | None = None,
@@ -99,3 +99,20 @@ def build_fmu(model_path: str | Path, out: str | Path, native: bool = False) -> 
     from lmncell.fmu.pythonfmu_build import build_fmu as _build
 
     return _build(model_path, out)
+
+
+def sweep(fmu: str | Path, cycles: Sequence[str] = ("wltc",), ambient_c: Sequence[float] = (25.0,),
+          soc0: Sequence[float] = (0.9,), vehicles: Sequence[str | Path | None] = (None,),
+          repeat: int = 1, workers: int | None = None, scheduler: str | None = None,
+          progress: bool = True):
+    """Drive an FMU through every combination of cycles × vehicles × ambient temperatures (°C)
+    × start SoC on Dask (a LocalCluster of `workers` processes, or the cluster behind
+    `scheduler`); returns a pandas DataFrame, one row per scenario (minimum and maximum cell
+    voltage, end SoC, Ah throughput, energy, maximum cell temperature, out-of-range steps,
+    wall time). Needs the `sweep` extra (dask[distributed], pandas)."""
+    from lmncell.scenarios.sweep import scenarios
+    from lmncell.scenarios.sweep import sweep as _sweep
+
+    cases = scenarios(list(cycles), list(ambient_c), list(soc0),
+                      [None if v is None else str(v) for v in vehicles], repeat)
+    return _sweep(fmu, cases, workers, scheduler, progress)

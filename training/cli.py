@@ -58,6 +58,17 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _temperature(text: str) -> float:
+    try:
+        v = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a temperature in °C") from None
+    if not -273.15 < v < 1000.0:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected a temperature in °C above "
+                                         "absolute zero")
+    return v
+
+
 def _columns(text: str) -> dict[str, str]:
     """time=COL,current=COL,voltage=COL[,temperature=COL] → {quantity: column name}."""
     out: dict[str, str] = {}
@@ -147,6 +158,34 @@ def cmd_simulate(a: argparse.Namespace) -> int:
     from lmncell.scenarios.drive import simulate_cycle_cli
 
     return simulate_cycle_cli(a)
+
+
+def _floats(option: str):
+    def parse(text: str) -> list[float]:
+        try:
+            return [float(x) for x in text.split(",") if x.strip()]
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{option} {text!r}: expected comma-separated "
+                                             "numbers") from None
+    return parse
+
+
+def cmd_sweep(a: argparse.Namespace) -> int:
+    from lmncell.scenarios.sweep import plot_sweep, scenarios, sweep, write_table
+
+    cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat)
+    print(f"sweep: {len(cases)} scenario(s) on "
+          + (f"the scheduler {a.scheduler}" if a.scheduler else
+             f"a LocalCluster of {a.workers or 'all'} worker(s)"), flush=True)
+    table = sweep(a.fmu, cases, a.workers, a.scheduler)
+    write_table(table, a.out)
+    print(f"wrote {a.out}: {len(table)} rows; minimum cell voltage "
+          f"{table['voltage_min_v'].min():.3f} V, end SoC {table['soc_end'].min():.3f}…"
+          f"{table['soc_end'].max():.3f}, {table['wall_s'].sum():.1f} s of FMU runs")
+    if a.plot:
+        for f in plot_sweep(table, a.plot):
+            print(f"plot: {f}")
+    return 0
 
 
 def cmd_design(a: argparse.Namespace) -> int:
@@ -252,10 +291,32 @@ def build_parser() -> argparse.ArgumentParser:
                    "built-in compact EV)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
     s.add_argument("--soc0", type=_float01, default=0.9, help="start SoC")
+    s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "
+                   "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts)")
     s.add_argument("--plot", metavar="OUT.png", help="figure of speed, current, voltage, SoC")
     s.add_argument("--json", action="store_true", help="print the results as JSON")
     s.set_defaults(func=cmd_simulate)
+
+    s = sub.add_parser("sweep", help="many drive-cycle scenarios of an FMU on Dask", **fmt)
+    s.add_argument("fmu", help="an LMNCell FMU (pythonfmu or native)")
+    s.add_argument("--cycles", default="wltc", help="comma list of wltc, udds, us06, hwfet")
+    s.add_argument("--ambient", type=_floats("--ambient"), default=[25.0],
+                   help="comma list of ambient temperatures, °C (default: 25)")
+    s.add_argument("--soc0", type=_floats("--soc0"), default=[0.9],
+                   help="comma list of start SoC (default: 0.9)")
+    s.add_argument("--vehicle", action="append", metavar="V.toml", help="vehicle file; "
+                   "repeatable (default: the built-in compact EV)")
+    s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=_positive_int, help="LocalCluster worker processes "
+                   "(default: one per core)")
+    g.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. "
+                   "tcp://10.0.0.5:8786, instead of a LocalCluster")
+    s.add_argument("--out", required=True, metavar="RESULTS.csv", help="table to write "
+                   "(.csv, or .parquet with pyarrow)")
+    s.add_argument("--plot", metavar="DIR", help="summary figures")
+    s.set_defaults(func=cmd_sweep)
 
     s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile",
                        **fmt)

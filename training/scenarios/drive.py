@@ -114,12 +114,15 @@ class CycleResult:
     soc: np.ndarray
     out_of_range: np.ndarray
     figures: dict
+    cell_temperature_c: np.ndarray | None = None
 
 
 def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = None,
               repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
               temperature_c: float = 25.0) -> CycleResult:
-    """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step."""
+    """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step.
+    temperature_c is the ambient temperature (the model computes the cell temperature where it
+    has a thermal model)."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
@@ -137,7 +140,9 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cycle")
     n = math.floor(power.size * dt / h + 1e-9)
-    out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed")}
+    out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed",
+                                    "cell_t")}
+    has_cell_t = "cell_temperature" in vr
     try:
         slave.instantiate()
         slave.setupExperiment(startTime=0.0)
@@ -157,6 +162,8 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
             u, soc = slave.getReal([vr["voltage"], vr["soc"]])
             out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
             out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
+            out["cell_t"][k] = (slave.getReal([vr["cell_temperature"]])[0] if has_cell_t
+                                else math.nan)
             out["speed"][k] = speed[idx]
         slave.terminate()
     finally:
@@ -175,9 +182,11 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
         "soc_start": soc0, "soc_end": float(out["soc"][-1]),
         "soc_swing": float(out["soc"].max() - out["soc"].min()),
         "out_of_range_steps": int(out["oor"].sum()), "vehicle": vehicle.name,
+        "ambient_c": float(temperature_c),
+        "cell_temperature_max_c": float(np.max(out["cell_t"])) if has_cell_t else None,
     }
     return CycleResult(out["time"], out["speed"], cur, volt, out["soc"], out["oor"].astype(bool),
-                       figures)
+                       figures, out["cell_t"] if has_cell_t else None)
 
 
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
@@ -198,6 +207,11 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     ax[2].set(ylabel="cell voltage / V")
     ax[3].plot(t, 100 * res.soc, color="tab:green")
     ax[3].set(ylabel="SoC / %", xlabel="time / min")
+    if res.cell_temperature_c is not None:
+        tx = ax[3].twinx()
+        tx.plot(t, res.cell_temperature_c, color="tab:red", lw=0.8)
+        tx.set_ylabel(f"cell temperature / °C (ambient {res.figures['ambient_c']:g})",
+                      color="tab:red")
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return Path(path)
@@ -205,7 +219,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
 
 def simulate_cycle_cli(a) -> int:
     vehicle = load_vehicle(a.vehicle)
-    res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step)
+    res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step, a.ambient)
     if a.plot:
         plot_cycle(res, a.plot)
     f = res.figures
@@ -217,7 +231,10 @@ def simulate_cycle_cli(a) -> int:
               f"{f['pack_energy_kwh']:.2f} kWh), {f['ah_throughput']:.3f} Ah throughput, "
               f"current {f['current_min_a']:.2f}…{f['current_max_a']:.2f} A, minimum voltage "
               f"{f['voltage_min_v']:.3f} V, SoC {100 * f['soc_start']:.1f} → "
-              f"{100 * f['soc_end']:.1f} % (swing {100 * f['soc_swing']:.1f} points)")
+              f"{100 * f['soc_end']:.1f} % (swing {100 * f['soc_swing']:.1f} points)"
+              + ("" if f["cell_temperature_max_c"] is None else
+                 f", cell temperature up to {f['cell_temperature_max_c']:.1f} °C at "
+                 f"{f['ambient_c']:g} °C ambient"))
     if f["out_of_range_steps"]:
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
               "(current, SoC or temperature); see the FMU log and the plot")

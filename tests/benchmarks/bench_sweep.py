@@ -1,0 +1,49 @@
+"""Benchmark of `lmncell sweep`: 48 scenarios (4 cycles × 3 ambients × 4 start SoC, repeat 5)
+with the native FMU on 1 and 2 LocalCluster workers; prints scenarios and cell-steps per
+second, the speed-up, and whether the two tables are identical (wall time aside).
+
+    python tests/benchmarks/bench_sweep.py [--repeat 5]
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+from lmncell.fmu.native_build import build_native_fmu
+from lmncell.identification.train import train_files
+from lmncell.scenarios.sweep import scenarios, sweep
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "data/panasonic_18650pf/25degC"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--repeat", type=int, default=5)
+    a = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="lmncell-bench-sweep-"))
+    files = [DATA / "drive_cycles/03-20-17_05.56_25degC_HWFTa_Pan18650PF.mat",
+             DATA / "hppc/03-11-17_08.47_25degC_5Pulse_HPPC_Pan18650PF.mat"]
+    train_files(files, tmp / "m.json", capacity_ah=2.85, soc0=1.0, progress=lambda _m: None)
+    fmu = build_native_fmu(tmp / "m.json", tmp / "cell.fmu")
+    cases = scenarios(["wltc", "udds", "us06", "hwfet"], [0.0, 25.0, 40.0],
+                      [0.95, 0.8, 0.65, 0.5], repeat=a.repeat)
+    tables, seconds = {}, {}
+    for workers in (1, 2):
+        t0 = time.perf_counter()
+        tables[workers] = sweep(fmu, cases, workers=workers, progress=False)
+        seconds[workers] = time.perf_counter() - t0
+        steps = int(tables[workers]["steps"].sum())
+        print(f"{workers} worker(s): {len(cases)} scenarios in {seconds[workers]:.1f} s, "
+              f"{len(cases) / seconds[workers]:.2f} scenarios/s, "
+              f"{steps / seconds[workers]:.0f} cell-steps/s (cluster start included)")
+    cols = [c for c in tables[1].columns if c != "wall_s"]
+    print(f"speed-up 2 vs 1 worker: {seconds[1] / seconds[2]:.2f}; tables identical: "
+          f"{tables[1][cols].equals(tables[2][cols])}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,63 @@
+"""Scenario sweeps on Dask (issue 20): rows equal single runs, the table does not depend on the
+number of workers, bad option values are refused with the option's name."""
+
+from __future__ import annotations
+
+import pytest
+from lmncell.cli import main
+
+pytest.importorskip("dask.distributed", reason="the sweep extra (dask[distributed]) is absent")
+pytest.importorskip("pandas", reason="the sweep extra (pandas) is absent")
+
+from lmncell.scenarios.drive import run_cycle
+from lmncell.scenarios.sweep import scenarios, sweep
+
+
+@pytest.fixture(scope="module")
+def cases():
+    return scenarios(["us06", "hwfet"], [10.0, 35.0], [0.9], repeat=1)
+
+
+def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
+    one = sweep(native_fmu, cases, workers=1, progress=False)
+    two = sweep(native_fmu, cases, workers=2, progress=False)
+    deterministic = [c for c in one.columns if c != "wall_s"]
+    assert one[deterministic].equals(two[deterministic])
+    assert list(one["cycle"]) == ["us06", "us06", "hwfet", "hwfet"]
+    assert list(one["ambient_c"]) == [10.0, 35.0, 10.0, 35.0]
+    for sc, (_, row) in zip(cases, one.iterrows(), strict=True):
+        single = run_cycle(native_fmu, sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
+                           temperature_c=sc.ambient_c).figures
+        for key in ("voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
+                    "cell_energy_wh", "out_of_range_steps", "cell_temperature_max_c"):
+            assert row[key] == single[key], key
+    warm = one[one["ambient_c"] == 35.0]["cell_temperature_max_c"].to_numpy()
+    cold = one[one["ambient_c"] == 10.0]["cell_temperature_max_c"].to_numpy()
+    assert (warm > cold + 20).all()                      # the ambient reaches the model
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--cycles", "wltc,nedc"], "--cycles ['nedc'] unknown"),
+    (["--soc0", "0.5,1.5"], "--soc0 1.5"),
+    (["--ambient", "-300"], "--ambient -300.0"),
+    (["--ambient", "warm"], "--ambient 'warm'"),
+    (["--workers", "0"], "expected a whole number"),
+])
+def test_bad_options_name_the_option(native_fmu, tmp_path, capsys, args, message) -> None:
+    code = None
+    try:
+        code = main(["sweep", str(native_fmu), "--out", str(tmp_path / "r.csv"), *args])
+    except SystemExit as exc:            # argparse refuses malformed values itself
+        code = exc.code
+    assert code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_cli_writes_table_and_plots(native_fmu, tmp_path, capsys) -> None:
+    out = tmp_path / "r.csv"
+    assert main(["sweep", str(native_fmu), "--cycles", "us06", "--ambient", "0,25",
+                 "--soc0", "0.8", "--workers", "1", "--out", str(out),
+                 "--plot", str(tmp_path / "plots")]) == 0
+    text = out.read_text().splitlines()
+    assert len(text) == 3 and text[0].startswith("cycle,vehicle")
+    assert (tmp_path / "plots" / "sweep_voltage_min_v.png").exists()

@@ -1,0 +1,171 @@
+"""Sweeps of drive-cycle scenarios on Dask: the Cartesian product of cycles × vehicles × ambient
+temperatures × start SoC, each scenario one FMU run (run_cycle, as `lmncell simulate`), on a
+`dask.distributed` LocalCluster or on the cluster behind a scheduler address.
+
+The FMU travels to the workers as bytes (scattered once), so a remote cluster needs no shared
+file system; each worker unpacks it once per process. The table has one row per scenario in the
+order of the product, whatever the number of workers; every column but `wall_s` is
+deterministic.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from lmncell.data.records import DataError
+from lmncell.scenarios.drive import CYCLES, Vehicle, load_vehicle, run_cycle
+
+RESULT_COLUMNS = ("voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
+                  "cell_energy_wh", "pack_energy_kwh", "cell_temperature_max_c",
+                  "out_of_range_steps")
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """One run: a cycle (repeated), a vehicle, the ambient temperature (°C), the start SoC."""
+
+    cycle: str
+    vehicle: Vehicle
+    vehicle_file: str
+    ambient_c: float
+    soc0: float
+    repeat: int = 1
+
+
+def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[float],
+              vehicle_files: Sequence[str | None] = (None,), repeat: int = 1) -> list[Scenario]:
+    """The Cartesian product, cycle slowest and start SoC fastest; values checked with
+    messages that name the option."""
+    if not cycles or not ambients or not soc0s or not vehicle_files:
+        raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
+    bad = [c for c in cycles if c not in CYCLES]
+    if bad:
+        raise DataError(f"sweep: --cycles {bad} unknown; expected some of {list(CYCLES)}")
+    for t in ambients:
+        if not (math.isfinite(t) and -273.15 < t < 1000.0):
+            raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C")
+    for s in soc0s:
+        if not (math.isfinite(s) and 0.0 <= s <= 1.0):
+            raise DataError(f"sweep: --soc0 {s!r}: expected fractions within 0…1")
+    if repeat < 1:
+        raise DataError(f"sweep: --repeat {repeat!r}: expected a whole number ≥ 1")
+    vehicles = [(load_vehicle(v), str(v) if v else "built-in") for v in vehicle_files]
+    return [Scenario(c, veh, vf, float(t), float(s), int(repeat))
+            for c, (veh, vf), t, s in itertools.product(cycles, vehicles, ambients, soc0s)]
+
+
+_UNPACKED: dict[str, Path] = {}
+
+
+def _fmu_file(fmu_bytes: bytes) -> Path:
+    """The FMU as a file in this process (written once per process and FMU)."""
+    key = hashlib.sha256(fmu_bytes).hexdigest()[:16]
+    if key not in _UNPACKED or not _UNPACKED[key].exists():
+        path = Path(tempfile.mkdtemp(prefix="lmncell-sweep-")) / f"{key}.fmu"
+        path.write_bytes(fmu_bytes)
+        _UNPACKED[key] = path
+    return _UNPACKED[key]
+
+
+def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
+    """One row of the table: the scenario's settings and its results (run_cycle's figures)."""
+    t0 = time.perf_counter()
+    res = run_cycle(_fmu_file(fmu_bytes), sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
+                    temperature_c=sc.ambient_c)
+    f = res.figures
+    row = {"cycle": sc.cycle, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
+           "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat,
+           "pack": f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p",
+           "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
+           "soc_end": f["soc_end"], "ah_throughput": f["ah_throughput"],
+           "cell_energy_wh": f["cell_energy_wh"], "pack_energy_kwh": f["pack_energy_kwh"],
+           "cell_temperature_max_c": (math.nan if f["cell_temperature_max_c"] is None
+                                      else f["cell_temperature_max_c"]),
+           "out_of_range_steps": f["out_of_range_steps"], "steps": int(res.time_s.size),
+           "wall_s": time.perf_counter() - t0}
+    return row
+
+
+def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
+          scheduler: str | None = None, progress: bool = True):
+    """Run the scenarios on Dask and return the table (pandas DataFrame), one row per
+    scenario in the given order. workers: LocalCluster processes (default: the cores);
+    scheduler: the address of a running Dask scheduler instead (then workers is ignored)."""
+    import pandas as pd
+    from dask.distributed import Client, LocalCluster
+    from dask.distributed import progress as dask_progress
+
+    fmu = Path(fmu)
+    if not fmu.is_file():
+        raise DataError(f"{fmu}: no such FMU file")
+    if workers is not None and workers < 1:
+        raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
+    data = fmu.read_bytes()
+    cluster = None
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    else:
+        client = Client(scheduler)
+    try:
+        blob = client.scatter(data, broadcast=True)
+        futures = [client.submit(run_scenario, blob, sc, key=f"scenario-{k}-{fmu.stem}",
+                                 pure=False) for k, sc in enumerate(cases)]
+        if progress:
+            dask_progress(futures)
+            print(flush=True)
+        rows = client.gather(futures)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    return pd.DataFrame(rows)
+
+
+def write_table(table, path: str | Path) -> Path:
+    """CSV, or Parquet for a .parquet name (needs pyarrow)."""
+    path = Path(path)
+    if path.suffix == ".parquet":
+        table.to_parquet(path, index=False)
+    elif path.suffix == ".csv":
+        table.to_csv(path, index=False, float_format="%.17g")
+    else:
+        raise DataError(f"{path}: --out must end in .csv or .parquet")
+    return path
+
+
+def plot_sweep(table, out_dir: str | Path) -> list[Path]:
+    """Minimum cell voltage and end SoC over ambient × cycle (mean over the other settings)."""
+    from lmncell.report.plots import plt
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    files = []
+    for column, label in (("voltage_min_v", "minimum cell voltage / V"),
+                          ("soc_end", "end SoC")):
+        grid = table.pivot_table(index="cycle", columns="ambient_c", values=column,
+                                 aggfunc="mean")
+        fig, ax = plt.subplots(figsize=(7, 0.6 * len(grid) + 2), constrained_layout=True)
+        im = ax.imshow(grid.to_numpy(), aspect="auto", cmap="viridis")
+        ax.set(xticks=range(grid.shape[1]), xticklabels=[f"{c:g}" for c in grid.columns],
+               yticks=range(grid.shape[0]), yticklabels=list(grid.index),
+               xlabel="ambient temperature / °C", ylabel="cycle",
+               title=f"{label} (mean over start SoC and vehicles)")
+        for (r, c), v in np.ndenumerate(grid.to_numpy()):
+            ax.text(c, r, f"{v:.3f}", ha="center", va="center", color="w", fontsize=8)
+        fig.colorbar(im, ax=ax, label=label)
+        path = out / f"sweep_{column}.png"
+        fig.savefig(path, dpi=90)
+        plt.close(fig)
+        files.append(path)
+    return files
+
