@@ -271,3 +271,53 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
     res = compare_fmu_with_pipeline(path, fmu, PAN_US06)
     assert res["steps"] > 4000
     assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("observer", [0, 1, 2, 3])
+def test_sanitizers_find_nothing_on_hostile_inputs(native_fmu, us06, tmp_path, observer) -> None:
+    """The FMU's shipped sources and the C host built with -fsanitize=address,undefined, driven
+    through a drive cycle mixed with NaN, ±inf, ±1e308 and zero currents and contradictory or
+    NaN voltages, from full and from empty: no sanitizer report, refused steps counted."""
+    from lmncell.fmu.native_build import compile_linux64, fmi_headers
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    san = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-g", "-O1"]
+    src = tmp_path / "src"
+    with zipfile.ZipFile(native_fmu) as z:
+        for name in z.namelist():
+            if name.startswith("sources/") and not name.endswith("/"):
+                (src / Path(name).name).parent.mkdir(parents=True, exist_ok=True)
+                (src / Path(name).name).write_bytes(z.read(name))
+    so = tmp_path / "LMNCell.so"
+    compile_linux64(src, so, san)
+    exe = tmp_path / "host_asan"
+    subprocess.run(["gcc", "-std=c99", *san, f"-I{fmi_headers()}", str(HOST_C), "-o", str(exe),
+                    "-ldl"], check=True)
+    _, seg = us06
+    rng = np.random.default_rng(observer)
+    n = 6000
+    cur = np.resize(seg.current_a, n).astype(object)
+    volts = np.resize(seg.voltage_v, n).astype(object)
+    hostile = rng.choice(n, 300, replace=False)
+    cur[hostile] = rng.choice(["nan", "inf", "-inf", "1e308", "-1e308", "0"], hostile.size)
+    volts[rng.choice(n, 300, replace=False)] = rng.choice(["nan", "0.5", "4.9", "-1"], 300)
+    with zipfile.ZipFile(native_fmu) as z:
+        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    (tmp_path / "c.txt").write_text("\n".join(map(str, cur)))
+    (tmp_path / "v.txt").write_text("\n".join(map(str, volts)))
+    env = {**__import__("os").environ, "ASAN_OPTIONS": "detect_leaks=1:halt_on_error=1",
+           "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1"}
+    for soc0 in ("1.0", "0.0"):
+        out = subprocess.run([str(exe), str(so), (tmp_path / "res").as_uri(), guid,
+                              str(tmp_path / "c.txt"), "1.0", soc0, str(observer),
+                              str(tmp_path / "v.txt")], capture_output=True, text=True,
+                             env=env, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        assert "runtime error" not in out.stderr and "AddressSanitizer" not in out.stderr
+        res = _parse(out.stdout)
+        assert res["steps"] == n and res["errors"] >= 100     # the hostile steps were refused
+        assert math.isfinite(res["voltage"]) and math.isfinite(res["soc"])
+        if observer:                   # coulomb counting is not clamped; the observers are
+            assert 0.0 <= res["soc"] <= 1.0
