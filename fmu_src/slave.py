@@ -135,15 +135,81 @@ class LmnCellSlave(Fmi2Slave):
         cosim.reset(temp)
         return cosim
 
+    # ----- guarded access: pythonfmu 0.7's wrapper turns any Python exception into fmi2Fatal
+    # and frees the slave object while it is still in use (PySlaveInstance::cleanPyObject in
+    # handle_py_exception), so the host crashes on the next call. Ordinary call errors are
+    # therefore logged through the FMI logger and the call is ignored (its status stays OK:
+    # the wrapper offers no way to return fmi2Error from a getter or setter).
+    def _problem(self, vr: int, kind: type, setting: bool) -> str:
+        var = self.vars.get(vr)
+        if var is None:
+            return f"no variable with value reference {vr}"
+        if not isinstance(var, kind):
+            return f"value reference {vr} ('{var.name}') is not a {kind.__name__}"
+        if setting and var.causality not in (Fmi2Causality.input, Fmi2Causality.parameter):
+            return f"'{var.name}' is an {var.causality.name} and cannot be set"
+        if setting and var.causality == Fmi2Causality.parameter and self._cosim is not None:
+            return (f"parameter '{var.name}' is fixed after initialisation (value kept: "
+                    f"{var.getter()!r})")
+        return ""
+
+    def _get(self, vrs: list[int], kind: type, call: str, bad: object) -> list:
+        out = []
+        for vr in vrs:
+            problem = self._problem(vr, kind, setting=False)
+            if problem:
+                self._error(f"{call}: {problem}")
+                out.append(bad)
+            else:
+                out.append(self.vars[vr].getter())
+        return out
+
+    def _set(self, vrs: list[int], values: list, kind: type, call: str) -> None:
+        for vr, value in zip(vrs, values, strict=False):
+            problem = self._problem(vr, kind, setting=True)
+            if problem:
+                self._error(f"{call}: {problem}; {value!r} was not set")
+            else:
+                self.vars[vr].setter(value)
+
+    def get_real(self, vrs: list[int]) -> list[float]:
+        return [float(v) for v in self._get(vrs, Real, "fmi2GetReal", math.nan)]
+
+    def get_integer(self, vrs: list[int]) -> list[int]:
+        return [int(v) for v in self._get(vrs, Integer, "fmi2GetInteger", 0)]
+
+    def get_boolean(self, vrs: list[int]) -> list[bool]:
+        return [bool(v) for v in self._get(vrs, Boolean, "fmi2GetBoolean", False)]
+
+    def get_string(self, vrs: list[int]) -> list[str]:
+        for vr in vrs:
+            self._error(f"fmi2GetString: value reference {vr}: this FMU has no String")
+        return ["" for _ in vrs]
+
+    def set_real(self, vrs: list[int], values: list[float]) -> None:
+        self._set(vrs, values, Real, "fmi2SetReal")
+
+    def set_integer(self, vrs: list[int], values: list[int]) -> None:
+        self._set(vrs, values, Integer, "fmi2SetInteger")
+
+    def set_boolean(self, vrs: list[int], values: list[bool]) -> None:
+        self._set(vrs, values, Boolean, "fmi2SetBoolean")
+
+    def set_string(self, vrs: list[int], values: list[str]) -> None:
+        for vr in vrs:
+            self._error(f"fmi2SetString: value reference {vr}: this FMU has no String")
+
     def _error(self, msg: str) -> None:
         self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
 
     def exit_initialization_mode(self) -> None:
+        """Bad parameters are logged as errors and leave the FMU uninitialised, so that every
+        doStep is refused (not raised: see _problem on pythonfmu 0.7's wrapper)."""
         if self.observer not in OBSERVERS:
-            msg = (f"parameter 'observer' = {self.observer}: this FMU offers "
-                   f"{sorted(OBSERVERS)} ({', '.join(OBSERVERS.values())})")
-            self._error(msg)
-            raise InputError(msg)
+            self._error(f"parameter 'observer' = {self.observer}: this FMU offers "
+                        f"{sorted(OBSERVERS)} ({', '.join(OBSERVERS.values())}); not "
+                        "initialised, every step will be refused")
+            return
         try:
             self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
                                                             float(self.capacity),
@@ -152,8 +218,8 @@ class LmnCellSlave(Fmi2Slave):
             self._cosim.reset(float(self.temperature) if math.isfinite(self.temperature)
                               else 25.0)
         except InputError as exc:
-            self._error(str(exc))
-            raise
+            self._cosim = None
+            self._error(f"{exc}; not initialised, every step will be refused")
 
     def setup_experiment(self, start_time: float, stop_time: float | None,
                          tolerance: float | None) -> None:

@@ -108,8 +108,33 @@ def observers_at_full(fmu: str) -> dict:
     return out
 
 
+def ordinary_errors(fmu: str) -> dict:
+    """Row 1 and 7: unknown references, wrong types, outputs and fixed parameters set after
+    initialisation, bad parameters at exitInitializationMode: no crash, nothing changed."""
+    out = {}
+    inst = Instance(fmu, start={"soc0": 0.8})
+    inst.step(-1.0)
+    out["unknown_get"] = [_status(lambda: inst.slave.getReal([999])) for _ in range(6)]
+    out["set_output"] = _status(lambda: inst.slave.setReal([inst.vr["voltage"]], [1.0]))
+    out["set_fixed"] = _status(lambda: inst.slave.setReal([inst.vr["soc0"]], [0.2]))
+    out["soc0_after"] = inst.get("soc0")[0]
+    out["set_observer"] = _status(lambda: inst.slave.setInteger([inst.vr["observer"]], [2]))
+    out["wrong_type"] = _status(lambda: inst.slave.setInteger([inst.vr["current"]], [1]))
+    out["steps_after"] = _status(lambda: inst.step(-1.0))
+    out["finite"] = all(math.isfinite(x) for x in inst.get("voltage", "soc"))
+    inst.free()
+    slave, vr = _raw(fmu)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.setReal([vr["soc0"]], [2.0])
+    out["bad_param_exit"] = _status(slave.exitInitializationMode)
+    out["step_uninitialised"] = _status(lambda: slave.doStep(0.0, 1.0))
+    slave.freeInstance()
+    return out
+
+
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
-                                      observers_at_full)}
+                                      observers_at_full, ordinary_errors)}
 
 if __name__ == "__main__":
     print(json.dumps(SEQUENCES[sys.argv[2]](sys.argv[1])))

@@ -70,6 +70,19 @@ def test_observers_stay_finite_from_full_charge(fmu) -> None:
         assert res == {"worst_status": 0, "finite": True}, observer
 
 
+def test_ordinary_errors_never_crash_and_change_nothing(fmu, native_fmu) -> None:
+    res = _run(fmu, "ordinary_errors")
+    assert res["soc0_after"] == 0.8                      # the fixed parameter kept its value
+    assert res["steps_after"] == 0 and res["finite"]
+    assert res["step_uninitialised"] in (ERROR, DISCARD)
+    if fmu == native_fmu:
+        assert res["unknown_get"] == [ERROR] * 6
+        assert res["set_output"] == res["set_fixed"] == res["set_observer"] == ERROR
+        assert res["wrong_type"] == ERROR and res["bad_param_exit"] == ERROR
+    else:   # pythonfmu 0.7's wrapper cannot return fmi2Error here: logged, ignored, no crash
+        assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
+
+
 def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> None:
     def doc(path) -> str:
         with zipfile.ZipFile(path) as z:
