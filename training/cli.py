@@ -28,45 +28,24 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
         return text
 
 
-def _float01(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number within 0…1") from None
-    if not 0.0 <= v <= 1.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a SoC fraction within 0…1")
-    return v
+def _number(cast: type, ok, expected: str):
+    """An argparse type: text → cast(text), refused with `expected` unless ok(value)."""
+    def parse(text: str):
+        try:
+            value = cast(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}") from None
+        if not ok(value):
+            raise argparse.ArgumentTypeError(f"{text!r}: expected {expected}")
+        return value
+    return parse
 
 
-def _positive(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a number > 0") from None
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a value > 0")
-    return v
-
-
-def _positive_int(text: str) -> int:
-    try:
-        v = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number ≥ 1") from None
-    if v < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a whole number ≥ 1")
-    return v
-
-
-def _temperature(text: str) -> float:
-    try:
-        v = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a temperature in °C") from None
-    if not -273.15 < v < 1000.0:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected a temperature in °C above "
-                                         "absolute zero")
-    return v
+_float01 = _number(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
+_positive = _number(float, lambda v: v > 0, "a number > 0")
+_positive_int = _number(int, lambda v: v >= 1, "a whole number ≥ 1")
+_temperature = _number(float, lambda v: -273.15 < v < 1000.0,
+                       "a temperature in °C above absolute zero")
 
 
 def _columns(text: str) -> dict[str, str]:
