@@ -1,0 +1,141 @@
+"""Many cells of one LMN model stepped at once with numpy (packs, sweeps): the same step as
+step.CellStepper (and the same thermal model as step.CellThermal) on arrays over cells, plus
+per-cell capacity and an overpotential scale for cell-to-cell spread.
+
+Cell k's voltage is OCV(SoC_k) + r_k·ŷ_k for a relative-OCV model (r_k = 1: the model as
+identified; r_k > 1: a cell whose resistances and polarisation are r_k times larger), or r_k·ŷ_k
+for an absolute model. With r = 1 and the model's capacity every cell equals CellStepper.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .model import TEMPERATURE_STEP_K, LmnModel
+from .step import CHARGE, DISCHARGE, fixed_point, initial_hysteresis
+
+
+class VectorCells:
+    """N cells: step(current_a (N,), temperature_c (N,) or scalar) → voltages (N,).
+
+    temperature_is_cell False with a thermal model: the temperature given is the ambient and
+    each cell heats up by its own losses (as the FMU's default)."""
+
+    def __init__(self, model: LmnModel, soc0: np.ndarray | float, n: int | None = None,
+                 capacity_ah: np.ndarray | float | None = None,
+                 resistance_scale: np.ndarray | float = 1.0,
+                 temperature_c: float = 25.0, temperature_is_cell: bool = True) -> None:
+        soc0 = np.atleast_1d(np.asarray(soc0, dtype=float))
+        n = int(n if n is not None else soc0.size)
+        self.model, self.n = model, n
+        m, ts = model, model.sample_time_s
+        cap = np.broadcast_to(np.asarray(model.capacity_ah if capacity_ah is None
+                                         else capacity_ah, dtype=float), (n,)).copy()
+        if not (np.isfinite(cap).all() and (cap > 0).all()):
+            raise ValueError("capacity_ah: expected finite values > 0 Ah for every cell")
+        self.r = np.broadcast_to(np.asarray(resistance_scale, dtype=float), (n,)).copy()
+        self.soc_gain = ts / (3600.0 * cap)
+        self.coef = np.array([np.exp(-ts / tau) for f in m.filters for tau in f])
+        self.soc = np.broadcast_to(soc0, (n,)).copy()
+        self.lp = np.zeros((n, 2 * len(m.filters)))
+        self.h = np.array([initial_hysteresis(s) for s in self.soc])
+        d0 = CHARGE if m.initial_direction == "charge" else DISCHARGE
+        self.direction = np.full(n, d0, dtype=np.intp)
+        self.past = np.zeros((n, m.current_terms - 1))
+        self.thermal_active = m.thermal is not None and not temperature_is_cell
+        t0 = temperature_c + (m.thermal.offset_k if self.thermal_active else 0.0)
+        self.cell_temperature_c = np.full(n, float(t0))
+        self._started = False
+        y0 = np.array([fixed_point(m, float(s), t0, float(h)) for s, h in zip(self.soc, self.h,
+                                                                              strict=True)])
+        self.lags = np.repeat(y0[:, None], m.output_lags, axis=1)
+        ocv0 = m.ocv(self.soc) if m.relative_ocv else 0.0
+        self.voltage_v = ocv0 + self.r * y0
+        self._src = m.temperature_source_indices()
+
+    # ----- the step ---------------------------------------------------------------------------
+    def _features(self, i: np.ndarray, t: np.ndarray, soc: np.ndarray, lp: np.ndarray,
+                  h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        m, n = self.model, self.n
+        g = (np.ones(n) if m.arrhenius_k is None else
+             np.exp(m.arrhenius_k * (1.0 / (t + 273.15)
+                                     - 1.0 / (m.reference_temperature_c + 273.15))))
+        cols = [g * i, *(g * self.past[:, k] for k in range(self.past.shape[1])),
+                *(g * (lp[:, 2 * f] - lp[:, 2 * f + 1]) for f in range(len(m.filters)))]
+        if m.hysteresis_gamma is not None:
+            cols.append(h)
+        if m.ocv_input:
+            cols.append(m.ocv(soc))
+        if m.soc_input:
+            cols.append(soc)
+        if m.offset:
+            cols.append(np.ones(n))
+        x = np.column_stack(cols)
+        if m.temperature_terms:
+            dt = (t - m.reference_temperature_c) / TEMPERATURE_STEP_K
+            terms, power = [], np.ones(n)
+            for _ in range(m.temperature_terms):
+                power = power * dt
+                terms.append(power[:, None] * x[:, self._src])
+            x = np.hstack([x, *terms])
+        z = np.zeros((n, len(m.partition_variables)))
+        for k, name in enumerate(m.partition_variables):
+            z[:, k] = {"soc": soc, "current": i, "temperature": t}.get(
+                name, lp[:, 1] if lp.shape[1] else i)
+        return x, z
+
+    def _advance(self, i: np.ndarray, t: np.ndarray):
+        """The state after one step and the voltage, without storing anything."""
+        m = self.model
+        eta = np.where(i > 0, m.efficiency_charge, m.efficiency_discharge)
+        soc = self.soc + self.soc_gain * eta * i
+        lp = self.coef * self.lp + (1.0 - self.coef) * i[:, None]
+        h = self.h
+        if m.hysteresis_gamma is not None:
+            e = np.exp(-m.hysteresis_gamma * np.abs(i) * self.soc_gain)
+            h = e * self.h + (1.0 - e) * np.sign(i)
+        rest = m.rest_current_a
+        direction = np.where(i > rest, CHARGE, np.where(i < -rest, DISCHARGE, self.direction))
+        x, z = self._features(i, t, soc, lp, h)
+        A, b, _ = m.blend(x, m.normalise(z), direction)
+        y = b + np.sum(A * self.lags, axis=1) if m.output_lags else b
+        u = (m.ocv(soc) if m.relative_ocv else 0.0) + self.r * y
+        return soc, lp, h, direction, y, u
+
+    def _temperatures(self, temperature_c: np.ndarray) -> np.ndarray:
+        if not self.thermal_active:
+            return temperature_c
+        if not self._started:
+            self.cell_temperature_c = temperature_c + self.model.thermal.offset_k
+        return self.cell_temperature_c
+
+    def peek(self, current_a: np.ndarray, temperature_c: np.ndarray | float) -> np.ndarray:
+        """The voltages a step with these currents would give; nothing changes."""
+        i = np.asarray(current_a, dtype=float)
+        t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (self.n,))
+        started, cell = self._started, self.cell_temperature_c
+        u = self._advance(i, self._temperatures(t))[-1]
+        self._started, self.cell_temperature_c = started, cell
+        return u
+
+    def step(self, current_a: np.ndarray, temperature_c: np.ndarray | float) -> np.ndarray:
+        """One model step of every cell (currents held over it, > 0 charges); the voltages."""
+        i = np.asarray(current_a, dtype=float)
+        t_in = np.broadcast_to(np.asarray(temperature_c, dtype=float), (self.n,))
+        t = self._temperatures(t_in)
+        self.soc, self.lp, self.h, self.direction, y, self.voltage_v = self._advance(i, t)
+        if self.past.shape[1]:
+            self.past = np.column_stack([i, self.past[:, :-1]])
+        if self.model.output_lags:
+            self.lags = np.column_stack([y, self.lags[:, :-1]])
+        self._started = True
+        if self.thermal_active:
+            th, ts = self.model.thermal, self.model.sample_time_s
+            a = np.exp(-ts / th.time_constant_s)
+            rest = t_in + th.offset_k
+            q = i * (self.voltage_v - self.model.ocv(self.soc))
+            self.cell_temperature_c = (rest + a * (t - rest)
+                                       + th.resistance_k_per_w * (1.0 - a) * q)
+        else:
+            self.cell_temperature_c = t_in.copy()
+        return self.voltage_v
