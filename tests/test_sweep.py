@@ -42,6 +42,8 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
     (["--ambient", "-300"], "--ambient -300.0"),
     (["--ambient", "warm"], "--ambient 'warm'"),
     (["--workers", "0"], "expected a whole number"),
+    (["--pack", "96x3"], "--pack '96x3'"),
+    (["--pack", "4s2p", "--spread", "capacity=0.5"], "--spread capacity=0.5"),
 ])
 def test_bad_options_name_the_option(native_fmu, tmp_path, capsys, args, message) -> None:
     code = None
@@ -61,3 +63,18 @@ def test_cli_writes_table_and_plots(native_fmu, tmp_path, capsys) -> None:
     text = out.read_text().splitlines()
     assert len(text) == 3 and text[0].startswith("cycle,vehicle")
     assert (tmp_path / "plots" / "sweep_voltage_min_v.png").exists()
+
+
+def test_pack_scenarios_with_spread(native_fmu) -> None:
+    cases = scenarios(["us06"], [25.0], [0.9, 0.5], pack="12s3p",
+                      spread="capacity=0.03,resistance=0.1", seed=4)
+    one = sweep(native_fmu, cases, workers=1, progress=False)
+    two = sweep(native_fmu, cases, workers=2, progress=False)
+    cols = [c for c in one.columns if c != "wall_s"]
+    assert one[cols].equals(two[cols])
+    assert list(one["pack"]) == ["12s3p", "12s3p"]
+    assert (one["soc_end_min"] < one["soc_end"]).all()      # the weakest cell is lower
+    same = sweep(native_fmu, scenarios(["us06"], [25.0], [0.9], pack="12s3p",
+                                       spread="capacity=0.03,resistance=0.1", seed=4),
+                 workers=1, progress=False)
+    assert same.loc[0, "voltage_min_v"] == one.loc[0, "voltage_min_v"]   # seeded

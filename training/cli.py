@@ -152,7 +152,8 @@ def _floats(option: str):
 def cmd_sweep(a: argparse.Namespace) -> int:
     from lmncell.scenarios.sweep import plot_sweep, scenarios, sweep, write_table
 
-    cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat)
+    cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat,
+                      a.pack, a.spread, a.seed)
     print(f"sweep: {len(cases)} scenario(s) on "
           + (f"the scheduler {a.scheduler}" if a.scheduler else
              f"a LocalCluster of {a.workers or 'all'} worker(s)"), flush=True)
@@ -287,6 +288,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--vehicle", action="append", metavar="V.toml", help="vehicle file; "
                    "repeatable (default: the built-in compact EV)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
+    s.add_argument("--pack", metavar="NsNp", help="simulate the whole pack, e.g. 96s3p, with "
+                   "the vectorised runtime on the FMU's model (default: one cell through the "
+                   "FMU)")
+    s.add_argument("--spread", metavar="capacity=F,resistance=F", help="cell-to-cell spread "
+                   "(relative standard deviations) of a pack")
+    s.add_argument("--seed", type=int, default=0, help="seed of the spread")
     g = s.add_mutually_exclusive_group()
     g.add_argument("--workers", type=_positive_int, help="LocalCluster worker processes "
                    "(default: one per core)")
