@@ -78,3 +78,11 @@ def test_pack_scenarios_with_spread(native_fmu) -> None:
                                        spread="capacity=0.03,resistance=0.1", seed=4),
                  workers=1, progress=False)
     assert same.loc[0, "voltage_min_v"] == one.loc[0, "voltage_min_v"]   # seeded
+
+
+def test_pythonfmu_fmu_sweeps_too(quick_fmu) -> None:
+    cases = scenarios(["us06"], [25.0], [0.9])
+    table = sweep(quick_fmu, cases, workers=1, progress=False)
+    single = run_cycle(quick_fmu, "us06", cases[0].vehicle, 1, 0.9, temperature_c=25.0).figures
+    assert table.loc[0, "voltage_min_v"] == single["voltage_min_v"]
+    assert table.loc[0, "soc_end"] == single["soc_end"]

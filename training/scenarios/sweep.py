@@ -152,10 +152,11 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
 
 
 def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
-          scheduler: str | None = None, progress: bool = True):
+          scheduler: str | None = None, progress: bool = True, client=None):
     """Run the scenarios on Dask and return the table (pandas DataFrame), one row per
     scenario in the given order. workers: LocalCluster processes (default: the cores);
-    scheduler: the address of a running Dask scheduler instead (then workers is ignored)."""
+    scheduler: the address of a running Dask scheduler instead (then workers is ignored);
+    client: a dask.distributed Client to use as it is (then both are ignored)."""
     import pandas as pd
     from dask.distributed import Client, LocalCluster
     from dask.distributed import progress as dask_progress
@@ -167,22 +168,25 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
         raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
     data = fmu.read_bytes()
     cluster = None
-    if scheduler is None:
+    own = client is None
+    if not own:
+        pass
+    elif scheduler is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None)
         client = Client(cluster)
     else:
         client = Client(scheduler)
     try:
-        blob = client.scatter(data, broadcast=True)
-        futures = [client.submit(run_scenario, blob, sc, key=f"scenario-{k}-{fmu.stem}",
-                                 pure=False) for k, sc in enumerate(cases)]
+        blob = client.scatter(data, broadcast=True, hash=False)   # own key per sweep
+        futures = [client.submit(run_scenario, blob, sc, pure=False) for sc in cases]
         if progress:
             dask_progress(futures)
             print(flush=True)
         rows = client.gather(futures)
     finally:
-        client.close()
+        if own:
+            client.close()
         if cluster is not None:
             cluster.close()
     return pd.DataFrame(rows)
