@@ -16,6 +16,7 @@ the output lags sit at the network's fixed point for zero current at SoC0.
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
@@ -265,6 +266,68 @@ def simulate(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray |
     return simulate_exo(model, ex, soc0, h0, t0)
 
 
+class _ScalarTree:
+    """LmnModel.blend for one sample in plain Python (the FMU's per-step cost): the same
+    validities and blend as the batch path, up to the order of floating-point sums. Built for
+    a model that does not change afterwards (a stepper's)."""
+
+    def __init__(self, model: LmnModel) -> None:
+        self.center = model.partition_center.tolist()
+        self.scale = model.partition_scale.tolist()
+        self.weights = [(float(w[0]), w[1:].tolist()) for w in model.node_weights]
+        self.paths = [list(p) for p in model.leaf_paths]
+        self.gates = [GATE_CODES[g] for g in model.leaf_gates]
+        self.gated = model.gating_mode == "current_sign"
+        na = model.output_lags
+        self.theta_lags = model.theta[:, :na].tolist()
+        self.theta_exo = np.ascontiguousarray(model.theta[:, na:])
+        self.na = na
+        self.ocv_soc = model.ocv_soc.tolist()
+        self.ocv_v = model.ocv_v.tolist()
+
+    def ocv(self, soc: float) -> float:
+        """np.interp(soc, ocv_soc, ocv_v) for one value: linear, held beyond the ends."""
+        xs, ys = self.ocv_soc, self.ocv_v
+        if not soc > xs[0]:
+            return ys[0] if soc == soc else math.nan
+        if soc >= xs[-1]:
+            return ys[-1]
+        j = bisect.bisect_right(xs, soc) - 1
+        slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+        return slope * (soc - xs[j]) + ys[j]
+
+    def blend(self, x: np.ndarray, z: list[float], direction: int
+              ) -> tuple[list[float], float, np.ndarray]:
+        """(blended lag coefficients, exogenous part, validities) of one sample."""
+        zn = [(v - c) / s for v, c, s in zip(z, self.center, self.scale, strict=True)]
+        phi = []
+        for w0, w in self.weights:
+            act = w0
+            for zk, wk in zip(zn, w, strict=True):
+                act += zk * wk
+            phi.append(1.0 / (1.0 + (math.exp(-act) if act > -709.0 else math.inf)))
+        validity = []
+        for path, gate in zip(self.paths, self.gates, strict=True):
+            v = 1.0
+            for node, side in path:
+                v *= phi[node] if side == 0 else 1.0 - phi[node]
+            if self.gated and gate and gate != direction:
+                v = 0.0
+            validity.append(v)
+        parts = (self.theta_exo @ x).tolist()
+        b = 0.0
+        for v, p in zip(validity, parts, strict=True):
+            b += v * p
+        a = [0.0] * self.na
+        for v, row in zip(validity, self.theta_lags, strict=True):
+            for l in range(self.na):
+                a[l] += v * row[l]
+        return a, b, np.array(validity)
+
+
+GATE_CODES = {"all": 0, "charge": CHARGE, "discharge": DISCHARGE}
+
+
 class CellStepper:
     """Step-by-step free-run simulation (the FMU's engine): one call per model sample."""
 
@@ -282,10 +345,15 @@ class CellStepper:
         self._d = np.zeros(1, dtype=np.intp)
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity = np.zeros(model.n_local_models)
+        self._tree = _ScalarTree(model)
 
     @property
     def soc(self) -> float:
         return self.state.soc
+
+    def ocv(self, soc: float) -> float:
+        """The model's OCV at one SoC (V), as np.interp gives it."""
+        return self._tree.ocv(soc)
 
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
@@ -294,9 +362,7 @@ class CellStepper:
         self.exo.features(s, current_a, temperature_c, self._x[0], self._z[0])
         self.exo.shift(s, current_a)
         self._d[0] = s.direction
-        A, b, Phi = m.blend(self._x, m.normalise(self._z), self._d)
-        a = A[0].tolist()
-        acc = float(b[0])
+        a, acc, Phi = self._tree.blend(self._x[0], self._z[0].tolist(), s.direction)
         lags = self.lags
         self.prev_lags = list(lags)
         for l in range(m.output_lags):
@@ -304,8 +370,8 @@ class CellStepper:
         if m.output_lags:
             lags.pop()
             lags.insert(0, acc)
-        self.validity = Phi[0]
-        self.voltage_v = acc + float(m.ocv(s.soc)) if m.relative_ocv else acc
+        self.validity = Phi
+        self.voltage_v = acc + self._tree.ocv(s.soc) if m.relative_ocv else acc
         return self.voltage_v
 
     def get_state(self) -> list[float]:
@@ -348,7 +414,7 @@ class CellThermal:
             self.temperature_c = input_c
             return
         m = self.model
-        q = heat_w(current_a, stepper.voltage_v, float(m.ocv(stepper.soc)))
+        q = heat_w(current_a, stepper.voltage_v, stepper.ocv(stepper.soc))
         self.temperature_c = next_temperature(m.thermal, self.cell_temperature(input_c),
                                               input_c, q, m.sample_time_s)
 
