@@ -11,6 +11,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 from lmncell.data.records import Record
 from lmncell.runtime.model import LmnModel
+from matplotlib.ticker import FuncFormatter
 
 COLORS = {"measured": "k", "lmn": "tab:red", "arx": "tab:gray", "ecm2rc": "tab:blue",
           "ecm2rc_hyst": "tab:green"}
@@ -114,7 +115,10 @@ def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
     if np.isfinite(val).any():
         ax.plot(m, val, "^-", label="free-run (validation)")
     ax.axvline(chosen, color="k", ls="--", lw=0.8, label=f"chosen M = {chosen}")
-    ax.set(xlabel="number of local models M", ylabel="RMSE / mV", yscale="log")
+    ax.set(xlabel="number of local models M", ylabel="RMSE / mV (log scale)", yscale="log")
+    plain = FuncFormatter(lambda v, _pos: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(plain)
     ax.legend()
     fig.savefig(path, dpi=90)
     plt.close(fig)
