@@ -86,3 +86,15 @@ def test_pythonfmu_fmu_sweeps_too(quick_fmu) -> None:
     single = run_cycle(quick_fmu, "us06", cases[0].vehicle, 1, 0.9, temperature_c=25.0).figures
     assert table.loc[0, "voltage_min_v"] == single["voltage_min_v"]
     assert table.loc[0, "soc_end"] == single["soc_end"]
+
+
+def test_a_sample_string_of_cells_carries_the_cell_current(native_fmu) -> None:
+    """--cells N: N cells in series with spread, each with the vehicle pack's cell current;
+    without spread every cell is the one cell that the FMU run simulates."""
+    cases = scenarios(["us06"], [25.0], [0.9], cells=5, spread="capacity=0.0,resistance=0.0")
+    string = sweep(native_fmu, cases, workers=1, progress=False)
+    single = run_cycle(native_fmu, "us06", cases[0].vehicle, 1, 0.9, temperature_c=25.0)
+    assert string.loc[0, "pack"] == "5s1p"
+    assert string.loc[0, "soc_end"] == pytest.approx(single.figures["soc_end"], abs=2e-3)
+    assert string.loc[0, "voltage_min_v"] == pytest.approx(single.figures["voltage_min_v"],
+                                                           abs=5e-3)

@@ -153,7 +153,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     from lmncell.scenarios.sweep import plot_sweep, scenarios, sweep, write_table
 
     cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat,
-                      a.pack, a.spread, a.seed)
+                      a.pack, a.spread, a.seed, a.cells)
     print(f"sweep: {len(cases)} scenario(s) on "
           + (f"the scheduler {a.scheduler}" if a.scheduler else
              f"a LocalCluster of {a.workers or 'all'} worker(s)"), flush=True)
@@ -293,6 +293,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "FMU)")
     s.add_argument("--spread", metavar="capacity=F,resistance=F", help="cell-to-cell spread "
                    "(relative standard deviations) of a pack")
+    s.add_argument("--cells", type=_positive_int, help="without --pack: a string of N cells "
+                   "with the spread, each carrying the vehicle's cell current")
     s.add_argument("--seed", type=int, default=0, help="seed of the spread")
     g = s.add_mutually_exclusive_group()
     g.add_argument("--workers", type=_positive_int, help="LocalCluster worker processes "

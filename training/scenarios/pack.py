@@ -31,6 +31,12 @@ class PackSpec:
     capacity_spread: float = 0.0
     resistance_spread: float = 0.0
     seed: int = 0
+    vehicle_cells: int | None = None   # a sample string of a larger vehicle pack: its size
+
+    def cells_in_vehicle(self, vehicle) -> int:
+        """How many cells share the vehicle's power (the vehicle's pack size for a sample
+        string, else this pack's)."""
+        return self.vehicle_cells or self.n_series * self.n_parallel
 
     @property
     def label(self) -> str:

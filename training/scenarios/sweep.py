@@ -10,7 +10,6 @@ deterministic.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import itertools
 import math
@@ -46,11 +45,12 @@ class Scenario:
 def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[float],
               vehicle_files: Sequence[str | None] = (None,), repeat: int = 1,
               pack: str | None = None, spread: str | None = None,
-              seed: int = 0) -> list[Scenario]:
+              seed: int = 0, cells: int | None = None) -> list[Scenario]:
     """The Cartesian product, cycle slowest and start SoC fastest; values checked with
     messages that name the option. pack ('96s3p') or spread ('capacity=0.02,resistance=0.05')
     simulate the whole pack with the vectorised runtime (the pack of the vehicle file where
-    only a spread is given)."""
+    only a spread is given); cells N without pack: a string of N cells in series (each
+    carrying the cell current of the vehicle's pack, spread as given)."""
     if not cycles or not ambients or not soc0s or not vehicle_files:
         raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
     bad = [c for c in cycles if c not in CYCLES]
@@ -66,11 +66,16 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
         raise DataError(f"sweep: --repeat {repeat!r}: expected a whole number ≥ 1")
     vehicles = [(load_vehicle(v), str(v) if v else "built-in") for v in vehicle_files]
     spreads = parse_spread(spread) if spread else {}
+    if cells is not None and (cells < 1 or pack):
+        raise DataError(f"sweep: --cells {cells!r}: expected a whole number ≥ 1, without --pack")
     size = parse_pack(pack) if pack else None
-
     def spec(veh: Vehicle) -> PackSpec | None:
-        if size is None and not spreads:
+        if size is None and not spreads and cells is None:
             return None
+        if cells is not None:
+            return PackSpec(int(cells), 1, spreads.get("capacity", 0.0),
+                            spreads.get("resistance", 0.0), int(seed), veh.n_series
+                            * veh.n_parallel)
         ns, npar = size or (veh.n_series, veh.n_parallel)
         return PackSpec(ns, npar, spreads.get("capacity", 0.0),
                         spreads.get("resistance", 0.0), int(seed))
@@ -110,9 +115,10 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     model = _model_of(fmu_bytes)
     t, speed, grade = load_cycle(sc.cycle)
     dt = float(np.median(np.diff(t)))
-    veh = dataclasses.replace(sc.vehicle, n_series=sc.pack.n_series,
-                              n_parallel=sc.pack.n_parallel)
-    power = np.tile(pack_power(veh, speed, grade, dt), sc.repeat)
+    power = np.tile(pack_power(sc.vehicle, speed, grade, dt), sc.repeat)
+    # the vehicle's pack power, shared by its cells; a sample string gets its cells' share
+    power = power * (sc.pack.n_series * sc.pack.n_parallel) / sc.pack.cells_in_vehicle(
+        sc.vehicle)
     ts = model.sample_time_s
     steps = math.floor(power.size * dt / ts + 1e-9)
     idx = np.minimum((np.arange(steps) * ts / dt + 1e-9).astype(int), power.size - 1)
