@@ -175,13 +175,11 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     data = fmu.read_bytes()
     cluster = None
     own = client is None
-    if not own:
-        pass
-    elif scheduler is None:
+    if own and scheduler is None:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                                dashboard_address=None)
         client = Client(cluster)
-    else:
+    elif own:
         client = Client(scheduler)
     try:
         blob = client.scatter(data, broadcast=True, hash=False)   # own key per sweep
