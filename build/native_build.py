@@ -241,12 +241,17 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
 """
 
 
+# sources/buildDescription.xml: the build-description file is defined by FMI 3.0 (hence its
+# fmiVersion="3.0", the version of that file's schema, which is all fmpy compile reads); the
+# FMI 2.0 model description lists the same source in <SourceFiles>. The code needs the C math
+# library (exp, sqrt, log): listed as an external library, so that a build links -lm.
 BUILD_DESCRIPTION = f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiBuildDescription fmiVersion="3.0">
   <BuildConfiguration modelIdentifier="{MODEL_IDENTIFIER}">
     <SourceFileSet language="C99">
       <SourceFile name="lmncell.c"/>
     </SourceFileSet>
+    <Library name="m" external="true" description="the C math library: link with -lm"/>
   </BuildConfiguration>
 </fmiBuildDescription>
 """

@@ -321,3 +321,13 @@ def test_sanitizers_find_nothing_on_hostile_inputs(native_fmu, us06, tmp_path, o
         assert math.isfinite(res["voltage"]) and math.isfinite(res["soc"])
         if observer:                   # coulomb counting is not clamped; the observers are
             assert 0.0 <= res["soc"] <= 1.0
+
+
+def test_build_description_validates_and_names_libm(native_fmu) -> None:
+    from fmpy.model_description import read_build_description
+
+    configs = read_build_description(str(native_fmu), validate=True)   # fmpy's FMI 3 schema
+    assert configs and configs[0].sourceFileSets[0].sourceFiles == ["lmncell.c"]
+    with zipfile.ZipFile(native_fmu) as z:
+        assert '<Library name="m" external="true"' in z.read(
+            "sources/buildDescription.xml").decode()
