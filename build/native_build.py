@@ -21,6 +21,7 @@ import numpy as np
 from lmncell.fmu.interface import dependency_indices
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
+    EKF_ERROR_SCALE,
     FD_CURRENT_A,
     FD_HYSTERESIS,
     FD_SOC,
@@ -115,6 +116,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define FD_SOC {FD_SOC!r}", f"#define FD_CURRENT_A {FD_CURRENT_A!r}",
         f"#define FD_HYSTERESIS {FD_HYSTERESIS!r}",
         f"#define VOLTAGE_SIGMA_V {float(settings.voltage_sigma_v)!r}",
+        f"#define EKF_ERROR_SCALE {EKF_ERROR_SCALE!r}",
         f"#define SOC0_SIGMA {settings.soc0_sigma!r}", f"#define IMM_STAY {settings.imm_stay!r}",
         "#ifndef M_PI", "#define M_PI 3.14159265358979323846", "#endif",
         f"static const double OCV_SOC[NOCV] = {_arr(m.ocv_soc)};",

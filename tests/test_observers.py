@@ -110,7 +110,7 @@ def test_ekf_estimates_soc_and_the_dynamic_state_of_a_hysteresis_model(a123_mode
     assert abs(ob.state.soc - seg.soc_ref[k0 + 3599]) < 0.05
     # the voltage corrected the hysteresis and filter states, not only SoC
     print(f"largest correction of h {dh:.3g}, of a low-pass state {dlp:.3g} A")
-    assert dh > 0.01 and dlp > 0.01
+    assert dh > 0.005 and dlp > 0.01    # (σ_u·EKF_ERROR_SCALE: corrections are gentler)
 
 
 def test_ekf_started_at_rest_knows_the_filter_states(us06) -> None:
