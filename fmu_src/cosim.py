@@ -52,8 +52,7 @@ class CellCosim:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")
         self.thermal = CellThermal(self.model, p.temperature_is_cell)
-        t_cell = self.thermal.cell_temperature(temperature_c)
-        self.thermal.temperature_c = None        # the first step's ambient sets the start
+        t_cell = self.thermal.rested(temperature_c)   # the first step's input sets the start
         self.observer: SocObserver | None = None
         if p.observer:
             self.observer = SocObserver(self.model, OBSERVER_NAMES[p.observer], p.soc0,
@@ -69,8 +68,7 @@ class CellCosim:
         self.out_of_range = False
         self.range_message = ""
         self.steps = 0
-        self._last_input_temperature = self.thermal.cell_temperature(temperature_c)
-        self.thermal.temperature_c = None
+        self._start_temperature_c = t_cell
 
     @property
     def voltage_v(self) -> float:
@@ -85,7 +83,7 @@ class CellCosim:
         """The cell temperature of the last step (°C); before the first step the rested cell
         at the last `temperature` input given (nan if none yet)."""
         t = self.thermal.temperature_c
-        return t if t is not None else self._last_input_temperature
+        return t if t is not None else self._start_temperature_c
 
     @property
     def soc_std(self) -> float:
@@ -172,7 +170,7 @@ class CellCosim:
                 "acc": [self.covered_s, self.charge_as, self.temp_int, self.volt_int,
                         self.volt_time],
                 "flags": [self.out_of_range, self.range_message, self.steps],
-                "thermal": [self.thermal.temperature_c, self._last_input_temperature],
+                "thermal": [self.thermal.temperature_c, self._start_temperature_c],
                 "params": [self.params.soc0, self.params.capacity_ah, self.params.observer,
                            self.params.temperature_is_cell]}
 
@@ -182,7 +180,7 @@ class CellCosim:
         self.reset()
         t_cell, t_last = state["thermal"]
         self.thermal.temperature_c = None if t_cell is None else float(t_cell)
-        self._last_input_temperature = float(t_last)
+        self._start_temperature_c = float(t_last)
         if self.observer:
             self.observer.set_state(state["observer"])
         else:

@@ -28,6 +28,15 @@ from .thermal import heat_w, next_temperature, rested_temperature
 CHARGE, DISCHARGE = 1, 2
 
 
+def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
+                   ref_c: float = 25.0) -> np.ndarray:
+    """g(T) of ExoStepper.temperature_gain for n samples at once (ones without E or T); the
+    step itself keeps a scalar math.exp version, which costs less per call."""
+    if e_k is None or temperature_c is None:
+        return np.ones(n)
+    return np.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
+
+
 def initial_hysteresis(soc0: float) -> float:
     """Default hysteresis state: +1 (just charged) at SoC0 ≥ 0.95, else 0 (unknown history)."""
     return 1.0 if soc0 >= 0.95 else 0.0
@@ -400,12 +409,18 @@ class CellThermal:
         self.active = model.thermal is not None and not temperature_is_cell
         self.temperature_c: float | None = None      # cell temperature at the step's start
 
+    def rested(self, input_c: float) -> float:
+        """The temperature of a cell rested at the given `temperature` input (°C); nothing
+        changes."""
+        return rested_temperature(self.model.thermal, input_c) if self.active else input_c
+
     def cell_temperature(self, input_c: float) -> float:
-        """The cell temperature for the next step, given the step's `temperature` input."""
+        """The cell temperature for the next step, given the step's `temperature` input (the
+        first step's starts rested at it)."""
         if not self.active:
             return input_c
         if self.temperature_c is None:
-            self.temperature_c = rested_temperature(self.model.thermal, input_c)
+            self.temperature_c = self.rested(input_c)
         return self.temperature_c
 
     def update(self, input_c: float, current_a: float, stepper: CellStepper) -> None:
@@ -429,7 +444,7 @@ def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarr
     current = np.asarray(current_a, dtype=float)
     ambient = np.broadcast_to(np.asarray(ambient_c, dtype=float), current.shape)
     thermal = CellThermal(model)
-    t_start = thermal.cell_temperature(float(ambient[0])) if current.size else 25.0
+    t_start = thermal.rested(float(ambient[0])) if current.size else 25.0
     stepper = CellStepper(model, soc0, capacity_ah, t_start, h0)
     n = current.size
     u, soc, y = np.empty(n), np.empty(n), np.empty(n)
@@ -439,7 +454,7 @@ def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarr
         cell[k] = thermal.cell_temperature(ta)
         u[k] = stepper.step(i, cell[k])
         soc[k] = stepper.soc
-        y[k] = u[k] - float(model.ocv(soc[k])) if model.relative_ocv else u[k]
+        y[k] = u[k] - stepper.ocv(soc[k]) if model.relative_ocv else u[k]
         phi[k] = stepper.validity
         thermal.update(ta, i, stepper)
     return SimResult(u, soc, y, phi), cell

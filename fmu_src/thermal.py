@@ -52,7 +52,8 @@ class ThermalModel:
 
 
 def heat_w(current_a: float, voltage_v: float, ocv_v: float) -> float:
-    """Irreversible heat of a step (W): current times overpotential."""
+    """Irreversible heat of a step (W): current times overpotential (elementwise on arrays
+    too, as the functions below)."""
     return current_a * (voltage_v - ocv_v)
 
 

@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from .model import TEMPERATURE_STEP_K, LmnModel
-from .step import CHARGE, DISCHARGE, fixed_point, initial_hysteresis
+from .step import CHARGE, DISCHARGE, arrhenius_gain, fixed_point, initial_hysteresis
+from .thermal import heat_w, next_temperature, rested_temperature
 
 
 class VectorCells:
@@ -43,7 +44,7 @@ class VectorCells:
         self.direction = np.full(n, d0, dtype=np.intp)
         self.past = np.zeros((n, m.current_terms - 1))
         self.thermal_active = m.thermal is not None and not temperature_is_cell
-        t0 = temperature_c + (m.thermal.offset_k if self.thermal_active else 0.0)
+        t0 = rested_temperature(m.thermal if self.thermal_active else None, temperature_c)
         self.cell_temperature_c = np.full(n, float(t0))
         self._started = False
         y0 = np.array([fixed_point(m, float(s), t0, float(h)) for s, h in zip(self.soc, self.h,
@@ -57,9 +58,7 @@ class VectorCells:
     def _features(self, i: np.ndarray, t: np.ndarray, soc: np.ndarray, lp: np.ndarray,
                   h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m, n = self.model, self.n
-        g = (np.ones(n) if m.arrhenius_k is None else
-             np.exp(m.arrhenius_k * (1.0 / (t + 273.15)
-                                     - 1.0 / (m.reference_temperature_c + 273.15))))
+        g = arrhenius_gain(t, m.arrhenius_k, n, m.reference_temperature_c)
         cols = [g * i, *(g * self.past[:, k] for k in range(self.past.shape[1])),
                 *(g * (lp[:, 2 * f] - lp[:, 2 * f + 1]) for f in range(len(m.filters)))]
         if m.hysteresis_gamma is not None:
@@ -106,7 +105,7 @@ class VectorCells:
         if not self.thermal_active:
             return temperature_c
         if not self._started:
-            self.cell_temperature_c = temperature_c + self.model.thermal.offset_k
+            self.cell_temperature_c = rested_temperature(self.model.thermal, temperature_c)
         return self.cell_temperature_c
 
     def peek(self, current_a: np.ndarray, temperature_c: np.ndarray | float) -> np.ndarray:
@@ -130,12 +129,9 @@ class VectorCells:
             self.lags = np.column_stack([y, self.lags[:, :-1]])
         self._started = True
         if self.thermal_active:
-            th, ts = self.model.thermal, self.model.sample_time_s
-            a = np.exp(-ts / th.time_constant_s)
-            rest = t_in + th.offset_k
-            q = i * (self.voltage_v - self.model.ocv(self.soc))
-            self.cell_temperature_c = (rest + a * (t - rest)
-                                       + th.resistance_k_per_w * (1.0 - a) * q)
+            q = heat_w(i, self.voltage_v, self.model.ocv(self.soc))
+            self.cell_temperature_c = next_temperature(self.model.thermal, t, t_in, q,
+                                                       self.model.sample_time_s)
         else:
             self.cell_temperature_c = t_in.copy()
         return self.voltage_v

@@ -14,7 +14,7 @@ from lmncell.identification.baselines import hysteresis
 from lmncell.identification.ocvfit import OcvFit, fit_ocv, measured_ocv
 from lmncell.identification.tree import Design, build_design, freerun_rmse, root_tree
 from lmncell.runtime.model import LmnModel
-from lmncell.runtime.step import initial_hysteresis
+from lmncell.runtime.step import arrhenius_gain, initial_hysteresis
 
 HYSTERESIS_CANDIDATES = (10.0, 30.0, 100.0, 300.0)
 HYSTERESIS_MIN_GAIN = 0.03
@@ -42,14 +42,6 @@ def _within_record_span(segs: list[Segment]) -> float:
     """The largest temperature span (K) inside one segment (0 without temperatures)."""
     return max((float(np.ptp(s.temperature_c)) for s in segs if s.temperature_c is not None),
                default=0.0)
-
-
-def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
-                   ref_c: float = 25.0) -> np.ndarray:
-    """g(T) of lmncell.runtime.step.ExoStepper.temperature_gain for a whole series."""
-    if e_k is None or temperature_c is None:
-        return np.ones(n)
-    return np.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
 
 
 def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],

@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 from lmncell.data.dataset import Segment
 from lmncell.runtime.model import LmnModel
-from lmncell.runtime.thermal import ThermalModel
+from lmncell.runtime.thermal import ThermalModel, rested_temperature
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
@@ -24,7 +24,7 @@ def predicted_temperature(params: ThermalModel, heat: np.ndarray, ambient_c: flo
                           start_c: float, ts: float) -> np.ndarray:
     """T(k−1) for k = 0…n−1 (the temperature each step is taken at), from T(−1) = start_c."""
     a = np.exp(-ts / params.time_constant_s)
-    rest = ambient_c + params.offset_k
+    rest = rested_temperature(params, ambient_c)
     b = params.resistance_k_per_w * (1.0 - a)
     # x(k) = a·x(k−1) + b·q(k), x = T − rest, x(−1) = start − rest
     x, _ = lfilter([b], [1.0, -a], heat, zi=[a * (start_c - rest)])
