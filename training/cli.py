@@ -10,7 +10,7 @@ from typing import Any
 from lmncell import __version__
 from lmncell.config import ConfigError, parse_setting
 from lmncell.data.records import DataError
-from lmncell.runtime.cosim import InputError
+from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C, InputError
 from lmncell.runtime.model import ModelFileError
 
 USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
@@ -44,7 +44,7 @@ def _number(cast: type, ok, expected: str):
 _float01 = _number(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = _number(float, lambda v: v > 0, "a number > 0")
 _positive_int = _number(int, lambda v: v >= 1, "a whole number ≥ 1")
-_temperature = _number(float, lambda v: -273.15 < v < 1000.0,
+_temperature = _number(float, lambda v: MIN_TEMPERATURE_C < v < MAX_TEMPERATURE_C,
                        "a temperature in °C above absolute zero")
 
 

@@ -92,7 +92,11 @@ def _mat_path(path: Path) -> bool:
 
 def detect_format(path: str | Path) -> str:
     """Name of the reader for a file, from its content (header line or MATLAB signature)."""
-    path = check_readable(path)
+    return _format_of(check_readable(path))
+
+
+def _format_of(path: Path) -> str:
+    """detect_format for a path already checked by check_readable."""
     if _mat_path(path):
         return "panasonic"
     header = _read_text(path, first_line=True).strip()
@@ -365,7 +369,7 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
         raise DataError(f"{path}: reader options {sorted(generic_kw)} need a column mapping "
                         "(--columns / columns=...), which selects the generic CSV reader")
     if fmt is None:
-        fmt = detect_format(path)
+        fmt = _format_of(path)
     if fmt == "generic":
         rec = read_generic(path, **generic_kw)
     elif fmt in _READERS:

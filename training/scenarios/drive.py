@@ -143,6 +143,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed",
                                     "cell_t")}
     has_cell_t = "cell_temperature" in vr
+    outputs = [vr["voltage"], vr["soc"], *([vr["cell_temperature"]] if has_cell_t else [])]
     try:
         slave.instantiate()
         slave.setupExperiment(startTime=0.0)
@@ -159,11 +160,10 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
             status = slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
             if status is not None and status > 1:
                 raise RuntimeError(f"FMU doStep failed at t = {t0} s (status {status})")
-            u, soc = slave.getReal([vr["voltage"], vr["soc"]])
+            u, soc, *cell_t = slave.getReal(outputs)
             out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
             out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
-            out["cell_t"][k] = (slave.getReal([vr["cell_temperature"]])[0] if has_cell_t
-                                else math.nan)
+            out["cell_t"][k] = cell_t[0] if cell_t else math.nan
             out["speed"][k] = speed[idx]
         slave.terminate()
     finally:

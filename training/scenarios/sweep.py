@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 from lmncell.data.records import DataError
+from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C
 from lmncell.scenarios.drive import CYCLES, Vehicle, load_cycle, load_vehicle, pack_power, run_cycle
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
 
@@ -57,7 +58,7 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
     if bad:
         raise DataError(f"sweep: --cycles {bad} unknown; expected some of {list(CYCLES)}")
     for t in ambients:
-        if not (math.isfinite(t) and -273.15 < t < 1000.0):
+        if not (math.isfinite(t) and MIN_TEMPERATURE_C < t < MAX_TEMPERATURE_C):
             raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C")
     for s in soc0s:
         if not (math.isfinite(s) and 0.0 <= s <= 1.0):
