@@ -275,10 +275,11 @@ def simulate(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray |
     return simulate_exo(model, ex, soc0, h0, t0)
 
 
-class _ScalarTree:
-    """LmnModel.blend for one sample in plain Python (the FMU's per-step cost): the same
-    validities and blend as the batch path, up to the order of floating-point sums. Built for
-    a model that does not change afterwards (a stepper's)."""
+class _OneSample:
+    """LmnModel.blend and ocv for one sample in plain Python (the FMU's per-step cost): the
+    same validities and blend as the batch path, up to the order of floating-point sums, and
+    the OCV bit for bit as np.interp. Built for a model that does not change afterwards (a
+    stepper's)."""
 
     def __init__(self, model: LmnModel) -> None:
         self.center = model.partition_center.tolist()
@@ -354,7 +355,7 @@ class CellStepper:
         self._d = np.zeros(1, dtype=np.intp)
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity = np.zeros(model.n_local_models)
-        self._tree = _ScalarTree(model)
+        self._one = _OneSample(model)
 
     @property
     def soc(self) -> float:
@@ -362,7 +363,7 @@ class CellStepper:
 
     def ocv(self, soc: float) -> float:
         """The model's OCV at one SoC (V), as np.interp gives it."""
-        return self._tree.ocv(soc)
+        return self._one.ocv(soc)
 
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
@@ -371,7 +372,7 @@ class CellStepper:
         self.exo.features(s, current_a, temperature_c, self._x[0], self._z[0])
         self.exo.shift(s, current_a)
         self._d[0] = s.direction
-        a, acc, Phi = self._tree.blend(self._x[0], self._z[0].tolist(), s.direction)
+        a, acc, Phi = self._one.blend(self._x[0], self._z[0].tolist(), s.direction)
         lags = self.lags
         self.prev_lags = list(lags)
         for l in range(m.output_lags):
@@ -380,7 +381,7 @@ class CellStepper:
             lags.pop()
             lags.insert(0, acc)
         self.validity = Phi
-        self.voltage_v = acc + self._tree.ocv(s.soc) if m.relative_ocv else acc
+        self.voltage_v = acc + self._one.ocv(s.soc) if m.relative_ocv else acc
         return self.voltage_v
 
     def get_state(self) -> list[float]:

@@ -703,13 +703,21 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
 
 void fmi2FreeInstance(fmi2Component c) { free(c); }
 
-static int in_mode(Instance *in, int allowed, const char *call);
+/* 1 if the instance's mode is among `allowed` (a mask of M_(MODE_…)), else log and 0 */
+#define M_(m) (1 << (m))
+static int in_mode(Instance *in, int allowed, const char *call) {
+    static const char *names[] = {"instantiated", "initialization mode", "step mode",
+                                  "terminated"};
+    if (allowed & M_(in->mode)) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s is not allowed in %s", call, names[in->mode]);
+    return 0;
+}
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0,
                                fmi2Boolean stopDef, fmi2Real t1) {
     Instance *in = (Instance *)c;
     (void)tolDef; (void)tol; (void)stopDef; (void)t1;
-    if (!in || !in_mode(in, 1 << MODE_INSTANTIATED, "fmi2SetupExperiment")) return fmi2Error;
+    if (!in || !in_mode(in, M_(MODE_INSTANTIATED), "fmi2SetupExperiment")) return fmi2Error;
     if (!isfinite(t0)) {
         logf_(in, fmi2Error, "logStatusError", "fmi2SetupExperiment: startTime %g is not finite",
               t0);
@@ -718,15 +726,6 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol
     in->s.time = t0;
     return fmi2OK;
 }
-
-static int in_mode(Instance *in, int allowed, const char *call) {
-    static const char *names[] = {"instantiated", "initialization mode", "step mode",
-                                  "terminated"};
-    if (allowed & (1 << in->mode)) return 1;
-    logf_(in, fmi2Error, "logStatusError", "%s is not allowed in %s", call, names[in->mode]);
-    return 0;
-}
-#define M_(m) (1 << (m))
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     Instance *in = (Instance *)c;
