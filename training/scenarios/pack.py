@@ -33,10 +33,12 @@ class PackSpec:
     seed: int = 0
     vehicle_cells: int | None = None   # a sample string of a larger vehicle pack: its size
 
-    def cells_in_vehicle(self, vehicle) -> int:
-        """How many cells share the vehicle's power (the vehicle's pack size for a sample
-        string, else this pack's)."""
-        return self.vehicle_cells or self.n_series * self.n_parallel
+    @property
+    def power_share(self) -> float:
+        """The share of the vehicle's pack power these cells carry: 1 for the whole pack,
+        cells/vehicle_cells for a sample string of it."""
+        cells = self.n_series * self.n_parallel
+        return cells / self.vehicle_cells if self.vehicle_cells else 1.0
 
     @property
     def label(self) -> str:

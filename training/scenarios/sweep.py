@@ -11,10 +11,13 @@ deterministic.
 from __future__ import annotations
 
 import hashlib
+import io
 import itertools
+import json
 import math
 import tempfile
 import time
+import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +25,7 @@ from pathlib import Path
 import numpy as np
 from lmncell.data.records import DataError
 from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C
+from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import CYCLES, Vehicle, load_cycle, load_vehicle, pack_power, run_cycle
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
 
@@ -70,22 +74,22 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
     if cells is not None and (cells < 1 or pack):
         raise DataError(f"sweep: --cells {cells!r}: expected a whole number ≥ 1, without --pack")
     size = parse_pack(pack) if pack else None
+
     def spec(veh: Vehicle) -> PackSpec | None:
         if size is None and not spreads and cells is None:
             return None
-        if cells is not None:
-            return PackSpec(int(cells), 1, spreads.get("capacity", 0.0),
-                            spreads.get("resistance", 0.0), int(seed), veh.n_series
-                            * veh.n_parallel)
-        ns, npar = size or (veh.n_series, veh.n_parallel)
-        return PackSpec(ns, npar, spreads.get("capacity", 0.0),
-                        spreads.get("resistance", 0.0), int(seed))
+        whole = veh.n_series * veh.n_parallel
+        ns, npar = (cells, 1) if cells is not None else size or (veh.n_series, veh.n_parallel)
+        return PackSpec(int(ns), int(npar), spreads.get("capacity", 0.0),
+                        spreads.get("resistance", 0.0), int(seed),
+                        whole if cells is not None else None)
 
     return [Scenario(c, veh, vf, float(t), float(s), int(repeat), spec(veh))
             for c, (veh, vf), t, s in itertools.product(cycles, vehicles, ambients, soc0s)]
 
 
 _UNPACKED: dict[str, Path] = {}
+_MODELS: dict[str, LmnModel] = {}
 
 
 def _fmu_file(fmu_bytes: bytes) -> Path:
@@ -98,16 +102,21 @@ def _fmu_file(fmu_bytes: bytes) -> Path:
     return _UNPACKED[key]
 
 
-def _model_of(fmu_bytes: bytes):
-    """The model file every LMNCell FMU carries (resources/model.json)."""
-    import io
-    import json
-    import zipfile
+def _model_of(fmu_bytes: bytes) -> LmnModel:
+    """The model file every LMNCell FMU carries (resources/model.json), read once per
+    process and FMU."""
+    key = hashlib.sha256(fmu_bytes).hexdigest()[:16]
+    if key not in _MODELS:
+        with zipfile.ZipFile(io.BytesIO(fmu_bytes)) as z:
+            _MODELS[key] = model_from_dict(json.loads(z.read("resources/model.json")),
+                                           "FMU resources/model.json")
+    return _MODELS[key]
 
-    from lmncell.runtime.model import model_from_dict
 
-    with zipfile.ZipFile(io.BytesIO(fmu_bytes)) as z:
-        return model_from_dict(json.loads(z.read("resources/model.json")), "FMU model.json")
+def _settings(sc: Scenario, pack: str) -> dict:
+    """The scenario's columns of a row."""
+    return {"cycle": sc.cycle, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
+            "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat, "pack": pack}
 
 
 def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
@@ -116,17 +125,12 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     model = _model_of(fmu_bytes)
     t, speed, grade = load_cycle(sc.cycle)
     dt = float(np.median(np.diff(t)))
-    power = np.tile(pack_power(sc.vehicle, speed, grade, dt), sc.repeat)
-    # the vehicle's pack power, shared by its cells; a sample string gets its cells' share
-    power = power * (sc.pack.n_series * sc.pack.n_parallel) / sc.pack.cells_in_vehicle(
-        sc.vehicle)
+    power = np.tile(pack_power(sc.vehicle, speed, grade, dt), sc.repeat) * sc.pack.power_share
     ts = model.sample_time_s
     steps = math.floor(power.size * dt / ts + 1e-9)
     idx = np.minimum((np.arange(steps) * ts / dt + 1e-9).astype(int), power.size - 1)
     f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0)
-    return {"cycle": sc.cycle, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
-            "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat,
-            "pack": sc.pack.label, "capacity_spread": sc.pack.capacity_spread,
+    return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
             "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
             "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
             "soc_end": f["soc_end"], "soc_end_min": f["soc_end_min"],
@@ -145,9 +149,7 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     res = run_cycle(_fmu_file(fmu_bytes), sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
                     temperature_c=sc.ambient_c)
     f = res.figures
-    row = {"cycle": sc.cycle, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
-           "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat,
-           "pack": f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p",
+    return {**_settings(sc, f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p"),
            "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
            "soc_end": f["soc_end"], "ah_throughput": f["ah_throughput"],
            "cell_energy_wh": f["cell_energy_wh"], "pack_energy_kwh": f["pack_energy_kwh"],
@@ -155,7 +157,6 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
                                       else f["cell_temperature_max_c"]),
            "out_of_range_steps": f["out_of_range_steps"], "steps": int(res.time_s.size),
            "wall_s": time.perf_counter() - t0}
-    return row
 
 
 def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
