@@ -18,15 +18,11 @@ import dataclasses
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
 from scipy.optimize import minimize
 from scipy.signal import lfilter
-
-if TYPE_CHECKING:
-    from lmncell.design.virtual_cell import VirtualCell
 
 # A123 26650 LFP, mean of the C/30 charge and discharge OCV at 25 °C (shipped data), 0…100 % SoC
 DEFAULT_OCV_SOC = tuple(np.linspace(0.0, 1.0, 11))
@@ -47,9 +43,15 @@ class CellSpec:
                                                                    (0.012, 150.0)])
     ocv_soc: tuple[float, ...] = DEFAULT_OCV_SOC
     ocv_v: tuple[float, ...] = DEFAULT_OCV_V
+    # every resistance × this factor over SoC (linear between points, held beyond; none: 1)
+    r_scale_soc: tuple[float, ...] = ()
+    r_scale: tuple[float, ...] = ()
 
     def ocv(self, soc: np.ndarray) -> np.ndarray:
         return np.interp(soc, self.ocv_soc, self.ocv_v)
+
+    def resistance_scale(self, soc: np.ndarray) -> np.ndarray | float:
+        return np.interp(soc, self.r_scale_soc, self.r_scale) if self.r_scale else 1.0
 
 
 @dataclass
@@ -72,6 +74,8 @@ class DesignSpec:
     voltage_margin_v: float = 0.02
     soc_margin: float = 0.015     # SoC stays within the profile's range widened by this
     amplitude_levels: int = 4     # sequences cycle through bands I_max, I_max/2, I_max/4, …
+    method: str = "spacefill"     # "spacefill" (default) or "slsqp", see design_sequence
+    information: str = "lmn"      # "lmn" (default) or "rc", see sensitivities
 
 
 def amplitude_band(spec: DesignSpec, i_max: float, index: int, mean: float) -> float:
@@ -96,13 +100,15 @@ def parse_profile(text: str) -> list[float]:
 # ----- the design model -------------------------------------------------------------------------
 def predict(cell: CellSpec, current: np.ndarray, ts: float, soc0: float,
             v0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Voltage (V), SoC and final RC voltages for a current held over each sample."""
+    """Voltage (V), SoC and final RC voltages for a current held over each sample (the
+    resistances scaled by the cell's resistance_scale at each sample's SoC)."""
     soc = soc0 + np.cumsum(current) * ts / (3600.0 * cell.capacity_ah)
-    u = cell.ocv(soc) + cell.r0_ohm * current
+    scaled = current * cell.resistance_scale(soc)
+    u = cell.ocv(soc) + cell.r0_ohm * scaled
     vend = np.empty(len(cell.rc))
     for m, (r, tau) in enumerate(cell.rc):
         e = np.exp(-ts / tau)
-        v, _ = lfilter([r * (1 - e)], [1.0, -e], current, zi=[e * v0[m]])
+        v, _ = lfilter([r * (1 - e)], [1.0, -e], scaled, zi=[e * v0[m]])
         u = u + v
         vend[m] = v[-1]
     return u, soc, vend
@@ -118,14 +124,24 @@ AMPLITUDE_KNOT_SPACING = 1 / 6
 OFFSET_SCALE_V = 0.01   # the local OCV offset's scale in the relative sensitivities
 
 
+# the default LMN's filter ladder (lmncell.config.TrainConfig.filters): its local models' dynamic
+# regressors are low-passes of the current at these time constants (s)
+LMN_FILTER_TAUS_S = (5.0, 30.0, 150.0, 800.0, 3000.0)
+INFORMATION_KINDS = ("lmn", "rc")
+
+
 def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
-                  i_ref: float | None = None) -> np.ndarray:
-    """(N, p) relative sensitivities θ·∂u/∂θ of [R0, a_1…a_K, R_1, τ_1, R_2, τ_2, …, c], where
-    the a_k make the resistance a piecewise-linear function of |i|/i_ref over AMPLITUDE_KNOTS
-    (all 0 in the nominal model): they ask the design to use several amplitude levels, as the
-    network's local models at different currents need; c is the local OCV offset (each local
-    model of the network has one), scaled by OFFSET_SCALE_V: it asks the design to separate the
-    offset from the resistances' drop under the sequence's mean current. i_ref: the sequence's
+                  i_ref: float | None = None, information: str = "lmn") -> np.ndarray:
+    """(N, p) sensitivity columns of the model the programme identifies.
+
+    Both kinds: R0 (the current), a_1…a_K (the resistance a piecewise-linear function of
+    |i|/i_ref over AMPLITUDE_KNOTS, all 0 in the nominal model: they ask for several amplitude
+    levels, as the network's local models at different currents need) and c, the local OCV
+    offset (scaled by OFFSET_SCALE_V: it asks to separate the offset from the drop under the
+    mean current). "lmn" (the paper's model-based design): the local model's dynamic regressors,
+    low-passes of the current at LMN_FILTER_TAUS_S, slow relaxation included. "rc": relative
+    sensitivities θ·∂u/∂θ of R and τ of each RC element of the cell's design model. Log det is
+    invariant to each column's scale, so only the time constants matter. i_ref: the sequence's
     current bound."""
     i_ref = max(float(np.abs(current).max()), 1e-9) if i_ref is None else i_ref
     x = np.abs(current) / i_ref
@@ -133,21 +149,40 @@ def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
     for knot in AMPLITUDE_KNOTS:   # piecewise-linear resistance over |i|: hat functions
         hat = np.clip(1.0 - np.abs(x - knot) / AMPLITUDE_KNOT_SPACING, 0.0, None)
         cols.append(cell.r0_ohm * hat * current)
-    for r, tau in cell.rc:
-        e = np.exp(-ts / tau)
-        v = lfilter([r * (1 - e)], [1.0, -e], current)
-        tau2 = tau * 1.01
-        e2 = np.exp(-ts / tau2)
-        v2 = lfilter([r * (1 - e2)], [1.0, -e2], current)
-        cols += [v, (v2 - v) / 0.01]
+    if information == "lmn":
+        for tau in LMN_FILTER_TAUS_S:
+            e = np.exp(-ts / tau)
+            cols.append(cell.r0_ohm * lfilter([1 - e], [1.0, -e], current))
+    elif information == "rc":
+        for r, tau in cell.rc:
+            e = np.exp(-ts / tau)
+            v = lfilter([r * (1 - e)], [1.0, -e], current)
+            tau2 = tau * 1.01
+            e2 = np.exp(-ts / tau2)
+            v2 = lfilter([r * (1 - e2)], [1.0, -e2], current)
+            cols += [v, (v2 - v) / 0.01]
+    else:
+        raise DataError(f"design information {information!r}: expected one of "
+                        f"{', '.join(INFORMATION_KINDS)}")
     cols.append(np.full(current.size, OFFSET_SCALE_V))
     return np.column_stack(cols)
 
 
+def information_matrix(cell: CellSpec, current: np.ndarray, ts: float,
+                       i_ref: float | None = None, information: str = "lmn") -> np.ndarray:
+    S = sensitivities(cell, current, ts, i_ref, information)
+    return S.T @ S
+
+
 def log_det_information(cell: CellSpec, current: np.ndarray, ts: float,
-                        i_ref: float | None = None) -> float:
-    S = sensitivities(cell, current, ts, i_ref)
-    sign, ld = np.linalg.slogdet(S.T @ S + 1e-12 * np.eye(S.shape[1]))
+                        i_ref: float | None = None, information: str = "lmn",
+                        prior: np.ndarray | None = None) -> float:
+    """log det of the information of `current`, plus `prior` (the information the programme's
+    earlier sequences already hold) where given."""
+    F = information_matrix(cell, current, ts, i_ref, information)
+    if prior is not None:
+        F = F + prior
+    sign, ld = np.linalg.slogdet(F + 1e-12 * np.eye(F.shape[0]))
     return float(ld) if sign > 0 else -np.inf
 
 
@@ -165,17 +200,34 @@ def _expand(levels: np.ndarray, per: int) -> np.ndarray:
     return np.repeat(levels, per)
 
 
+DESIGN_METHODS = ("spacefill", "slsqp")
+SWAP_PASSES = 6
+GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
+
+
 def design_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: float,
-                    v0: np.ndarray, dsoc: float, i_max: float, index: int) -> Sequence:
-    """The locally D-optimal sequence that moves SoC by dsoc from (soc0, v0)."""
+                    v0: np.ndarray, dsoc: float, i_max: float, index: int,
+                    prior: np.ndarray | None = None) -> Sequence:
+    """The sequence that moves SoC by dsoc from (soc0, v0), by spec.method:
+
+    "spacefill": its levels are evenly spaced over the band around the charge-moving mean (a
+    space-filling set of current amplitudes: every current the network's local models live at
+    is visited, none twice) and their order is chosen for the largest log det of the information
+    (deterministic pairwise-swap search from a golden-ratio order; `prior`, the information
+    of earlier sequences, makes it sequential: on the PyBaMM cell that did worse, so the
+    programme designs each sequence on its own), under the voltage and SoC
+    limits (the spread shrinks, as for the random programmes, only where the start breaks them).
+    "slsqp": the levels themselves maximise log det (SLSQP); they go to the band's edges, which
+    gives a D-optimal linear model but leaves the currents in between unvisited (on the PyBaMM
+    cell its LMNs lost to APRBS, whose levels are spread)."""
+    if spec.method == "spacefill":
+        return _spacefill_sequence(cell, cyc, spec, soc0, v0, dsoc, i_max, index, prior)
+    if spec.method != "slsqp":
+        raise DataError(f"design method {spec.method!r}: expected one of "
+                        f"{', '.join(DESIGN_METHODS)}")
     ts, per = cyc.sample_time_s, round(cyc.hold_s / cyc.sample_time_s)
-    n_levels = round(spec.sequence_s / cyc.hold_s)
+    n_levels, mean = _sequence_mean(cell, cyc, spec, dsoc, i_max, index)
     target_as = dsoc * cell.capacity_ah * 3600.0          # charge to move (A·s)
-    mean = target_as / (n_levels * cyc.hold_s)
-    if abs(mean) > i_max:
-        raise DataError(f"sequence {index}: moving SoC by {dsoc:+.3f} in {spec.sequence_s:.0f} s "
-                        f"needs {abs(mean):.2f} A on average, above the {i_max:.2f} A limit; "
-                        "give a longer --duration or a smaller SoC swing")
     # deterministic start: alternating steps of growing amplitude around the mean (PRBS-like)
     k = np.arange(n_levels)
     amp = 0.5 * (i_max - abs(mean))
@@ -199,14 +251,72 @@ def design_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: flo
             {"type": "ineq", "fun": lambda x: np.concatenate([volt(x) - lo_v, hi_v - volt(x)])},
             {"type": "ineq", "fun": lambda x: 10 * np.concatenate([soc_path(x) - soc_lo,
                                                                    soc_hi - soc_path(x)])}]
-    res = minimize(lambda x: -log_det_information(cell, _expand(x, per), ts, i_max) / 10.0,
+    res = minimize(lambda x: -log_det_information(cell, _expand(x, per), ts, i_max,
+                                         spec.information) / 10.0,
                    np.clip(x0, -i_max, i_max), method="SLSQP",
                    bounds=[(-i_max, i_max)] * n_levels, constraints=cons,
                    options={"maxiter": 200, "ftol": 1e-7})
     levels = exact_charge(np.clip(res.x, -i_max, i_max), target_as / cyc.hold_s, i_max)
     cur = _expand(levels, per)
     u, soc, _ = predict(cell, cur, ts, soc0, v0)
-    return Sequence(cur, u, soc, log_det_information(cell, cur, ts, i_max), bool(res.success))
+    return Sequence(cur, u, soc, log_det_information(cell, cur, ts, i_max, spec.information),
+                    bool(res.success))
+
+
+def _sequence_mean(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, dsoc: float,
+                   i_max: float, index: int) -> tuple[int, float]:
+    n_levels = round(spec.sequence_s / cyc.hold_s)
+    mean = dsoc * cell.capacity_ah * 3600.0 / (n_levels * cyc.hold_s)
+    if abs(mean) > i_max:
+        raise DataError(f"sequence {index}: moving SoC by {dsoc:+.3f} in {spec.sequence_s:.0f} s "
+                        f"needs {abs(mean):.2f} A on average, above the {i_max:.2f} A limit; "
+                        "give a longer --duration or a smaller SoC swing")
+    return n_levels, mean
+
+
+def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: float,
+                        v0: np.ndarray, dsoc: float, i_max: float, index: int,
+                        prior: np.ndarray | None) -> Sequence:
+    ts, per = cyc.sample_time_s, round(cyc.hold_s / cyc.sample_time_s)
+    n_levels, mean = _sequence_mean(cell, cyc, spec, dsoc, i_max, index)
+    grid = np.linspace(-1.0, 1.0, n_levels)                      # zero mean: exact charge
+    # deterministic, irregular start: the golden-ratio (low-discrepancy) order of the levels
+    start = np.argsort(np.mod(np.arange(1, n_levels + 1) * GOLDEN, 1.0))
+    lo_v = cell.voltage_min_v + spec.voltage_margin_v
+    hi_v = cell.voltage_max_v - spec.voltage_margin_v
+    soc_lo = min(spec.soc_profile) - spec.soc_margin
+    soc_hi = max(spec.soc_profile) + spec.soc_margin
+
+    def levels(order: np.ndarray, spread: float) -> np.ndarray:
+        return mean + spread * (i_max - abs(mean)) * grid[order]
+
+    def feasible(x: np.ndarray) -> bool:
+        u, soc, _ = predict(cell, _expand(x, per), ts, soc0, v0)
+        return bool(u.min() >= lo_v and u.max() <= hi_v and soc.min() >= soc_lo
+                    and soc.max() <= soc_hi)
+
+    spread = next((f for f in np.linspace(1.0, 0.0, 21) if feasible(levels(start, f))), 0.0)
+    order = start.copy()
+    best = log_det_information(cell, _expand(levels(order, spread), per), ts, i_max,
+                               spec.information, prior)
+    for _ in range(SWAP_PASSES):
+        improved = False
+        for a in range(n_levels - 1):
+            for b in range(a + 1, n_levels):
+                order[[a, b]] = order[[b, a]]
+                x = levels(order, spread)
+                ld = log_det_information(cell, _expand(x, per), ts, i_max,
+                                         spec.information, prior)
+                if ld > best + 1e-9 and feasible(x):
+                    best, improved = ld, True
+                else:
+                    order[[a, b]] = order[[b, a]]
+        if not improved:
+            break
+    cur = _expand(levels(order, spread), per)
+    u, soc, _ = predict(cell, cur, ts, soc0, v0)
+    return Sequence(cur, u, soc, log_det_information(cell, cur, ts, i_max, spec.information),
+                    True)
 
 
 def exact_charge(levels: np.ndarray, target_sum: float, i_max: float) -> np.ndarray:
@@ -271,8 +381,8 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     parts, starts, lds, t0 = [], [], [], 0
     for k, dsoc in enumerate(steps):
         mean = dsoc * cell.capacity_ah * 3600.0 / spec.sequence_s
-        seq = design_sequence(cell, cyc, spec, soc, v, dsoc, amplitude_band(spec, i_max, k, mean),
-                              k)
+        band = amplitude_band(spec, i_max, k, mean)
+        seq = design_sequence(cell, cyc, spec, soc, v, dsoc, band, k)
         _, _, v = predict(cell, seq.current_a, cyc.sample_time_s, soc, v)
         soc = float(seq.soc[-1])
         parts.append(seq)
@@ -350,6 +460,7 @@ def write_programme(prog: Programme, out: Path) -> list[Path]:
     from lmncell.data.readers import write_bdf
 
     out = Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
     with open(out, "w") as fh:
         fh.write("time_s,current_a\n")
         t_start = np.concatenate([[0.0], prog.time_s[:-1]])
@@ -400,111 +511,3 @@ def plot_programme(prog: Programme, out_dir: Path, index: int = 0) -> list[Path]
     plt.close(fig)
     files.append(out_dir / "fig06_programme.png")
     return files
-
-
-# ----- proof on a virtual cell -----------------------------------------------------------------
-def drive_profile_current(capacity_ah: float, cycle: str = "udds", repeat: int = 3,
-                          c_rate_peak: float = 4.0) -> np.ndarray:
-    """Cell current (A, 1 s) of a vehicle drive cycle scaled so that its peak is c_rate_peak·C."""
-    from lmncell.scenarios.drive import load_cycle, load_vehicle, pack_power
-
-    veh = load_vehicle()
-    _, speed, grade = load_cycle(cycle)
-    p = np.tile(pack_power(veh, speed, grade, 1.0), repeat)
-    cur = -p / (3.3 * veh.n_series * veh.n_parallel)
-    return cur * c_rate_peak * capacity_ah / np.abs(cur).max()
-
-
-def hev_profile_current(capacity_ah: float, c_rate_peak: float, cycle: str = "udds",
-                        repeat: int = 3) -> np.ndarray:
-    """Charge-sustaining (hybrid) use of a drive cycle: its mean removed, peak c_rate_peak·C."""
-    cur = drive_profile_current(capacity_ah, cycle, repeat, c_rate_peak)
-    cur = cur - cur.mean()
-    return cur * c_rate_peak * capacity_ah / np.abs(cur).max()
-
-
-VIRTUAL_OCV_TEST_C_RATE = 1 / 20
-RANDOM_SEEDS = (1, 2, 3, 4, 5)
-
-
-def _virtual_ocv_test(vc: VirtualCell, capacity_ah: float, folder: Path) -> Path:
-    """A slow full → empty → full test (C/20, 1 s) run on the virtual cell, as a BDF file."""
-    from lmncell.data.readers import write_bdf
-
-    n = round(3600.0 / VIRTUAL_OCV_TEST_C_RATE)
-    i = VIRTUAL_OCV_TEST_C_RATE * capacity_ah
-    cur = np.concatenate([np.full(n, -i), np.full(n, i)])
-    u, _ = vc.run(cur, 1.0)
-    t = np.arange(1, cur.size + 1, dtype=float)
-    path = Path(folder) / "virtual_ocv_test.bdf.csv"
-    write_bdf(Record(t, cur, u, RecordMeta("virtual cell C/20 OCV test", "virtual",
-                                           "current > 0 charges", 1.0)), path)
-    return path
-
-
-def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec,
-                            spec: DesignSpec, progress=print,
-                            seeds: tuple[int, ...] = RANDOM_SEEDS,
-                            kinds: tuple[str, ...] = RANDOM_KINDS) -> dict:
-    """Train an LMN on the designed programme and on random programmes (one per seed) run on
-    the virtual cell, each with the same slow OCV test run on that cell; validate all free-run on
-    two drive profiles run on the same cell: an EV drive cycle discharging from SoC 0.7 (peak 4C)
-    and charge-sustaining hybrid use at the design's current limit from mid profile. Also the
-    linear design model's covariance-determinant ratio (random over designed)."""
-    import tempfile
-
-    from lmncell.config import load_config
-    from lmncell.data.dataset import Segment
-    from lmncell.design.virtual_cell import VirtualCell
-    from lmncell.evaluation.evaluate import simulate_segment
-    from lmncell.evaluation.metrics import record_metrics
-    from lmncell.identification.construction import train_lmn
-
-    vc = VirtualCell(capacity_ah=cell.capacity_ah)
-    soc0 = float(spec.soc_profile[0])
-    i_max = current_limit(cell, cyc)
-
-    def segment(name: str, cur: np.ndarray, s0: float) -> Segment:
-        u, soc = vc.run(cur, s0)
-        t = np.arange(1, cur.size + 1, dtype=float)
-        return Segment(name, t, cur, u, None, s0, soc, np.ones(cur.size))
-
-    mid = 0.5 * (min(spec.soc_profile) + max(spec.soc_profile))
-    vals = {"ev_discharge_4c": segment("EV drive cycle (UDDS x3, peak 4C)",
-                                       drive_profile_current(cell.capacity_ah), 0.7),
-            "hev_sustaining": segment("charge-sustaining UDDS x3 at the current limit",
-                                      hev_profile_current(cell.capacity_ah,
-                                                          i_max / cell.capacity_ah), mid)}
-    programmes = [("designed", designed.current_a)] + [
-        (f"{kind}_seed_{s}", random_programme(cell, cyc, spec, s, kind).current_a)
-        for kind in kinds for s in seeds]
-    out: dict = {"validation": {k: v.name for k, v in vals.items()}, "programmes": {}}
-    with tempfile.TemporaryDirectory() as tmp:
-        ocv_test = _virtual_ocv_test(vc, cell.capacity_ah, Path(tmp))
-        cfg = load_config(partition=["soc", "current"], validation="none", stop="aicc",
-                          max_local_models=8, ocv_tests=[str(ocv_test)])
-        for name, cur in programmes:
-            res = train_lmn([segment(name, cur, soc0)], cfg, cell.capacity_ah)
-            row = {"local_models": res.chosen_m, "log_det_information":
-                   log_det_information(cell, cur, cyc.sample_time_s)}
-            for key, val in vals.items():
-                sim = simulate_segment(res.model, val)
-                row[f"{key}_rmse_mv"] = record_metrics(val.voltage_v, sim.voltage_v,
-                                                       val.soc_ref)["rmse_mv"]
-            out["programmes"][name] = row
-            progress(f"  {name}: {res.chosen_m} local models, validation RMSE "
-                     + ", ".join(f"{k} {row[f'{k}_rmse_mv']:.2f} mV" for k in vals))
-    des = out["programmes"]["designed"]
-    for kind in kinds:
-        rand = [r for n, r in out["programmes"].items() if n.startswith(f"{kind}_")]
-        for key in vals:
-            med = float(np.median([r[f"{key}_rmse_mv"] for r in rand]))
-            out[f"{key}_designed_vs_{kind}_median_mv"] = [des[f"{key}_rmse_mv"], med]
-            out[f"{key}_{kind}_programmes_beaten"] = sum(
-                des[f"{key}_rmse_mv"] < r[f"{key}_rmse_mv"] for r in rand)
-        ld = np.median([r["log_det_information"] for r in rand])
-        out[f"covariance_det_ratio_{kind}_over_designed"] = float(
-            np.exp(des["log_det_information"] - ld))
-    out["virtual_cell"] = ("built-in nonlinear ECM with hysteresis (lmncell.design.virtual_cell; "
-                           "pybamm not installed here)")
-    return out

@@ -27,9 +27,10 @@ class VirtualCell:
     noise_v: float = 0.001
     seed: int = 7
 
-    def run(self, current_a: np.ndarray, soc0: float, ts: float = 1.0) -> tuple[np.ndarray,
-                                                                                 np.ndarray]:
-        """Terminal voltage (V, with noise) and SoC for a current held over each sample."""
+    def run(self, current_a: np.ndarray, soc0: float, ts: float = 1.0,
+            name: str = "programme") -> tuple[np.ndarray, np.ndarray]:
+        """Terminal voltage (V, with noise) and SoC for a current held over each sample (name:
+        unused here; the PyBaMM cell names the run in its errors)."""
         soc = soc0 + np.cumsum(current_a) * ts / (3600.0 * self.capacity_ah)
         x = current_a / (2.0 * self.i0_a)
         bv = np.where(np.abs(x) > 1e-9, np.arcsinh(x) / np.where(x == 0, 1, x), 1.0)
