@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import json
 
 import numpy as np
 import pytest
@@ -88,8 +89,12 @@ def test_random_programme_has_the_designs_amplitude_bands_and_limits() -> None:
     assert abs(soc[3599] - 0.2) <= 0.02 and abs(soc[-1] - 0.8) <= 0.02
     # sequence by sequence: at most the designed band, and a spread reduced only where the
     # voltage limit needs it (most sequences use over half of their band, as the design does)
+    from lmncell.design.optimal import amplitude_band
+
     seq_r, seq_d = r.current_a.reshape(24, 300), d.current_a.reshape(24, 300)
-    assert np.all(np.abs(seq_r).max(axis=1) <= np.abs(seq_d).max(axis=1) + 1e-9)
+    bands = [amplitude_band(spec, 46.0, k, seq_d[k].mean()) for k in range(24)]
+    assert np.all(np.abs(seq_r).max(axis=1) <= np.array(bands) + 1e-9)
+    assert np.all(np.abs(seq_d).max(axis=1) <= np.array(bands) + 1e-9)
     ratio = np.abs(seq_r).max(axis=1) / np.abs(seq_d).max(axis=1)
     assert np.median(ratio) > 0.5
 
@@ -104,30 +109,92 @@ def test_designed_sequences_use_several_current_levels() -> None:
 
 
 def test_virtual_ocv_test_gives_the_virtual_cells_ocv(tmp_path) -> None:
-    from lmncell.design.optimal import DEFAULT_OCV_SOC, DEFAULT_OCV_V, _virtual_ocv_test
+    from lmncell.design.optimal import DEFAULT_OCV_SOC, DEFAULT_OCV_V
+    from lmncell.design.proof import ocv_test_record
     from lmncell.design.virtual_cell import VirtualCell
     from lmncell.identification.ocvfit import measured_ocv
 
-    path = _virtual_ocv_test(VirtualCell(capacity_ah=2.3), 2.3, tmp_path)
+    path = ocv_test_record(VirtualCell(capacity_ah=2.3), 2.3, tmp_path)
     knots = np.linspace(0.1, 0.9, 9)
     ocv = measured_ocv([str(path)], 2.3, knots)
     assert np.max(np.abs(ocv - np.interp(knots, DEFAULT_OCV_SOC, DEFAULT_OCV_V))) < 0.005
 
 
-@pytest.mark.slow
-def test_virtual_cell_proof_reports_every_programme() -> None:
-    from lmncell.design.optimal import compare_on_virtual_cell
+class _LinearCell:
+    """A virtual cell that is exactly the design model (no noise): characterise must recover it."""
 
+    def __init__(self, cell: CellSpec) -> None:
+        self.cell, self.capacity_ah = cell, cell.capacity_ah
+
+    def run(self, current_a, soc0, ts=1.0, name="programme"):
+        u, soc, _ = predict(self.cell, np.asarray(current_a, float), ts, soc0,
+                            np.zeros(len(self.cell.rc)))
+        return u, soc
+
+
+def test_characterise_recovers_a_known_design_model(tmp_path) -> None:
+    from lmncell.design.proof import characterise, ocv_test_record
+
+    true = CellSpec(capacity_ah=2.3, r0_ohm=0.012, rc=[(0.006, 8.0), (0.010, 120.0)],
+                    r_scale_soc=(0.2, 0.5, 0.8), r_scale=(1.4, 1.0, 1.1))
+    vc = _LinearCell(true)
+    ocv_path = ocv_test_record(vc, 2.3, tmp_path)
+    ch = characterise(vc, CellSpec(capacity_ah=2.3), DesignSpec([0.8, 0.2, 0.8]), ocv_path)
+    got = ch.cell
+    assert ch.rmse_mv < 0.5
+    assert got.r0_ohm == pytest.approx(0.012, rel=0.05)
+    assert [r for r, _ in got.rc] == pytest.approx([0.006, 0.010], rel=0.1)
+    assert [t for _, t in got.rc] == pytest.approx([8.0, 120.0], rel=0.1)
+    assert got.r_scale == pytest.approx((1.4, 1.0, 1.1), rel=0.03)
+
+
+def test_spacefill_sequences_hold_evenly_spaced_levels() -> None:
     cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
-    spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)
+    spec = DesignSpec([0.6, 0.55], duration_s=300, sequence_s=300)
     d = design_programme(cell, cyc, spec, progress=lambda _m: None)
-    out = compare_on_virtual_cell(d, cell, cyc, spec, progress=lambda _m: None, seeds=(1, 2))
-    assert set(out["programmes"]) == {"designed", "prbs_seed_1", "prbs_seed_2", "aprbs_seed_1",
-                                      "aprbs_seed_2"}
-    for row in out["programmes"].values():
-        assert 0.5 < row["ev_discharge_4c_rmse_mv"] < 50
-    assert out["covariance_det_ratio_prbs_over_designed"] > 1.0
-    assert out["covariance_det_ratio_aprbs_over_designed"] > 1.0
+    levels = d.current_a[::10]
+    gaps = np.diff(np.sort(levels))
+    assert levels.size == 30 and np.allclose(gaps, gaps[0]) and gaps[0] > 0
+    # its order carries more information than the same levels in their sorted order
+    from lmncell.design.optimal import log_det_information
+
+    assert log_det_information(cell, d.current_a, 1.0) > log_det_information(
+        cell, np.repeat(np.sort(levels), 10), 1.0)
+    with pytest.raises(DataError, match="design method"):
+        design_programme(cell, cyc, DesignSpec([0.6, 0.55], 300, 300, method="bogus"),
+                         progress=lambda _m: None)
+
+
+def test_design_proof_json_on_the_builtin_cell(tmp_path, capsys) -> None:
+    out = tmp_path / "P.csv"
+    assert main(["design", "--capacity", "2.3", "--soc-profile", "0.8,0.2,0.8", "--duration",
+                 "3600", "--out", str(out), "--compare-virtual", "--virtual-cell", "builtin",
+                 "--json"]) == 0
+    result = json.loads(capsys.readouterr().out)
+    assert set(result["profiles"]) == {"ev_discharge", "hev_sustaining", "high_rate_pulses"}
+    for entry in result["profiles"].values():
+        assert 0.3 < entry["designed_mv"] < 50
+        assert len(entry["prbs_mv"]) == 5 and len(entry["aprbs_mv"]) == 5
+        assert entry["beats_prbs_median"] == (entry["designed_mv"] < np.median(entry["prbs_mv"]))
+    assert set(result["programmes"]) == {"designed"} | {f"{k}_seed_{s}" for k in ("prbs", "aprbs")
+                                                       for s in range(1, 6)}
+    assert result["covariance_det_ratio"]["prbs_over_designed"] > 0
+    assert (tmp_path / "P_proof.png").exists() and out.with_suffix(".proof.json").exists()
+
+
+def test_pybamm_virtual_cell_runs_pulses_and_refuses_a_stopped_solve() -> None:
+    pytest.importorskip("pybamm")
+    from lmncell.design.pybamm_cell import PybammCell
+
+    vc = PybammCell(noise_v=0.0)
+    cur = np.concatenate([np.zeros(20), np.full(10, -5 * 2.3), np.zeros(30)])
+    u, soc = vc.run(cur, 0.5)
+    assert np.all(np.isfinite(u)) and u.size == cur.size
+    assert u[19] - u[29] > 0.05                    # a 5C discharge pulse pulls the voltage down
+    assert soc[-1] == pytest.approx(0.5 - 10 * 5 * 2.3 / 3600 / 2.3)
+    assert vc.solves[-1]["reached_s"] == pytest.approx(60.0)
+    with pytest.raises(DataError, match="stopped at .* of 600.0 s"):
+        vc.run(np.full(600, -40 * 2.3), 0.3, name="too hard")
 
 
 @pytest.mark.parametrize("kind", ["prbs", "aprbs"])

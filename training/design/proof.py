@@ -243,7 +243,7 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     soc0 = float(spec.soc_profile[0])
     profiles = validation_profiles(cell, cyc, spec)
     vals = {p.key: segment(p.description, p.current_a, p.soc0) for p in profiles}
-    progress(f"  validation profiles run on the virtual cell: "
+    progress("  validation profiles run on the virtual cell: "
              + "; ".join(p.description for p in profiles))
     programmes = [("designed", designed.current_a)] + [
         (f"{kind}_seed_{s}", random_programme(cell, cyc, spec, s, kind).current_a)
@@ -300,14 +300,16 @@ def prove_design(vc: VirtualCellLike, cell: CellSpec, cyc: CyclerSpec, spec: Des
         c = ch.cell
         progress(f"  design model: R0 {1e3 * c.r0_ohm:.2f} mΩ, RC "
                  + ", ".join(f"{1e3 * r:.2f} mΩ / {t:.1f} s" for r, t in c.rc)
-                 + ", resistance × " + ", ".join(f"{g:.2f} at SoC {s:.2f}"
-                                                 for s, g in zip(c.r_scale_soc, c.r_scale))
+                 + ", resistance × " + ", ".join(
+                     f"{g:.2f} at SoC {s:.2f}"
+                     for s, g in zip(c.r_scale_soc, c.r_scale, strict=True))
                  + f"; pulse-fit RMSE {ch.rmse_mv:.2f} mV")
         prog = design(c)
         result = compare_on_virtual_cell(prog, c, cyc, spec, vc, ocv_path, progress, seeds)
     result["virtual_cell"] = describe(vc)
     result["design_model"] = {"r0_ohm": c.r0_ohm, "rc": [list(x) for x in c.rc],
-                              "resistance_scale": dict(zip(map(str, c.r_scale_soc), c.r_scale)),
+                              "resistance_scale": dict(zip(map(str, c.r_scale_soc), c.r_scale,
+                                                          strict=True)),
                               "pulse_fit_rmse_mv": ch.rmse_mv,
                               "pulse_socs": list(ch.pulse_socs)}
     if hasattr(vc, "solves"):

@@ -19,6 +19,7 @@ error naming the run, the time and the reason, never a shorter record). Current 
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -84,7 +85,7 @@ class PybammCell:
         edges = np.concatenate([[0], np.flatnonzero(np.diff(current_a) != 0.0) + 1, [n]])
         u = np.empty(n)
         sol, t0 = None, 0.0
-        for a, b in zip(edges[:-1], edges[1:], strict=True):
+        for a, b in itertools.pairwise(edges):
             try:
                 sol = sim.step(dt=ts * (b - a), inputs={"Current function [A]": -current_a[a]},
                                save=False, starting_solution=sol)
