@@ -331,7 +331,7 @@ def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
     width = 0.8 / (len(kinds) + 1)
     for j, key in enumerate(profs):
         e = profs[key]
-        ax.bar(j, e["designed_mv"], width, color="tab:green", label="designed" if j == 0 else None)
+        ax.bar(j, e["designed_mv"], width, color="tab:blue", label="designed" if j == 0 else None)
         for m, kind in enumerate(kinds, start=1):
             x = j + m * width
             ax.bar(x, e[f"{kind}_median_mv"], width, color=f"C{m}", alpha=0.5,
@@ -343,7 +343,8 @@ def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
     ax.set_ylabel("free-run voltage RMSE on the profile / mV")
     ratios = ", ".join(f"{k.split('_')[0].upper()} {v:.3g}"
                        for k, v in result["covariance_det_ratio"].items())
-    ax.set_title("LMNs trained on each programme run on the virtual cell, validated in free run\n"
+    cell = result.get("virtual_cell", "virtual cell").split(",")[0].split(";")[0]
+    ax.set_title(f"LMNs trained on each programme run on {cell}, validated in free run\n"
                  f"information-determinant ratio designed/random (median): {ratios}", fontsize=9)
     ax.legend(fontsize=8)
     path = out_dir / f"{stem}_proof.png"
