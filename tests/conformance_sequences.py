@@ -133,8 +133,45 @@ def ordinary_errors(fmu: str) -> dict:
     return out
 
 
+def wrong_guid_or_type(fmu: str) -> dict:
+    """Row 7: fmi2Instantiate with another FMU's GUID, and as Model Exchange, is refused (NULL);
+    the right GUID instantiates."""
+    import pathlib
+    from ctypes import byref
+
+    from fmpy.fmi2 import defaultCallbacks, fmi2ModelExchange
+
+    class AsModelExchange(FMU2Slave):
+        """fmpy's slave, but asking fmi2Instantiate for Model Exchange."""
+
+        def instantiate(self, visible=False, callbacks=None, loggingOn=False):
+            self.callbacks = defaultCallbacks
+            uri = pathlib.Path(self.unzipDirectory, "resources").as_uri()
+            self.component = self.fmi2Instantiate(self.instanceName.encode(), fmi2ModelExchange,
+                                                  self.guid.encode(), uri.encode(),
+                                                  byref(self.callbacks), visible, loggingOn)
+            if self.component is None:
+                raise RuntimeError("Failed to instantiate model")
+
+    md = read_model_description(fmu)
+    out = {}
+    for key, guid, cls in (("wrong_guid", "{00000000-0000-0000-0000-000000000000}", FMU2Slave),
+                           ("model_exchange", md.guid, AsModelExchange),
+                           ("right", md.guid, FMU2Slave)):
+        slave = cls(guid=guid, unzipDirectory=extract(fmu),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
+        try:
+            slave.instantiate(loggingOn=False)
+        except Exception:
+            out[key] = "refused"
+            continue
+        out[key] = "instantiated"
+        slave.freeInstance()
+    return out
+
+
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
-                                      observers_at_full, ordinary_errors)}
+                                      observers_at_full, ordinary_errors, wrong_guid_or_type)}
 
 if __name__ == "__main__":
     print(json.dumps(SEQUENCES[sys.argv[2]](sys.argv[1])))

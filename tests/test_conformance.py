@@ -83,6 +83,15 @@ def test_ordinary_errors_never_crash_and_change_nothing(fmu, native_fmu) -> None
         assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
 
 
+def test_wrong_guid_or_fmu_type_is_refused(fmu, native_fmu) -> None:
+    res = _run(fmu, "wrong_guid_or_type")
+    assert res["right"] == "instantiated"
+    if fmu == native_fmu:
+        assert res["wrong_guid"] == res["model_exchange"] == "refused"
+    else:   # pythonfmu 0.7's wrapper passes neither GUID nor type to Python (see the README)
+        assert res["wrong_guid"] == "instantiated"
+
+
 def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> None:
     def doc(path) -> str:
         with zipfile.ZipFile(path) as z:
