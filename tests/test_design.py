@@ -131,6 +131,10 @@ class _LinearCell:
                             np.zeros(len(self.cell.rc)))
         return u, soc
 
+    from lmncell.design.virtual_cell import VirtualCell
+
+    ocv_test = VirtualCell.ocv_test      # the same C/20 round trip, through this run()
+
 
 def test_characterise_recovers_a_known_design_model(tmp_path) -> None:
     from lmncell.design.proof import characterise, ocv_test_record

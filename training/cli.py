@@ -10,6 +10,7 @@ from typing import Any
 from lmncell import __version__
 from lmncell.config import ConfigError, parse_setting
 from lmncell.data.records import DataError
+from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C, InputError
 from lmncell.runtime.model import ModelFileError
 
@@ -323,14 +324,14 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--r0", type=_positive, default=0.010, help="design model R0, Ω")
     s.add_argument("--model", help="take the OCV and voltage limits from a model file")
     s.add_argument("--plot", metavar="DIR", help="write the programme's figures")
-    s.add_argument("--method", choices=("spacefill", "slsqp"), default="spacefill",
+    s.add_argument("--method", choices=DESIGN_METHODS, default="spacefill",
                    help="evenly spaced levels in D-optimal order, or free D-optimal levels")
-    s.add_argument("--information", choices=("lmn", "rc"), default="lmn",
+    s.add_argument("--information", choices=INFORMATION_KINDS, default="lmn",
                    help="design for the LMN's regressors or for the RC design model's parameters")
     s.add_argument("--compare-virtual", action="store_true", help="characterise a virtual cell, "
                    "design on it and prove the design against PRBS and APRBS programmes (LMNs "
                    "trained on each, validated in free run on three profiles)")
-    s.add_argument("--virtual-cell", choices=("pybamm", "builtin"), default=None,
+    s.add_argument("--virtual-cell", choices=VIRTUAL_CELLS, default=None,
                    help="PyBaMM DFN with Prada2013 (the sim extra) or the built-in ECM (default: "
                    "pybamm where installed)")
     s.add_argument("--json", action="store_true", help="print the proof as JSON on stdout "

@@ -20,7 +20,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from lmncell.config import TrainConfig
 from lmncell.data.records import DataError, Record, RecordMeta
+from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
@@ -54,6 +56,11 @@ class CellSpec:
         return np.interp(soc, self.r_scale_soc, self.r_scale) if self.r_scale else 1.0
 
 
+def held_soc(soc0: float, current_a: np.ndarray, ts: float, capacity_ah: float) -> np.ndarray:
+    """SoC at the end of each sample for a current (A, > 0 charges) held over each sample."""
+    return soc0 + np.cumsum(current_a) * ts / (3600.0 * capacity_ah)
+
+
 @dataclass
 class CyclerSpec:
     max_current_a: float = 100.0
@@ -76,6 +83,17 @@ class DesignSpec:
     amplitude_levels: int = 4     # sequences cycle through bands I_max, I_max/2, I_max/4, …
     method: str = "spacefill"     # "spacefill" (default) or "slsqp", see design_sequence
     information: str = "lmn"      # "lmn" (default) or "rc", see sensitivities
+
+
+def voltage_window(cell: CellSpec, spec: DesignSpec) -> tuple[float, float]:
+    """The voltages (V) a programme's predicted voltage must stay within: the cell's limits
+    narrowed by the design's margin."""
+    return cell.voltage_min_v + spec.voltage_margin_v, cell.voltage_max_v - spec.voltage_margin_v
+
+
+def soc_window(spec: DesignSpec) -> tuple[float, float]:
+    """The SoC a designed sequence stays within: the profile's range widened by the margin."""
+    return min(spec.soc_profile) - spec.soc_margin, max(spec.soc_profile) + spec.soc_margin
 
 
 def amplitude_band(spec: DesignSpec, i_max: float, index: int, mean: float) -> float:
@@ -102,7 +120,7 @@ def predict(cell: CellSpec, current: np.ndarray, ts: float, soc0: float,
             v0: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Voltage (V), SoC and final RC voltages for a current held over each sample (the
     resistances scaled by the cell's resistance_scale at each sample's SoC)."""
-    soc = soc0 + np.cumsum(current) * ts / (3600.0 * cell.capacity_ah)
+    soc = held_soc(soc0, current, ts, cell.capacity_ah)
     scaled = current * cell.resistance_scale(soc)
     u = cell.ocv(soc) + cell.r0_ohm * scaled
     vend = np.empty(len(cell.rc))
@@ -124,10 +142,9 @@ AMPLITUDE_KNOT_SPACING = 1 / 6
 OFFSET_SCALE_V = 0.01   # the local OCV offset's scale in the relative sensitivities
 
 
-# the default LMN's filter ladder (lmncell.config.TrainConfig.filters): its local models' dynamic
-# regressors are low-passes of the current at these time constants (s)
-LMN_FILTER_TAUS_S = (5.0, 30.0, 150.0, 800.0, 3000.0)
-INFORMATION_KINDS = ("lmn", "rc")
+# the default LMN's filter ladder: its local models' dynamic regressors are low-passes of the
+# current at these time constants (s), the slow end of each pair (5, 30, 150, 800, 3000 s)
+LMN_FILTER_TAUS_S = tuple(float(slow) for _, slow in TrainConfig().filters)
 
 
 def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
@@ -168,21 +185,10 @@ def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,
     return np.column_stack(cols)
 
 
-def information_matrix(cell: CellSpec, current: np.ndarray, ts: float,
-                       i_ref: float | None = None, information: str = "lmn") -> np.ndarray:
-    S = sensitivities(cell, current, ts, i_ref, information)
-    return S.T @ S
-
-
 def log_det_information(cell: CellSpec, current: np.ndarray, ts: float,
-                        i_ref: float | None = None, information: str = "lmn",
-                        prior: np.ndarray | None = None) -> float:
-    """log det of the information of `current`, plus `prior` (the information the programme's
-    earlier sequences already hold) where given."""
-    F = information_matrix(cell, current, ts, i_ref, information)
-    if prior is not None:
-        F = F + prior
-    sign, ld = np.linalg.slogdet(F + 1e-12 * np.eye(F.shape[0]))
+                        i_ref: float | None = None, information: str = "lmn") -> float:
+    S = sensitivities(cell, current, ts, i_ref, information)
+    sign, ld = np.linalg.slogdet(S.T @ S + 1e-12 * np.eye(S.shape[1]))
     return float(ld) if sign > 0 else -np.inf
 
 
@@ -200,28 +206,26 @@ def _expand(levels: np.ndarray, per: int) -> np.ndarray:
     return np.repeat(levels, per)
 
 
-DESIGN_METHODS = ("spacefill", "slsqp")
 SWAP_PASSES = 6
 GOLDEN = (np.sqrt(5.0) - 1.0) / 2.0
 
 
 def design_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: float,
-                    v0: np.ndarray, dsoc: float, i_max: float, index: int,
-                    prior: np.ndarray | None = None) -> Sequence:
+                    v0: np.ndarray, dsoc: float, i_max: float, index: int) -> Sequence:
     """The sequence that moves SoC by dsoc from (soc0, v0), by spec.method:
 
     "spacefill": its levels are evenly spaced over the band around the charge-moving mean (a
     space-filling set of current amplitudes: every current the network's local models live at
     is visited, none twice) and their order is chosen for the largest log det of the information
-    (deterministic pairwise-swap search from a golden-ratio order; `prior`, the information
-    of earlier sequences, makes it sequential: on the PyBaMM cell that did worse, so the
-    programme designs each sequence on its own), under the voltage and SoC
-    limits (the spread shrinks, as for the random programmes, only where the start breaks them).
+    (deterministic pairwise-swap search from a golden-ratio order; each sequence on its own: a
+    sequential design, with the earlier sequences' information added, did worse on the PyBaMM
+    cell), under the voltage and SoC limits (the spread shrinks, as for the random programmes,
+    only where the start breaks them).
     "slsqp": the levels themselves maximise log det (SLSQP); they go to the band's edges, which
     gives a D-optimal linear model but leaves the currents in between unvisited (on the PyBaMM
     cell its LMNs lost to APRBS, whose levels are spread)."""
     if spec.method == "spacefill":
-        return _spacefill_sequence(cell, cyc, spec, soc0, v0, dsoc, i_max, index, prior)
+        return _spacefill_sequence(cell, cyc, spec, soc0, v0, dsoc, i_max, index)
     if spec.method != "slsqp":
         raise DataError(f"design method {spec.method!r}: expected one of "
                         f"{', '.join(DESIGN_METHODS)}")
@@ -234,14 +238,12 @@ def design_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: flo
     x0 = mean + amp * np.sign(np.sin(2 * np.pi * k / max(n_levels / 3.0, 2.0) + 0.3)) * \
         (0.5 + 0.5 * (k % 3) / 2)
     x0 = x0 - (x0.sum() * cyc.hold_s - target_as) / (n_levels * cyc.hold_s)
-    lo_v = cell.voltage_min_v + spec.voltage_margin_v
-    hi_v = cell.voltage_max_v - spec.voltage_margin_v
+    lo_v, hi_v = voltage_window(cell, spec)
+    soc_lo, soc_hi = soc_window(spec)
 
     def volt(levels: np.ndarray) -> np.ndarray:
         return predict(cell, _expand(levels, per), ts, soc0, v0)[0]
 
-    soc_lo = min(spec.soc_profile) - spec.soc_margin
-    soc_hi = max(spec.soc_profile) + spec.soc_margin
     step_soc = cyc.hold_s / (3600.0 * cell.capacity_ah)
 
     def soc_path(levels: np.ndarray) -> np.ndarray:
@@ -275,17 +277,14 @@ def _sequence_mean(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, dsoc: floa
 
 
 def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0: float,
-                        v0: np.ndarray, dsoc: float, i_max: float, index: int,
-                        prior: np.ndarray | None) -> Sequence:
+                        v0: np.ndarray, dsoc: float, i_max: float, index: int) -> Sequence:
     ts, per = cyc.sample_time_s, round(cyc.hold_s / cyc.sample_time_s)
     n_levels, mean = _sequence_mean(cell, cyc, spec, dsoc, i_max, index)
     grid = np.linspace(-1.0, 1.0, n_levels)                      # zero mean: exact charge
     # deterministic, irregular start: the golden-ratio (low-discrepancy) order of the levels
     start = np.argsort(np.mod(np.arange(1, n_levels + 1) * GOLDEN, 1.0))
-    lo_v = cell.voltage_min_v + spec.voltage_margin_v
-    hi_v = cell.voltage_max_v - spec.voltage_margin_v
-    soc_lo = min(spec.soc_profile) - spec.soc_margin
-    soc_hi = max(spec.soc_profile) + spec.soc_margin
+    lo_v, hi_v = voltage_window(cell, spec)
+    soc_lo, soc_hi = soc_window(spec)
 
     def levels(order: np.ndarray, spread: float) -> np.ndarray:
         return mean + spread * (i_max - abs(mean)) * grid[order]
@@ -298,7 +297,7 @@ def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0:
     spread = next((f for f in np.linspace(1.0, 0.0, 21) if feasible(levels(start, f))), 0.0)
     order = start.copy()
     best = log_det_information(cell, _expand(levels(order, spread), per), ts, i_max,
-                               spec.information, prior)
+                               spec.information)
     for _ in range(SWAP_PASSES):
         improved = False
         for a in range(n_levels - 1):
@@ -306,7 +305,7 @@ def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0:
                 order[[a, b]] = order[[b, a]]
                 x = levels(order, spread)
                 ld = log_det_information(cell, _expand(x, per), ts, i_max,
-                                         spec.information, prior)
+                                         spec.information)
                 if ld > best + 1e-9 and feasible(x):
                     best, improved = ld, True
                 else:
@@ -315,8 +314,7 @@ def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0:
             break
     cur = _expand(levels(order, spread), per)
     u, soc, _ = predict(cell, cur, ts, soc0, v0)
-    return Sequence(cur, u, soc, log_det_information(cell, cur, ts, i_max, spec.information),
-                    True)
+    return Sequence(cur, u, soc, best, True)
 
 
 def exact_charge(levels: np.ndarray, target_sum: float, i_max: float) -> np.ndarray:
@@ -433,8 +431,7 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     rng = np.random.default_rng(seed)
     per = round(cyc.hold_s / cyc.sample_time_s)
     n_levels = round(spec.sequence_s / cyc.hold_s)
-    lo_v = cell.voltage_min_v + spec.voltage_margin_v
-    hi_v = cell.voltage_max_v - spec.voltage_margin_v
+    lo_v, hi_v = voltage_window(cell, spec)
     soc, v = spec.soc_profile[0], np.zeros(len(cell.rc))
     parts = []
     for k, dsoc in enumerate(allocate(spec.soc_profile, n_seq)[0]):

@@ -3,7 +3,8 @@ random programmes (PRBS and APRBS, several seeds, same length, hold time, amplit
 and limits), each validated in free run on drive profiles run on the same virtual cell.
 
 The flow, as an engineer would run it on a new cell: a slow OCV test and a pulse test on the
-virtual cell give the linear design model (OCV, R0 and two RC elements, `characterise`); the
+virtual cell give the linear design model (OCV, R0, RC elements and the resistance over SoC,
+`characterise`); the
 programme is designed on that model; every programme and every validation profile is run on the
 virtual cell (PyBaMM's DFN, or the built-in nonlinear ECM). Current > 0 charges; SI units.
 """
@@ -18,6 +19,7 @@ from typing import Protocol
 
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
+from lmncell.design import VIRTUAL_CELLS
 from lmncell.design.optimal import (
     RANDOM_KINDS,
     CellSpec,
@@ -28,9 +30,9 @@ from lmncell.design.optimal import (
     log_det_information,
     predict,
     random_programme,
+    voltage_window,
 )
 
-VIRTUAL_CELLS = ("builtin", "pybamm")
 RANDOM_SEEDS = (1, 2, 3, 4, 5)
 OCV_TEST_C_RATE = 1 / 20
 PULSE_C_RATES = (3.0,)     # characterisation pulses, C
@@ -39,10 +41,16 @@ NEGLIGIBLE_RC = 0.05                 # an RC element below this share of R0 is d
 
 
 class VirtualCellLike(Protocol):
+    """What a virtual cell offers the proof (PybammCell, VirtualCell)."""
+
     capacity_ah: float
 
     def run(self, current_a: np.ndarray, soc0: float, ts: float = 1.0,
             name: str = "programme") -> tuple[np.ndarray, np.ndarray]: ...
+
+    def ocv_test(self, c_rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]: ...
+
+    def describe(self) -> str: ...
 
 
 def make_virtual_cell(kind: str, capacity_ah: float) -> VirtualCellLike:
@@ -59,24 +67,12 @@ def make_virtual_cell(kind: str, capacity_ah: float) -> VirtualCellLike:
     raise DataError(f"--virtual-cell {kind!r}: expected one of {', '.join(VIRTUAL_CELLS)}")
 
 
-def describe(vc: VirtualCellLike) -> str:
-    return vc.describe() if hasattr(vc, "describe") else (
-        "built-in nonlinear ECM with hysteresis (lmncell.design.virtual_cell)")
-
-
 # ----- characterisation: the design model from tests on the cell ------------------------------
 def ocv_test_record(vc: VirtualCellLike, capacity_ah: float, folder: Path) -> Path:
     """A slow full → empty → full test run on the virtual cell, written as a BDF file."""
     from lmncell.data.readers import write_bdf
 
-    if hasattr(vc, "ocv_test"):
-        t, cur, u = vc.ocv_test(OCV_TEST_C_RATE)
-    else:
-        n = round(3600.0 / OCV_TEST_C_RATE)
-        i = OCV_TEST_C_RATE * capacity_ah
-        cur = np.concatenate([np.full(n, -i), np.full(n, i)])
-        u, _ = vc.run(cur, 1.0, name="OCV test")
-        t = np.arange(1, cur.size + 1, dtype=float)
+    t, cur, u = vc.ocv_test(OCV_TEST_C_RATE)
     path = Path(folder) / "virtual_ocv_test.bdf.csv"
     write_bdf(Record(t, cur, u, RecordMeta("virtual cell C/20 OCV test", "virtual",
                                            "current > 0 charges", float(t[1] - t[0]))), path)
@@ -181,8 +177,7 @@ def largest_safe_peak(cell: CellSpec, spec: DesignSpec, shape, soc0: float,
     """The largest peak C-rate (from c_rate_max down in steps of 10 %) whose profile the design
     model keeps inside the voltage limits with the design's margin: validation runs the cell
     where a user may run it."""
-    lo = cell.voltage_min_v + spec.voltage_margin_v
-    hi = cell.voltage_max_v - spec.voltage_margin_v
+    lo, hi = voltage_window(cell, spec)
     for frac in np.linspace(1.0, 0.1, 10):
         c = c_rate_max * frac
         u = predict(cell, shape(c), 1.0, soc0, np.zeros(len(cell.rc)))[0]
@@ -269,7 +264,8 @@ def summarise(rows: dict, profiles: list[Profile], kinds: tuple[str, ...]) -> di
     """Per profile: designed_mv, <kind>_mv lists, medians and whether the design beats them;
     per kind the covariance-determinant ratio (random over designed, design model)."""
     des = rows["designed"]
-    out: dict = {"profiles": {}, "covariance_det_ratio": {}, "programmes": rows}
+    out: dict = {"profiles": {}, "covariance_det_ratio": {}, "random_kinds": list(kinds),
+                 "programmes": rows}
     for p in profiles:
         entry: dict = {"description": p.description, "designed_mv": des[f"{p.key}_mv"]}
         for kind in kinds:
@@ -306,13 +302,13 @@ def prove_design(vc: VirtualCellLike, cell: CellSpec, cyc: CyclerSpec, spec: Des
                  + f"; pulse-fit RMSE {ch.rmse_mv:.2f} mV")
         prog = design(c)
         result = compare_on_virtual_cell(prog, c, cyc, spec, vc, ocv_path, progress, seeds)
-    result["virtual_cell"] = describe(vc)
+    result["virtual_cell"] = vc.describe()
     result["design_model"] = {"r0_ohm": c.r0_ohm, "rc": [list(x) for x in c.rc],
                               "resistance_scale": dict(zip(map(str, c.r_scale_soc), c.r_scale,
                                                           strict=True)),
                               "pulse_fit_rmse_mv": ch.rmse_mv,
                               "pulse_socs": list(ch.pulse_socs)}
-    if hasattr(vc, "solves"):
+    if hasattr(vc, "solves"):       # the PyBaMM cell's record of every solve
         result["solves"] = vc.solves
     return result, prog
 
@@ -325,8 +321,7 @@ def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     profs = result["profiles"]
-    kinds = [k[:-3] for k in next(iter(profs.values())) if k.endswith("_mv")
-             and k != "designed_mv" and not k.endswith("median_mv")]
+    kinds = result["random_kinds"]
     fig, ax = plt.subplots(figsize=(9, 4.5), constrained_layout=True)
     width = 0.8 / (len(kinds) + 1)
     for j, key in enumerate(profs):

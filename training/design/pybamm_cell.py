@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from lmncell.data.records import DataError
+from lmncell.design.optimal import held_soc
 
 PARAMETER_SET = "Prada2013"
 PARAMETER_CHANGES: dict[str, float] = {"Negative particle diffusivity [m2.s-1]": 3e-13}
@@ -61,15 +62,16 @@ class PybammCell:
                 f"IDAKLU rtol {SOLVER_RTOL:g}, atol {SOLVER_ATOL:g}; parameters changed: "
                 f"{changed}; {1e3 * self.noise_v:g} mV measurement noise")
 
-    def _simulation(self, pybamm, experiment=None, current_input: bool = False):
+    def _parameters(self, pybamm):
         pv = pybamm.ParameterValues(PARAMETER_SET)
         pv.update(self.changes)
-        if current_input:
-            pv["Current function [A]"] = "[input]"
+        return pv
+
+    def _simulation(self, pybamm, pv, experiment=None):
         model = {"DFN": pybamm.lithium_ion.DFN, "SPMe": pybamm.lithium_ion.SPMe}[self.model]()
         solver = pybamm.IDAKLUSolver(rtol=SOLVER_RTOL, atol=SOLVER_ATOL)
         return pybamm.Simulation(model, parameter_values=pv, experiment=experiment,
-                                 solver=solver), pv
+                                 solver=solver)
 
     def run(self, current_a: np.ndarray, soc0: float, ts: float = 1.0,
             name: str = "programme") -> tuple[np.ndarray, np.ndarray]:
@@ -79,7 +81,9 @@ class PybammCell:
         is a step input, which one interpolated solve would smear or step over)."""
         pybamm = require_pybamm()
         current_a = np.asarray(current_a, dtype=float)
-        sim, _ = self._simulation(pybamm, current_input=True)
+        pv = self._parameters(pybamm)
+        pv["Current function [A]"] = "[input]"
+        sim = self._simulation(pybamm, pv)
         sim.build(initial_soc=soc0)
         n = current_a.size
         edges = np.concatenate([[0], np.flatnonzero(np.diff(current_a) != 0.0) + 1, [n]])
@@ -102,7 +106,7 @@ class PybammCell:
             t0 = reached
         self.solves.append({"name": name, "final_time_s": ts * n, "reached_s": t0,
                             "steps": int(edges.size - 1)})
-        soc = soc0 + np.cumsum(current_a) * ts / (3600.0 * self.capacity_ah)
+        soc = held_soc(soc0, current_a, ts, self.capacity_ah)
         rng = np.random.default_rng(self.seed)
         return u + rng.normal(0.0, self.noise_v, u.size), soc
 
@@ -113,13 +117,12 @@ class PybammCell:
         upper cut-off) discharge at c_rate until 2.0 V, then charge until 3.6 V; returns time
         (s), current (A, > 0 charges) and voltage (V, with noise), sampled every ts."""
         pybamm = require_pybamm()
-        pv = pybamm.ParameterValues(PARAMETER_SET)
-        pv.update(self.changes)
+        pv = self._parameters(pybamm)
         lo, hi = pv["Lower voltage cut-off [V]"], pv["Upper voltage cut-off [V]"]
         rate = f"C/{1 / c_rate:g}"
         exp = pybamm.Experiment([f"Discharge at {rate} until {lo} V",
                                  f"Charge at {rate} until {hi} V"], period=f"{ts:g} seconds")
-        sim, _ = self._simulation(pybamm, experiment=exp)
+        sim = self._simulation(pybamm, pv, experiment=exp)
         sol = sim.solve(initial_soc=0.999)
         v = np.asarray(sol["Terminal voltage [V]"].entries, dtype=float)
         if v.min() > lo + 0.05 or v[-1] < hi - 0.05:

@@ -12,7 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.design.optimal import DEFAULT_OCV_SOC, DEFAULT_OCV_V
+from lmncell.design.optimal import DEFAULT_OCV_SOC, DEFAULT_OCV_V, held_soc
 from lmncell.identification.baselines import hysteresis
 
 
@@ -31,7 +31,7 @@ class VirtualCell:
             name: str = "programme") -> tuple[np.ndarray, np.ndarray]:
         """Terminal voltage (V, with noise) and SoC for a current held over each sample (name:
         unused here; the PyBaMM cell names the run in its errors)."""
-        soc = soc0 + np.cumsum(current_a) * ts / (3600.0 * self.capacity_ah)
+        soc = held_soc(soc0, current_a, ts, self.capacity_ah)
         x = current_a / (2.0 * self.i0_a)
         bv = np.where(np.abs(x) > 1e-9, np.arcsinh(x) / np.where(x == 0, 1, x), 1.0)
         u = np.interp(soc, DEFAULT_OCV_SOC, DEFAULT_OCV_V)
@@ -48,3 +48,15 @@ class VirtualCell:
         u = u + self.hyst_v * hysteresis(current_a, self.gamma, ts, self.capacity_ah, 0.0)
         rng = np.random.default_rng(self.seed)
         return u + rng.normal(0.0, self.noise_v, u.size), soc
+
+    def ocv_test(self, c_rate: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """A slow round trip at c_rate from full: a full discharge then a full charge (1 s
+        samples); time (s), current (A, > 0 charges) and voltage (V, with noise)."""
+        n = round(3600.0 / c_rate)
+        i = c_rate * self.capacity_ah
+        cur = np.concatenate([np.full(n, -i), np.full(n, i)])
+        u, _ = self.run(cur, 1.0, name="OCV test")
+        return np.arange(1, cur.size + 1, dtype=float), cur, u
+
+    def describe(self) -> str:
+        return "built-in nonlinear ECM with hysteresis (lmncell.design.virtual_cell)"
