@@ -261,6 +261,34 @@ def test_arrhenius_energy_is_found_where_resistance_also_rises_towards_empty() -
     assert train_lmn(segs, cfg, cap).info["arrhenius_k"] == 3000.0
 
 
+def test_arrhenius_energy_is_not_chosen_by_the_voltage_collapse_before_empty() -> None:
+    """The cell of the test above with E = 3000 K, discharged to SoC 0.02 through a steep OCV
+    knee where its voltage collapses beyond what a linear model follows while the cell heats up
+    fastest: E is chosen with the SoC-reference weights (the knee's samples count little) and
+    is still 3000 K."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import train_lmn
+    from lmncell.identification.ocvfit import lowpass
+
+    rng = np.random.default_rng(7)
+    cap, ts, n = 2.0, 1.0, 8000
+    segs = []
+    for k, t_amb in enumerate((15.0, 25.0, 35.0)):
+        levels = rng.choice([-3.0, -1.5, -0.5, 0.0, 1.0], size=n // 20)
+        i = np.repeat(levels, 20)
+        i *= 0.98 * cap * 3600.0 / -np.sum(i * ts)          # from full to SoC 0.02
+        soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
+        temp = t_amb + 8.0 * (1.0 - soc) + 15.0 * np.exp(-soc / 0.05)
+        g = np.exp(3000.0 * (1 / (temp + 273.15) - 1 / 298.15))
+        ocv = 3.3 + 0.8 * soc - 0.6 * np.exp(-soc / 0.03)
+        knee = 0.1 * np.exp(-soc / 0.03) * np.minimum(i, 0.0) ** 2
+        u = ocv + g * (0.03 * i + 0.01 * lowpass(i, 60.0, ts)) - knee
+        segs.append(Segment(f"synthetic{k}", np.arange(1, n + 1) * ts, i, u, temp, 1.0, soc,
+                            np.ones(n)))
+    cfg = load_config(max_local_models=1, oe_refinement=False, hysteresis="off")
+    assert train_lmn(segs, cfg, cap).info["arrhenius_k"] == 3000.0
+
+
 def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature_terms() -> None:
     """Records at four constant chamber temperatures of a cell whose resistance follows
     exp(E(1/T − 1/T_ref)) with E = 4000 K and OCV shifting with T: with temperature terms, E

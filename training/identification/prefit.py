@@ -81,8 +81,16 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
                        cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed, r_knots)
 
-    e_k = _choose_arrhenius(cfg, segs, prefit, progress)
-    gamma = _choose_hysteresis(cfg, e_k, prefit, progress)
+    # E and γ are chosen where the linear pre-fit can follow the cell, with the inverse-variance
+    # SoC weights the network will use: unweighted, the voltage collapse before the cut-off,
+    # while the cell is warmest, chose E (Panasonic 25 °C, US06 left out: E off, held-out
+    # RMSE 13.9 mV in 20–80 % and 31.0 mV whole; with the weights E = 2000 K, 10.2 and 22.2 mV)
+    knots = np.linspace(0, 1, cfg.ocv_knots)
+    factors = soc_reference_factors(
+        socs, knots, fixed if fixed is not None else prefit(None, None).ocv_v, cfg)
+    select = [w * f for w, f in zip(fit_weights, factors, strict=True)]
+    e_k = _choose_arrhenius(cfg, segs, lambda *a: prefit(*a, weights=select), progress)
+    gamma = _choose_hysteresis(cfg, e_k, lambda *a: prefit(*a, weights=select), progress)
     return gamma, e_k, prefit(gamma, e_k, weights=ocv_weights)
 
 
@@ -145,12 +153,15 @@ def with_soc_reference_weights(segs: list[Segment], socs: list[np.ndarray],
     socs: each segment's SoC as the model counts it."""
     if cfg.soc_reference_sigma <= 0:
         return segs
-    out = []
-    for seg, soc in zip(segs, socs, strict=True):
-        spread = ocv_slope(ocv_soc, ocv_v, soc) * cfg.soc_reference_sigma
-        w = 1.0 / (1.0 + (spread / cfg.model_error_sigma_v) ** 2)
-        out.append(dataclasses.replace(seg, weight=seg.weight * w))
-    return out
+    return [dataclasses.replace(seg, weight=seg.weight * f) for seg, f in
+            zip(segs, soc_reference_factors(socs, ocv_soc, ocv_v, cfg), strict=True)]
+
+
+def soc_reference_factors(socs: list[np.ndarray], ocv_soc: np.ndarray, ocv_v: np.ndarray,
+                          cfg: TrainConfig) -> list[np.ndarray]:
+    """Per segment σ_u²/(σ_u² + (dOCV/dSoC·σ_SoC)²) (all 1 with soc_reference_sigma = 0)."""
+    return [1.0 / (1.0 + (ocv_slope(ocv_soc, ocv_v, soc) * cfg.soc_reference_sigma
+                          / cfg.model_error_sigma_v) ** 2) for soc in socs]
 
 
 TEMPERATURE_LEVEL_GAP_K = 7.5
