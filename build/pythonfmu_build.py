@@ -6,6 +6,13 @@ The FMU's resources hold the model file (`model.json`), a copy of the runtime pa
 their own code. After pythonfmu has written the FMU, the model description is completed with
 units, `InitialUnknowns`, a default experiment at the model's sample time, version and
 generation tool.
+
+The linux64 binary is pythonfmu 0.7.0's wrapper built from its sources with LMNCell's fixes
+(`pythonfmu_wrapper/`, see its README): ordinary call errors return fmi2Error instead of freeing
+the instance, a wrong GUID, Model Exchange or a missing resource location is refused, no memory
+grows per instantiation, no heap corruption at exit. It needs a C++17 compiler and the Python
+headers where the FMU is built; without them the FMU keeps pythonfmu's own binary (with a
+warning, and the documentation says so).
 """
 
 from __future__ import annotations
@@ -13,8 +20,11 @@ from __future__ import annotations
 import hashlib
 import html
 import shutil
+import subprocess
 import sys
+import sysconfig
 import tempfile
+import warnings
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -24,6 +34,36 @@ from lmncell.fmu.interface import dependency_indices
 from lmncell.runtime.model import LmnModel, load_model
 
 RUNTIME_DIR = Path(runtime_package.__file__).resolve().parent
+WRAPPER_DIR = Path(__file__).resolve().parent / "pythonfmu_wrapper"
+WRAPPER_SOURCES = ("fmi2.cpp", "PySlaveInstance.cpp")
+PATCHED, STOCK = "LMNCell's build of the PythonFMU 0.7.0 wrapper", "PythonFMU 0.7.0's wrapper"
+
+
+class WrapperBuildError(RuntimeError):
+    """The patched wrapper cannot be compiled here (no C++ compiler or Python headers)."""
+
+
+def compile_wrapper(guid: str, out: Path) -> None:
+    """Compile pythonfmu_wrapper/ into the FMU binary `out` for an FMU with this GUID
+    (g++ or c++, C++17, Python's stable ABI from 3.8 on, the FMI 2.0 headers from fmpy)."""
+    from lmncell.fmu.native_build import NativeBuildError, fmi_headers
+
+    cxx = shutil.which("g++") or shutil.which("c++")
+    if cxx is None:
+        raise WrapperBuildError("no C++ compiler (g++ or c++) found")
+    include = Path(sysconfig.get_paths()["include"])
+    if not (include / "Python.h").exists():
+        raise WrapperBuildError(f"no Python headers ({include / 'Python.h'} is missing)")
+    try:
+        fmi = fmi_headers()
+    except NativeBuildError as exc:
+        raise WrapperBuildError(str(exc)) from None
+    cmd = [cxx, "-std=c++17", "-O2", "-fPIC", "-shared", "-DPy_LIMITED_API=0x03080000",
+           f'-DLMNCELL_GUID="{guid}"', f"-I{WRAPPER_DIR}", f"-I{fmi}", f"-I{include}",
+           *(str(WRAPPER_DIR / s) for s in WRAPPER_SOURCES), "-o", str(out)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise WrapperBuildError(f"{' '.join(cmd)} failed:\n{res.stderr[-2000:]}")
 UNITS = {"current": "A", "voltage_measured": "V", "temperature": "degC", "voltage": "V",
          "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1", "cell_temperature": "degC"}
 UNIT_BASE = {"A": {"A": "1"}, "V": {"kg": "1", "m": "2", "s": "-3", "A": "-1"},
@@ -54,9 +94,22 @@ FLAVOURS = {
 }
 
 
-def documentation_html(model: LmnModel, model_path: Path, flavour: str = "pythonfmu") -> str:
+WRAPPERS = {
+    PATCHED: " Its linux64 binary is LMNCell's build of PythonFMU 0.7.0's wrapper: an ordinary "
+             "call error (unknown value reference, wrong type, fixed parameter set after "
+             "initialisation, refused step) is logged and returns fmi2Error; a wrong GUID or "
+             "Model Exchange is refused. Its win64 binary is PythonFMU's own.",
+    STOCK: " Its binaries are PythonFMU 0.7.0's own wrapper: an ordinary call error is logged "
+           "and the call ignored (status OK; a refused step returns fmi2Discard), because that "
+           "wrapper turns any error into fmi2Fatal and frees the instance.",
+}
+
+
+def documentation_html(model: LmnModel, model_path: Path, flavour: str = "pythonfmu",
+                       wrapper: str = STOCK) -> str:
     """documentation/index.html: cell, data, sample time, accuracy and limits of the model;
-    flavour "pythonfmu" or "native" says what the importer needs."""
+    flavour "pythonfmu" or "native" says what the importer needs (and for pythonfmu, which
+    wrapper the linux64 binary is)."""
     tr = model.extra.get("training", {})
     files = "".join(f"<li>{html.escape(Path(f['path']).name)} <small>sha256 {f['sha256'][:16]}…"
                     "</small></li>" for f in tr.get("files", []))
@@ -103,7 +156,7 @@ not taken.</p>
 <h2>Trained region</h2><table border="1"><tr><th>quantity</th><th>range</th></tr>{rows}</table>
 <h2>Free-run accuracy on the training records</h2><table border="1"><tr><th>segment</th>
 <th>RMSE / mV</th><th>RMSE 20–80 % SoC / mV</th><th>max / mV</th></tr>{acc}</table>
-<p>{FLAVOURS[flavour]}</p>
+<p>{FLAVOURS[flavour]}{WRAPPERS[wrapper] if flavour == "pythonfmu" else ""}</p>
 </body></html>"""
 
 
@@ -111,12 +164,14 @@ def _indent(elem: ET.Element) -> None:
     ET.indent(elem, space="  ")
 
 
-def patch_model_description(xml_text: str, model: LmnModel, module_hash: str) -> str:
-    """Add units, InitialUnknowns, default experiment, version and generation tool."""
+def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
+                            wrapper: str = STOCK) -> str:
+    """Add units, InitialUnknowns, default experiment, version and generation tool (which
+    names the wrapper in the linux64 binary)."""
     from lmncell import __version__
 
     root = ET.fromstring(xml_text)
-    root.set("generationTool", f"LMNCell {__version__} (PythonFMU 0.7.0)")
+    root.set("generationTool", f"LMNCell {__version__} ({wrapper})")
     root.set("version", module_hash)
     root.set("description", model.extra.get("description", "LMNCell model"))
     variables = root.find("ModelVariables")
@@ -162,13 +217,27 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str) ->
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode")
 
 
-def _rewrite_member(fmu: Path, member: str, text: str) -> None:
+def _rewrite_members(fmu: Path, members: dict[str, bytes]) -> None:
+    """Replace the contents of the named zip members (same names, same order)."""
     tmp = fmu.with_suffix(".tmp")
     with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
         for item in zin.infolist():
-            data = text.encode("utf-8") if item.filename == member else zin.read(item.filename)
-            zout.writestr(item, data)
+            zout.writestr(item, members.get(item.filename, zin.read(item.filename)))
     tmp.replace(fmu)
+
+
+def patched_binary(guid: str, model_identifier: str) -> dict[str, bytes]:
+    """{zip member: bytes} of the patched linux64 wrapper, or {} (with a warning) where it
+    cannot be built here."""
+    with tempfile.TemporaryDirectory(prefix="lmncell_wrapper_") as tmp:
+        out = Path(tmp) / "wrapper.so"
+        try:
+            compile_wrapper(guid, out)
+        except WrapperBuildError as exc:
+            warnings.warn(f"the pythonfmu FMU keeps {STOCK} (ordinary call errors are logged and "
+                          f"ignored, see the README): {exc}", RuntimeWarning, stacklevel=3)
+            return {}
+        return {f"binaries/linux64/{model_identifier}.so": out.read_bytes()}
 
 
 def build_fmu(model_path: str | Path, out: str | Path) -> Path:
@@ -203,5 +272,12 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
                 del sys.modules[name]
     with zipfile.ZipFile(out) as z:
         xml_text = z.read("modelDescription.xml").decode("utf-8")
-    _rewrite_member(out, "modelDescription.xml", patch_model_description(xml_text, model, h))
+    root = ET.fromstring(xml_text)
+    members = patched_binary(root.get("guid"), root.find("CoSimulation").get("modelIdentifier"))
+    wrapper = PATCHED if members else STOCK
+    members["modelDescription.xml"] = patch_model_description(xml_text, model, h,
+                                                              wrapper).encode("utf-8")
+    members["documentation/index.html"] = documentation_html(
+        model, model_path, "pythonfmu", wrapper).encode("utf-8")
+    _rewrite_members(out, members)
     return out

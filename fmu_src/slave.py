@@ -33,6 +33,10 @@ def keep_module_dict(namespace: dict) -> None:
     _MODULE_DICT_REFS.append(namespace)
 
 
+class CallError(RuntimeError):
+    """An ordinary FMI call error (unknown reference, wrong type, refused step, …)."""
+
+
 class LmnCellSlave(Fmi2Slave):
     """FMI 2.0 co-simulation slave of an LMN cell model (see GUIDE: FMU interface)."""
 
@@ -40,6 +44,9 @@ class LmnCellSlave(Fmi2Slave):
     description = "Local model network battery cell model"
 
     def __init__(self, **kwargs) -> None:
+        # LMNCell's build of the wrapper (build/pythonfmu_wrapper) passes errors_as_status: it
+        # returns fmi2Error for an exception and keeps the instance; pythonfmu 0.7's own does not
+        self._errors_as_status = bool(kwargs.pop("errors_as_status", False))
         super().__init__(**kwargs)
         self._dedupe_sys_path()
         res = Path(self.resources) if self.resources else Path(__file__).resolve().parent.parent
@@ -55,6 +62,7 @@ class LmnCellSlave(Fmi2Slave):
         self._cosim: CellCosim | None = None
         self._time = 0.0
         self._terminated = False
+        self._in_initialization = False
         reg = self.register_variable
         reg(Real("current", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
                  description="cell current held over the step, > 0 charges [A]"))
@@ -135,11 +143,12 @@ class LmnCellSlave(Fmi2Slave):
         cosim.reset(temp)
         return cosim
 
-    # ----- guarded access: pythonfmu 0.7's wrapper turns any Python exception into fmi2Fatal
-    # and frees the slave object while it is still in use (PySlaveInstance::cleanPyObject in
-    # handle_py_exception), so the host crashes on the next call. Ordinary call errors are
-    # therefore logged through the FMI logger and the call is ignored (its status stays OK:
-    # the wrapper offers no way to return fmi2Error from a getter or setter).
+    # ----- guarded access. With LMNCell's build of the wrapper an ordinary call error raises
+    # CallError, which the wrapper logs and returns as fmi2Error (nothing is changed). pythonfmu
+    # 0.7's own wrapper turns any Python exception into fmi2Fatal and frees the slave object
+    # while it is still in use (PySlaveInstance::cleanPyObject in handle_py_exception), so the
+    # host crashes on the next call: with that wrapper the error is logged through the FMI
+    # logger and the call ignored (status OK; a refused step is fmi2Discard).
     def _problem(self, vr: int, kind: type, setting: bool) -> str:
         var = self.vars.get(vr)
         if var is None:
@@ -165,8 +174,12 @@ class LmnCellSlave(Fmi2Slave):
         return out
 
     def _set(self, vrs: list[int], values: list, kind: type, call: str) -> None:
-        for vr, value in zip(vrs, values, strict=False):
-            problem = self._problem(vr, kind, setting=True)
+        pairs = list(zip(vrs, values, strict=False))
+        problems = [(vr, value, self._problem(vr, kind, setting=True)) for vr, value in pairs]
+        bad = [f"{problem}; {value!r} was not set" for _, value, problem in problems if problem]
+        if bad and self._errors_as_status:
+            self._error(f"{call}: " + "; ".join(bad) + " (nothing of this call was set)")
+        for vr, value, problem in problems:
             if problem:
                 self._error(f"{call}: {problem}; {value!r} was not set")
             else:
@@ -200,11 +213,22 @@ class LmnCellSlave(Fmi2Slave):
             self._error(f"fmi2SetString: value reference {vr}: this FMU has no String")
 
     def _error(self, msg: str) -> None:
+        """Report an ordinary call error: raised as CallError (→ fmi2Error) where the wrapper
+        allows it, else logged (the call is then ignored)."""
+        if self._errors_as_status:
+            raise CallError(f"{self.instance_name}: {msg}")
         self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
 
+    def enter_initialization_mode(self) -> None:
+        self._in_initialization = True
+
     def exit_initialization_mode(self) -> None:
-        """Bad parameters are logged as errors and leave the FMU uninitialised, so that every
-        doStep is refused (not raised: see _problem on pythonfmu 0.7's wrapper)."""
+        """Bad parameters are errors (see _error) and leave the FMU uninitialised, so that every
+        doStep is refused."""
+        if not self._in_initialization:
+            self._error("fmi2ExitInitializationMode called without fmi2EnterInitializationMode")
+            return
+        self._in_initialization = False
         if self.observer not in OBSERVERS:
             self._error(f"parameter 'observer' = {self.observer}: this FMU offers "
                         f"{sorted(OBSERVERS)} ({', '.join(OBSERVERS.values())}); not "

@@ -81,6 +81,8 @@ def impossible_inputs(fmu: str) -> dict:
         "voltage", "soc")}
     out["below_zero_kelvin"] = _status(lambda: inst.step(-1.0, temperature=-300.0))
     out["after_cold"] = inst.get("voltage", "soc")
+    out["nan_current"] = _status(lambda: inst.step(math.nan))
+    out["after_nan"] = inst.get("voltage", "soc")
     out["before"] = before
     out["still_steps"] = _status(lambda: inst.step(-1.0))
     out["finite"] = all(math.isfinite(x) for x in inst.get("voltage", "soc", "soc_std"))
@@ -134,29 +136,43 @@ def ordinary_errors(fmu: str) -> dict:
 
 
 def wrong_guid_or_type(fmu: str) -> dict:
-    """Row 7: fmi2Instantiate with another FMU's GUID, and as Model Exchange, is refused (NULL);
-    the right GUID instantiates."""
+    """Row 7: fmi2Instantiate with another FMU's GUID, as Model Exchange, with an empty or a
+    missing resource location is refused (NULL); the right GUID instantiates."""
     import pathlib
     from ctypes import byref
 
-    from fmpy.fmi2 import defaultCallbacks, fmi2ModelExchange
+    from fmpy.fmi2 import defaultCallbacks, fmi2CoSimulation, fmi2ModelExchange
 
-    class AsModelExchange(FMU2Slave):
-        """fmpy's slave, but asking fmi2Instantiate for Model Exchange."""
+    class Raw(FMU2Slave):
+        """fmpy's slave with a chosen FMU type and resource location for fmi2Instantiate."""
+
+        fmu_type, uri = fmi2CoSimulation, None
 
         def instantiate(self, visible=False, callbacks=None, loggingOn=False):
             self.callbacks = defaultCallbacks
-            uri = pathlib.Path(self.unzipDirectory, "resources").as_uri()
-            self.component = self.fmi2Instantiate(self.instanceName.encode(), fmi2ModelExchange,
+            uri = (pathlib.Path(self.unzipDirectory, "resources").as_uri() if self.uri is None
+                   else self.uri)
+            self.component = self.fmi2Instantiate(self.instanceName.encode(), self.fmu_type,
                                                   self.guid.encode(), uri.encode(),
                                                   byref(self.callbacks), visible, loggingOn)
             if self.component is None:
                 raise RuntimeError("Failed to instantiate model")
 
+    class AsModelExchange(Raw):
+        fmu_type = fmi2ModelExchange
+
+    class NoResources(Raw):
+        uri = ""
+
+    class MissingResources(Raw):
+        uri = "file:///nonexistent/lmncell/resources"
+
     md = read_model_description(fmu)
     out = {}
     for key, guid, cls in (("wrong_guid", "{00000000-0000-0000-0000-000000000000}", FMU2Slave),
                            ("model_exchange", md.guid, AsModelExchange),
+                           ("no_resources", md.guid, NoResources),
+                           ("missing_resources", md.guid, MissingResources),
                            ("right", md.guid, FMU2Slave)):
         slave = cls(guid=guid, unzipDirectory=extract(fmu),
                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
@@ -170,8 +186,36 @@ def wrong_guid_or_type(fmu: str) -> dict:
     return out
 
 
+def _rss_kb() -> int:
+    """Resident set size of this process (kB, Linux)."""
+    with open("/proc/self/statm") as fh:
+        return int(fh.read().split()[1]) * 4
+
+
+def instantiate_many(fmu: str, cycles: int = 2000) -> dict:
+    """Row 7: memory over many instantiate/setup/initialise/step/free cycles (kB of resident
+    memory after the first 200 cycles and after all)."""
+    md = read_model_description(fmu)
+    where = extract(fmu)
+    rss = {}
+    for k in range(cycles):
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=where,
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=f"i{k}")
+        slave.instantiate()
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        slave.doStep(0.0, 1.0)
+        slave.terminate()
+        slave.freeInstance()
+        if k + 1 in (200, cycles):
+            rss[str(k + 1)] = _rss_kb()
+    return rss
+
+
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
-                                      observers_at_full, ordinary_errors, wrong_guid_or_type)}
+                                      observers_at_full, ordinary_errors, wrong_guid_or_type,
+                                      instantiate_many)}
 
 if __name__ == "__main__":
     print(json.dumps(SEQUENCES[sys.argv[2]](sys.argv[1])))
