@@ -191,6 +191,24 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
             assert np.abs(poles(t, 3)).max() <= 0.9995 + 1e-9
 
 
+def test_auto_partition_adds_temperature_at_two_or_more_temperatures() -> None:
+    """partition "auto": soc for records at one temperature (self-heating included), soc and
+    temperature for records at two chamber temperatures; a given list is kept."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import resolve_partition
+
+    def seg(t0: float) -> Segment:
+        n = 100
+        return Segment("s", np.arange(1.0, n + 1), -np.ones(n), np.full(n, 3.6),
+                       t0 + np.linspace(0.0, 6.0, n), 1.0, np.linspace(1.0, 0.97, n), np.ones(n))
+
+    auto = load_config()
+    assert resolve_partition(auto, [seg(25.0), seg(26.0)]).partition == ["soc"]
+    assert resolve_partition(auto, [seg(25.0), seg(10.0)]).partition == ["soc", "temperature"]
+    given = load_config(partition=["soc", "current"])
+    assert resolve_partition(given, [seg(25.0), seg(10.0)]).partition == ["soc", "current"]
+
+
 @pytest.mark.parametrize("kw, message", [
     ({"partition": ["soc", "pressure"]}, "'partition'"),
     ({"filters": [[100.0, 5.0]]}, "'filters'"),
@@ -206,6 +224,8 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
     ({"soc_reference_sigma": -0.01}, "'soc_reference_sigma'"),
     ({"model_error_sigma_v": 0.0}, "'model_error_sigma_v'"),
     ({"no_such_setting": 1}, "unknown setting"),
+    ({"partition": "soc"}, "'partition'"),
+    ({"partition": ["soc", "pressure"]}, "'partition'"),
 ])
 def test_bad_configuration(kw, message) -> None:
     with pytest.raises(ConfigError, match=message):

@@ -37,7 +37,11 @@ class TrainConfig:
     weights stay 0): the terms carry the temperature dependence.
     output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
-    partition: partition-space variables (soc, current, filtered_current, temperature).
+    partition: partition-space variables (soc, current, filtered_current, temperature), or
+    "auto": soc, plus temperature where the training records lie at two or more distinct
+    temperatures (see lmncell.identification.prefit.temperature_levels): local models per
+    temperature region instead of one set shared by them (Panasonic, 25 and 10 °C drive cycles,
+    leave-one-record-out: 13.9/35.5 → 11.9/23.6 mV in 20–80 % / whole record).
     pre_partition: "none" or "current_sign" (separate charge and discharge trees).
     oblique: optimise all split weights (True) or only the split's own axis (False).
     max_local_models: upper bound on M; stop: "validation" (free-run error) or "aicc".
@@ -72,7 +76,7 @@ class TrainConfig:
     ocv_input: bool = False
     temperature_terms: str | int = "auto"
     soc_input: bool = False
-    partition: list[str] = field(default_factory=lambda: ["soc"])
+    partition: str | list[str] = "auto"
     pre_partition: str = "none"
     oblique: bool = True
     max_local_models: int = 8
@@ -120,9 +124,14 @@ class TrainConfig:
                       f"expected 'auto' or a degree 0…{MAX_TEMPERATURE_TERMS}")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")
-        unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]
-        if unknown or not self.partition or len(set(self.partition)) != len(self.partition):
-            raise bad("partition", f"expected distinct names from {PARTITION_VARIABLES}")
+        if self.partition != "auto":
+            if isinstance(self.partition, str):
+                raise bad("partition", f"expected 'auto' or a list of distinct names from "
+                          f"{PARTITION_VARIABLES}")
+            unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]
+            if unknown or not self.partition or len(set(self.partition)) != len(self.partition):
+                raise bad("partition", f"expected 'auto' or distinct names from "
+                          f"{PARTITION_VARIABLES}")
         if self.pre_partition not in ("none", "current_sign"):
             raise bad("pre_partition", "expected 'none' or 'current_sign'")
         if self.max_local_models < 1 or self.max_local_models > 64:

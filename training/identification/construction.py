@@ -18,6 +18,7 @@ Nothing is random: the same data and settings give the same model.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -104,10 +105,24 @@ def partition_normalisation(base: LmnModel, segs: list[Segment]
     return center, scale, [ex.soc for ex in series]
 
 
+def resolve_partition(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
+                      ) -> TrainConfig:
+    """The settings with partition "auto" replaced: soc, plus temperature where the segments
+    lie at two or more distinct temperatures (temperature_levels)."""
+    if cfg.partition != "auto":
+        return cfg
+    levels = temperature_levels(segs)
+    partition = ["soc", "temperature"] if len(levels) >= 2 else ["soc"]
+    progress(f"  partition (auto): {', '.join(partition)} (training temperatures "
+             + (", ".join(f"{t:.0f}" for t in levels) or "none") + " °C)")
+    return dataclasses.replace(cfg, partition=partition)
+
+
 def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
               progress: Progress = _quiet) -> TrainResult:
     """Identify an LMN from model-rate segments (see the module docstring)."""
     t_start = time.perf_counter()
+    cfg = resolve_partition(cfg, segs, progress)
     d = len(cfg.partition)
     n_temp = temperature_degree(cfg, segs)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,

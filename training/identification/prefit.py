@@ -81,16 +81,17 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
                        cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed, r_knots)
 
-    # E and γ are chosen where the linear pre-fit can follow the cell, with the inverse-variance
-    # SoC weights the network will use: unweighted, the voltage collapse before the cut-off,
-    # while the cell is warmest, chose E (Panasonic 25 °C, US06 left out: E off, held-out
-    # RMSE 13.9 mV in 20–80 % and 31.0 mV whole; with the weights E = 2000 K, 10.2 and 22.2 mV)
+    # E is chosen where the linear pre-fit can follow the cell, with the inverse-variance SoC
+    # weights the network will use: unweighted, the voltage collapse before the cut-off, while
+    # the cell is warmest, chose E (Panasonic 25 °C, US06 left out: E off, held-out RMSE
+    # 13.9 mV in 20–80 % and 31.0 mV whole; with the weights E = 2000 K, 10.2 and 22.2 mV).
+    # γ keeps the fit weights: the hysteresis of LFP shows most where the OCV is steep
     knots = np.linspace(0, 1, cfg.ocv_knots)
     factors = soc_reference_factors(
         socs, knots, fixed if fixed is not None else prefit(None, None).ocv_v, cfg)
     select = [w * f for w, f in zip(fit_weights, factors, strict=True)]
     e_k = _choose_arrhenius(cfg, segs, lambda *a: prefit(*a, weights=select), progress)
-    gamma = _choose_hysteresis(cfg, e_k, lambda *a: prefit(*a, weights=select), progress)
+    gamma = _choose_hysteresis(cfg, e_k, prefit, progress)
     return gamma, e_k, prefit(gamma, e_k, weights=ocv_weights)
 
 
