@@ -277,15 +277,24 @@ def simulate(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray |
 
 class _OneSample:
     """LmnModel.blend and ocv for one sample in plain Python (the FMU's per-step cost): the
-    same validities and blend as the batch path, up to the order of floating-point sums, and
-    the OCV bit for bit as np.interp. Built for a model that does not change afterwards (a
+    same validities and blend as the batch path up to floating-point rounding (the partition
+    normalisation is folded into each node's weights, sums run in another order), and the OCV
+    bit for bit as np.interp. Built for a model that does not change afterwards (a
     stepper's)."""
 
     def __init__(self, model: LmnModel) -> None:
-        self.center = model.partition_center.tolist()
-        self.scale = model.partition_scale.tolist()
-        self.weights = [(float(w[0]), w[1:].tolist()) for w in model.node_weights]
-        self.paths = [list(p) for p in model.leaf_paths]
+        center = model.partition_center.tolist()
+        scale = model.partition_scale.tolist()
+        # act = w0 + Σ w_k·(z_k − c_k)/s_k = (w0 − Σ w_k·c_k/s_k) + Σ (w_k/s_k)·z_k
+        self.weights = []
+        for w in model.node_weights.tolist():
+            wz = [wk / sk for wk, sk in zip(w[1:], scale, strict=True)]
+            self.weights.append((w[0] - sum(a * c for a, c in zip(wz, center, strict=True)),
+                                 wz))
+        n_nodes = len(self.weights)
+        # a leaf's validity: the product of q[i] over its path, q = [φ_0…φ_n−1, 1−φ_0…1−φ_n−1]
+        self.path_index = [[node + side * n_nodes for node, side in p]
+                           for p in model.leaf_paths]
         self.gates = [GATE_CODES[g] for g in model.leaf_gates]
         self.gated = model.gating_mode == "current_sign"
         na = model.output_lags
@@ -308,26 +317,20 @@ class _OneSample:
 
     def blend(self, x: np.ndarray, z: list[float], direction: int
               ) -> tuple[list[float], float, np.ndarray]:
-        """(blended lag coefficients, exogenous part, validities) of one sample."""
-        zn = [(v - c) / s for v, c, s in zip(z, self.center, self.scale, strict=True)]
+        """(blended lag coefficients, exogenous part, validities) of one sample; z are the raw
+        partition inputs."""
         phi = []
         for w0, w in self.weights:
             act = w0
-            for zk, wk in zip(zn, w, strict=True):
+            for zk, wk in zip(z, w, strict=True):
                 act += zk * wk
             phi.append(1.0 / (1.0 + (math.exp(-act) if act > -709.0 else math.inf)))
-        validity = []
-        for path, gate in zip(self.paths, self.gates, strict=True):
-            v = 1.0
-            for node, side in path:
-                v *= phi[node] if side == 0 else 1.0 - phi[node]
-            if self.gated and gate and gate != direction:
-                v = 0.0
-            validity.append(v)
-        parts = (self.theta_exo @ x).tolist()
-        b = 0.0
-        for v, p in zip(validity, parts, strict=True):
-            b += v * p
+        q = phi + [1.0 - p for p in phi]
+        validity = [math.prod([q[i] for i in idx]) for idx in self.path_index]
+        if self.gated:
+            validity = [0.0 if gate and gate != direction else v
+                        for v, gate in zip(validity, self.gates, strict=True)]
+        b = sum(v * p for v, p in zip(validity, (self.theta_exo @ x).tolist(), strict=True))
         a = [0.0] * self.na
         for v, row in zip(validity, self.theta_lags, strict=True):
             for l in range(self.na):
