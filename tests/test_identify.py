@@ -257,54 +257,53 @@ def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
     assert np.all((m.ocv_v[mid] > 3.2) & (m.ocv_v[mid] < 3.4))     # LFP plateau
 
 
-def test_arrhenius_energy_is_found_where_resistance_also_rises_towards_empty() -> None:
-    """A synthetic cell with R(SoC, T) = R(SoC)·exp(E(1/T − 1/T_ref)), E = 3000 K, that warms up
-    while it empties (so a SoC trend and a temperature trend overlap): the chosen E is 3000 K."""
+def _warming_cell(knee: bool) -> tuple[list, float]:
+    """Segments at 15/25/35 °C of a synthetic cell with R(SoC, T) = R(SoC)·exp(E(1/T − 1/T_ref)),
+    E = 3000 K, that warms up while it empties (so a SoC trend and a temperature trend overlap),
+    and its capacity (Ah). knee: discharged to SoC 0.02 through a steep OCV knee where its
+    voltage collapses beyond what a linear model follows while it heats up fastest."""
     from lmncell.data.dataset import Segment
-    from lmncell.identification.construction import train_lmn
     from lmncell.identification.ocvfit import lowpass
 
     rng = np.random.default_rng(7)
     cap, ts, n = 2.0, 1.0, 8000
     segs = []
     for k, t_amb in enumerate((15.0, 25.0, 35.0)):
-        levels = rng.choice([-3.0, -1.5, -0.5, 0.0, 1.5], size=n // 20)
+        levels = rng.choice([-3.0, -1.5, -0.5, 0.0, 1.0 if knee else 1.5], size=n // 20)
         i = np.repeat(levels, 20)
+        if knee:
+            i *= 0.98 * cap * 3600.0 / -np.sum(i * ts)          # from full to SoC 0.02
         soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
-        temp = t_amb + 8.0 * (1.0 - soc) + 2.0 * np.sin(np.arange(n) / 900.0)
+        temp = t_amb + 8.0 * (1.0 - soc) + (15.0 * np.exp(-soc / 0.05) if knee else
+                                            2.0 * np.sin(np.arange(n) / 900.0))
         g = np.exp(3000.0 * (1 / (temp + 273.15) - 1 / 298.15))
-        r0 = 0.02 + 0.04 * (1.0 - soc) ** 2
-        u = 3.3 + 0.8 * soc + g * (r0 * i + 0.01 * lowpass(i, 60.0, ts))
+        if knee:
+            ocv = 3.3 + 0.8 * soc - 0.6 * np.exp(-soc / 0.03)
+            u = ocv + g * (0.03 * i + 0.01 * lowpass(i, 60.0, ts)) - \
+                0.1 * np.exp(-soc / 0.03) * np.minimum(i, 0.0) ** 2
+        else:
+            r0 = 0.02 + 0.04 * (1.0 - soc) ** 2
+            u = 3.3 + 0.8 * soc + g * (r0 * i + 0.01 * lowpass(i, 60.0, ts))
         segs.append(Segment(f"synthetic{k}", np.arange(1, n + 1) * ts, i, u, temp, 1.0, soc,
                             np.ones(n)))
+    return segs, cap
+
+
+def test_arrhenius_energy_is_found_where_resistance_also_rises_towards_empty() -> None:
+    """The warming cell of _warming_cell: the chosen E is 3000 K."""
+    from lmncell.identification.construction import train_lmn
+
+    segs, cap = _warming_cell(knee=False)
     cfg = load_config(max_local_models=1, oe_refinement=False, hysteresis="off")
     assert train_lmn(segs, cfg, cap).info["arrhenius_k"] == 3000.0
 
 
 def test_arrhenius_energy_is_not_chosen_by_the_voltage_collapse_before_empty() -> None:
-    """The cell of the test above with E = 3000 K, discharged to SoC 0.02 through a steep OCV
-    knee where its voltage collapses beyond what a linear model follows while the cell heats up
-    fastest: E is chosen with the SoC-reference weights (the knee's samples count little) and
-    is still 3000 K."""
-    from lmncell.data.dataset import Segment
+    """The warming cell discharged through a knee: E is chosen with the SoC-reference weights
+    (the knee's samples count little) and is still 3000 K (unweighted it was not)."""
     from lmncell.identification.construction import train_lmn
-    from lmncell.identification.ocvfit import lowpass
 
-    rng = np.random.default_rng(7)
-    cap, ts, n = 2.0, 1.0, 8000
-    segs = []
-    for k, t_amb in enumerate((15.0, 25.0, 35.0)):
-        levels = rng.choice([-3.0, -1.5, -0.5, 0.0, 1.0], size=n // 20)
-        i = np.repeat(levels, 20)
-        i *= 0.98 * cap * 3600.0 / -np.sum(i * ts)          # from full to SoC 0.02
-        soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
-        temp = t_amb + 8.0 * (1.0 - soc) + 15.0 * np.exp(-soc / 0.05)
-        g = np.exp(3000.0 * (1 / (temp + 273.15) - 1 / 298.15))
-        ocv = 3.3 + 0.8 * soc - 0.6 * np.exp(-soc / 0.03)
-        knee = 0.1 * np.exp(-soc / 0.03) * np.minimum(i, 0.0) ** 2
-        u = ocv + g * (0.03 * i + 0.01 * lowpass(i, 60.0, ts)) - knee
-        segs.append(Segment(f"synthetic{k}", np.arange(1, n + 1) * ts, i, u, temp, 1.0, soc,
-                            np.ones(n)))
+    segs, cap = _warming_cell(knee=True)
     cfg = load_config(max_local_models=1, oe_refinement=False, hysteresis="off")
     assert train_lmn(segs, cfg, cap).info["arrhenius_k"] == 3000.0
 
