@@ -64,6 +64,8 @@ def compile_wrapper(guid: str, out: Path) -> None:
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
         raise WrapperBuildError(f"{' '.join(cmd)} failed:\n{res.stderr[-2000:]}")
+
+
 UNITS = {"current": "A", "voltage_measured": "V", "temperature": "degC", "voltage": "V",
          "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1", "cell_temperature": "degC"}
 UNIT_BASE = {"A": {"A": "1"}, "V": {"kg": "1", "m": "2", "s": "-3", "A": "-1"},

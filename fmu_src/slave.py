@@ -174,8 +174,8 @@ class LmnCellSlave(Fmi2Slave):
         return out
 
     def _set(self, vrs: list[int], values: list, kind: type, call: str) -> None:
-        pairs = list(zip(vrs, values, strict=False))
-        problems = [(vr, value, self._problem(vr, kind, setting=True)) for vr, value in pairs]
+        problems = [(vr, value, self._problem(vr, kind, setting=True))
+                    for vr, value in zip(vrs, values, strict=False)]
         bad = [f"{problem}; {value!r} was not set" for _, value, problem in problems if problem]
         if bad and self._errors_as_status:
             self._error(f"{call}: " + "; ".join(bad) + " (nothing of this call was set)")

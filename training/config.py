@@ -41,7 +41,8 @@ class TrainConfig:
     "auto": soc, plus temperature where the training records lie at two or more distinct
     temperatures (see lmncell.identification.prefit.temperature_levels): local models per
     temperature region instead of one set shared by them (Panasonic, 25 and 10 °C drive cycles,
-    leave-one-record-out: 13.9/35.5 → 11.9/23.6 mV in 20–80 % / whole record).
+    leave-one-record-out, 20–80 % / whole record: partition soc, current 13.9/35.5 mV; soc,
+    temperature 11.9/23.6 mV).
     pre_partition: "none" or "current_sign" (separate charge and discharge trees).
     oblique: optimise all split weights (True) or only the split's own axis (False).
     max_local_models: upper bound on M; stop: "validation" (free-run error) or "aicc".
