@@ -318,7 +318,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "model's)")
     s.add_argument("--voltage-max", type=float, default=None, help="V (default: 3.6 or the "
                    "model's)")
-    s.add_argument("--hold", type=_positive, default=10.0, help="minimum hold time, s")
+    s.add_argument("--hold", type=_positive, default=10.0,
+                   help="the cycler's minimum hold time, s (levels are held for a multiple of "
+                   "it: 3 τ of the design model's slowest RC, at most a tenth of a sequence)")
     s.add_argument("--sample-time", type=_positive, default=1.0, help="s")
     s.add_argument("--sequence", type=_positive, default=300.0, help="sequence length, s")
     s.add_argument("--duration", type=_positive, default=7200.0, help="total, s")

@@ -240,8 +240,9 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     vals = {p.key: segment(p.description, p.current_a, p.soc0) for p in profiles}
     progress("  validation profiles run on the virtual cell: "
              + "; ".join(p.description for p in profiles))
+    same_hold = dataclasses.replace(cyc, hold_s=designed.settings["cycler"]["hold_s"])
     programmes = [("designed", designed.current_a)] + [
-        (f"{kind}_seed_{s}", random_programme(cell, cyc, spec, s, kind).current_a)
+        (f"{kind}_seed_{s}", random_programme(cell, same_hold, spec, s, kind).current_a)
         for kind in kinds for s in seeds]
     cfg = load_config(partition=["soc", "current"], validation="none", stop="aicc",
                       max_local_models=8, ocv_tests=[str(ocv_path)])
