@@ -48,6 +48,9 @@ def compile_wrapper(guid: str, out: Path) -> None:
     (g++ or c++, C++17, Python's stable ABI from 3.8 on, the FMI 2.0 headers from fmpy)."""
     from lmncell.fmu.native_build import NativeBuildError, fmi_headers
 
+    if not (sys.platform.startswith("linux") and sys.maxsize > 2**32):
+        raise WrapperBuildError(f"the patched wrapper is built for linux64 only (this is "
+                                f"{sys.platform})")
     cxx = shutil.which("g++") or shutil.which("c++")
     if cxx is None:
         raise WrapperBuildError("no C++ compiler (g++ or c++) found")

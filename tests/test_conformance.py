@@ -78,6 +78,16 @@ def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(quick_model, tm
     assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
 
 
+def test_the_patched_wrapper_is_only_built_for_linux64(monkeypatch, tmp_path) -> None:
+    """On another platform no linux64 binary is compiled there (it would replace pythonfmu's
+    with a binary of the wrong format)."""
+    from lmncell.fmu import pythonfmu_build as pb
+
+    monkeypatch.setattr(pb.sys, "platform", "darwin")
+    with pytest.raises(pb.WrapperBuildError, match="linux64 only"):
+        pb.compile_wrapper("{guid}", tmp_path / "w.so")
+
+
 def test_state_machine(fmu) -> None:
     res = _run(fmu, "state_machine")
     assert res["first_step"] == 0 and res["right_point"] == 0
