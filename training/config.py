@@ -125,14 +125,11 @@ class TrainConfig:
                       f"expected 'auto' or a degree 0…{MAX_TEMPERATURE_TERMS}")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")
-        if self.partition != "auto":
-            if isinstance(self.partition, str):
-                raise bad("partition", f"expected 'auto' or a list of distinct names from "
-                          f"{PARTITION_VARIABLES}")
-            unknown = [p for p in self.partition if p not in PARTITION_VARIABLES]
-            if unknown or not self.partition or len(set(self.partition)) != len(self.partition):
-                raise bad("partition", f"expected 'auto' or distinct names from "
-                          f"{PARTITION_VARIABLES}")
+        part = self.partition
+        if part != "auto" and (isinstance(part, str) or not part or len(set(part)) != len(part)
+                               or any(p not in PARTITION_VARIABLES for p in part)):
+            raise bad("partition", f"expected 'auto' or a list of distinct names from "
+                      f"{PARTITION_VARIABLES}")
         if self.pre_partition not in ("none", "current_sign"):
             raise bad("pre_partition", "expected 'none' or 'current_sign'")
         if self.max_local_models < 1 or self.max_local_models > 64:

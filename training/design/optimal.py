@@ -81,12 +81,17 @@ SETTLING_TAUS = 3.0      # a first-order response settles to 95 % in 3 τ
 MIN_LEVELS_PER_SEQUENCE = 10
 
 
+def slowest_time_constant(cell: CellSpec) -> float:
+    """The longest time constant (s) of the design model's RC elements (0 without any)."""
+    return max((t for _, t in cell.rc), default=0.0)
+
+
 def settling_hold(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec) -> float:
     """The hold time (s) of the programme's levels: SETTLING_TAUS × the design model's longest
     time constant, rounded to a multiple of the cycler's minimum hold (at least one), and no
     longer than allows MIN_LEVELS_PER_SEQUENCE levels in a sequence (the built-in cell, whose
     slow RC has 159 s, won two of three profiles with 30 s and one with 50 s holds)."""
-    tau = max((t for _, t in cell.rc), default=0.0)
+    tau = slowest_time_constant(cell)
     longest = max(cyc.hold_s, cyc.hold_s * np.floor(spec.sequence_s / MIN_LEVELS_PER_SEQUENCE
                                                     / cyc.hold_s))
     return float(min(max(cyc.hold_s, cyc.hold_s * round(SETTLING_TAUS * tau / cyc.hold_s)),
@@ -401,7 +406,8 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     i_max = current_limit(cell, cyc)
     cyc = dataclasses.replace(cyc, hold_s=settling_hold(cell, cyc, spec))
     progress(f"  hold time {cyc.hold_s:g} s ({SETTLING_TAUS:g} × the design model's longest "
-             f"time constant, {max((t for _, t in cell.rc), default=0.0):.1f} s)")
+             f"time constant, {slowest_time_constant(cell):.1f} s, at most "
+             f"{spec.sequence_s / MIN_LEVELS_PER_SEQUENCE:g} s)")
     steps, counts = allocate(spec.soc_profile, n_seq)
     soc, v = spec.soc_profile[0], np.zeros(len(cell.rc))
     parts, starts, lds, t0 = [], [], [], 0

@@ -86,11 +86,17 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     # the cell is warmest, chose E (Panasonic 25 °C, US06 left out: E off, held-out RMSE
     # 13.9 mV in 20–80 % and 31.0 mV whole; with the weights E = 2000 K, 10.2 and 22.2 mV).
     # γ keeps the fit weights: the hysteresis of LFP shows most where the OCV is steep
-    knots = np.linspace(0, 1, cfg.ocv_knots)
-    factors = soc_reference_factors(
-        socs, knots, fixed if fixed is not None else prefit(None, None).ocv_v, cfg)
-    select = [w * f for w, f in zip(fit_weights, factors, strict=True)]
-    e_k = _choose_arrhenius(cfg, segs, lambda *a: prefit(*a, weights=select), progress)
+    select: list[list[np.ndarray]] = []       # computed on the first call: only 'auto' needs it
+
+    def prefit_selection(gamma: float | None, e_k: float | None, r_knots: int = 1) -> OcvFit:
+        if not select:
+            knots = np.linspace(0, 1, cfg.ocv_knots)
+            table = fixed if fixed is not None else prefit(None, None).ocv_v
+            select.append([w * f for w, f in zip(
+                fit_weights, soc_reference_factors(socs, knots, table, cfg), strict=True)])
+        return prefit(gamma, e_k, r_knots, weights=select[0])
+
+    e_k = _choose_arrhenius(cfg, segs, prefit_selection, progress)
     gamma = _choose_hysteresis(cfg, e_k, prefit, progress)
     return gamma, e_k, prefit(gamma, e_k, weights=ocv_weights)
 
