@@ -26,6 +26,7 @@ from lmncell.runtime.observers import (
     FD_HYSTERESIS,
     FD_SOC,
     HYSTERESIS_PRIOR_VAR,
+    SPREAD_MAX,
     ObserverSettings,
     local_ocv_slopes,
 )
@@ -114,7 +115,8 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define HYST_PRIOR_UNKNOWN {HYSTERESIS_PRIOR_VAR[0]!r}",
         f"#define HYST_PRIOR_ASSUMED {HYSTERESIS_PRIOR_VAR[1]!r}",
         f"#define FD_SOC {FD_SOC!r}", f"#define FD_CURRENT_A {FD_CURRENT_A!r}",
-        f"#define FD_HYSTERESIS {FD_HYSTERESIS!r}",
+        f"#define FD_HYSTERESIS {FD_HYSTERESIS!r}", f"#define SPREAD_MAX {SPREAD_MAX!r}",
+        f"#define MODEL_ERROR_V {float(settings.model_error_v)!r}",
         f"#define VOLTAGE_SIGMA_V {float(settings.voltage_sigma_v)!r}",
         f"#define EKF_ERROR_SCALE {EKF_ERROR_SCALE!r}",
         f"#define SOC0_SIGMA {settings.soc0_sigma!r}", f"#define IMM_STAY {settings.imm_stay!r}",

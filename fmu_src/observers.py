@@ -32,6 +32,12 @@ capacity error of about 1.5 % at 1/3 C) and SOC_ONLY_DRIFT_PER_SQRT_H for the fu
 the IMM, whose SoC also absorbs the error of the hysteresis and filter states they do not
 estimate. In the EKF the current-sensor error drives SoC and the low-pass states together
 (Q = σ_i²·g·gᵀ, g = [Ts·η/(3600·Cn), 1 − a_k, 0]) and h walks by σ_h per √hour.
+Consistency of ±3σ: the EKF's SoC column of H is the secant over ±σ_SoC (at most SPREAD_MAX) and
+the curvature over that range is added to r (statistical linearisation); the fuzzy observer's
+variance is propagated exactly for its fixed blended gain, (1 − K·c)²·P + K²·r, from σ_SoC0; and
+every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor, σ_m the
+model's free-run training RMSE), because the model's error is correlated, not white; that floor
+widens the reported band only and does not change the gains.
 A measurement that is NaN, ≤ 0 (not measured) or more than GATE_V away from the model's voltage
 range is skipped and counted. SoC is kept within [0, 1] (the estimate is projected onto the
 interval after each update), h within [−1, 1].
@@ -54,6 +60,7 @@ EKF_ERROR_SCALE = 4.0
 FD_SOC = 1e-4
 FD_CURRENT_A = 1e-3
 FD_HYSTERESIS = 1e-4
+SPREAD_MAX = 0.2      # largest SoC half-width of the EKF's secant (statistical linearisation)
 EKF_DRIFT_PER_SQRT_H = 0.005
 SOC_ONLY_DRIFT_PER_SQRT_H = 0.05
 HYSTERESIS_PRIOR_VAR = (1.0 / 3.0, 0.05)   # h0 unknown (0): uniform on [−1, 1]; h0 = ±1 assumed
@@ -66,7 +73,9 @@ class ObserverSettings:
     voltage_sigma_v: measurement and model error (V); soc0_sigma: standard deviation of the
     initial SoC guess; imm_stay: IMM mode persistence; hysteresis_drift_per_sqrt_h: random walk
     of the EKF's hysteresis state (per √hour); history_current_sigma_a: spread of the unknown
-    steady current before the start (A), 0 for a start at rest."""
+    steady current before the start (A), 0 for a start at rest; model_error_v: the model's
+    persistent voltage error σ_m (V; its free-run training RMSE by default), which sets the
+    floor of the SoC variance (soc_variance_floor)."""
 
     current_sigma_a: float = 0.05
     soc_drift_per_sqrt_h: float | None = None
@@ -75,6 +84,7 @@ class ObserverSettings:
     imm_stay: float = 0.95
     hysteresis_drift_per_sqrt_h: float = 0.06
     history_current_sigma_a: float = 0.0
+    model_error_v: float = 0.0
 
     def drift(self, kind: str) -> float:
         """The SoC random walk (per √hour) of an observer kind."""
@@ -91,6 +101,7 @@ class ObserverSettings:
         s = cls()
         rmse = float(model.noise.get("residual_std_v", 0.01))
         s.voltage_sigma_v = max(MODEL_ERROR_FACTOR * rmse, 0.002)
+        s.model_error_v = rmse
         if not at_rest:
             s.history_current_sigma_a = float(model.noise.get("recent_current_rms_a", 0.0))
         return s
@@ -109,6 +120,7 @@ class ObserverState:
     mode_soc: list[float] = field(default_factory=list)
     mode_var: list[float] = field(default_factory=list)
     mode_prob: list[float] = field(default_factory=list)
+    var_floor: float = 0.0        # the reported variance's floor (soc_variance_floor), SoC²
 
     def covariance(self) -> np.ndarray:
         """The EKF's covariance P of ξ as a square matrix."""
@@ -141,6 +153,7 @@ class SocObserver:
         self.state = ObserverState(soc0_est, var0, 0, cov.ravel().tolist(), [soc0_est] * m,
                                    [var0] * m, [1.0 / m] * m)
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
+        self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
 
     # ----- measurement model ---------------------------------------------------------------
@@ -188,23 +201,35 @@ class SocObserver:
         u, _, loc = self._outputs_for(np.array([[hi], [lo]]))
         return (u[0] - u[1]) / (hi - lo), (loc[0] - loc[1]) / (hi - lo)
 
-    def _jacobian(self, xi: np.ndarray) -> tuple[float, np.ndarray]:
-        """u(ξ) and H = ∂u/∂ξ by central differences (SoC kept within [0, 1])."""
+    def _jacobian(self, xi: np.ndarray, soc_spread: float = FD_SOC
+                  ) -> tuple[float, np.ndarray, float, float]:
+        """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
+        δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (difference FD_SOC).
+        The SoC difference d of H is soc_spread (at least FD_SOC): with d = σ_SoC the SoC
+        column is the secant over ±σ, a statistical linearisation that does not take the OCV
+        slope at a wrong estimate for the slope over the whole uncertainty (an EKF started on
+        the steep part of an LFP curve otherwise trusts it and collapses its variance before it
+        reaches the plateau), and δ² is added to the measurement variance as the linearisation
+        error. The tangent sets the variance floor (it does not depend on the variance)."""
         n = xi.size
         steps = np.full(n, FD_CURRENT_A)
-        steps[0] = FD_SOC
+        steps[0] = max(FD_SOC, soc_spread)
         if self.model.hysteresis_gamma is not None:
             steps[-1] = FD_HYSTERESIS
-        rows = np.tile(xi, (2 * n + 1, 1))
+        rows = np.tile(xi, (2 * n + 3, 1))
         rows[:, 0] = min(max(float(xi[0]), 0.0), 1.0)   # differences around the clipped SoC:
         for k in range(n):                                # beyond 0 or 1 both sides would clip
             rows[1 + 2 * k, k] += steps[k]
             rows[2 + 2 * k, k] -= steps[k]
+        rows[-2, 0] += FD_SOC
+        rows[-1, 0] -= FD_SOC
         rows[:, 0] = np.clip(rows[:, 0], 0.0, 1.0)
         u = self._outputs_for(rows)[0]
         diag = np.arange(n)
-        width = rows[1::2][diag, diag] - rows[2::2][diag, diag]
-        return float(u[0]), (u[1::2] - u[2::2]) / width
+        width = rows[1:2 * n + 1:2][diag, diag] - rows[2:2 * n + 2:2][diag, diag]
+        curvature = 0.5 * (float(u[1]) + float(u[2])) - float(u[0])
+        tangent = float(u[-2] - u[-1]) / float(rows[-2, 0] - rows[-1, 0])
+        return float(u[0]), (u[1:2 * n + 1:2] - u[2:2 * n + 2:2]) / width, curvature, tangent
 
     # ----- one step ------------------------------------------------------------------------
     def step(self, current_a: float, voltage_measured_v: float,
@@ -232,9 +257,11 @@ class SocObserver:
             soc = self._ekf_update(voltage_measured_v)
         elif self.kind == "fuzzy":
             u, phi, _ = self._outputs_at(soc)
-            gains, variances = self.fuzzy_gains
-            soc += float(phi @ gains) * (voltage_measured_v - u)
-            s.var = float(phi @ variances)
+            gain = float(phi @ self.fuzzy_gains[0])
+            soc += gain * (voltage_measured_v - u)
+            slope = float(phi @ self.fuzzy_slopes)
+            s.var = fixed_gain_variance(s.var, gain, slope, self.r)
+            s.var_floor = soc_variance_floor(self.settings.model_error_v, slope)
         else:
             soc = self._imm_update(voltage_measured_v)
         s.soc = _clip01(soc)
@@ -267,13 +294,16 @@ class SocObserver:
         xi = self._state_vector()
         n = xi.size
         p = s.covariance()
-        u, h = self._jacobian(xi)
+        u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(p[0, 0], 0.0)),
+                                                          SPREAD_MAX))
+        r = self.r + curvature * curvature
         ph = p @ h
-        k = ph / (float(h @ ph) + self.r)
+        k = ph / (float(h @ ph) + r)
         xi = xi + k * (v_meas - u)
         ikh = np.eye(n) - np.outer(k, h)
-        p = ikh @ p @ ikh.T + self.r * np.outer(k, k)
+        p = ikh @ p @ ikh.T + r * np.outer(k, k)
         p = 0.5 * (p + p.T)
+        s.var_floor = soc_variance_floor(self.settings.model_error_v, tangent)
         s.cov = p.ravel().tolist()
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
@@ -284,7 +314,9 @@ class SocObserver:
 
     @property
     def soc_std(self) -> float:
-        return math.sqrt(max(self.state.var, 0.0))
+        """The reported SoC standard deviation: the filter's own, but at least the floor of
+        soc_variance_floor (which does not feed back into the gains)."""
+        return math.sqrt(max(self.state.var, self.state.var_floor, 0.0))
 
     def _imm_predict(self, dsoc: float) -> None:
         s, m = self.state, self.model.n_local_models
@@ -307,6 +339,7 @@ class SocObserver:
         xs = np.asarray(s.mode_soc)
         ps = np.asarray(s.mode_var)
         lik = np.empty(xs.size)
+        slopes = np.empty(xs.size)
         for j in range(xs.size):
             u_j = self._outputs_at(_clip01(xs[j]))[2][j]
             h_j = self._slopes(_clip01(xs[j]))[1][j]
@@ -315,12 +348,14 @@ class SocObserver:
             innov = v_meas - u_j
             xs[j] = _clip01(xs[j] + k * innov)
             ps[j] = max((1.0 - k * h_j) * ps[j], 1e-12)
+            slopes[j] = h_j
             lik[j] = math.exp(-0.5 * innov * innov / sj) / math.sqrt(2 * math.pi * sj)
         mu = np.asarray(s.mode_prob) * lik
         mu = mu / mu.sum() if mu.sum() > 0 else np.full(xs.size, 1.0 / xs.size)
         s.mode_soc, s.mode_var, s.mode_prob = xs.tolist(), ps.tolist(), mu.tolist()
         x = float(mu @ xs)
         s.var = float(mu @ (ps + (xs - x) ** 2))
+        s.var_floor = soc_variance_floor(self.settings.model_error_v, float(mu @ slopes))
         return x
 
     # ----- state ---------------------------------------------------------------------------
@@ -328,14 +363,15 @@ class SocObserver:
         s = self.state
         return {"stepper": self.stepper.get_state(), "soc": s.soc, "var": s.var,
                 "skipped": s.skipped, "cov": list(s.cov), "mode_soc": list(s.mode_soc),
-                "mode_var": list(s.mode_var), "mode_prob": list(s.mode_prob)}
+                "mode_var": list(s.mode_var), "mode_prob": list(s.mode_prob),
+                "var_floor": s.var_floor}
 
     def set_state(self, d: dict) -> None:
         self.stepper.set_state(list(d["stepper"]))
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
                                    [float(v) for v in d["cov"]], list(d["mode_soc"]),
                                    list(d["mode_var"]),
-                                   list(d["mode_prob"]))
+                                   list(d["mode_prob"]), float(d["var_floor"]))
 
 
 def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.ndarray]:
@@ -351,6 +387,29 @@ def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.nda
         return np.asarray(stored["gains"], dtype=float), np.asarray(stored["variances"],
                                                                      dtype=float)
     return design_fuzzy_gains(local_ocv_slopes(model), q, r)
+
+
+def soc_variance_floor(model_error_v: float, slope_v: float) -> float:
+    """The smallest SoC variance an observer reports: (σ_m/|∂u/∂SoC|)², the SoC error that the
+    model's persistent voltage error σ_m causes at the local slope (V per unit SoC). The
+    model's error on a record is correlated over minutes, not white as the filters assume, so
+    that where the OCV is steep (near empty) their variance would otherwise fall far below
+    the error they actually make (A123: ±3σ of 0.4 % around a 1.3 % error). A "consider"
+    term: it widens the reported band only; the gains keep the filter's own variance (as a
+    floor inside the filter it made the EKF chase the model's error: Panasonic 25 °C
+    leave-one-out EKF RMSE 0.22 → 0.66 %). Capped at 1."""
+    if model_error_v <= 0.0:
+        return 0.0
+    return min((model_error_v / max(abs(slope_v), 1e-6)) ** 2, 1.0)
+
+
+def fixed_gain_variance(var: float, gain: float, slope: float, r: float) -> float:
+    """Variance after a correction with a given (not necessarily optimal) gain K of the scalar
+    measurement y = c·SoC + v: (1 − K·c)²·P + K²·r (c guarded as in design_fuzzy_gains). From
+    the start variance it falls as fast as the gains correct, so that ±3σ stays honest while
+    the estimate converges; at the design point it settles at the local steady-state variance."""
+    c = slope if abs(slope) > 1e-6 else 1e-6
+    return (1.0 - gain * c) ** 2 * var + gain * gain * r
 
 
 def design_fuzzy_gains(slopes: np.ndarray, q: float, r: float) -> tuple[np.ndarray, np.ndarray]:

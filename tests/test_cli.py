@@ -63,3 +63,20 @@ def test_missing_soc0_is_explained(tmp_path, capsys) -> None:
     assert main(["train", str(rec), "--out", str(tmp_path / "m.json"),
                  "--capacity", "2.0"]) == 2
     assert "give --soc0" in capsys.readouterr().err
+
+
+def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, tmp_path,
+                                                                  capsys) -> None:
+    assert main(["explain", str(quick_model)]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert "RC ladder" in lines[0] and "R@800s" in lines[2] and "R ≥ 0" in lines[2]
+    rows = lines[3:]
+    assert len(rows) == json.loads(quick_model.read_text())["local_models"]["theta"].__len__()
+    assert all(r.split()[-1] == "yes" for r in rows)
+    assert main(["explain", str(quick_model), "--temperature", "10", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert all(r["temperature_c"] == 10.0 and r["rc_positive"] for r in doc)
+    (tmp_path / "bad.json").write_text("{}")
+    assert main(["explain", str(tmp_path / "bad.json")]) == 2
+    assert "bad.json" in capsys.readouterr().err

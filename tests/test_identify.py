@@ -128,8 +128,11 @@ def test_record_weights_favour_the_weighted_record(tmp_path) -> None:
 
     from tests.conftest import PAN_HPPC
 
+    # free local models: with the HPPC record weighted down, the HWFET record alone cannot tell
+    # the OCV from slow polarisation, and RC-ladder local models (which cannot absorb that with
+    # negative RC elements) fit it poorly whichever the weights (41.7 vs 37.8 mV)
     kw = dict(capacity_ah=2.85, soc0=1.0, progress=lambda _m: None, max_local_models=2,
-              oe_max_iterations=2, hysteresis="off")
+              oe_max_iterations=2, hysteresis="off", local_model_form="free")
     rmse = {}
     for name, weights in (("hwfet", [1.0, 0.01]), ("hppc", [0.01, 1.0])):
         train_files([PAN_HWFET, PAN_HPPC], tmp_path / f"{name}.json", record_weights=weights,

@@ -121,6 +121,13 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
     return 0
 
 
+def cmd_explain(a: argparse.Namespace) -> int:
+    from lmncell.evaluation.interpret import explain
+
+    print(explain(a.model, a.temperature, a.json))
+    return 0
+
+
 def cmd_build_fmu(a: argparse.Namespace) -> int:
     if a.native:
         from lmncell.fmu.native_build import build_native_fmu
@@ -255,6 +262,15 @@ def build_parser() -> argparse.ArgumentParser:
                    "SoC first falls to this value (under load; default: the record's start)")
     _add_reader_options(s)
     s.set_defaults(func=cmd_evaluate)
+
+    s = sub.add_parser("explain", help="every local model as the cell it describes: R0, RC "
+                       "elements, hysteresis and OCV offset per operating regime", **fmt)
+    s.add_argument("model", help="model file (JSON)")
+    s.add_argument("--temperature", type=_temperature, metavar="DEGC", help="cell temperature "
+                   "at which to state the resistances (default: each local model's centre, or "
+                   "the model's reference temperature)")
+    s.add_argument("--json", action="store_true", help="print the rows as JSON")
+    s.set_defaults(func=cmd_explain)
 
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU",
                        **fmt)

@@ -7,6 +7,7 @@ import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmncell.identification.ladder import is_ladder
 from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES
 
 
@@ -35,6 +36,10 @@ class TrainConfig:
     temperatures (records whose median temperatures lie ≥ 7.5 K apart), else 0; or 0…3.
     With temperature terms, "temperature" in the partition is not split along (its split
     weights stay 0): the terms carry the temperature dependence.
+    local_model_form: "rc_ladder" (every local model an equivalent circuit: R0, RC elements at
+    the filters' time constants and the hysteresis voltage, all ≥ 0, identified by bounded
+    least squares; needs output_lags = 0 and a chain of filters), "free" (unconstrained
+    coefficients; the paper's ARX form), or "auto" (rc_ladder wherever the structure allows).
     output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
     partition: partition-space variables (soc, current, filtered_current, temperature), or
@@ -73,6 +78,7 @@ class TrainConfig:
                                  [800.0, 3000.0]])
     hysteresis: str | float = "auto"
     temperature_scaling: str | float = "auto"
+    local_model_form: str = "auto"
     output: str = "relative_ocv"
     ocv_input: bool = False
     temperature_terms: str | int = "auto"
@@ -123,6 +129,13 @@ class TrainConfig:
                 and 0 <= self.temperature_terms <= MAX_TEMPERATURE_TERMS)):
             raise bad("temperature_terms",
                       f"expected 'auto' or a degree 0…{MAX_TEMPERATURE_TERMS}")
+        if self.local_model_form not in ("auto", "rc_ladder", "free"):
+            raise bad("local_model_form", "expected 'auto', 'rc_ladder' or 'free'")
+        if self.local_model_form == "rc_ladder" and not is_ladder(
+                self.filters, self.sample_time_s, self.output_lags):
+            raise bad("local_model_form", "RC-ladder local models need output_lags = 0 and a "
+                      "chain of filters whose time constants at or above sample_time_s are "
+                      "shared like [[0.01, 5], [5, 30], [30, 150]]; use 'free' or 'auto'")
         if self.output not in ("relative_ocv", "absolute"):
             raise bad("output", "expected 'relative_ocv' or 'absolute'")
         part = self.partition

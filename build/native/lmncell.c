@@ -55,7 +55,7 @@ typedef struct {
     double covered, charge, temp_int, volt_int, volt_time;
     int out_of_range, steps;
     /* observer (observers.SocObserver) */
-    double q, r, ob_soc, ob_var;
+    double q, r, ob_soc, ob_var, ob_floor;
     int skipped;
     double ob_p[NX][NX];                       /* EKF covariance of [SoC, lp…, h] */
     double ob_i, ob_t, ob_past[NB + 1];        /* the step's current, temperature, past currents */
@@ -332,9 +332,17 @@ static double output_moved(const State *s, const double *xi, int a, double delta
     return outputs_for(s, row, NX, phi, uj);
 }
 
+/* observers.soc_variance_floor: (σ_m/|∂u/∂SoC|)², at most 1 */
+static double soc_variance_floor(double slope) {
+    double m = fabs(slope) > 1e-6 ? fabs(slope) : 1e-6, f;
+    if (MODEL_ERROR_V <= 0.0) return 0.0;
+    f = (MODEL_ERROR_V / m) * (MODEL_ERROR_V / m);
+    return f < 1.0 ? f : 1.0;
+}
+
 static double ekf_update(State *s, double v) {
     double xi[NX], hv[NX], ph[NX], k[NX], ikh[NX][NX], tmp[NX][NX], np_[NX][NX];
-    double phi[NM], uj[NM], u, hph = 0.0, innov;
+    double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent;
     int a, b, c;
     xi[0] = s->soc;
     for (a = 0; a < 2 * NF; a++) xi[1 + a] = s->lp[a];
@@ -342,13 +350,24 @@ static double ekf_update(State *s, double v) {
     xi[NX - 1] = s->h;
 #endif
     u = outputs_for(s, xi, NX, phi, uj);
+    /* SoC column: the secant over ±σ (observers.SocObserver._jacobian), δ² added to r */
+    spread = sqrt(s->ob_p[0][0] > 0.0 ? s->ob_p[0][0] : 0.0);
+    if (spread > SPREAD_MAX) spread = SPREAD_MAX;
     for (a = 0; a < NX; a++) {
-        double step = a == 0 ? FD_SOC : ((HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A);
+        double step = a == 0 ? (spread > FD_SOC ? spread : FD_SOC)
+                             : ((HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A);
         double hi, lo, uh, ul;
         uh = output_moved(s, xi, a, step, &hi);
         ul = output_moved(s, xi, a, -step, &lo);
         hv[a] = (uh - ul) / (hi - lo);
+        if (a == 0) curvature = 0.5 * (uh + ul) - u;
     }
+    {   /* the tangent (difference FD_SOC) sets the variance floor */
+        double hi, lo, uh = output_moved(s, xi, 0, FD_SOC, &hi), ul;
+        ul = output_moved(s, xi, 0, -FD_SOC, &lo);
+        tangent = (uh - ul) / (hi - lo);
+    }
+    r = s->r + curvature * curvature;
     for (a = 0; a < NX; a++) {
         ph[a] = 0.0;
         for (b = 0; b < NX; b++) ph[a] += s->ob_p[a][b] * hv[b];
@@ -356,7 +375,7 @@ static double ekf_update(State *s, double v) {
     for (a = 0; a < NX; a++) hph += hv[a] * ph[a];
     innov = v - u;
     for (a = 0; a < NX; a++) {
-        k[a] = ph[a] / (hph + s->r);
+        k[a] = ph[a] / (hph + r);
         xi[a] += k[a] * innov;
     }
     for (a = 0; a < NX; a++)
@@ -370,10 +389,11 @@ static double ekf_update(State *s, double v) {
         for (b = 0; b < NX; b++) {
             np_[a][b] = 0.0;
             for (c = 0; c < NX; c++) np_[a][b] += tmp[a][c] * ikh[b][c];
-            np_[a][b] += s->r * (k[a] * k[b]);
+            np_[a][b] += r * (k[a] * k[b]);
         }
     for (a = 0; a < NX; a++)
         for (b = 0; b < NX; b++) s->ob_p[a][b] = 0.5 * (np_[a][b] + np_[b][a]);
+    s->ob_floor = soc_variance_floor(tangent);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
     for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
 #if HAS_HYSTERESIS
@@ -402,6 +422,7 @@ static void observer_init(State *s, double soc0) {
                             : VOLTAGE_SIGMA_V * VOLTAGE_SIGMA_V;
     s->ob_soc = soc0;
     s->ob_var = var0;
+    s->ob_floor = 0.0;
     s->skipped = 0;
     for (j = 0; j < NM; j++) {
         s->mode_soc[j] = soc0;
@@ -443,7 +464,8 @@ static void imm_predict(State *s, double dsoc) {
 }
 
 static double imm_update(State *s, double v) {
-    double phi[NM], uj[NM], ujh[NM], ujl[NM], lik[NM], sum = 0.0, x = 0.0, var = 0.0;
+    double phi[NM], uj[NM], ujh[NM], ujl[NM], lik[NM], slopes[NM], sum = 0.0, x = 0.0;
+    double var = 0.0, slope = 0.0;
     int j;
     for (j = 0; j < NM; j++) {
         double xs = clip01(s->mode_soc[j]);
@@ -459,6 +481,7 @@ static double imm_update(State *s, double v) {
         s->mode_soc[j] = clip01(s->mode_soc[j] + k * innov);
         s->mode_var[j] = (1.0 - k * hj) * s->mode_var[j];
         if (s->mode_var[j] < 1e-12) s->mode_var[j] = 1e-12;
+        slopes[j] = hj;
         lik[j] = exp(-0.5 * innov * innov / sj) / sqrt(2.0 * M_PI * sj);
     }
     for (j = 0; j < NM; j++) sum += s->mode_prob[j] * lik[j];
@@ -467,8 +490,10 @@ static double imm_update(State *s, double v) {
     for (j = 0; j < NM; j++) {
         double dx = s->mode_soc[j] - x;
         var += s->mode_prob[j] * (s->mode_var[j] + dx * dx);
+        slope += s->mode_prob[j] * slopes[j];
     }
     s->ob_var = var;
+    s->ob_floor = soc_variance_floor(slope);
     return x;
 }
 
@@ -495,14 +520,17 @@ static void observer_step(State *s, double i, double v, double t) {
     if (s->observer == 1) {
         soc = ekf_update(s, v);
     } else if (s->observer == 2) {
-        double u = outputs_at(s, soc, phi, uj), kk = 0.0, var = 0.0;
+        /* fixed-gain variance, observers.fixed_gain_variance */
+        double u = outputs_at(s, soc, phi, uj), kk = 0.0, slope = 0.0, c;
         int j;
         for (j = 0; j < NM; j++) {
             kk += phi[j] * s->fuzzy_gain[j];
-            var += phi[j] * s->fuzzy_var[j];
+            slope += phi[j] * LOCAL_SLOPE[j];
         }
+        c = fabs(slope) > 1e-6 ? slope : 1e-6;
         soc += kk * (v - u);
-        s->ob_var = var;
+        s->ob_var = (1.0 - kk * c) * (1.0 - kk * c) * s->ob_var + kk * kk * s->r;
+        s->ob_floor = soc_variance_floor(slope);
     } else {
         soc = imm_update(s, v);
     }
@@ -779,7 +807,10 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
     case VR_TEMPERATURE: return s->temperature;
     case VR_VOLTAGE: return s->initialized ? s->voltage : (RELATIVE_OCV ? ocv(s->soc0) : NAN);
     case VR_SOC: return s->initialized ? (s->observer ? s->ob_soc : s->soc) : s->soc0;
-    case VR_SOC_STD: return s->initialized && s->observer ? sqrt(s->ob_var > 0 ? s->ob_var : 0) : 0.0;
+    case VR_SOC_STD: {   /* the reported σ: at least the floor (SocObserver.soc_std) */
+        double var = s->ob_var > s->ob_floor ? s->ob_var : s->ob_floor;
+        return s->initialized && s->observer ? sqrt(var > 0 ? var : 0) : 0.0;
+    }
     case VR_SOC0: return s->soc0;
     case VR_CAPACITY: return s->capacity;
     case VR_CELL_TEMPERATURE:

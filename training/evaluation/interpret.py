@@ -3,9 +3,13 @@
 from __future__ import annotations
 
 import itertools
+import json
+from pathlib import Path
 
 import numpy as np
-from lmncell.runtime.model import LmnModel
+from lmncell.identification.ladder import is_ladder
+from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
+from lmncell.runtime.step import arrhenius_gain
 
 
 def leaf_centres(model: LmnModel, points: int = 21) -> np.ndarray:
@@ -22,49 +26,162 @@ def leaf_centres(model: LmnModel, points: int = 21) -> np.ndarray:
     return z * model.partition_scale + model.partition_center
 
 
-def local_model_table(model: LmnModel) -> list[dict]:
-    """Per local model: operating point, instantaneous and static resistance (mΩ), time
-    constants (s) of its real stable poles, and the hysteresis gain (mV) where present."""
+def local_model_table(model: LmnModel, temperature_c: float | None = None) -> list[dict]:
+    """Per local model: operating point, instantaneous and static resistance (mΩ), and either
+    its RC ladder (feedback-free models: R per time constant, hysteresis and OCV offset in mV,
+    at temperature_c, default: the local model's own centre or the reference temperature) or the
+    time constants (s) of its real stable poles (ARX models). Current > 0 charges; a resistance
+    is (u − OCV)/i."""
     na, cols = model.output_lags, model.columns()
-    cur = [k for k, c in enumerate(cols) if c.startswith("i(k")]
     centres = leaf_centres(model)
     rows = []
     for j, th in enumerate(model.theta):
-        a = th[:na]
-        dc = 1.0 - float(a.sum())
-        poles = np.roots(np.concatenate([[1.0], -a])) if na else np.zeros(0)
-        taus = sorted(float(-model.sample_time_s / np.log(p.real)) for p in poles
-                      if abs(p.imag) < 1e-9 and 0 < p.real < 1)
-        row = {"local_model": j + 1, "gate": model.leaf_gates[j],
-               **{v: float(c) for v, c in zip(model.partition_variables, centres[j],
-                                               strict=True)},
-               "r0_mohm": 1e3 * float(th[cur[0]]),
-               "r_static_mohm": 1e3 * float(th[cur].sum()) / dc if abs(dc) > 1e-9 else np.inf,
-               "time_constants_s": taus,
-               "max_pole": float(np.abs(poles).max()) if poles.size else 0.0}
+        point = dict(zip(model.partition_variables, map(float, centres[j]), strict=True))
+        row = {"local_model": j + 1, "gate": model.leaf_gates[j], **point}
         if na == 0 and model.filters:
-            row["rc_mohm_by_tau_s"] = rc_ladder(model, th)
-            row["r0_mohm"] = row["rc_mohm_by_tau_s"]["0"]   # current lags + sub-Ts filters
-        if "h(k)" in cols:
-            g = th[cols.index("h(k)")]
-            row["hysteresis_mv"] = 1e3 * float(g) / dc if abs(dc) > 1e-9 else np.inf
+            t = temperature_c if temperature_c is not None else point.get(
+                "temperature", model.reference_temperature_c)
+            row["temperature_c"] = float(t)
+            row.update(ladder_parameters(model, th, float(t)))
+        else:
+            row.update(_arx_row(model, th, cols))
         rows.append(row)
     return rows
 
 
-def rc_ladder(model: LmnModel, theta: np.ndarray) -> dict[str, float]:
-    """A feedback-free local model as an RC ladder: u − OCV ≈ R0·i + Σ_τ R_τ·LP_τ(i).
+def _arx_row(model: LmnModel, th: np.ndarray, cols: list[str]) -> dict:
+    """Resistances, pole time constants and hysteresis of a local model with output feedback."""
+    na = model.output_lags
+    cur = [k for k, c in enumerate(cols) if c.startswith("i(k")]
+    a = th[:na]
+    dc = 1.0 - float(a.sum())
+    poles = np.roots(np.concatenate([[1.0], -a])) if na else np.zeros(0)
+    taus = sorted(float(-model.sample_time_s / np.log(p.real)) for p in poles
+                  if abs(p.imag) < 1e-9 and 0 < p.real < 1)
+    row = {"r0_mohm": 1e3 * float(th[cur[0]]),
+           "r_static_mohm": 1e3 * float(th[cur].sum()) / dc if abs(dc) > 1e-9 else np.inf,
+           "time_constants_s": taus,
+           "max_pole": float(np.abs(poles).max()) if poles.size else 0.0}
+    if "h(k)" in cols:
+        g = th[cols.index("h(k)")]
+        row["hysteresis_mv"] = 1e3 * float(g) / dc if abs(dc) > 1e-9 else np.inf
+    return row
 
-    Each filter input v = LP_fast − LP_slow puts +g on its fast and −g on its slow time
-    constant; a time constant below the sample time counts as instantaneous (part of R0).
-    Returns mΩ per time constant in s ("0" = instantaneous R0, including the current lags)."""
+
+def _source_values(model: LmnModel, theta: np.ndarray, temperature_c: float) -> dict[str, float]:
+    """Coefficient of each plain column at a temperature (temperature terms summed in)."""
     cols = model.columns()
+    dt = (temperature_c - model.reference_temperature_c) / TEMPERATURE_STEP_K
+    out = {}
+    for c in model._plain_columns():
+        v = float(theta[cols.index(c)])
+        for power in range(1, model.temperature_terms + 1):
+            name = f"{c}*dT^{power}"
+            if name in cols:
+                v += float(theta[cols.index(name)]) * dt ** power
+        out[c] = v
+    return out
+
+
+def ladder_parameters(model: LmnModel, theta: np.ndarray, temperature_c: float) -> dict:
+    """A feedback-free local model as an RC ladder at a temperature:
+    u − OCV = R0·i + Σ_τ R_τ·LP_τ(i) + H·h + U_off (+ the current lags' small correction).
+
+    Each filter v = LP_fast − LP_slow puts +g on its fast and −g on its slow time constant; one
+    below the sample time counts as instantaneous (part of R0, with the current lags); the
+    Arrhenius gain g(T) scales every resistance. Returns R0, the RC elements (mΩ by τ in s, key
+    "0" = R0 as well), the static resistance R0 + Σ R_τ, H and U_off (mV), and whether every R
+    and H is ≥ 0 (`rc_positive`)."""
+    c = _source_values(model, theta, temperature_c)
+    g = float(arrhenius_gain(np.array([temperature_c]), model.arrhenius_k, 1,
+                             model.reference_temperature_c)[0])
     ts = model.sample_time_s
-    out: dict[float, float] = {0.0: float(sum(theta[k] for k, c in enumerate(cols)
-                                               if c.startswith("i(k")))}
+    r0 = sum(v for k, v in c.items() if k.startswith("i(k"))
+    rc: dict[float, float] = {}
     for f, (fast, slow) in enumerate(model.filters):
-        g = float(theta[cols.index(f"v{f + 1}(k)")])
+        gf = c[f"v{f + 1}(k)"]
         for tau, sign in ((fast, 1.0), (slow, -1.0)):
-            key = 0.0 if tau < ts else tau
-            out[key] = out.get(key, 0.0) + sign * g
-    return {f"{k:g}": 1e3 * v for k, v in sorted(out.items())}
+            if tau < ts:
+                r0 += sign * gf
+            else:
+                rc[tau] = rc.get(tau, 0.0) + sign * gf
+    ladder = {"0": _clean(1e3 * g * r0),
+              **{f"{k:g}": _clean(1e3 * g * v) for k, v in sorted(rc.items())}}
+    row = {"r0_mohm": ladder["0"], "rc_mohm_by_tau_s": ladder,
+           "r_static_mohm": float(sum(ladder.values())),
+           "time_constants_s": [float(k) for k in sorted(rc)]}
+    if "h(k)" in c:
+        row["hysteresis_mv"] = _clean(1e3 * c["h(k)"])
+    if "1" in c:
+        row["ocv_offset_mv"] = 1e3 * c["1"]
+    row["rc_positive"] = bool(min(ladder.values()) >= 0.0 and row.get("hysteresis_mv", 0.0) >= 0.0)
+    return row
+
+
+ROUND_OFF = 1e-6     # mΩ or mV: |values| below this are the constrained solver's round-off
+
+
+def _clean(value: float) -> float:
+    """The value, or exactly 0.0 where it is round-off around 0 (a constraint at its bound)."""
+    return 0.0 if abs(value) < ROUND_OFF else value
+
+
+def rc_ladder(model: LmnModel, theta: np.ndarray) -> dict[str, float]:
+    """R per time constant (mΩ by τ in s, "0" = R0) at the reference temperature."""
+    return ladder_parameters(model, theta, model.reference_temperature_c)["rc_mohm_by_tau_s"]
+
+
+def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
+    """The table of `lmncell explain`: every local model as the cell it describes."""
+    rows = local_model_table(model, temperature_c)
+    lines = []
+    form = "RC ladder"
+    if model.output_lags or not model.filters:
+        form = f"ARX with {model.output_lags} output lags (time constants from its poles)"
+    elif not is_ladder(model.filters, model.sample_time_s, 0):
+        form = "filter terms that are not a chain (RC elements may be negative)"
+    lines.append(f"{model.n_local_models} local model(s), {form}; partition: "
+                 f"{', '.join(model.partition_variables)}; hysteresis: "
+                 + ("off" if model.hysteresis_gamma is None
+                    else f"γ = {model.hysteresis_gamma:g}")
+                 + ("" if model.arrhenius_k is None
+                    else f"; resistances × exp(E·(1/T − 1/T_ref)), E = {model.arrhenius_k:g} K"))
+    lines.append("resistances in mΩ, voltages in mV; current > 0 charges")
+    part = model.partition_variables
+    if "rc_mohm_by_tau_s" in rows[0]:
+        taus = [k for k in rows[0]["rc_mohm_by_tau_s"] if k != "0"]
+        head = (["LM", "gate", *part, "T/°C", "R0"] + [f"R@{t}s" for t in taus]
+                + ["R static"] + (["H"] if "hysteresis_mv" in rows[0] else [])
+                + (["U_off"] if "ocv_offset_mv" in rows[0] else []) + ["R ≥ 0"])
+        body = []
+        for r in rows:
+            cells = [str(r["local_model"]), r["gate"], *[f"{r[v]:.2f}" for v in part],
+                     f"{r['temperature_c']:.1f}", f"{r['r0_mohm']:.2f}"]
+            cells += [f"{r['rc_mohm_by_tau_s'][t]:.2f}" for t in taus]
+            cells.append(f"{r['r_static_mohm']:.2f}")
+            if "hysteresis_mv" in r:
+                cells.append(f"{r['hysteresis_mv']:.1f}")
+            if "ocv_offset_mv" in r:
+                cells.append(f"{r['ocv_offset_mv']:.1f}")
+            cells.append("yes" if r["rc_positive"] else "NO")
+            body.append(cells)
+    else:
+        head = ["LM", "gate", *part, "R0", "R static", "time constants/s", "max pole"]
+        body = [[str(r["local_model"]), r["gate"], *[f"{r[v]:.2f}" for v in part],
+                 f"{r['r0_mohm']:.2f}", f"{r['r_static_mohm']:.2f}",
+                 " ".join(f"{t:.1f}" for t in r["time_constants_s"]) or "-",
+                 f"{r['max_pole']:.4f}"] for r in rows]
+    widths = [max(len(h), *(len(b[k]) for b in body)) for k, h in enumerate(head)]
+    lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
+    lines += ["  ".join(c.rjust(w) for c, w in zip(b, widths, strict=True)) for b in body]
+    return "\n".join(lines)
+
+
+def explain(model_path: str | Path, temperature_c: float | None = None,
+            as_json: bool = False) -> str:
+    """`lmncell explain MODEL`: the table (or JSON rows) of the model's local models."""
+    model = load_model(model_path)
+    if as_json:
+        return json.dumps(local_model_table(model, temperature_c), indent=1)
+    return explain_text(model, temperature_c)
+

@@ -24,8 +24,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.config import TrainConfig
+from lmncell.config import ConfigError, TrainConfig
 from lmncell.data.dataset import Segment
+from lmncell.identification.ladder import Ladder, ladder_for, ladder_keys
 from lmncell.identification.prefit import (
     CHAMBER_SPAN_K,
     _within_record_span,
@@ -143,14 +144,15 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         progress("  temperature acts through the temperature terms, not through splits: "
                  "sigmoid splits between a few training temperatures interpolate badly")
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
+    ladder = local_ladder(cfg, base, segs, progress)
     e_scores: dict[str, float] = {}
     if (n_temp and cfg.temperature_scaling == "auto" and e_k is not None
             and _within_record_span(segs) <= CHAMBER_SPAN_K):
         e_k, e_scores, design = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg,
-                                                                        progress)
+                                                                        progress, ladder)
         base.arrhenius_k = e_k
     else:
-        design = build_design(base, segs, masks)
+        design = build_design(base, segs, masks, ladder)
     X, y, w = design.X, design.y, design.w_fit
     n_eff = float(w.sum())
     tree = root_tree(base, design, cfg)
@@ -181,7 +183,8 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         split = None
         for j in np.argsort(-leaf_err, kind="stable"):
             r_rest = y - (yhat - Phi[:, j] * (X @ model.theta[j]))
-            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg, fixed_axes)
+            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg, fixed_axes,
+                                   design.fit)
             if split is not None:
                 tree = tree.split(int(j), split.psi, split.theta_a, split.theta_b)
                 break
@@ -209,6 +212,29 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             1e3 * freerun_rmse(model, segs, design, "fit"))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
+
+
+def local_ladder(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
+                 progress: Progress = _quiet) -> Ladder | None:
+    """The RC-ladder bounds of the local models (ladder.py) where local_model_form asks for
+    them ("auto": wherever the structure is a ladder), else None (free local models)."""
+    if cfg.local_model_form == "free":
+        return None
+    temps = [s.temperature_c for s in segs if s.temperature_c is not None]
+    t_min = min((float(np.min(t)) for t in temps), default=base.reference_temperature_c)
+    t_max = max((float(np.max(t)) for t in temps), default=base.reference_temperature_c)
+    ladder = ladder_for(base, t_min, t_max)
+    if ladder is None:
+        if cfg.local_model_form == "rc_ladder":
+            raise ConfigError("setting 'local_model_form' = 'rc_ladder': the local models of "
+                              "this structure are not RC ladders (needs output_lags = 0 and a "
+                              "chain of filters, see lmncell.identification.ladder)")
+        progress("  local models: free (the structure is not an RC ladder)")
+        return None
+    progress("  local models: RC ladders, R0, R_τ (τ = " + ", ".join(
+        f"{t:g}" for t in ladder_keys(base.filters, base.sample_time_s)) + " s) and H ≥ 0"
+             + (f" at {t_min:.0f} … {t_max:.0f} °C" if base.temperature_terms else ""))
+    return ladder
 
 
 def finite_or_none(value: float) -> float | None:

@@ -11,6 +11,7 @@ import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
 from lmncell.identification.baselines import hysteresis
+from lmncell.identification.ladder import Ladder
 from lmncell.identification.ocvfit import OcvFit, fit_ocv, measured_ocv
 from lmncell.identification.tree import Design, build_design, freerun_rmse, root_tree
 from lmncell.runtime.model import LmnModel
@@ -197,7 +198,7 @@ def temperature_degree(cfg: TrainConfig, segs: list[Segment]) -> int:
 
 def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
                                             masks: list[np.ndarray], cfg: TrainConfig,
-                                            progress: Progress
+                                            progress: Progress, ladder: Ladder | None = None
                                             ) -> tuple[float, dict[str, float], Design]:
     """Arrhenius E (K) for records at constant chamber temperatures with temperature terms:
     the candidate whose root model (with those terms, fitted by weighted least squares) has
@@ -214,7 +215,7 @@ def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
     e_k, best = ARRHENIUS_CANDIDATES_K[0], None
     for cand in ARRHENIUS_CANDIDATES_K:
         trial = dataclasses.replace(base, arrhenius_k=cand)
-        design = build_design(trial, segs, masks)
+        design = build_design(trial, segs, masks, ladder)
         scores[cand] = freerun_rmse(root_tree(trial, design, cfg).apply(trial), segs, design,
                                     "fit")
         progress(f"  root model with temperature terms, E = {cand:g} K: free-run "

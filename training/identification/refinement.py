@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
+from lmncell.identification.ladder import Ladder, lsi
 from lmncell.identification.ocvfit import SMOOTHNESS, hat_basis, second_difference
 from lmncell.identification.tree import Design, _lags, freerun_rmse, stabilise
 from lmncell.runtime.model import LmnModel
@@ -126,15 +127,18 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     lower = np.full(x0.size, -np.inf)
     if with_ocv:
         lower[M * p + 1:] = 0.0
+    constraints = _ladder_constraints(design.ladder if na == 0 else None, M, p, lower)
     r0 = evaluate(x0)[0]
     n_res = int(sum(w.size for w in w_all))
     t_start = time.perf_counter()
     upper = np.full(x0.size, np.inf)
     if na == 0:
         # no output feedback: the free-run error is affine in the parameters; (iteratively
-        # reweighted) bounded linear least squares gives the exact optimum
+        # reweighted) bounded linear least squares gives the exact optimum (under the RC-ladder
+        # constraints where the local models are ladders)
         r_0, J_0 = evaluate(x0)
-        sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg)
+        sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
+                                   constraints)
         sol.cost = float(0.5 * np.sum(evaluate(sol.x)[0] ** 2))
     else:
         robust = {}
@@ -163,6 +167,21 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     return (out if accepted else model), info
 
 
+def _ladder_constraints(ladder: Ladder | None, M: int, p: int, lower: np.ndarray
+                        ) -> np.ndarray | None:
+    """Rows G with G·x ≥ lower-bound terms for the refinement's x = [θ of every local model,
+    OCV increments]: the ladder's C·θ_j ≥ 0 for every local model j, and one identity row per
+    finitely bounded entry (the OCV increments ≥ 0). None where there is no ladder."""
+    if ladder is None:
+        return None
+    n = lower.size
+    blocks = np.zeros((M * ladder.C.shape[0], n))
+    for j in range(M):
+        blocks[j * ladder.C.shape[0]:(j + 1) * ladder.C.shape[0], j * p:(j + 1) * p] = ladder.C
+    bounded = np.flatnonzero(np.isfinite(lower))
+    return np.vstack([blocks, np.eye(n)[bounded]])
+
+
 HUBER_K = 1.345      # Huber threshold in robust standard deviations (95 % efficiency)
 IRLS_ITERATIONS = 8
 
@@ -175,13 +194,24 @@ def _robust_scale(r: np.ndarray) -> float:
 
 
 def _robust_linear_solve(J: np.ndarray, b: np.ndarray, n_res: int,
-                         bounds: tuple[np.ndarray, np.ndarray], cfg: TrainConfig) -> _Solution:
+                         bounds: tuple[np.ndarray, np.ndarray], cfg: TrainConfig,
+                         constraints: np.ndarray | None = None) -> _Solution:
     """min Σ ρ(J·x − b) over the first n_res rows (data) plus plain squares of the rest
     (regularisation), ρ = squares ("none") or Huber ("huber", by iteratively reweighted least
-    squares with the scale fixed from the unweighted solution). Deterministic."""
+    squares with the scale fixed from the unweighted solution). Deterministic.
+    constraints: rows G of G·x ≥ h (h: the finite lower bounds of x, else 0; see
+    _ladder_constraints), which then replace `bounds`."""
     method = "bvls" if np.isfinite(bounds[0]).any() else "trf"
 
     def solve(weights: np.ndarray):
+        if constraints is not None:
+            Jw = J * weights[:, None]
+            h = np.zeros(constraints.shape[0])
+            finite = np.flatnonzero(np.isfinite(bounds[0]))
+            if finite.size:
+                h[-finite.size:] = bounds[0][finite]
+            x = lsi(J.T @ Jw, Jw.T @ b, constraints, h)
+            return _Solution(x, 0.0, 1, 0)
         sw = np.sqrt(weights)
         return lsq_linear(J * sw[:, None], b * sw, bounds=bounds, method=method,
                           lsq_solver="exact")

@@ -4,11 +4,14 @@ children. Only the new node's weights ψ (Levenberg–Marquardt) and the two chi
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.identification.tree import stabilise, wls
+
+Fit = Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]
 
 
 def _sigmoid(a: np.ndarray) -> np.ndarray:
@@ -26,11 +29,12 @@ class SplitResult:
 
 
 def _split_children(psi: np.ndarray, X: np.ndarray, y: np.ndarray, w: np.ndarray, Pj: np.ndarray,
-                    Z1: np.ndarray, r_rest: np.ndarray, na: int, max_pole: float):
+                    Z1: np.ndarray, r_rest: np.ndarray, na: int, max_pole: float,
+                    fit: Fit = wls):
     phi = _sigmoid(Z1 @ psi)
     wa, wb = w * Pj * phi, w * Pj * (1.0 - phi)
-    ta = stabilise(wls(X, y, wa), na, max_pole, X, y, wa)
-    tb = stabilise(wls(X, y, wb), na, max_pole, X, y, wb)
+    ta = stabilise(fit(X, y, wa), na, max_pole, X, y, wa)
+    tb = stabilise(fit(X, y, wb), na, max_pole, X, y, wb)
     ya, yb = X @ ta, X @ tb
     e = r_rest - Pj * (phi * ya + (1.0 - phi) * yb)
     return ta, tb, ya, yb, phi, e, float(np.sum(w * e * e))
@@ -38,9 +42,11 @@ def _split_children(psi: np.ndarray, X: np.ndarray, y: np.ndarray, w: np.ndarray
 
 def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, Pj: np.ndarray,
                    r_rest: np.ndarray, cfg: TrainConfig,
-                   fixed_axes: frozenset[int] = frozenset()) -> SplitResult | None:
+                   fixed_axes: frozenset[int] = frozenset(), fit: Fit = wls
+                   ) -> SplitResult | None:
     """Best initial orthogonal split of one leaf, then Levenberg–Marquardt on its weights ψ.
-    fixed_axes: partition axes the split may not use (their weights stay 0)."""
+    fixed_axes: partition axes the split may not use (their weights stay 0); fit: the local
+    weighted least squares (Design.fit: bounded for RC-ladder local models)."""
     na, max_pole = cfg.output_lags, cfg.max_pole
     sel = Pj > 1e-6 * Pj.max()
     X, y, w, Z, Pj, r_rest = X[sel], y[sel], w[sel], Z[sel], Pj[sel], r_rest[sel]
@@ -62,7 +68,7 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
         kappa = 2.0 / spread
         psi = np.zeros(Z1.shape[1])
         psi[0], psi[axis + 1] = -kappa * median, kappa
-        res = _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole)
+        res = _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole, fit)
         if best is None or res[-1] < best[1]:
             best = (psi, res[-1], axis, res)
     if best is None:
@@ -81,7 +87,7 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
             step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
             cand = psi.copy()
             cand[free] += step
-            new = _split_children(cand, X, y, w, Pj, Z1, r_rest, na, max_pole)
+            new = _split_children(cand, X, y, w, Pj, Z1, r_rest, na, max_pole, fit)
             if new[-1] < loss:
                 psi, (ta, tb, ya, yb, phi, e, loss) = cand, new
                 lam = max(lam / 3.0, 1e-9)

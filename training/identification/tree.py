@@ -10,6 +10,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
+from lmncell.identification.ladder import Ladder
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.step import ExoSeries, exo_series, initial_hysteresis, simulate_exo
 
@@ -86,6 +87,11 @@ class Design:
     w_val: np.ndarray        # (N,) validation weights
     exo: list[ExoSeries] = field(default_factory=list)
     bounds: list[tuple[int, int]] = field(default_factory=list)
+    ladder: Ladder | None = None   # local models as RC ladders with R ≥ 0 (ladder.py), or free
+
+    def fit(self, X: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """One local model by weighted least squares, in the ladder's bounds if there is one."""
+        return wls(X, y, w) if self.ladder is None else self.ladder.solve(X, y, w)
 
 
 def _target(model: LmnModel, seg: Segment, soc: np.ndarray) -> np.ndarray:
@@ -100,7 +106,8 @@ def _lags(y: np.ndarray, na: int) -> np.ndarray:
     return L
 
 
-def build_design(model: LmnModel, segs: list[Segment], val_masks: list[np.ndarray]) -> Design:
+def build_design(model: LmnModel, segs: list[Segment], val_masks: list[np.ndarray],
+                 ladder: Ladder | None = None) -> Design:
     Xs, ys, Zs, Ds, wf, wv, exos, bounds = [], [], [], [], [], [], [], []
     start = 0
     for seg, vmask in zip(segs, val_masks, strict=True):
@@ -119,7 +126,7 @@ def build_design(model: LmnModel, segs: list[Segment], val_masks: list[np.ndarra
         bounds.append((start, start + len(seg)))
         start += len(seg)
     return Design(np.vstack(Xs), np.concatenate(ys), np.vstack(Zs), np.concatenate(Ds),
-                  np.concatenate(wf), np.concatenate(wv), exos, bounds)
+                  np.concatenate(wf), np.concatenate(wv), exos, bounds, ladder)
 
 
 # ----- local least squares and stability -------------------------------------------------
@@ -180,9 +187,9 @@ def root_tree(base: LmnModel, design: Design, cfg: TrainConfig) -> Tree:
     """The start of the construction: one local model per root (one, or charge and
     discharge), each by weighted least squares over its gate, poles kept inside max_pole."""
     X, y, w = design.X, design.y, design.w_fit
-    theta = np.vstack([stabilise(wls(X, y, w * _gate_weight(design, g)), cfg.output_lags,
-                                 cfg.max_pole, X, y, w * _gate_weight(design, g))
-                       for g in base.leaf_gates[:len(base.roots)]])
+    weights = [w * _gate_weight(design, g) for g in base.leaf_gates[:len(base.roots)]]
+    theta = np.vstack([stabilise(design.fit(X, y, wg), cfg.output_lags, cfg.max_pole, X, y, wg)
+                       for wg in weights])
     return Tree(list(base.roots), [], [], theta)
 
 

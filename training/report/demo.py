@@ -131,23 +131,31 @@ def run_demo(out: Path) -> Path:
     rep.figure(plots.validity_figure(model, out / "fig_validity.png"),
                "Validity functions over SoC (temperature at the middle of the trained range): "
                "where each local linear model is in charge.")
-    table = local_model_table(model)
+    table = local_model_table(model, model.reference_temperature_c)
     cols = [("local_model", "LM", ""), *[(v, v, ".2f") for v in model.partition_variables],
             ("r0_mohm", "R0 / mΩ", ".1f"), ("r_static_mohm", "R static / mΩ", ".1f")]
-    if any(row["time_constants_s"] for row in table):
+    ladder = "rc_mohm_by_tau_s" in table[0]
+    if ladder:
+        for row in table:
+            rc = [(k, v) for k, v in row["rc_mohm_by_tau_s"].items() if k != "0"]
+            row["rc_text"] = ", ".join(f"{k} s: {v:.1f}" for k, v in rc)
+        cols.append(("rc_text", "RC elements: R / mΩ at τ", ""))
+    elif any(row["time_constants_s"] for row in table):
         cols.append(("time_constants_s", "time constants / s", ".1f"))
     if "hysteresis_mv" in table[0]:
-        cols.append(("hysteresis_mv", "hysteresis / mV", ".1f"))
-    if "rc_mohm_by_tau_s" in table[0]:
-        for row in table:
-            ladder = [(k, v) for k, v in row["rc_mohm_by_tau_s"].items() if k != "0"]
-            row["rc_text"] = ", ".join(f"{k} s: {v:.1f}" for k, v in ladder)
-        cols.append(("rc_text", "RC elements: R / mΩ at τ", ""))
-    rep.table(table, cols, "Local models: operating point (validity-weighted centre), "
-                           "instantaneous resistance R0, static resistance (R0 plus all RC "
-                           "elements) and the RC elements at the model's fixed time constants "
-                           "(the filters of the structure); SoC as a fraction, temperature in "
-                           "°C. Current > 0 charges, so a resistance is u − OCV per ampere.")
+        cols.append(("hysteresis_mv", "hysteresis H / mV", ".1f"))
+    if "ocv_offset_mv" in table[0]:
+        cols.append(("ocv_offset_mv", "OCV offset / mV", ".1f"))
+    rep.table(table, cols, "Local models (`lmncell explain MODEL` prints the same): operating "
+                           "point (validity-weighted centre), instantaneous resistance R0, "
+                           "static resistance (R0 plus all RC elements), the RC elements at the "
+                           "model's fixed time constants (the filters of the structure) and the "
+                           "local OCV offset, at the reference temperature (25 °C)"
+              + (" (resistances × the Arrhenius factor elsewhere)" if model.arrhenius_k else "")
+              + ". " + ("Identified as RC ladders: every R and the hysteresis voltage are "
+                        "constrained ≥ 0 (setting local_model_form). " if ladder else "")
+              + "SoC as a fraction, temperature in °C. Current > 0 charges, so a resistance is "
+                "u − OCV per ampere.")
 
     _say("evaluating free-run on the training records and on the unseen 25 °C record …")
     traces, rows = evaluate_model(model, [dyn / f for f in TRAIN] + [dyn / VALIDATE], soc0=1.0)

@@ -1,0 +1,155 @@
+"""Local models as RC ladders: the identification's constraint that keeps them interpretable.
+
+A feedback-free local model (output_lags = 0) whose filters form a chain (each filter
+v = LP_fast(i) − LP_slow(i), every time constant at or above the sample time Ts shared by the
+filters exactly as in a ladder) is, term by term, an equivalent circuit:
+
+    u − OCV = R0·i(k) + Σ_l b_l·i(k−l) + Σ_τ R_τ·LP_τ(i) + H·h + U_off
+
+(R0 the instantaneous resistance including the sub-Ts filters and the current lags' sum, R_τ an RC
+element of time constant τ, H the hysteresis voltage, U_off the local OCV offset). The map from
+the regressor coefficients θ to these parameters is linear; with temperature terms (θ then
+holds polynomials in dT) it is taken at a grid of temperatures across the training range. The
+identification solves its (locally weighted) least-squares problems under C·θ ≥ 0, R0, R_τ and
+H ≥ 0 at every grid temperature (least squares with linear inequality constraints, by the
+Lawson–Hanson reduction to a least-distance problem solved by NNLS: exact, deterministic), so
+that the runtime, the model file and the FMUs are unchanged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel
+from scipy.linalg import cho_factor, solve_triangular
+from scipy.optimize import nnls
+
+GRID_STEP_K = 1.0      # spacing of the temperatures where the ladder must hold (degree ≥ 2)
+
+
+def ladder_keys(filters: list[tuple[float, float]] | list[list[float]],
+                sample_time_s: float) -> list[float]:
+    """The RC time constants (s) of a filter chain: every corner at or above Ts (sorted)."""
+    return sorted({float(t) for pair in filters for t in pair if t >= sample_time_s})
+
+
+def is_ladder(filters: list[tuple[float, float]] | list[list[float]], sample_time_s: float,
+              output_lags: int) -> bool:
+    """True where the local models can be read (and constrained) as RC ladders: no output
+    feedback, and as many RC time constants as filters (a chain such as [[0.01, 5], [5, 30]])."""
+    if output_lags != 0 or not filters:
+        return False
+    a = _filter_to_ladder(list(filters), sample_time_s)
+    return a.shape[0] == a.shape[1] and np.linalg.matrix_rank(a) == a.shape[0]
+
+
+def _filter_to_ladder(filters: list, sample_time_s: float) -> np.ndarray:
+    """(1 + keys, F): row 0 the filters' share of R0, then one row per RC time constant."""
+    keys = ladder_keys(filters, sample_time_s)
+    a = np.zeros((1 + len(keys), len(filters)))
+    for f, (fast, slow) in enumerate(filters):
+        for tau, sign in ((float(fast), 1.0), (float(slow), -1.0)):
+            a[0 if tau < sample_time_s else 1 + keys.index(tau), f] += sign
+    return a[1:]
+
+
+def constraint_temperatures_c(t_min_c: float, t_max_c: float, degree: int,
+                              reference_c: float) -> list[float]:
+    """Temperatures where every R and H must be ≥ 0: the reference temperature without
+    temperature terms, both ends for degree 1 (linear: then everywhere between), else a grid
+    across the training range no coarser than GRID_STEP_K (between its points a polynomial of
+    degree 2 or 3 can dip below 0 by a negligible amount only)."""
+    if degree == 0 or t_max_c - t_min_c < 1e-6:
+        return [reference_c]
+    if degree == 1:
+        return [t_min_c, t_max_c]
+    points = max(3, int(np.ceil((t_max_c - t_min_c) / GRID_STEP_K)) + 1)
+    return np.linspace(t_min_c, t_max_c, points).tolist()
+
+
+class InfeasibleError(ArithmeticError):
+    """No parameters satisfy the constraints (cannot happen for C·θ ≥ 0: θ = 0 does)."""
+
+
+def lsi(H: np.ndarray, c: np.ndarray, C: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """min ½·x'Hx − c'x subject to C·x ≥ h (H symmetric positive semi-definite; a relative
+    ridge of 1e-9 makes it definite): Lawson & Hanson's reduction of least squares with
+    linear inequality constraints to a least-distance problem, solved by NNLS."""
+    p = H.shape[0]
+    scale = np.sqrt(np.maximum(np.diag(H), 1e-300))
+    Hs = H / np.outer(scale, scale) + 1e-9 * np.eye(p)
+    L = np.tril(cho_factor(Hs, lower=True)[0])              # Hs = L·L'
+    f = solve_triangular(L, c / scale, lower=True)          # objective ‖L'·xs − f‖²
+    free = solve_triangular(L.T, f, lower=False)
+    Cs = C / scale[None, :]
+    if C.shape[0] == 0 or np.all(Cs @ free >= h - 1e-12 * (1.0 + np.abs(h))):
+        return free / scale
+    A = solve_triangular(L, Cs.T, lower=True).T              # Cs·L'^{-1}
+    b = h - A @ f
+    E = np.vstack([A.T, b[None, :]])
+    target = np.zeros(p + 1)
+    target[-1] = 1.0
+    u, _ = nnls(E, target, maxiter=50 * E.shape[1])
+    r = E @ u - target
+    if not abs(r[-1]) > 1e-12:
+        raise InfeasibleError("the inequality constraints have no solution")
+    z = -r[:p] / r[-1]
+    return solve_triangular(L.T, z + f, lower=False) / scale
+
+
+@dataclass(frozen=True)
+class Ladder:
+    """The constraints C·θ ≥ 0 of an RC-ladder local model (rows named in `names`)."""
+
+    C: np.ndarray
+    names: list[str]
+
+    def solve(self, X: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
+        """Weighted least squares of y ≈ X·θ under the ladder's constraints; returns θ."""
+        Xw = X * w[:, None]
+        return lsi(X.T @ Xw, Xw.T @ y, self.C, np.zeros(self.C.shape[0]))
+
+    def holds(self, theta: np.ndarray, tol: float = 1e-9) -> bool:
+        """True where θ satisfies the constraints (to tol, V/A or V)."""
+        return bool(np.all(self.C @ theta >= -tol))
+
+
+def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0) -> Ladder | None:
+    """The ladder constraints of a model's local models, or None where they are not ladders
+    (is_ladder). t_min_c … t_max_c: the training temperature range (for temperature terms)."""
+    if not is_ladder(model.filters, model.sample_time_s, model.output_lags):
+        return None
+    cols = model.columns()
+    n = model.temperature_terms
+    temps = constraint_temperatures_c(t_min_c, t_max_c, n, model.reference_temperature_c)
+    keys = ladder_keys(model.filters, model.sample_time_s)
+    a = _filter_to_ladder(list(model.filters), model.sample_time_s)
+    ts = model.sample_time_s
+    share_r0 = np.array([(fast < ts) - (slow < ts) for fast, slow in model.filters], float)
+    sources = model.temperature_term_sources()
+    rows: list[np.ndarray] = []
+    names: list[str] = []
+    for t in temps:
+        dt = (t - model.reference_temperature_c) / TEMPERATURE_STEP_K
+        tag = "" if n == 0 else f"@{t:g}C"
+
+        def value(src: str, dt: float = dt) -> np.ndarray:
+            """Row vector: the coefficient of source column src at this temperature."""
+            v = np.zeros(len(cols))
+            v[cols.index(src)] = 1.0
+            for power in range(1, n + 1):
+                v[cols.index(f"{src}*dT^{power}")] = dt ** power
+            return v
+
+        cur = sum(value(c) for c in sources if c.startswith("i(k"))
+        filt = np.array([value(f"v{f + 1}(k)") for f in range(len(model.filters))])
+        rows.append(cur + share_r0 @ filt)
+        names.append(f"R0{tag}")
+        for k, tau in enumerate(keys):
+            rows.append(a[k] @ filt)
+            names.append(f"R_{tau:g}s{tag}")
+        if "h(k)" in sources:
+            rows.append(value("h(k)"))
+            names.append(f"H{tag}")
+    return Ladder(np.array(rows), names)
