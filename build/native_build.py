@@ -29,6 +29,7 @@ from lmncell.runtime.observers import (
     SPREAD_MAX,
     ObserverSettings,
     local_ocv_slopes,
+    state_columns,
 )
 
 HERE = Path(__file__).resolve().parent
@@ -107,6 +108,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define V_MIN {lim['voltage_v'][0]!r}", f"#define V_MAX {lim['voltage_v'][1]!r}",
         f"#define T_MIN {float(t_lim[0])!r}", f"#define T_MAX {float(t_lim[1])!r}",
         f"#define HAS_TEMPERATURE_PARTITION {int('temperature' in m.partition_variables)}",
+        f"#define LINEAR_STATES {int('filtered_current' not in m.partition_variables)}",
         f"#define CURRENT_SIGMA_A {settings.current_sigma_a!r}",
         f"#define EKF_DRIFT_PER_SQRT_H {settings.drift('ekf')!r}",
         f"#define SOC_ONLY_DRIFT_PER_SQRT_H {settings.drift('fuzzy')!r}",
@@ -138,8 +140,27 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"/* local models: columns {', '.join(cols)} */",
         f"static const double THETA[NM][NA + NEXO] = {_arr2(m.theta)};",
         f"static const double LOCAL_SLOPE[NM] = {_arr(local_ocv_slopes(m))};",
+        *_state_column_tables(m),
         "#endif", ""]
     return "\n".join(lines)
+
+
+def _state_column_tables(m: LmnModel) -> list[str]:
+    """observers.state_columns as C tables indexed by the EKF state (row 0, SoC, empty)."""
+    rows = [[], *state_columns(m)]
+    width = max(1, *(len(r) for r in rows))
+
+    def table(kind: str, name: str, pick) -> str:
+        body = ", ".join("{" + ", ".join(str(pick(c)) for c in r + [(0, 0, False, 0.0)]
+                                         * (width - len(r))) + "}" for r in rows)
+        return f"static const {kind} {name}[{len(rows)}][{width}] = {{{body}}};"
+
+    return ["#if LINEAR_STATES",
+            f"static const int STATE_NCOL[{len(rows)}] = "
+            f"{{{', '.join(str(len(r)) for r in rows)}}};",
+            table("int", "STATE_COL", lambda c: c[0]), table("int", "STATE_POW", lambda c: c[1]),
+            table("int", "STATE_SCALED", lambda c: int(c[2])),
+            table("double", "STATE_SIGN", lambda c: repr(float(c[3]))), "#endif"]
 
 
 VARIABLES = [  # name, vr, causality, variability, type, unit, start, description

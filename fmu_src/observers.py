@@ -50,7 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import LmnModel
+from .model import TEMPERATURE_STEP_K, LmnModel
 from .step import CellStepper, ExoState
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
@@ -116,7 +116,7 @@ class ObserverState:
     soc: float
     var: float
     skipped: int = 0
-    cov: list[float] = field(default_factory=list)      # EKF: P of ξ, row by row
+    cov: np.ndarray = field(default_factory=lambda: np.zeros(0))   # EKF: P of ξ, row by row
     mode_soc: list[float] = field(default_factory=list)
     mode_var: list[float] = field(default_factory=list)
     mode_prob: list[float] = field(default_factory=list)
@@ -124,8 +124,8 @@ class ObserverState:
 
     def covariance(self) -> np.ndarray:
         """The EKF's covariance P of ξ as a square matrix."""
-        n = math.isqrt(len(self.cov))
-        return np.asarray(self.cov, dtype=float).reshape(n, n)
+        n = math.isqrt(self.cov.size)
+        return self.cov.reshape(n, n)
 
 
 class SocObserver:
@@ -150,10 +150,18 @@ class SocObserver:
         cov = initial_covariance(self.settings, len(self.stepper.state.lp),
                                  self.stepper.state.h if model.hysteresis_gamma is not None
                                  else None) if kind == "ekf" else np.zeros((0, 0))
-        self.state = ObserverState(soc0_est, var0, 0, cov.ravel().tolist(), [soc0_est] * m,
+        self.state = ObserverState(soc0_est, var0, 0, cov.ravel().copy(), [soc0_est] * m,
                                    [var0] * m, [1.0 / m] * m)
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
         self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
+        self.state_columns = state_columns(model) if kind == "ekf" else []
+        self._ekf_fg: tuple[np.ndarray, np.ndarray] | None = None   # F and G without the step's
+        #                                                             current-dependent entries
+        exo = model.columns()[model.output_lags:]
+        self._soc_entries = (exo.index("ocv(k)") if "ocv(k)" in exo else None,
+                             exo.index("soc(k)") if "soc(k)" in exo else None,
+                             model.partition_variables.index("soc")
+                             if "soc" in model.partition_variables else None)
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
 
     # ----- measurement model ---------------------------------------------------------------
@@ -163,25 +171,45 @@ class SocObserver:
         h = [s.h] if self.model.hysteresis_gamma is not None else []
         return np.array([s.soc, *s.lp, *h])
 
-    def _outputs_for(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Network voltage (n,), validities (n, M) and per-local-model voltages (n, M) for the
-        step just predicted, with rows of ξ replacing the stepper's SoC, low-pass states and h
-        (columns beyond a row's length keep the stepper's values). Features come from the
-        runtime's own ExoStepper.features with the step's current, temperature and past currents."""
+    def _features_for(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Exogenous regressors x (n, p − na) and raw partition inputs z (n, d) of the step just
+        predicted, with rows of ξ replacing the stepper's SoC, low-pass states and h (columns
+        beyond a row's length keep the stepper's values), from the runtime's own
+        ExoStepper.features with the step's current, temperature and past currents."""
         m, st = self.model, self.stepper
         current, temperature, past = self._step_inputs
-        states = np.atleast_2d(states)
         n, nlp = states.shape[0], len(st.state.lp)
         x = np.zeros((n, m.n_exo))
         z = np.zeros((n, len(m.partition_variables)))
         base = st.state
-        for r in range(n):
+        soc_only = n > 1 and (states.shape[1] == 1 or bool(np.all(states[1:, 1:] == states[0, 1:])))
+        for r in range(1 if soc_only else n):
             row = states[r]
             lp = row[1:1 + nlp].tolist() if row.size > 1 else list(base.lp)
             h = float(row[1 + nlp]) if row.size > 1 + nlp else base.h
             cand = ExoState(float(row[0]), lp, h, base.direction, past)
             st.exo.features(cand, current, temperature, x[r], z[r])
-        d = np.full(n, base.direction, dtype=np.intp)
+        if soc_only:        # rows that differ in SoC only: patch the SoC-dependent entries
+            x[1:], z[1:] = x[0], z[0]
+            ocv_col, soc_col, soc_z = self._soc_entries
+            for r in range(1, n):
+                soc = float(states[r, 0])
+                if ocv_col is not None:
+                    x[r, ocv_col] = float(m.ocv(soc))
+                if soc_col is not None:
+                    x[r, soc_col] = soc
+                if soc_z is not None:
+                    z[r, soc_z] = soc
+        return x, z
+
+    def _outputs_for(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Network voltage (n,), validities (n, M) and per-local-model voltages (n, M) for the
+        step just predicted, with rows of ξ replacing the stepper's states (_features_for)."""
+        m, st = self.model, self.stepper
+        states = np.atleast_2d(states)
+        x, z = self._features_for(states)
+        n = states.shape[0]
+        d = np.full(n, st.state.direction, dtype=np.intp)
         phi = m.validities(m.normalise(z), d)
         na = m.output_lags
         lag_part = m.theta[:, :na] @ np.asarray(st.prev_lags) if na else 0.0
@@ -205,31 +233,47 @@ class SocObserver:
                   ) -> tuple[float, np.ndarray, float, float]:
         """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
         δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (difference FD_SOC).
+
         The SoC difference d of H is soc_spread (at least FD_SOC): with d = σ_SoC the SoC
         column is the secant over ±σ, a statistical linearisation that does not take the OCV
         slope at a wrong estimate for the slope over the whole uncertainty (an EKF started on
         the steep part of an LFP curve otherwise trusts it and collapses its variance before it
         reaches the plateau), and δ² is added to the measurement variance as the linearisation
-        error. The tangent sets the variance floor (it does not depend on the variance)."""
+        error. The tangent sets the variance floor (it does not depend on the variance).
+        The low-pass states and h enter u only through the regressors (unless the filtered
+        current is a partition input, then by central differences): their columns are
+        ∂x/∂state (state_columns) times the network's blended coefficients at ξ."""
         n = xi.size
-        steps = np.full(n, FD_CURRENT_A)
-        steps[0] = max(FD_SOC, soc_spread)
-        if self.model.hysteresis_gamma is not None:
-            steps[-1] = FD_HYSTERESIS
-        rows = np.tile(xi, (2 * n + 3, 1))
-        rows[:, 0] = min(max(float(xi[0]), 0.0), 1.0)   # differences around the clipped SoC:
-        for k in range(n):                                # beyond 0 or 1 both sides would clip
-            rows[1 + 2 * k, k] += steps[k]
-            rows[2 + 2 * k, k] -= steps[k]
-        rows[-2, 0] += FD_SOC
-        rows[-1, 0] -= FD_SOC
-        rows[:, 0] = np.clip(rows[:, 0], 0.0, 1.0)
-        u = self._outputs_for(rows)[0]
-        diag = np.arange(n)
-        width = rows[1:2 * n + 1:2][diag, diag] - rows[2:2 * n + 2:2][diag, diag]
-        curvature = 0.5 * (float(u[1]) + float(u[2])) - float(u[0])
-        tangent = float(u[-2] - u[-1]) / float(rows[-2, 0] - rows[-1, 0])
-        return float(u[0]), (u[1:2 * n + 1:2] - u[2:2 * n + 2:2]) / width, curvature, tangent
+        clipped = min(max(float(xi[0]), 0.0), 1.0)  # differences around the clipped SoC:
+        spread = max(FD_SOC, soc_spread)              # beyond 0 or 1 both sides would clip
+        soc_rows = np.tile(xi, (5, 1))
+        soc_rows[:, 0] = np.clip(clipped + np.array([0.0, spread, -spread, FD_SOC, -FD_SOC]),
+                                 0.0, 1.0)
+        h = np.empty(n)
+        if "filtered_current" not in self.model.partition_variables:
+            u5, phi5, _ = self._outputs_for(soc_rows)
+            blended = phi5[0] @ self.model.theta[:, self.model.output_lags:]   # ∂u/∂x at ξ
+            _, temperature, _ = self._step_inputs
+            h[1:] = state_gradient(self.state_columns, blended,
+                                   self.stepper.exo.temperature_gain(temperature),
+                                   (temperature - self.model.reference_temperature_c)
+                                   / TEMPERATURE_STEP_K)
+        else:
+            steps = np.full(n - 1, FD_CURRENT_A)
+            if self.model.hysteresis_gamma is not None:
+                steps[-1] = FD_HYSTERESIS
+            rows = np.tile(xi, (2 * (n - 1), 1))
+            rows[:, 0] = clipped
+            for k in range(1, n):
+                rows[2 * k - 2, k] += steps[k - 1]
+                rows[2 * k - 1, k] -= steps[k - 1]
+            u_all = self._outputs_for(np.vstack([soc_rows, rows]))[0]
+            u5 = u_all[:5]
+            h[1:] = (u_all[5::2] - u_all[6::2]) / (2.0 * steps)
+        h[0] = (u5[1] - u5[2]) / (soc_rows[1, 0] - soc_rows[2, 0])
+        curvature = 0.5 * (float(u5[1]) + float(u5[2])) - float(u5[0])
+        tangent = float(u5[3] - u5[4]) / float(soc_rows[3, 0] - soc_rows[4, 0])
+        return float(u5[0]), h, curvature, tangent
 
     # ----- one step ------------------------------------------------------------------------
     def step(self, current_a: float, voltage_measured_v: float,
@@ -272,39 +316,41 @@ class SocObserver:
         """P ← F·P·Fᵀ + Q for the step the stepper just took."""
         s, exo, cfg = self.state, self.stepper.exo, self.settings
         p = s.covariance()
-        n = p.shape[0]
-        f = np.ones(n)
-        f[1:1 + len(exo.coef)] = exo.coef
-        g = np.zeros(n)
+        if self._ekf_fg is None or self._ekf_fg[0].size != p.shape[0]:
+            n = p.shape[0]
+            f0, g0 = np.ones(n), np.zeros(n)
+            f0[1:1 + len(exo.coef)] = exo.coef
+            g0[1:1 + len(exo.coef)] = [1.0 - a for a in exo.coef]
+            self._ekf_fg = (f0, g0)
+        f, g = self._ekf_fg[0].copy(), self._ekf_fg[1].copy()
         g[0] = exo.soc_gain * exo.eta(current_a)
-        g[1:1 + len(exo.coef)] = [1.0 - a for a in exo.coef]
         q = cfg.current_sigma_a ** 2 * np.outer(g, g)
         q[0, 0] += cfg.drift("ekf") ** 2 * self.model.sample_time_s / 3600.0
         if self.model.hysteresis_gamma is not None:
             f[-1] = math.exp(-exo.gamma * abs(current_a) * exo.soc_gain)
             q[-1, -1] += cfg.hysteresis_drift_per_sqrt_h ** 2 * self.model.sample_time_s / 3600.0
         p = f[:, None] * p * f[None, :] + q
-        s.cov = p.ravel().tolist()
+        s.cov = p.ravel()
         s.var = float(p[0, 0])
 
     def _ekf_update(self, v_meas: float) -> float:
-        """Correct ξ with one voltage (Joseph form); writes the low-pass states and h back to
+        """Correct ξ with one voltage; writes the low-pass states and h back to
         the stepper and returns the unclipped SoC."""
         s, st = self.state, self.stepper
         xi = self._state_vector()
-        n = xi.size
         p = s.covariance()
         u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(p[0, 0], 0.0)),
                                                           SPREAD_MAX))
         r = self.r + curvature * curvature
         ph = p @ h
-        k = ph / (float(h @ ph) + r)
+        innovation_var = float(h @ ph) + r
+        k = ph / innovation_var
         xi = xi + k * (v_meas - u)
-        ikh = np.eye(n) - np.outer(k, h)
-        p = ikh @ p @ ikh.T + r * np.outer(k, k)
+        # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
+        p = p - np.outer(ph, ph) / innovation_var
         p = 0.5 * (p + p.T)
         s.var_floor = soc_variance_floor(self.settings.model_error_v, tangent)
-        s.cov = p.ravel().tolist()
+        s.cov = p.ravel()
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
         st.state.lp = xi[1:1 + nlp].tolist()
@@ -362,14 +408,14 @@ class SocObserver:
     def get_state(self) -> dict:
         s = self.state
         return {"stepper": self.stepper.get_state(), "soc": s.soc, "var": s.var,
-                "skipped": s.skipped, "cov": list(s.cov), "mode_soc": list(s.mode_soc),
+                "skipped": s.skipped, "cov": s.cov.tolist(), "mode_soc": list(s.mode_soc),
                 "mode_var": list(s.mode_var), "mode_prob": list(s.mode_prob),
                 "var_floor": s.var_floor}
 
     def set_state(self, d: dict) -> None:
         self.stepper.set_state(list(d["stepper"]))
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
-                                   [float(v) for v in d["cov"]], list(d["mode_soc"]),
+                                   np.array([float(v) for v in d["cov"]]), list(d["mode_soc"]),
                                    list(d["mode_var"]),
                                    list(d["mode_prob"]), float(d["var_floor"]))
 
@@ -387,6 +433,45 @@ def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.nda
         return np.asarray(stored["gains"], dtype=float), np.asarray(stored["variances"],
                                                                      dtype=float)
     return design_fuzzy_gains(local_ocv_slopes(model), q, r)
+
+
+def state_columns(model: LmnModel) -> list[list[tuple[int, int, bool, float]]]:
+    """Per EKF state after SoC (the low-pass states, then h): the regressor columns it enters
+    linearly, as (exogenous column, power p of dT, times the Arrhenius gain g, sign): the
+    filter v_f = g·(lp_fast − lp_slow) and its temperature terms v_f·dTᵖ; h and h·dTᵖ."""
+    exo = model.columns()[model.output_lags:]
+    powers = range(model.temperature_terms + 1)
+
+    def with_terms(col: str, scaled: bool, sign: float) -> list[tuple[int, int, bool, float]]:
+        names = [col] + [f"{col}*dT^{p}" for p in powers if p > 0]
+        return [(exo.index(name), p, scaled, sign) for p, name in zip(powers, names,
+                                                                       strict=True)
+                if name in exo]
+
+    out = []
+    for f in range(len(model.filters)):
+        out.append(with_terms(f"v{f + 1}(k)", True, 1.0))
+        out.append(with_terms(f"v{f + 1}(k)", True, -1.0))
+    if model.hysteresis_gamma is not None:
+        out.append(with_terms("h(k)", False, 1.0))
+    return out
+
+
+def state_gradient(columns: list[list[tuple[int, int, bool, float]]], blended: np.ndarray,
+                   gain: float, dt: float) -> np.ndarray:
+    """∂u/∂state for the states of state_columns: Σ sign·(g)·dTᵖ·∂u/∂x_col (blended: the
+    network's coefficients of the regressors at the operating point; dTᵖ by repeated
+    multiplication, as the step computes it)."""
+    out = np.empty(len(columns))
+    for a, cols in enumerate(columns):
+        acc = 0.0
+        for col, p, scaled, sign in cols:
+            power = 1.0
+            for _ in range(p):
+                power *= dt
+            acc += sign * (gain if scaled else 1.0) * power * float(blended[col])
+        out[a] = acc
+    return out
 
 
 def soc_variance_floor(model_error_v: float, slope_v: float) -> float:

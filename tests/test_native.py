@@ -333,3 +333,26 @@ def test_build_description_validates_and_names_libm(native_fmu) -> None:
     with zipfile.ZipFile(native_fmu) as z:
         assert '<Library name="m" external="true"' in z.read(
             "sources/buildDescription.xml").decode()
+
+
+def test_native_ekf_with_the_filtered_current_in_the_partition_equals_the_runtime(
+        tmp_path) -> None:
+    # the low-pass states then move the validities too: their columns of H are central
+    # differences of the whole network, not the blended regressor coefficients
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.identification.train import train_files
+
+    from tests.conftest import PAN_HWFET
+
+    out = tmp_path / "fc.json"
+    train_files([PAN_HWFET], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
+                partition=["soc", "filtered_current"], max_local_models=3, oe_max_iterations=2,
+                hysteresis="off")
+    model = load_model(out)
+    assert model.n_local_models > 1 and np.any(model.node_weights[:, 2] != 0.0)
+    fmu = build_native_fmu(out, tmp_path / "fc.fmu")
+    seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
+    worst_v, worst_s, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 1500, 0.6)
+    assert worst_v <= 1e-9 and worst_s <= 1e-9

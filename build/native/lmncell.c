@@ -341,7 +341,7 @@ static double soc_variance_floor(double slope) {
 }
 
 static double ekf_update(State *s, double v) {
-    double xi[NX], hv[NX], ph[NX], k[NX], ikh[NX][NX], tmp[NX][NX], np_[NX][NX];
+    double xi[NX], hv[NX], ph[NX], k[NX], np_[NX][NX];
     double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent;
     int a, b, c;
     xi[0] = s->soc;
@@ -349,23 +349,54 @@ static double ekf_update(State *s, double v) {
 #if HAS_HYSTERESIS
     xi[NX - 1] = s->h;
 #endif
-    u = outputs_for(s, xi, NX, phi, uj);
-    /* SoC column: the secant over ±σ (observers.SocObserver._jacobian), δ² added to r */
+    {   /* the base point at the clipped SoC (observers.SocObserver._jacobian) */
+        double xc[NX];
+        memcpy(xc, xi, sizeof xc);
+        xc[0] = clip01(xi[0]);
+        u = outputs_for(s, xc, NX, phi, uj);
+    }
+    /* SoC column: the secant over ±σ, δ² added to r; the tangent sets the variance floor */
     spread = sqrt(s->ob_p[0][0] > 0.0 ? s->ob_p[0][0] : 0.0);
     if (spread > SPREAD_MAX) spread = SPREAD_MAX;
-    for (a = 0; a < NX; a++) {
-        double step = a == 0 ? (spread > FD_SOC ? spread : FD_SOC)
-                             : ((HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A);
-        double hi, lo, uh, ul;
-        uh = output_moved(s, xi, a, step, &hi);
-        ul = output_moved(s, xi, a, -step, &lo);
-        hv[a] = (uh - ul) / (hi - lo);
-        if (a == 0) curvature = 0.5 * (uh + ul) - u;
-    }
-    {   /* the tangent (difference FD_SOC) sets the variance floor */
-        double hi, lo, uh = output_moved(s, xi, 0, FD_SOC, &hi), ul;
+    if (spread < FD_SOC) spread = FD_SOC;
+    {
+        double hi, lo, uh = output_moved(s, xi, 0, spread, &hi), ul;
+        ul = output_moved(s, xi, 0, -spread, &lo);
+        hv[0] = (uh - ul) / (hi - lo);
+        curvature = 0.5 * (uh + ul) - u;
+        uh = output_moved(s, xi, 0, FD_SOC, &hi);
         ul = output_moved(s, xi, 0, -FD_SOC, &lo);
         tangent = (uh - ul) / (hi - lo);
+    }
+    /* the other states: through the regressors only (the validities do not depend on them),
+       so their columns are ∂x/∂state times the blended coefficients at ξ (state_gradient) */
+    {
+#if LINEAR_STATES
+        double blended[NEXO + 1], g = temperature_gain(s->ob_t);
+        double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
+        int j, m, p;
+        for (c = 0; c < NEXO; c++) {
+            blended[c] = 0.0;
+            for (j = 0; j < NM; j++) blended[c] += phi[j] * THETA[j][NA + c];
+        }
+        for (a = 1; a < NX; a++) {
+            double acc = 0.0;
+            for (m = 0; m < STATE_NCOL[a]; m++) {
+                double power = 1.0;
+                for (p = 0; p < STATE_POW[a][m]; p++) power *= dt;
+                acc += STATE_SIGN[a][m] * (STATE_SCALED[a][m] ? g : 1.0) * power
+                       * blended[STATE_COL[a][m]];
+            }
+            hv[a] = acc;
+        }
+#else
+        for (a = 1; a < NX; a++) {
+            double step = (HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A;
+            double hi, lo, uh = output_moved(s, xi, a, step, &hi), ul;
+            ul = output_moved(s, xi, a, -step, &lo);
+            hv[a] = (uh - ul) / (2.0 * step);
+        }
+#endif
     }
     r = s->r + curvature * curvature;
     for (a = 0; a < NX; a++) {
@@ -378,19 +409,9 @@ static double ekf_update(State *s, double v) {
         k[a] = ph[a] / (hph + r);
         xi[a] += k[a] * innov;
     }
+    /* P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²) */
     for (a = 0; a < NX; a++)
-        for (b = 0; b < NX; b++) ikh[a][b] = (a == b ? 1.0 : 0.0) - k[a] * hv[b];
-    for (a = 0; a < NX; a++)
-        for (b = 0; b < NX; b++) {
-            tmp[a][b] = 0.0;
-            for (c = 0; c < NX; c++) tmp[a][b] += ikh[a][c] * s->ob_p[c][b];
-        }
-    for (a = 0; a < NX; a++)
-        for (b = 0; b < NX; b++) {
-            np_[a][b] = 0.0;
-            for (c = 0; c < NX; c++) np_[a][b] += tmp[a][c] * ikh[b][c];
-            np_[a][b] += r * (k[a] * k[b]);
-        }
+        for (b = 0; b < NX; b++) np_[a][b] = s->ob_p[a][b] - ph[a] * ph[b] / (hph + r);
     for (a = 0; a < NX; a++)
         for (b = 0; b < NX; b++) s->ob_p[a][b] = 0.5 * (np_[a][b] + np_[b][a]);
     s->ob_floor = soc_variance_floor(tangent);
