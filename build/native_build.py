@@ -68,6 +68,7 @@ def model_header(model: LmnModel, guid: str) -> str:
     cols = m.columns()
     lp = [np.exp(-m.sample_time_s / tau) for f in m.filters for tau in f]
     settings = ObserverSettings.for_model(m)
+    merr = settings.model_error_by_soc or ([0.5], [float(settings.model_error_v)])
     lim = m.limits
     path = m._path_index
     gate = [{"all": 0, "charge": 1, "discharge": 2}[g] for g in m.leaf_gates]
@@ -118,7 +119,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define HYST_PRIOR_ASSUMED {HYSTERESIS_PRIOR_VAR[1]!r}",
         f"#define FD_SOC {FD_SOC!r}", f"#define FD_CURRENT_A {FD_CURRENT_A!r}",
         f"#define FD_HYSTERESIS {FD_HYSTERESIS!r}", f"#define SPREAD_MAX {SPREAD_MAX!r}",
-        f"#define MODEL_ERROR_V {float(settings.model_error_v)!r}",
+        f"#define NMERR {len(merr[0])}",
         f"#define VOLTAGE_SIGMA_V {float(settings.voltage_sigma_v)!r}",
         f"#define EKF_ERROR_SCALE {EKF_ERROR_SCALE!r}",
         f"#define SOC0_SIGMA {settings.soc0_sigma!r}", f"#define IMM_STAY {settings.imm_stay!r}",
@@ -140,6 +141,8 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"/* local models: columns {', '.join(cols)} */",
         f"static const double THETA[NM][NA + NEXO] = {_arr2(m.theta)};",
         f"static const double LOCAL_SLOPE[NM] = {_arr(local_ocv_slopes(m))};",
+        f"static const double MERR_SOC[NMERR] = {_arr(merr[0])};",
+        f"static const double MERR_V[NMERR] = {_arr(merr[1])};",
         *_state_column_tables(m),
         "#endif", ""]
     return "\n".join(lines)

@@ -32,7 +32,9 @@ too). Keys (units in the names, current > 0 charges, SoC 0…1):
 - ``local_models``: ``theta`` (M rows of the columns above).
 - ``limits``: the ranges seen in training (``current_a``, ``soc``, ``temperature_c``,
   ``voltage_v``).
-- ``noise``: ``residual_std_v`` of the free-run training error and (optional)
+- ``noise``: ``residual_std_v`` of the free-run training error, (optional)
+  ``residual_std_by_soc`` {``soc``: bin centres, ``std_v``: that error's RMS per bin of the
+  reference SoC, never below ``residual_std_v``; the observers' SoC-variance floor} and
   ``recent_current_rms_a``, the RMS of the training current low-passed over 150 s (observer
   defaults).
 - ``observers`` (optional): ``fuzzy``, the fuzzy observer's offline design for the default
@@ -280,6 +282,24 @@ def _thermal(doc: object, source: str) -> ThermalModel | None:
         raise ModelFileError(str(exc)) from None
 
 
+def _noise(doc: object, source: str) -> dict:
+    """The 'noise' object; its optional residual_std_by_soc checked (increasing SoC in 0…1,
+    one finite σ ≥ 0 per SoC)."""
+    if not isinstance(doc, dict):
+        raise ModelFileError(f"{source}: 'noise' must be an object, got {doc!r}")
+    by_soc = doc.get("residual_std_by_soc")
+    if by_soc is not None:
+        where = f"{source}: noise.residual_std_by_soc"
+        if not isinstance(by_soc, dict):
+            raise ModelFileError(f"{where} must be an object with 'soc' and 'std_v'")
+        soc, std = _array(by_soc, "soc", where, 1), _array(by_soc, "std_v", where, 1)
+        if (soc.size == 0 or soc.size != std.size or np.any(np.diff(soc) <= 0)
+                or soc[0] < 0 or soc[-1] > 1 or np.any(std < 0)):
+            raise ModelFileError(f"{where}: expected increasing SoC within 0…1 and one σ ≥ 0 "
+                                 f"(V) per SoC, got {by_soc!r}")
+    return dict(doc)
+
+
 def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     """Check a model document and build the runtime model; errors name the file and key."""
     if not isinstance(doc, dict):
@@ -381,7 +401,8 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
         thermal=_thermal(doc.get("thermal"), source),
-        limits=dict(doc.get("limits", {})), cell=dict(cell), noise=dict(doc.get("noise", {})),
+        limits=dict(doc.get("limits", {})), cell=dict(cell),
+        noise=_noise(doc.get("noise", {}), source),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
                if k in doc})
     p = len(model.columns())

@@ -18,7 +18,10 @@ filter and hysteresis states with SoC.
   σ²·11ᵀ): the EKF then estimates the relaxation under way when it starts under load.
 - Fuzzy: time-invariant (steady-state) Kalman gains K_j designed offline for each local model at
   its centre, blended online with the validity functions: K = Σ Φ_j·K_j.
-- IMM: one filter per local model (its measurement model is that local model alone), mode
+- IMM: one filter per local model (its measurement model is that local model alone, its
+  measurement variance r plus the squared difference between that local model and the whole
+  network at the mode's SoC: outside its validity region a local model is no model of the
+  cell, and its mode must neither pull SoC nor win the probabilities there), mode
   probabilities updated by the innovation likelihoods, Markov mode switching, mixing.
 
 Noise: process q = (σ_i·Ts/(3600·Cn))² + σ_d²·Ts/3600 per step (σ_i: current-sensor error, A;
@@ -74,8 +77,9 @@ class ObserverSettings:
     initial SoC guess; imm_stay: IMM mode persistence; hysteresis_drift_per_sqrt_h: random walk
     of the EKF's hysteresis state (per √hour); history_current_sigma_a: spread of the unknown
     steady current before the start (A), 0 for a start at rest; model_error_v: the model's
-    persistent voltage error σ_m (V; its free-run training RMSE by default), which sets the
-    floor of the SoC variance (soc_variance_floor)."""
+    persistent voltage error σ_m (V; its free-run training RMSE by default) and
+    model_error_by_soc ([SoC…], [σ_m…]; the model file's noise.residual_std_by_soc by
+    default), which set the floor of the reported SoC variance (soc_variance_floor)."""
 
     current_sigma_a: float = 0.05
     soc_drift_per_sqrt_h: float | None = None
@@ -85,6 +89,14 @@ class ObserverSettings:
     hysteresis_drift_per_sqrt_h: float = 0.06
     history_current_sigma_a: float = 0.0
     model_error_v: float = 0.0
+    model_error_by_soc: tuple[list[float], list[float]] | None = None
+
+    def model_error_at(self, soc: float) -> float:
+        """σ_m (V) at a SoC: model_error_by_soc interpolated (held beyond its ends), else
+        model_error_v."""
+        if self.model_error_by_soc is None:
+            return self.model_error_v
+        return float(np.interp(soc, *self.model_error_by_soc))
 
     def drift(self, kind: str) -> float:
         """The SoC random walk (per √hour) of an observer kind."""
@@ -102,6 +114,10 @@ class ObserverSettings:
         rmse = float(model.noise.get("residual_std_v", 0.01))
         s.voltage_sigma_v = max(MODEL_ERROR_FACTOR * rmse, 0.002)
         s.model_error_v = rmse
+        by_soc = model.noise.get("residual_std_by_soc")
+        if by_soc:
+            s.model_error_by_soc = ([float(v) for v in by_soc["soc"]],
+                                    [float(v) for v in by_soc["std_v"]])
         if not at_rest:
             s.history_current_sigma_a = float(model.noise.get("recent_current_rms_a", 0.0))
         return s
@@ -305,7 +321,7 @@ class SocObserver:
             soc += gain * (voltage_measured_v - u)
             slope = float(phi @ self.fuzzy_slopes)
             s.var = fixed_gain_variance(s.var, gain, slope, self.r)
-            s.var_floor = soc_variance_floor(self.settings.model_error_v, slope)
+            s.var_floor = soc_variance_floor(self.settings.model_error_at(st.soc), slope)
         else:
             soc = self._imm_update(voltage_measured_v)
         s.soc = _clip01(soc)
@@ -349,7 +365,8 @@ class SocObserver:
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
         p = p - np.outer(ph, ph) / innovation_var
         p = 0.5 * (p + p.T)
-        s.var_floor = soc_variance_floor(self.settings.model_error_v, tangent)
+        s.var_floor = soc_variance_floor(
+            self.settings.model_error_at(min(max(float(xi[0]), 0.0), 1.0)), tangent)
         s.cov = p.ravel()
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
@@ -387,9 +404,10 @@ class SocObserver:
         lik = np.empty(xs.size)
         slopes = np.empty(xs.size)
         for j in range(xs.size):
-            u_j = self._outputs_at(_clip01(xs[j]))[2][j]
+            u_net, _, local = self._outputs_at(_clip01(xs[j]))
+            u_j = local[j]
             h_j = self._slopes(_clip01(xs[j]))[1][j]
-            sj = h_j * h_j * ps[j] + self.r
+            sj = h_j * h_j * ps[j] + self.r + (u_net - u_j) ** 2
             k = ps[j] * h_j / sj
             innov = v_meas - u_j
             xs[j] = _clip01(xs[j] + k * innov)
@@ -401,7 +419,7 @@ class SocObserver:
         s.mode_soc, s.mode_var, s.mode_prob = xs.tolist(), ps.tolist(), mu.tolist()
         x = float(mu @ xs)
         s.var = float(mu @ (ps + (xs - x) ** 2))
-        s.var_floor = soc_variance_floor(self.settings.model_error_v, float(mu @ slopes))
+        s.var_floor = soc_variance_floor(self.settings.model_error_at(x), float(mu @ slopes))
         return x
 
     # ----- state ---------------------------------------------------------------------------

@@ -108,6 +108,12 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
     (lambda d: d["cell"].pop("capacity_ah"), "missing key 'capacity_ah'"),
     (lambda d: d["regressors"].update(temperature_terms=5), "'temperature_terms' is 5"),
     (lambda d: d["regressors"].update(temperature_terms=1), "theta has shape"),
+    (lambda d: d.update(noise={"residual_std_by_soc": {"soc": [0.5, 0.2],
+                                                       "std_v": [0.01, 0.01]}}),
+     "residual_std_by_soc: expected increasing SoC"),
+    (lambda d: d.update(noise={"residual_std_by_soc": {"soc": [0.5], "std_v": [-1.0]}}),
+     "residual_std_by_soc: expected"),
+    (lambda d: d.update(noise=[1]), "'noise' must be an object"),
 ])
 def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
     doc = model_to_dict(random_tree_model())

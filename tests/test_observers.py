@@ -162,6 +162,17 @@ def a123_two_temperatures(tmp_path_factory):
     return load_model(out), seg
 
 
+def test_model_error_by_soc_is_stored_and_larger_near_empty(a123_two_temperatures) -> None:
+    model, _ = a123_two_temperatures
+    by_soc = model.noise["residual_std_by_soc"]
+    overall = model.noise["residual_std_v"]
+    assert len(by_soc["soc"]) == len(by_soc["std_v"]) == 10
+    assert min(by_soc["std_v"]) >= overall
+    assert by_soc["std_v"][0] > 2 * overall                 # the collapse before cut-off
+    settings = ObserverSettings.for_model(model)
+    assert settings.model_error_at(0.05) == pytest.approx(by_soc["std_v"][0])
+
+
 @pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])
 def test_observers_are_consistent_on_an_unseen_record(a123_two_temperatures, kind) -> None:
     """Started under load at true SoC 0.6 with the estimate 0.3 on the unseen 25 °C record:

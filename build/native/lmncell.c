@@ -332,27 +332,38 @@ static double output_moved(const State *s, const double *xi, int a, double delta
     return outputs_for(s, row, NX, phi, uj);
 }
 
+/* ObserverSettings.model_error_at: σ_m (V) at a SoC, numpy.interp of the training error */
+static double model_error_at(double soc) {
+    int k;
+    if (!(soc > MERR_SOC[0])) return MERR_V[0];
+    if (soc >= MERR_SOC[NMERR - 1]) return MERR_V[NMERR - 1];
+    for (k = 0; k < NMERR - 1; k++)
+        if (soc < MERR_SOC[k + 1]) break;
+    return MERR_V[k] + (MERR_V[k + 1] - MERR_V[k]) * (soc - MERR_SOC[k]) / (MERR_SOC[k + 1] - MERR_SOC[k]);
+}
+
 /* observers.soc_variance_floor: (σ_m/|∂u/∂SoC|)², at most 1 */
-static double soc_variance_floor(double slope) {
+static double soc_variance_floor(double err, double slope) {
     double m = fabs(slope) > 1e-6 ? fabs(slope) : 1e-6, f;
-    if (MODEL_ERROR_V <= 0.0) return 0.0;
-    f = (MODEL_ERROR_V / m) * (MODEL_ERROR_V / m);
+    if (err <= 0.0) return 0.0;
+    f = (err / m) * (err / m);
     return f < 1.0 ? f : 1.0;
 }
 
 static double ekf_update(State *s, double v) {
     double xi[NX], hv[NX], ph[NX], k[NX], np_[NX][NX];
-    double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent;
+    double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent, soc_prior;
     int a, b, c;
     xi[0] = s->soc;
     for (a = 0; a < 2 * NF; a++) xi[1 + a] = s->lp[a];
 #if HAS_HYSTERESIS
     xi[NX - 1] = s->h;
 #endif
+    soc_prior = clip01(xi[0]);
     {   /* the base point at the clipped SoC (observers.SocObserver._jacobian) */
         double xc[NX];
         memcpy(xc, xi, sizeof xc);
-        xc[0] = clip01(xi[0]);
+        xc[0] = soc_prior;
         u = outputs_for(s, xc, NX, phi, uj);
     }
     /* SoC column: the secant over ±σ, δ² added to r; the tangent sets the variance floor */
@@ -414,7 +425,7 @@ static double ekf_update(State *s, double v) {
         for (b = 0; b < NX; b++) np_[a][b] = s->ob_p[a][b] - ph[a] * ph[b] / (hph + r);
     for (a = 0; a < NX; a++)
         for (b = 0; b < NX; b++) s->ob_p[a][b] = 0.5 * (np_[a][b] + np_[b][a]);
-    s->ob_floor = soc_variance_floor(tangent);
+    s->ob_floor = soc_variance_floor(model_error_at(soc_prior), tangent);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
     for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
 #if HAS_HYSTERESIS
@@ -492,11 +503,12 @@ static double imm_update(State *s, double v) {
         double xs = clip01(s->mode_soc[j]);
         double hi = xs + FD_SOC < 1.0 ? xs + FD_SOC : 1.0, lo = xs - FD_SOC > 0.0 ? xs - FD_SOC : 0.0;
         double hj, sj, k, innov;
-        outputs_at(s, xs, phi, uj);
+        double unet = outputs_at(s, xs, phi, uj);
         outputs_at(s, hi, phi, ujh);
         outputs_at(s, lo, phi, ujl);
         hj = (ujh[j] - ujl[j]) / (hi - lo);
-        sj = hj * hj * s->mode_var[j] + s->r;
+        /* the local model's disagreement with the network counts as its measurement error */
+        sj = hj * hj * s->mode_var[j] + s->r + (unet - uj[j]) * (unet - uj[j]);
         k = s->mode_var[j] * hj / sj;
         innov = v - uj[j];
         s->mode_soc[j] = clip01(s->mode_soc[j] + k * innov);
@@ -514,7 +526,7 @@ static double imm_update(State *s, double v) {
         slope += s->mode_prob[j] * slopes[j];
     }
     s->ob_var = var;
-    s->ob_floor = soc_variance_floor(slope);
+    s->ob_floor = soc_variance_floor(model_error_at(x), slope);
     return x;
 }
 
@@ -551,7 +563,7 @@ static void observer_step(State *s, double i, double v, double t) {
         c = fabs(slope) > 1e-6 ? slope : 1e-6;
         soc += kk * (v - u);
         s->ob_var = (1.0 - kk * c) * (1.0 - kk * c) * s->ob_var + kk * kk * s->r;
-        s->ob_floor = soc_variance_floor(slope);
+        s->ob_floor = soc_variance_floor(model_error_at(s->soc), slope);
     } else {
         soc = imm_update(s, v);
     }

@@ -109,7 +109,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     model.limits = _limits(segs, model)
     model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
                   "voltage_max_v": model.limits["voltage_v"][1]}
-    train_metrics = [{"segment": s.name, **_metrics(model, s)} for s in segs]
+    sims = [simulate_segment(model, s).voltage_v for s in segs]
+    train_metrics = [{"segment": s.name, **record_metrics(s.voltage_v, v, s.soc_ref)}
+                     for s, v in zip(segs, sims, strict=True)]
     model.thermal, thermal_info = fit_thermal(model, segs)
     progress("thermal model: " + (
         f"R = {model.thermal.resistance_k_per_w:.2f} K/W, τ = {model.thermal.time_constant_s:.0f}"
@@ -117,7 +119,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
         f"{thermal_info['rmse_k']:.2f} K on {len(thermal_info['segments'])} segment(s)"
         if model.thermal is not None else f"off ({thermal_info['reason']})"))
     model.noise = {"residual_std_v": 1e-3 * pooled(train_metrics),
-                   "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s)}
+                   "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s),
+                   "residual_std_by_soc": residual_std_by_soc(segs, sims,
+                                                              1e-3 * pooled(train_metrics))}
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
@@ -151,6 +155,28 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     return model, summary
 
 
+SOC_BINS = 10            # residual_std_by_soc: bins of 0.1 SoC
+MIN_BIN_SAMPLES = 300
+
+
+def residual_std_by_soc(segs: list[Segment], model_v: list[np.ndarray],
+                        overall_v: float) -> dict:
+    """The free-run training error's RMS (V) per SoC bin of the reference SoC, at the bin
+    centres, never below the overall RMS (a bin with fewer than MIN_BIN_SAMPLES samples gets
+    the overall): the observers' persistent model error σ_m(SoC), larger near empty where the
+    voltage collapses than in the middle."""
+    soc = np.concatenate([s.soc_ref for s in segs])
+    err = np.concatenate([v - s.voltage_v for s, v in zip(segs, model_v, strict=True)])
+    edges = np.linspace(0.0, 1.0, SOC_BINS + 1)
+    idx = np.clip(np.searchsorted(edges, soc, side="right") - 1, 0, SOC_BINS - 1)
+    std = []
+    for b in range(SOC_BINS):
+        e = err[idx == b]
+        rms = float(np.sqrt(np.mean(e * e))) if e.size >= MIN_BIN_SAMPLES else overall_v
+        std.append(max(rms, overall_v) if np.isfinite(rms) else overall_v)
+    return {"soc": (0.5 * (edges[:-1] + edges[1:])).tolist(), "std_v": std}
+
+
 def _cell_name(records: list[Record]) -> str:
     names = " ".join(r.name for r in records)
     if "A123" in names:
@@ -158,11 +184,6 @@ def _cell_name(records: list[Record]) -> str:
     if "Pan18650PF" in names or "3349" in names:
         return "Panasonic NCR18650PF NCA (Kollmeyer data)"
     return "cell of " + ", ".join(r.name for r in records[:3])
-
-
-def _metrics(model: LmnModel, seg: Segment) -> dict:
-    sim = simulate_segment(model, seg)
-    return record_metrics(seg.voltage_v, sim.voltage_v, seg.soc_ref)
 
 
 def fit_baselines(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnModel,
