@@ -17,6 +17,28 @@ A123_S1 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s1.csv.gz"
 A123_S2 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s2.csv.gz"
 
 
+def chamber_cell_segments(n: int, tau_s: float, ocv_per_k: float = 0.0,
+                          e_k: float = 4000.0) -> list:
+    """Segments of a synthetic cell at constant chamber temperatures −5/5/25/45 °C (capacity
+    2 Ah, Ts 1 s, seeded random current levels): u = 3.3 + 0.8·SoC + ocv_per_k·T +
+    g(T)·(0.03·i + 0.01·LP_τ(i)), g(T) = exp(E·(1/T − 1/298.15 K))."""
+    import numpy as np
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.ocvfit import lowpass
+
+    rng = np.random.default_rng(3)
+    cap, ts = 2.0, 1.0
+    segs = []
+    for k, t_amb in enumerate((-5.0, 5.0, 25.0, 45.0)):
+        i = np.repeat(rng.choice([-3.0, -1.5, -0.5, 0.0, 1.5], size=n // 20), 20)
+        soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
+        g = np.exp(e_k * (1 / (t_amb + 273.15) - 1 / 298.15))
+        u = 3.3 + 0.8 * soc + ocv_per_k * t_amb + g * (0.03 * i + 0.01 * lowpass(i, tau_s, ts))
+        segs.append(Segment(f"chamber{k}", np.arange(1, n + 1) * ts, i, u, np.full(n, t_amb),
+                            1.0, soc, np.ones(n)))
+    return segs
+
+
 def import_or_skip(name: str, reason: str):
     """Import an optional host package or skip the test with a reason. Also catches OSError:
     ecospy raises it at import when its system library (Debian libtbb12) is missing, which

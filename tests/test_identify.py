@@ -317,21 +317,13 @@ def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature
     is chosen on the root model's free-run error with those terms (every candidate's figure
     recorded); the true E is among the best there, a far-off E is clearly worse. (With the
     quadratic terms E is only weakly identified: 4000–6000 K fit equally well here.)"""
-    from lmncell.data.dataset import Segment
     from lmncell.identification.construction import train_lmn
-    from lmncell.identification.ocvfit import lowpass
     from lmncell.identification.prefit import ARRHENIUS_CANDIDATES_K
 
-    rng = np.random.default_rng(3)
-    cap, ts, n = 2.0, 1.0, 6000
-    segs = []
-    for k, t_amb in enumerate((-5.0, 5.0, 25.0, 45.0)):
-        i = np.repeat(rng.choice([-3.0, -1.5, -0.5, 0.0, 1.5], size=n // 20), 20)
-        soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
-        g = np.exp(4000.0 * (1 / (t_amb + 273.15) - 1 / 298.15))
-        u = 3.3 + 0.8 * soc + 1e-4 * t_amb + g * (0.03 * i + 0.01 * lowpass(i, 60.0, ts))
-        segs.append(Segment(f"chamber{k}", np.arange(1, n + 1) * ts, i, u, np.full(n, t_amb),
-                            1.0, soc, np.ones(n)))
+    from tests.conftest import chamber_cell_segments
+
+    cap = 2.0
+    segs = chamber_cell_segments(6000, 60.0, ocv_per_k=1e-4)
     cfg = load_config(max_local_models=1, oe_refinement=False, hysteresis="off")
     info = train_lmn(segs, cfg, cap).info
     scores = info["arrhenius_root_freerun_rmse_mv"]

@@ -91,16 +91,10 @@ def test_local_models_of_measured_records_are_positive_rc_ladders(tmp_path) -> N
 
 
 def test_ladder_is_positive_at_every_training_temperature_with_temperature_terms() -> None:
-    rng = np.random.default_rng(3)
-    cap, ts, n = 2.0, 1.0, 5000
-    segs = []
-    for k, t_amb in enumerate((-5.0, 5.0, 25.0, 45.0)):
-        i = np.repeat(rng.choice([-3.0, -1.5, -0.5, 0.0, 1.5], size=n // 20), 20)
-        soc = 1.0 + np.cumsum(i) * ts / 3600.0 / cap
-        g = np.exp(4000.0 * (1 / (t_amb + 273.15) - 1 / 298.15))
-        u = 3.3 + 0.8 * soc + g * (0.03 * i + 0.01 * lowpass(i, 30.0, ts))
-        segs.append(Segment(f"chamber{k}", np.arange(1, n + 1) * ts, i, u, np.full(n, t_amb),
-                            1.0, soc, np.ones(n)))
+    from tests.conftest import chamber_cell_segments
+
+    cap = 2.0
+    segs = chamber_cell_segments(5000, 30.0)
     cfg = load_config(max_local_models=2, hysteresis="off", oe_max_iterations=2)
     model = train_lmn(segs, cfg, cap).model
     assert model.temperature_terms >= 1
