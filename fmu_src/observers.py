@@ -354,6 +354,7 @@ class SocObserver:
         the stepper and returns the unclipped SoC."""
         s, st = self.state, self.stepper
         xi = self._state_vector()
+        soc_prior = min(max(float(xi[0]), 0.0), 1.0)
         p = s.covariance()
         u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(p[0, 0], 0.0)),
                                                           SPREAD_MAX))
@@ -365,8 +366,7 @@ class SocObserver:
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
         p = p - np.outer(ph, ph) / innovation_var
         p = 0.5 * (p + p.T)
-        s.var_floor = soc_variance_floor(
-            self.settings.model_error_at(min(max(float(xi[0]), 0.0), 1.0)), tangent)
+        s.var_floor = soc_variance_floor(self.settings.model_error_at(soc_prior), tangent)
         s.cov = p.ravel()
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
