@@ -171,8 +171,8 @@ class SocObserver:
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
         self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
         self.state_columns = state_columns(model) if kind == "ekf" else []
-        self._ekf_fg: tuple[np.ndarray, np.ndarray] | None = None   # F and G without the step's
-        #                                                             current-dependent entries
+        self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
+                        else None)
         exo = model.columns()[model.output_lags:]
         self._soc_entries = (exo.index("ocv(k)") if "ocv(k)" in exo else None,
                              exo.index("soc(k)") if "soc(k)" in exo else None,
@@ -332,13 +332,7 @@ class SocObserver:
         """P ← F·P·Fᵀ + Q for the step the stepper just took."""
         s, exo, cfg = self.state, self.stepper.exo, self.settings
         p = s.covariance()
-        if self._ekf_fg is None or self._ekf_fg[0].size != p.shape[0]:
-            n = p.shape[0]
-            f0, g0 = np.ones(n), np.zeros(n)
-            f0[1:1 + len(exo.coef)] = exo.coef
-            g0[1:1 + len(exo.coef)] = [1.0 - a for a in exo.coef]
-            self._ekf_fg = (f0, g0)
-        f, g = self._ekf_fg[0].copy(), self._ekf_fg[1].copy()
+        f, g = (a.copy() for a in self._ekf_fg)
         g[0] = exo.soc_gain * exo.eta(current_a)
         q = cfg.current_sigma_a ** 2 * np.outer(g, g)
         q[0, 0] += cfg.drift("ekf") ** 2 * self.model.sample_time_s / 3600.0
@@ -451,6 +445,16 @@ def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.nda
         return np.asarray(stored["gains"], dtype=float), np.asarray(stored["variances"],
                                                                      dtype=float)
     return design_fuzzy_gains(local_ocv_slopes(model), q, r)
+
+
+def ekf_transition(coef: list[float], n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The EKF prediction's F (diagonal) and G of ξ = [SoC, low-pass states…, h] without the
+    step's current-dependent entries (G's SoC entry, F's h entry): the low-pass states decay by
+    their coefficients a and take 1 − a of the current."""
+    f, g = np.ones(n), np.zeros(n)
+    f[1:1 + len(coef)] = coef
+    g[1:1 + len(coef)] = [1.0 - a for a in coef]
+    return f, g
 
 
 def state_columns(model: LmnModel) -> list[list[tuple[int, int, bool, float]]]:

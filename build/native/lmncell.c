@@ -60,7 +60,7 @@ typedef struct {
     double ob_p[NX][NX];                       /* EKF covariance of [SoC, lp…, h] */
     double ob_i, ob_t, ob_past[NB + 1];        /* the step's current, temperature, past currents */
     double mode_soc[NM], mode_var[NM], mode_prob[NM];
-    double fuzzy_gain[NM], fuzzy_var[NM];
+    double fuzzy_gain[NM];
 } State;
 
 /* FMI 2.0 co-simulation states (the standard's state machine) */
@@ -441,7 +441,6 @@ static void fuzzy_design(State *s) {
         double p = 0.5 * (s->q + sqrt(s->q * s->q + 4.0 * s->q * s->r / (c * c)));
         double k = p * c / (c * c * p + s->r);
         s->fuzzy_gain[j] = k;
-        s->fuzzy_var[j] = (1.0 - k * c) * p;
     }
 }
 

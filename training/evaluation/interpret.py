@@ -7,8 +7,13 @@ import json
 from pathlib import Path
 
 import numpy as np
-from lmncell.identification.ladder import is_ladder
-from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
+from lmncell.identification.ladder import (
+    coefficient_row,
+    filter_to_ladder,
+    is_ladder,
+    ladder_keys,
+)
+from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.step import arrhenius_gain
 
 
@@ -68,43 +73,24 @@ def _arx_row(model: LmnModel, th: np.ndarray, cols: list[str]) -> dict:
     return row
 
 
-def _source_values(model: LmnModel, theta: np.ndarray, temperature_c: float) -> dict[str, float]:
-    """Coefficient of each plain column at a temperature (temperature terms summed in)."""
-    cols = model.columns()
-    dt = (temperature_c - model.reference_temperature_c) / TEMPERATURE_STEP_K
-    out = {}
-    for c in model._plain_columns():
-        v = float(theta[cols.index(c)])
-        for power in range(1, model.temperature_terms + 1):
-            name = f"{c}*dT^{power}"
-            if name in cols:
-                v += float(theta[cols.index(name)]) * dt ** power
-        out[c] = v
-    return out
-
-
 def ladder_parameters(model: LmnModel, theta: np.ndarray, temperature_c: float) -> dict:
     """A feedback-free local model as an RC ladder at a temperature:
     u − OCV = R0·i + Σ_τ R_τ·LP_τ(i) + H·h + U_off (+ the current lags' small correction).
 
-    Each filter v = LP_fast − LP_slow puts +g on its fast and −g on its slow time constant; one
-    below the sample time counts as instantaneous (part of R0, with the current lags); the
-    Arrhenius gain g(T) scales every resistance. Returns R0, the RC elements (mΩ by τ in s, key
+    The filter coefficients map onto the ladder by ladder.filter_to_ladder (time constants below
+    the sample time join R0, with the current lags); the Arrhenius gain g(T) scales every
+    resistance. Returns R0, the RC elements (mΩ by τ in s, key
     "0" = R0 as well), the static resistance R0 + Σ R_τ, H and U_off (mV), and whether every R
     and H is ≥ 0 (`rc_positive`)."""
-    c = _source_values(model, theta, temperature_c)
+    c = {src: float(coefficient_row(model, src, temperature_c) @ theta)
+         for src in model._plain_columns()}
     g = float(arrhenius_gain(np.array([temperature_c]), model.arrhenius_k, 1,
                              model.reference_temperature_c)[0])
-    ts = model.sample_time_s
-    r0 = sum(v for k, v in c.items() if k.startswith("i(k"))
-    rc: dict[float, float] = {}
-    for f, (fast, slow) in enumerate(model.filters):
-        gf = c[f"v{f + 1}(k)"]
-        for tau, sign in ((fast, 1.0), (slow, -1.0)):
-            if tau < ts:
-                r0 += sign * gf
-            else:
-                rc[tau] = rc.get(tau, 0.0) + sign * gf
+    a = filter_to_ladder(list(model.filters), model.sample_time_s)
+    gf = np.array([c[f"v{f + 1}(k)"] for f in range(len(model.filters))])
+    r0 = sum(v for k, v in c.items() if k.startswith("i(k")) + float(a[0] @ gf)
+    rc = dict(zip(ladder_keys(model.filters, model.sample_time_s), (a[1:] @ gf).tolist(),
+                  strict=True))
     ladder = {"0": _clean(1e3 * g * r0),
               **{f"{k:g}": _clean(1e3 * g * v) for k, v in sorted(rc.items())}}
     row = {"r0_mohm": ladder["0"], "rc_mohm_by_tau_s": ladder,
@@ -124,11 +110,6 @@ ROUND_OFF = 1e-6     # mΩ or mV: |values| below this are the constrained solver
 def _clean(value: float) -> float:
     """The value, or exactly 0.0 where it is round-off around 0 (a constraint at its bound)."""
     return 0.0 if abs(value) < ROUND_OFF else value
-
-
-def rc_ladder(model: LmnModel, theta: np.ndarray) -> dict[str, float]:
-    """R per time constant (mΩ by τ in s, "0" = R0) at the reference temperature."""
-    return ladder_parameters(model, theta, model.reference_temperature_c)["rc_mohm_by_tau_s"]
 
 
 def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:

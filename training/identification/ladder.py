@@ -40,18 +40,35 @@ def is_ladder(filters: list[tuple[float, float]] | list[list[float]], sample_tim
     feedback, and as many RC time constants as filters (a chain such as [[0.01, 5], [5, 30]])."""
     if output_lags != 0 or not filters:
         return False
-    a = _filter_to_ladder(list(filters), sample_time_s)
+    a = filter_to_ladder(list(filters), sample_time_s)[1:]
     return a.shape[0] == a.shape[1] and np.linalg.matrix_rank(a) == a.shape[0]
 
 
-def _filter_to_ladder(filters: list, sample_time_s: float) -> np.ndarray:
-    """(1 + keys, F): row 0 the filters' share of R0, then one row per RC time constant."""
+def filter_to_ladder(filters: list, sample_time_s: float) -> np.ndarray:
+    """(1 + keys, F): how the filter coefficients g add up to the ladder. Each filter
+    v = LP_fast − LP_slow puts +g on its fast and −g on its slow time constant; row 0 collects
+    those below the sample time (instantaneous: a share of R0), then one row per RC time
+    constant of ladder_keys."""
     keys = ladder_keys(filters, sample_time_s)
     a = np.zeros((1 + len(keys), len(filters)))
     for f, (fast, slow) in enumerate(filters):
         for tau, sign in ((float(fast), 1.0), (float(slow), -1.0)):
             a[0 if tau < sample_time_s else 1 + keys.index(tau), f] += sign
-    return a[1:]
+    return a
+
+
+def coefficient_row(model: LmnModel, source: str, temperature_c: float) -> np.ndarray:
+    """Row vector over the model's columns: the coefficient of a plain column at a
+    temperature, its temperature terms summed in (row @ θ gives the value)."""
+    cols = model.columns()
+    dt = (temperature_c - model.reference_temperature_c) / TEMPERATURE_STEP_K
+    v = np.zeros(len(cols))
+    v[cols.index(source)] = 1.0
+    for power in range(1, model.temperature_terms + 1):
+        name = f"{source}*dT^{power}"
+        if name in cols:
+            v[cols.index(name)] = dt ** power
+    return v
 
 
 def constraint_temperatures_c(t_min_c: float, t_max_c: float, degree: int,
@@ -120,36 +137,24 @@ def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0) ->
     (is_ladder). t_min_c … t_max_c: the training temperature range (for temperature terms)."""
     if not is_ladder(model.filters, model.sample_time_s, model.output_lags):
         return None
-    cols = model.columns()
     n = model.temperature_terms
     temps = constraint_temperatures_c(t_min_c, t_max_c, n, model.reference_temperature_c)
     keys = ladder_keys(model.filters, model.sample_time_s)
-    a = _filter_to_ladder(list(model.filters), model.sample_time_s)
-    ts = model.sample_time_s
-    share_r0 = np.array([(fast < ts) - (slow < ts) for fast, slow in model.filters], float)
+    a = filter_to_ladder(list(model.filters), model.sample_time_s)
     sources = model.temperature_term_sources()
     rows: list[np.ndarray] = []
     names: list[str] = []
     for t in temps:
-        dt = (t - model.reference_temperature_c) / TEMPERATURE_STEP_K
         tag = "" if n == 0 else f"@{t:g}C"
-
-        def value(src: str, dt: float = dt) -> np.ndarray:
-            """Row vector: the coefficient of source column src at this temperature."""
-            v = np.zeros(len(cols))
-            v[cols.index(src)] = 1.0
-            for power in range(1, n + 1):
-                v[cols.index(f"{src}*dT^{power}")] = dt ** power
-            return v
-
-        cur = sum(value(c) for c in sources if c.startswith("i(k"))
-        filt = np.array([value(f"v{f + 1}(k)") for f in range(len(model.filters))])
-        rows.append(cur + share_r0 @ filt)
+        cur = sum(coefficient_row(model, c, t) for c in sources if c.startswith("i(k"))
+        filt = np.array([coefficient_row(model, f"v{f + 1}(k)", t)
+                         for f in range(len(model.filters))])
+        rows.append(cur + a[0] @ filt)
         names.append(f"R0{tag}")
         for k, tau in enumerate(keys):
-            rows.append(a[k] @ filt)
+            rows.append(a[1 + k] @ filt)
             names.append(f"R_{tau:g}s{tag}")
         if "h(k)" in sources:
-            rows.append(value("h(k)"))
+            rows.append(coefficient_row(model, "h(k)", t))
             names.append(f"H{tag}")
     return Ladder(np.array(rows), names)

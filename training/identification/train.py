@@ -118,10 +118,10 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
         f" s, rested {model.thermal.offset_k:+.2f} K above ambient; cell temperature RMSE "
         f"{thermal_info['rmse_k']:.2f} K on {len(thermal_info['segments'])} segment(s)"
         if model.thermal is not None else f"off ({thermal_info['reason']})"))
-    model.noise = {"residual_std_v": 1e-3 * pooled(train_metrics),
+    residual_v = 1e-3 * pooled(train_metrics)
+    model.noise = {"residual_std_v": residual_v,
                    "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s),
-                   "residual_std_by_soc": residual_std_by_soc(segs, sims,
-                                                              1e-3 * pooled(train_metrics))}
+                   "residual_std_by_soc": residual_std_by_soc(segs, sims, residual_v)}
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
