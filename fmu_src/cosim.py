@@ -69,6 +69,7 @@ class CellCosim:
         self.range_message = ""
         self.steps = 0
         self._start_temperature_c = t_cell
+        self._bounds = self._range_bounds()
 
     @property
     def voltage_v(self) -> float:
@@ -90,22 +91,34 @@ class CellCosim:
         """Observer's SoC standard deviation; 0 without an observer (coulomb counting)."""
         return self.observer.soc_std if self.observer else 0.0
 
+    def _range_bounds(self) -> tuple[float, float, float, float, float, float]:
+        """Accepted current (A), SoC and temperature (°C) bounds: the trained region with the
+        margins check_range allows (±∞ where the model is not limited)."""
+        lim, inf = self.model.limits, math.inf
+        lo, hi = lim.get("current_a", (-inf, inf))
+        slo, shi = lim.get("soc", (-inf, inf))
+        tlo, thi = (lim.get("temperature_c", (-inf, inf))
+                    if "temperature" in self.model.partition_variables else (-inf, inf))
+        return (lo - 0.05 * abs(lo) - 1e-3, hi + 0.05 * abs(hi) + 1e-3, slo - 0.02, shi + 0.02,
+                tlo - 2.0, thi + 2.0)
+
     def check_range(self, current_a: float, temperature_c: float) -> str:
         """'' when inside the trained region, else a message (the model still extrapolates)."""
-        lim = self.model.limits
-        msgs = []
-        lo, hi = lim.get("current_a", (-math.inf, math.inf))
-        if current_a < lo - 0.05 * abs(lo) - 1e-3 or current_a > hi + 0.05 * abs(hi) + 1e-3:
+        ilo, ihi, slo, shi, tlo, thi = self._bounds
+        soc = self.stepper.state.soc
+        if ilo <= current_a <= ihi and slo <= soc <= shi and tlo <= temperature_c <= thi:
+            return ""
+        lim, msgs = self.model.limits, []
+        if not ilo <= current_a <= ihi:
+            lo, hi = lim["current_a"]
             msgs.append(f"current {current_a:.3f} A outside the trained {lo:.3f}…{hi:.3f} A")
-        slo, shi = lim.get("soc", (-math.inf, math.inf))
-        soc = self.stepper.soc
-        if soc < slo - 0.02 or soc > shi + 0.02:
-            msgs.append(f"SoC {soc:.3f} outside the trained {slo:.3f}…{shi:.3f}")
-        tlo, thi = lim.get("temperature_c", (-math.inf, math.inf))
-        if "temperature" in self.model.partition_variables and not tlo - 2 <= temperature_c <= \
-                thi + 2:
+        if not slo <= soc <= shi:
+            lo, hi = lim["soc"]
+            msgs.append(f"SoC {soc:.3f} outside the trained {lo:.3f}…{hi:.3f}")
+        if not tlo <= temperature_c <= thi:
+            lo, hi = lim["temperature_c"]
             msgs.append(f"temperature {temperature_c:.1f} °C outside the trained "
-                        f"{tlo:.1f}…{thi:.1f} °C")
+                        f"{lo:.1f}…{hi:.1f} °C")
         return "; ".join(msgs)
 
     def advance(self, step_s: float, current_a: float, temperature_c: float = 25.0,
@@ -115,20 +128,11 @@ class CellCosim:
         voltage_measured_v ≤ 0 means "not measured". Raises InputError (naming the variable)
         before changing any state.
         """
-        for name, val in (("current", current_a), ("temperature", temperature_c)):
-            if not math.isfinite(val):
-                raise InputError(f"input '{name}' = {val!r}: expected a finite number")
-        if not math.isfinite(step_s) or step_s <= 0:
-            raise InputError(f"communication step size {step_s!r}: expected > 0 s")
-        if not math.isfinite(voltage_measured_v):
-            raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
-                             "finite number (0 when not measured)")
-        if abs(current_a) > MAX_C_RATE * self.params.capacity_ah:
-            raise InputError(f"input 'current' = {current_a!r} A: beyond {MAX_C_RATE:g} C of "
-                             f"{self.params.capacity_ah:g} Ah, not a current a cell carries")
-        if not MIN_TEMPERATURE_C <= temperature_c <= MAX_TEMPERATURE_C:
-            raise InputError(f"input 'temperature' = {temperature_c!r} °C: expected "
-                             f"{MIN_TEMPERATURE_C:g}…{MAX_TEMPERATURE_C:g} °C")
+        i_max = MAX_C_RATE * self.params.capacity_ah
+        if not (-i_max <= current_a <= i_max and MIN_TEMPERATURE_C <= temperature_c
+                <= MAX_TEMPERATURE_C and 0.0 < step_s < math.inf
+                and math.isfinite(voltage_measured_v)):
+            self._refuse(step_s, current_a, temperature_c, voltage_measured_v)
         ts = self.model.sample_time_s
         remaining = step_s
         taken = 0
@@ -145,6 +149,23 @@ class CellCosim:
                 self._model_step()
                 taken += 1
         return taken
+
+    def _refuse(self, step_s: float, current_a: float, temperature_c: float,
+                voltage_measured_v: float) -> None:
+        """Raise InputError naming the first input of advance() that is not acceptable."""
+        for name, val in (("current", current_a), ("temperature", temperature_c)):
+            if not math.isfinite(val):
+                raise InputError(f"input '{name}' = {val!r}: expected a finite number")
+        if not math.isfinite(step_s) or step_s <= 0:
+            raise InputError(f"communication step size {step_s!r}: expected > 0 s")
+        if not math.isfinite(voltage_measured_v):
+            raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
+                             "finite number (0 when not measured)")
+        if abs(current_a) > MAX_C_RATE * self.params.capacity_ah:
+            raise InputError(f"input 'current' = {current_a!r} A: beyond {MAX_C_RATE:g} C of "
+                             f"{self.params.capacity_ah:g} Ah, not a current a cell carries")
+        raise InputError(f"input 'temperature' = {temperature_c!r} °C: expected "
+                         f"{MIN_TEMPERATURE_C:g}…{MAX_TEMPERATURE_C:g} °C")
 
     def _model_step(self) -> None:
         ts = self.model.sample_time_s

@@ -76,15 +76,15 @@ class LmnCellSlave(Fmi2Slave):
                  "cell temperature (this model has no thermal model) [degC]"))
         reg(Real("voltage", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
-                 getter=lambda: self._out("voltage_v"),
+                 getter=lambda: (self._cosim or self._initial_cosim()).voltage_v,
                  description="model terminal voltage of the last completed model step [V]"))
         reg(Real("soc", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
-                 getter=lambda: self._out("soc"),
+                 getter=lambda: (self._cosim or self._initial_cosim()).soc,
                  description="state of charge: coulomb counting, or the observer's estimate "
                              "[1]"))
         reg(Real("soc_std", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
-                 getter=lambda: self._out("soc_std"),
+                 getter=lambda: (self._cosim or self._initial_cosim()).soc_std,
                  description="observer's SoC standard deviation (0 without observer) [1]"))
         reg(Boolean("out_of_range", causality=Fmi2Causality.output,
                     variability=Fmi2Variability.discrete,
@@ -107,9 +107,14 @@ class LmnCellSlave(Fmi2Slave):
                                 "cell temperature follows the model's thermal model"))
         reg(Real("cell_temperature", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
-                 getter=lambda: self._out("cell_temperature_c"),
+                 getter=lambda: (self._cosim or self._initial_cosim()).cell_temperature_c,
                  description="cell temperature at the end of the last completed model step "
                              "(the next step's) [degC]"))
+        # the per-step calls' fast path: the Real variables that get_real may read and the
+        # inputs that set_real may always set (anything else goes through the checks)
+        self._real_getters = {vr: v.getter for vr, v in self.vars.items() if isinstance(v, Real)}
+        self._input_setters = {vr: v.setter for vr, v in self.vars.items()
+                               if isinstance(v, Real) and v.causality == Fmi2Causality.input}
 
     def _dedupe_sys_path(self) -> None:
         """The wrapper inserts the resources folder into sys.path at every instantiation: keep
@@ -126,13 +131,10 @@ class LmnCellSlave(Fmi2Slave):
             kept.append(p)
         sys.path[:] = kept
 
-    def _out(self, name: str) -> float:
-        """An output; before initialisation, the value exitInitializationMode will give with
-        the parameters and inputs set so far (nothing changed in between, nothing differs)."""
-        cosim = self._cosim if self._cosim is not None else self._initial_cosim()
-        return float(getattr(cosim, name))
-
     def _initial_cosim(self) -> CellCosim:
+        """Before initialisation, the engine exitInitializationMode will make from the
+        parameters and inputs set so far: the outputs read now are those it will give (nothing
+        changed in between, nothing differs)."""
         m = self._model
         soc0 = min(max(float(self.soc0), 0.0), 1.0) if math.isfinite(self.soc0) else 1.0
         cap = float(self.capacity)
@@ -186,6 +188,9 @@ class LmnCellSlave(Fmi2Slave):
                 self.vars[vr].setter(value)
 
     def get_real(self, vrs: list[int]) -> list[float]:
+        getters = self._real_getters
+        if all(vr in getters for vr in vrs):
+            return [float(getters[vr]()) for vr in vrs]
         return [float(v) for v in self._get(vrs, Real, "fmi2GetReal", math.nan)]
 
     def get_integer(self, vrs: list[int]) -> list[int]:
@@ -200,6 +205,11 @@ class LmnCellSlave(Fmi2Slave):
         return ["" for _ in vrs]
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
+        setters = self._input_setters
+        if len(vrs) == len(values) and all(vr in setters for vr in vrs):
+            for vr, value in zip(vrs, values, strict=True):
+                setters[vr](value)
+            return
         self._set(vrs, values, Real, "fmi2SetReal")
 
     def set_integer(self, vrs: list[int], values: list[int]) -> None:

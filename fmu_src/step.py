@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import bisect
 import math
+import operator
 from dataclasses import dataclass
 
 import numpy as np
@@ -286,20 +287,27 @@ class _OneSample:
         center = model.partition_center.tolist()
         scale = model.partition_scale.tolist()
         # act = w0 + Σ w_k·(z_k − c_k)/s_k = (w0 − Σ w_k·c_k/s_k) + Σ (w_k/s_k)·z_k
-        self.weights = []
+        weights = []
         for w in model.node_weights.tolist():
             wz = [wk / sk for wk, sk in zip(w[1:], scale, strict=True)]
-            self.weights.append((w[0] - sum(a * c for a, c in zip(wz, center, strict=True)),
+            weights.append((w[0] - sum(a * c for a, c in zip(wz, center, strict=True)),
                                  wz))
-        n_nodes = len(self.weights)
-        # a leaf's validity: the product of q[i] over its path, q = [φ_0…φ_n−1, 1−φ_0…1−φ_n−1]
-        self.path_index = [[node + side * n_nodes for node, side in p]
-                           for p in model.leaf_paths]
+        order, into, self.leaf_slots, self.n_slots = tree_plan(model.leaf_paths)
+        self.plan = [(into[node], 1 + 2 * node) for node in order]
+        node_w = np.array([[weights[node][0], *weights[node][1]] for node in order]
+                          ).reshape(len(order), 1 + len(center))
+        na = model.output_lags
+        theta_exo = model.theta[:, na:]
+        # one product gives the nodes' activations and the local models' exogenous parts:
+        # [act; θ_exo·x] = [[W, 0], [0, θ_exo]]·[1, z, x]
+        self.n_nodes = len(order)
+        self.block = np.zeros((self.n_nodes + theta_exo.shape[0], node_w.shape[1]
+                               + theta_exo.shape[1]))
+        self.block[:self.n_nodes, :node_w.shape[1]] = node_w
+        self.block[self.n_nodes:, node_w.shape[1]:] = theta_exo
         self.gates = [GATE_CODES[g] for g in model.leaf_gates]
         self.gated = model.gating_mode == "current_sign"
-        na = model.output_lags
         self.theta_lags = model.theta[:, :na].tolist()
-        self.theta_exo = np.ascontiguousarray(model.theta[:, na:])
         self.na = na
         self.ocv_soc = model.ocv_soc.tolist()
         self.ocv_v = model.ocv_v.tolist()
@@ -315,27 +323,48 @@ class _OneSample:
         slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
         return slope * (soc - xs[j]) + ys[j]
 
-    def blend(self, x: np.ndarray, z: list[float], direction: int
-              ) -> tuple[list[float], float, np.ndarray]:
-        """(blended lag coefficients, exogenous part, validities) of one sample; z are the raw
-        partition inputs."""
-        phi = []
-        for w0, w in self.weights:
-            act = w0
-            for zk, wk in zip(z, w, strict=True):
-                act += zk * wk
-            phi.append(1.0 / (1.0 + (math.exp(-act) if act > -709.0 else math.inf)))
-        q = phi + [1.0 - p for p in phi]
-        validity = [math.prod([q[i] for i in idx]) for idx in self.path_index]
+    def blend(self, u: np.ndarray, direction: int) -> tuple[list[float], float, list[float]]:
+        """(blended lag coefficients, exogenous part, validities) of one sample; u is
+        [1, raw partition inputs, exogenous regressors]."""
+        exp = math.exp
+        v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
+        products = (self.block @ u).tolist()
+        for (into, out), act in zip(self.plan, products, strict=False):
+            parent = v[into]                 # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
+            v[out] = side = parent / (1.0 + (exp(-act) if act > -709.0 else math.inf))
+            v[out + 1] = parent - side
+        validity = [v[k] for k in self.leaf_slots]
         if self.gated:
-            validity = [0.0 if gate and gate != direction else v
-                        for v, gate in zip(validity, self.gates, strict=True)]
-        b = sum(v * p for v, p in zip(validity, (self.theta_exo @ x).tolist(), strict=True))
+            validity = [0.0 if gate and gate != direction else vj
+                        for vj, gate in zip(validity, self.gates, strict=True)]
+        b = sum(map(operator.mul, validity, products[self.n_nodes:]))
         a = [0.0] * self.na
-        for v, row in zip(validity, self.theta_lags, strict=True):
-            for l in range(self.na):
-                a[l] += v * row[l]
-        return a, b, np.array(validity)
+        if self.na:
+            for vj, row in zip(validity, self.theta_lags, strict=True):
+                for l in range(self.na):
+                    a[l] += vj * row[l]
+        return a, b, validity
+
+
+def tree_plan(leaf_paths: list[list[tuple[int, int]]]
+              ) -> tuple[list[int], dict[int, int], list[int], int]:
+    """How to evaluate a discriminant tree one sample at a time, from each leaf's path
+    [(node, side), …] (side 0: φ, side 1: 1 − φ). Slot 0 holds a root's validity (1); node n
+    writes φ·v and (1 − φ)·v into slots 1 + 2n and 2 + 2n, v being the value in its parent's
+    slot. Returns the nodes in an order that has every parent before its children, each node's
+    parent slot, each leaf's slot, and the number of slots."""
+    order: list[int] = []
+    into: dict[int, int] = {}
+    leaf_slots = []
+    for path in leaf_paths:
+        slot = 0
+        for node, side in path:
+            if node not in into:
+                order.append(node)
+                into[node] = slot
+            slot = 1 + 2 * node + side
+        leaf_slots.append(slot)
+    return order, into, leaf_slots, 1 + 2 * max(order, default=-1) + 2
 
 
 GATE_CODES = {"all": 0, "charge": CHARGE, "discharge": DISCHARGE}
@@ -353,11 +382,11 @@ class CellStepper:
         y0 = fixed_point(model, soc0, temperature_c, h0)
         self.lags = [y0] * model.output_lags
         self.prev_lags = list(self.lags)
-        self._x = np.zeros((1, model.n_exo))
-        self._z = np.zeros((1, len(model.partition_variables)))
-        self._d = np.zeros(1, dtype=np.intp)
+        d = len(model.partition_variables)
+        self._u = np.ones(1 + d + model.n_exo)   # [1, raw partition inputs z, regressors x]
+        self._z, self._x = self._u[1:1 + d], self._u[1 + d:]
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
-        self.validity = np.zeros(model.n_local_models)
+        self.validity = [0.0] * model.n_local_models    # Φ of the last step
         self._one = _OneSample(model)
 
     @property
@@ -372,15 +401,15 @@ class CellStepper:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
         m, s = self.model, self.state
         self.exo.update(s, current_a)
-        self.exo.features(s, current_a, temperature_c, self._x[0], self._z[0])
+        x, z = self._x, self._z
+        self.exo.features(s, current_a, temperature_c, x, z)
         self.exo.shift(s, current_a)
-        self._d[0] = s.direction
-        a, acc, Phi = self._one.blend(self._x[0], self._z[0].tolist(), s.direction)
-        lags = self.lags
-        self.prev_lags = list(lags)
-        for l in range(m.output_lags):
-            acc += a[l] * lags[l]
+        a, acc, Phi = self._one.blend(self._u, s.direction)
         if m.output_lags:
+            lags = self.lags
+            self.prev_lags = list(lags)
+            for l in range(m.output_lags):
+                acc += a[l] * lags[l]
             lags.pop()
             lags.insert(0, acc)
         self.validity = Phi
