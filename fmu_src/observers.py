@@ -171,6 +171,7 @@ class SocObserver:
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
         self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
         self.state_columns = state_columns(model) if kind == "ekf" else []
+        self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
         exo = model.columns()[model.output_lags:]
@@ -235,15 +236,15 @@ class SocObserver:
 
     def _outputs_at(self, soc: float) -> tuple[float, np.ndarray, np.ndarray]:
         """Network voltage, validities and per-local-model voltages at a SoC (other states as
-        the stepper holds them)."""
-        u, phi, local = self._outputs_for(np.array([[soc]]))
-        return float(u[0]), phi[0], local[0]
+        the stepper holds them after the step just predicted)."""
+        u, phi, local = self.stepper.outputs_at_socs([soc])[0]
+        return u, np.asarray(phi), np.asarray(local)
 
     def _slopes(self, soc: float) -> tuple[float, np.ndarray]:
         """∂u/∂SoC of the network and of each local model (central difference)."""
         hi, lo = min(soc + FD_SOC, 1.0), max(soc - FD_SOC, 0.0)
-        u, _, loc = self._outputs_for(np.array([[hi], [lo]]))
-        return (u[0] - u[1]) / (hi - lo), (loc[0] - loc[1]) / (hi - lo)
+        (u_hi, _, loc_hi), (u_lo, _, loc_lo) = self.stepper.outputs_at_socs([hi, lo])
+        return (u_hi - u_lo) / (hi - lo), (np.asarray(loc_hi) - np.asarray(loc_lo)) / (hi - lo)
 
     def _jacobian(self, xi: np.ndarray, soc_spread: float = FD_SOC
                   ) -> tuple[float, np.ndarray, float, float]:
@@ -267,8 +268,9 @@ class SocObserver:
                                  0.0, 1.0)
         h = np.empty(n)
         if "filtered_current" not in self.model.partition_variables:
-            u5, phi5, _ = self._outputs_for(soc_rows)
-            blended = phi5[0] @ self.model.theta[:, self.model.output_lags:]   # ∂u/∂x at ξ
+            at = self.stepper.outputs_at_socs(soc_rows[:, 0].tolist())
+            u5 = [u for u, _, _ in at]
+            blended = np.asarray(at[0][1]) @ self.model.theta[:, self.model.output_lags:]
             _, temperature, _ = self._step_inputs
             h[1:] = state_gradient(self.state_columns, blended,
                                    self.stepper.exo.temperature_gain(temperature),
@@ -330,18 +332,31 @@ class SocObserver:
 
     def _ekf_predict(self, current_a: float) -> None:
         """P ← F·P·Fᵀ + Q for the step the stepper just took."""
-        s, exo, cfg = self.state, self.stepper.exo, self.settings
+        s, exo = self.state, self.stepper.exo
         p = s.covariance()
-        f, g = (a.copy() for a in self._ekf_fg)
-        g[0] = exo.soc_gain * exo.eta(current_a)
-        q = cfg.current_sigma_a ** 2 * np.outer(g, g)
-        q[0, 0] += cfg.drift("ekf") ** 2 * self.model.sample_time_s / 3600.0
+        f, q = self._ekf_f_and_q(exo.eta(current_a))
         if self.model.hysteresis_gamma is not None:
+            f = f.copy()
             f[-1] = math.exp(-exo.gamma * abs(current_a) * exo.soc_gain)
-            q[-1, -1] += cfg.hysteresis_drift_per_sqrt_h ** 2 * self.model.sample_time_s / 3600.0
         p = f[:, None] * p * f[None, :] + q
         s.cov = p.ravel()
         s.var = float(p[0, 0])
+
+    def _ekf_f_and_q(self, eta: float) -> tuple[np.ndarray, np.ndarray]:
+        """F (h entry still 1) and Q of the prediction for a step with coulombic efficiency
+        eta: Q = σ_i²·G·Gᵀ plus the SoC and hysteresis random walks; computed once per eta."""
+        cached = self._ekf_q.get(eta)
+        if cached is None:
+            cfg, exo = self.settings, self.stepper.exo
+            f, g = (a.copy() for a in self._ekf_fg)
+            g[0] = exo.soc_gain * eta
+            q = cfg.current_sigma_a ** 2 * np.outer(g, g)
+            q[0, 0] += cfg.drift("ekf") ** 2 * self.model.sample_time_s / 3600.0
+            if self.model.hysteresis_gamma is not None:
+                q[-1, -1] += (cfg.hysteresis_drift_per_sqrt_h ** 2 * self.model.sample_time_s
+                              / 3600.0)
+            cached = self._ekf_q[eta] = (f, q)
+        return cached
 
     def _ekf_update(self, v_meas: float) -> float:
         """Correct ξ with one voltage; writes the low-pass states and h back to
@@ -485,13 +500,14 @@ def state_gradient(columns: list[list[tuple[int, int, bool, float]]], blended: n
     network's coefficients of the regressors at the operating point; dTᵖ by repeated
     multiplication, as the step computes it)."""
     out = np.empty(len(columns))
+    coefficients = blended.tolist()
     for a, cols in enumerate(columns):
         acc = 0.0
         for col, p, scaled, sign in cols:
             power = 1.0
             for _ in range(p):
                 power *= dt
-            acc += sign * (gain if scaled else 1.0) * power * float(blended[col])
+            acc += sign * (gain if scaled else 1.0) * power * coefficients[col]
         out[a] = acc
     return out
 

@@ -323,12 +323,18 @@ class _OneSample:
         slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
         return slope * (soc - xs[j]) + ys[j]
 
-    def blend(self, u: np.ndarray, direction: int) -> tuple[list[float], float, list[float]]:
-        """(blended lag coefficients, exogenous part, validities) of one sample; u is
-        [1, raw partition inputs, exogenous regressors]."""
+    def blend(self, u: np.ndarray, direction: int
+              ) -> tuple[list[float], float, list[float], list[float]]:
+        """(blended lag coefficients, exogenous part, validities, each local model's
+        exogenous part θ_exo,j·x) of one sample; u is [1, raw partition inputs, exogenous
+        regressors]."""
+        return self.combine((self.block @ u).tolist(), direction)
+
+    def combine(self, products: list[float], direction: int
+                ) -> tuple[list[float], float, list[float], list[float]]:
+        """blend() from block·u (the nodes' activations, then each local model's θ_exo,j·x)."""
         exp = math.exp
         v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
-        products = (self.block @ u).tolist()
         for (into, out), act in zip(self.plan, products, strict=False):
             parent = v[into]                 # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
             v[out] = side = parent / (1.0 + (exp(-act) if act > -709.0 else math.inf))
@@ -337,13 +343,14 @@ class _OneSample:
         if self.gated:
             validity = [0.0 if gate and gate != direction else vj
                         for vj, gate in zip(validity, self.gates, strict=True)]
-        b = sum(map(operator.mul, validity, products[self.n_nodes:]))
+        local = products[self.n_nodes:]
+        b = sum(map(operator.mul, validity, local))
         a = [0.0] * self.na
         if self.na:
             for vj, row in zip(validity, self.theta_lags, strict=True):
                 for l in range(self.na):
                     a[l] += vj * row[l]
-        return a, b, validity
+        return a, b, validity, local
 
 
 def tree_plan(leaf_paths: list[list[tuple[int, int]]]
@@ -385,6 +392,11 @@ class CellStepper:
         d = len(model.partition_variables)
         self._u = np.ones(1 + d + model.n_exo)   # [1, raw partition inputs z, regressors x]
         self._z, self._x = self._u[1:1 + d], self._u[1 + d:]
+        exo = model.columns()[model.output_lags:]
+        pv = model.partition_variables      # where the SoC enters u besides the OCV
+        self._soc_entries = [(1 + pv.index("soc"), False)] if "soc" in pv else []
+        self._soc_entries += [(1 + d + exo.index(name), name == "ocv(k)")
+                              for name in ("ocv(k)", "soc(k)") if name in exo]
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity = [0.0] * model.n_local_models    # Φ of the last step
         self._one = _OneSample(model)
@@ -404,7 +416,7 @@ class CellStepper:
         x, z = self._x, self._z
         self.exo.features(s, current_a, temperature_c, x, z)
         self.exo.shift(s, current_a)
-        a, acc, Phi = self._one.blend(self._u, s.direction)
+        a, acc, Phi, _ = self._one.blend(self._u, s.direction)
         if m.output_lags:
             lags = self.lags
             self.prev_lags = list(lags)
@@ -415,6 +427,30 @@ class CellStepper:
         self.validity = Phi
         self.voltage_v = acc + self._one.ocv(s.soc) if m.relative_ocv else acc
         return self.voltage_v
+
+    def outputs_at_socs(self, socs: list[float]
+                        ) -> list[tuple[float, list[float], list[float]]]:
+        """Per SoC: the last step's terminal voltage (V), validities and each local model's
+        voltage (V) had its SoC been that one, every other regressor and partition input as
+        the step had them: the observers' measurement model at candidate SoCs (at the step's
+        own SoC, the step's voltage and validities)."""
+        m, one = self.model, self._one
+        rows = np.tile(self._u, (len(socs), 1))
+        ocv = [one.ocv(soc) for soc in socs]
+        for index, is_ocv in self._soc_entries:
+            rows[:, index] = ocv if is_ocv else socs
+        out = []
+        lags = self.prev_lags
+        for products, soc_ocv in zip((rows @ one.block.T).tolist(), ocv, strict=True):
+            a, b, validity, local = one.combine(products, self.state.direction)
+            for l in range(m.output_lags):
+                b += a[l] * lags[l]
+            if m.output_lags:
+                local = [x + sum(t * y for t, y in zip(row, lags, strict=True))
+                         for x, row in zip(local, one.theta_lags, strict=True)]
+            base = soc_ocv if m.relative_ocv else 0.0
+            out.append((b + base, validity, [x + base for x in local]))
+        return out
 
     def get_state(self) -> list[float]:
         """Everything the next step depends on, as a flat list of floats."""

@@ -89,6 +89,34 @@ def test_step_path_takes_any_node_numbering() -> None:
     assert np.max(np.abs(np.subtract(vb, simulate(r, cur, temp, 0.6).voltage_v))) <= 1e-12
 
 
+@pytest.mark.parametrize("temperature_terms", [0, 2])
+def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int) -> None:
+    """CellStepper.outputs_at_socs (the observers' measurement model) equals the batch path
+    (LmnModel.blend on the step's regressors with the SoC replaced), and at the step's own
+    SoC the step's voltage and validities."""
+    m = random_tree_model("current_sign", temperature_terms=temperature_terms)
+    st = CellStepper(m, 0.7, temperature_c=18.0)
+    rng = np.random.default_rng(4)
+    for i in rng.normal(0, 2, 40):
+        st.step(float(i), 18.0)
+    socs = [st.soc, 0.0, 0.31, 0.9, 1.0]
+    got = st.outputs_at_socs(socs)
+    assert got[0][0] == pytest.approx(st.voltage_v, abs=1e-12)
+    assert np.allclose(got[0][1], st.validity, atol=1e-15)
+    na = m.output_lags
+    for soc, (u, phi, local) in zip(socs, got, strict=True):
+        z = st._z.copy()
+        z[m.partition_variables.index("soc")] = soc
+        A, b, Phi = m.blend(st._x[None, :], m.normalise(z[None, :]),
+                            np.array([st.state.direction]))
+        ocv = float(m.ocv(soc))
+        assert u == pytest.approx(ocv + float(b[0] + A[0] @ np.asarray(st.prev_lags)),
+                                  abs=1e-12)
+        assert np.allclose(phi, Phi[0], atol=1e-14)
+        expect = ocv + st._x @ m.theta[:, na:].T + m.theta[:, :na] @ np.asarray(st.prev_lags)
+        assert np.allclose(local, expect, atol=1e-12)
+
+
 def test_temperature_terms_are_the_source_columns_times_powers_of_dt() -> None:
     m = random_tree_model(temperature_terms=2)
     cols = m.columns()
