@@ -134,6 +134,15 @@ class CellCosim:
                 and math.isfinite(voltage_measured_v)):
             self._refuse(step_s, current_a, temperature_c, voltage_measured_v)
         ts = self.model.sample_time_s
+        if step_s == ts and self.covered_s == 0.0:      # the usual case: one whole model step
+            self.covered_s = ts
+            self.charge_as += current_a * ts
+            self.temp_int += temperature_c * ts
+            if voltage_measured_v > 0:
+                self.volt_int += voltage_measured_v * ts
+                self.volt_time += ts
+            self._model_step()
+            return 1
         remaining = step_s
         taken = 0
         while remaining > 0.0:           # every positive step counts, however short
@@ -172,8 +181,12 @@ class CellCosim:
         i = self.charge_as / ts
         temp_input = self.temp_int / ts
         temp = self.thermal.cell_temperature(temp_input)
-        self.range_message = self.check_range(i, temp)
-        self.out_of_range = bool(self.range_message)
+        ilo, ihi, slo, shi, tlo, thi = self._bounds
+        if ilo <= i <= ihi and slo <= self.stepper.state.soc <= shi and tlo <= temp <= thi:
+            self.range_message, self.out_of_range = "", False
+        else:
+            self.range_message = self.check_range(i, temp)
+            self.out_of_range = bool(self.range_message)
         if self.observer:
             v = self.volt_int / self.volt_time if self.volt_time >= ts * (1 - STEP_TOL) else 0.0
             self.observer.step(i, v if v > 0 else math.nan, temp)

@@ -188,9 +188,12 @@ class LmnCellSlave(Fmi2Slave):
                 self.vars[vr].setter(value)
 
     def get_real(self, vrs: list[int]) -> list[float]:
-        getters = self._real_getters
-        if all(vr in getters for vr in vrs):
-            return [float(getters[vr]()) for vr in vrs]
+        try:
+            calls = [self._real_getters[vr] for vr in vrs]
+        except (KeyError, TypeError):
+            calls = None
+        if calls is not None:
+            return [float(get()) for get in calls]
         return [float(v) for v in self._get(vrs, Real, "fmi2GetReal", math.nan)]
 
     def get_integer(self, vrs: list[int]) -> list[int]:
@@ -205,10 +208,13 @@ class LmnCellSlave(Fmi2Slave):
         return ["" for _ in vrs]
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
-        setters = self._input_setters
-        if len(vrs) == len(values) and all(vr in setters for vr in vrs):
-            for vr, value in zip(vrs, values, strict=True):
-                setters[vr](value)
+        try:
+            calls = [self._input_setters[vr] for vr in vrs]
+        except (KeyError, TypeError):
+            calls = None
+        if calls is not None and len(calls) == len(values):
+            for set_value, value in zip(calls, values, strict=True):
+                set_value(value)
             return
         self._set(vrs, values, Real, "fmi2SetReal")
 
@@ -267,15 +273,14 @@ class LmnCellSlave(Fmi2Slave):
             self._error("do_step called " + ("after terminate" if self._terminated else
                                              "before initialisation"))
             return False
-        if not math.isfinite(current_time) or abs(current_time - self._time) > 1e-9 * max(
-                1.0, abs(self._time)):
+        if not abs(current_time - self._time) <= 1e-9 * max(1.0, abs(self._time)):  # NaN too
             self._error(f"do_step: currentCommunicationPoint {current_time!r} s is not the FMU's "
                         f"time {self._time!r} s (steps must follow on from each other)")
             return False
         try:
             was = self._cosim.out_of_range
-            self._cosim.advance(step_size, float(self.current), float(self.temperature),
-                                float(self.voltage_measured))
+            self._cosim.advance(step_size, self.current, self.temperature,
+                                self.voltage_measured)
         except InputError as exc:
             self._error(f"t = {current_time} s: {exc}; the step was not taken")
             return False

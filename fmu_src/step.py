@@ -19,12 +19,13 @@ from __future__ import annotations
 import bisect
 import math
 import operator
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from .model import TEMPERATURE_STEP_K, LmnModel
-from .thermal import heat_w, next_temperature, rested_temperature
+from .thermal import heat_w, next_temperature, rested_temperature, step_coefficients
 
 CHARGE, DISCHARGE = 1, 2
 
@@ -292,7 +293,9 @@ class _OneSample:
             wz = [wk / sk for wk, sk in zip(w[1:], scale, strict=True)]
             weights.append((w[0] - sum(a * c for a, c in zip(wz, center, strict=True)),
                                  wz))
-        order, into, self.leaf_slots, self.n_slots = tree_plan(model.leaf_paths)
+        order, into, leaf_slots, self.n_slots = tree_plan(model.leaf_paths)
+        pick = operator.itemgetter(*leaf_slots)        # the leaves' validities from the slots
+        self.leaves = pick if len(leaf_slots) > 1 else (lambda v: (pick(v),))
         self.plan = [(into[node], 1 + 2 * node) for node in order]
         node_w = np.array([[weights[node][0], *weights[node][1]] for node in order]
                           ).reshape(len(order), 1 + len(center))
@@ -324,22 +327,28 @@ class _OneSample:
         return slope * (soc - xs[j]) + ys[j]
 
     def blend(self, u: np.ndarray, direction: int
-              ) -> tuple[list[float], float, list[float], list[float]]:
+              ) -> tuple[list[float], float, Sequence[float], list[float]]:
         """(blended lag coefficients, exogenous part, validities, each local model's
         exogenous part θ_exo,j·x) of one sample; u is [1, raw partition inputs, exogenous
         regressors]."""
         return self.combine((self.block @ u).tolist(), direction)
 
     def combine(self, products: list[float], direction: int
-                ) -> tuple[list[float], float, list[float], list[float]]:
+                ) -> tuple[list[float], float, Sequence[float], list[float]]:
         """blend() from block·u (the nodes' activations, then each local model's θ_exo,j·x)."""
-        exp = math.exp
         v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
-        for (into, out), act in zip(self.plan, products, strict=False):
-            parent = v[into]                 # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
-            v[out] = side = parent / (1.0 + (exp(-act) if act > -709.0 else math.inf))
-            v[out + 1] = parent - side
-        validity = [v[k] for k in self.leaf_slots]
+        exp = math.exp
+        try:
+            for (into, out), act in zip(self.plan, products, strict=False):
+                parent = v[into]             # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
+                v[out] = side = parent / (1.0 + exp(-act))
+                v[out + 1] = parent - side
+        except OverflowError:                # act < −709.78: φ = 0 (as numpy's inf gives)
+            for (into, out), act in zip(self.plan, products, strict=False):
+                parent = v[into]
+                v[out] = side = parent / (1.0 + (exp(-act) if act > -709.0 else math.inf))
+                v[out + 1] = parent - side
+        validity = self.leaves(v)
         if self.gated:
             validity = [0.0 if gate and gate != direction else vj
                         for vj, gate in zip(validity, self.gates, strict=True)]
@@ -398,7 +407,7 @@ class CellStepper:
         self._soc_entries += [(1 + d + exo.index(name), name == "ocv(k)")
                               for name in ("ocv(k)", "soc(k)") if name in exo]
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
-        self.validity = [0.0] * model.n_local_models    # Φ of the last step
+        self.validity: Sequence[float] = [0.0] * model.n_local_models   # Φ of the last step
         self._one = _OneSample(model)
 
     @property
@@ -429,7 +438,7 @@ class CellStepper:
         return self.voltage_v
 
     def outputs_at_socs(self, socs: list[float]
-                        ) -> list[tuple[float, list[float], list[float]]]:
+                        ) -> list[tuple[float, Sequence[float], list[float]]]:
         """Per SoC: the last step's terminal voltage (V), validities and each local model's
         voltage (V) had its SoC been that one, every other regressor and partition input as
         the step had them: the observers' measurement model at candidate SoCs (at the step's
@@ -476,6 +485,8 @@ class CellThermal:
     def __init__(self, model: LmnModel, temperature_is_cell: bool = False) -> None:
         self.model = model
         self.active = model.thermal is not None and not temperature_is_cell
+        self._coefficients = (step_coefficients(model.thermal, model.sample_time_s)
+                              if model.thermal is not None else None)
         self.temperature_c: float | None = None      # cell temperature at the step's start
 
     def rested(self, input_c: float) -> float:
@@ -500,7 +511,7 @@ class CellThermal:
         m = self.model
         q = heat_w(current_a, stepper.voltage_v, stepper.ocv(stepper.soc))
         self.temperature_c = next_temperature(m.thermal, self.cell_temperature(input_c),
-                                              input_c, q, m.sample_time_s)
+                                              input_c, q, m.sample_time_s, self._coefficients)
 
 
 def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarray | float,

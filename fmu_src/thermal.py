@@ -57,12 +57,20 @@ def heat_w(current_a: float, voltage_v: float, ocv_v: float) -> float:
     return current_a * (voltage_v - ocv_v)
 
 
-def next_temperature(model: ThermalModel, temperature_c: float, ambient_c: float,
-                     heat: float, sample_time_s: float) -> float:
-    """The cell temperature at the end of a step (°C) from the one at its start."""
+def step_coefficients(model: ThermalModel, sample_time_s: float) -> tuple[float, float]:
+    """(a, R·(1 − a)) of the discretised model at the sample time."""
     a = math.exp(-sample_time_s / model.time_constant_s)
+    return a, model.resistance_k_per_w * (1.0 - a)
+
+
+def next_temperature(model: ThermalModel, temperature_c: float, ambient_c: float,
+                     heat: float, sample_time_s: float,
+                     coefficients: tuple[float, float] | None = None) -> float:
+    """The cell temperature at the end of a step (°C) from the one at its start
+    (coefficients: step_coefficients(model, sample_time_s), if already at hand)."""
+    a, gain = coefficients or step_coefficients(model, sample_time_s)
     rest = ambient_c + model.offset_k
-    return rest + a * (temperature_c - rest) + model.resistance_k_per_w * (1.0 - a) * heat
+    return rest + a * (temperature_c - rest) + gain * heat
 
 
 def rested_temperature(model: ThermalModel | None, ambient_c: float) -> float:
