@@ -194,11 +194,12 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
             assert np.abs(poles(t, 3)).max() <= 0.9995 + 1e-9
 
 
-def test_auto_partition_adds_temperature_at_two_or_more_temperatures() -> None:
+def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None:
     """partition "auto": soc for records at one temperature (self-heating included), soc and
-    temperature for records at two chamber temperatures; a given list is kept."""
+    temperature for records at two chamber temperatures; a given list is kept. The same for
+    max_local_models "auto"."""
     from lmncell.data.dataset import Segment
-    from lmncell.identification.construction import resolve_partition
+    from lmncell.identification.construction import resolve_max_local_models, resolve_partition
 
     def seg(t0: float) -> Segment:
         n = 100
@@ -210,6 +211,14 @@ def test_auto_partition_adds_temperature_at_two_or_more_temperatures() -> None:
     assert resolve_partition(auto, [seg(25.0), seg(10.0)]).partition == ["soc", "temperature"]
     given = load_config(partition=["soc", "current"])
     assert resolve_partition(given, [seg(25.0), seg(10.0)]).partition == ["soc", "current"]
+    # the local-model budget: 8 per temperature the tree splits along, else 8; a given one kept
+    two = [seg(25.0), seg(10.0)]
+    split = resolve_partition(auto, two)
+    assert resolve_max_local_models(split, two, temperature_fixed=False).max_local_models == 16
+    assert resolve_max_local_models(split, two, temperature_fixed=True).max_local_models == 8
+    assert resolve_max_local_models(given, two, temperature_fixed=False).max_local_models == 8
+    own = load_config(max_local_models=5)
+    assert resolve_max_local_models(own, two, temperature_fixed=False).max_local_models == 5
 
 
 @pytest.mark.parametrize("kw, message", [

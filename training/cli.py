@@ -236,7 +236,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "syntax; repeatable, e.g. --set max_local_models=4 --set "
                    "'partition=[\"soc\",\"current\"]'")
     s.add_argument("--max-local-models", type=_positive_int, help="upper limit of M "
-                   "(default: 8)")
+                   "(default: 8 per training temperature the tree splits along, else 8)")
     s.add_argument("--ocv-tests", nargs="+", metavar="FILE", help="slow OCV tests (discharge "
                    "from full, charge from empty; or one file with both): fixes the OCV")
     _add_reader_options(s)

@@ -119,6 +119,26 @@ def resolve_partition(cfg: TrainConfig, segs: list[Segment], progress: Progress 
     return dataclasses.replace(cfg, partition=partition)
 
 
+LOCAL_MODELS_PER_REGION = 8
+
+
+def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_fixed: bool,
+                             progress: Progress = _quiet) -> TrainConfig:
+    """The settings with max_local_models "auto" replaced: LOCAL_MODELS_PER_REGION per
+    distinct training temperature where the tree splits along temperature (temperature in the
+    partition and no temperature terms), else LOCAL_MODELS_PER_REGION; at most 64."""
+    if cfg.max_local_models != "auto":
+        return cfg
+    regions = 1
+    if "temperature" in cfg.partition and not temperature_fixed:
+        regions = max(len(temperature_levels(segs)), 1)
+    m = min(LOCAL_MODELS_PER_REGION * regions, 64)
+    if regions > 1:
+        progress(f"  at most {m} local models (auto: {LOCAL_MODELS_PER_REGION} for each of the "
+                 f"{regions} training temperatures)")
+    return dataclasses.replace(cfg, max_local_models=m)
+
+
 def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
               progress: Progress = _quiet) -> TrainResult:
     """Identify an LMN from model-rate segments (see the module docstring)."""
@@ -143,6 +163,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         fixed_axes = frozenset({cfg.partition.index("temperature")})
         progress("  temperature acts through the temperature terms, not through splits: "
                  "sigmoid splits between a few training temperatures interpolate badly")
+    cfg = resolve_max_local_models(cfg, segs, bool(fixed_axes), progress)
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     ladder = local_ladder(cfg, base, segs, progress)
     e_scores: dict[str, float] = {}
