@@ -34,7 +34,9 @@ too). Keys (units in the names, current > 0 charges, SoC 0…1):
   ``voltage_v``).
 - ``noise``: ``residual_std_v`` of the free-run training error, (optional)
   ``residual_std_by_soc`` {``soc``: bin centres, ``std_v``: that error's RMS per bin of the
-  reference SoC, never below ``residual_std_v``; the observers' SoC-variance floor} and
+  reference SoC, never below ``residual_std_v``, times the identification's validation / fit
+  free-run RMSE ratio (≥ 1; the error to expect on new data); the observers' SoC-variance
+  floor} and
   ``recent_current_rms_a``, the RMS of the training current low-passed over 150 s (observer
   defaults).
 - ``observers`` (optional): ``fuzzy``, the fuzzy observer's offline design for the default

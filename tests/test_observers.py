@@ -156,8 +156,11 @@ def a123_two_temperatures(tmp_path_factory):
 
     dyn = DATA / "a123_plett/dyn"
     out = tmp_path_factory.mktemp("a123t") / "a123.json"
+    # at most 8 local models, as before the per-temperature default: 25 °C lies outside the
+    # training temperatures here, and the default's 9th local model (a split along
+    # temperature) extrapolates worse (LMN 5.94 → 6.56 mV in 20–80 %, EKF 3.12 → 4.10 %)
     train_files([dyn / "A123_DYN_30_N05_s1.csv.gz", dyn / "A123_DYN_45_P05_s1.csv.gz"], out,
-                capacity_ah=2.0307, soc0=1.0, progress=lambda _m: None)
+                capacity_ah=2.0307, soc0=1.0, progress=lambda _m: None, max_local_models=8)
     seg = record_to_segments(read_record(A123_S1), 1.0, 1.0, 2.0307)[0]
     return load_model(out), seg
 
@@ -171,6 +174,23 @@ def test_model_error_by_soc_is_stored_and_larger_near_empty(a123_two_temperature
     assert by_soc["std_v"][0] > 2 * overall                 # the collapse before cut-off
     settings = ObserverSettings.for_model(model)
     assert settings.model_error_at(0.05) == pytest.approx(by_soc["std_v"][0])
+    # scaled by the identification's validation / fit error ratio (the error on new data)
+    info = model.extra["training"]["info"]
+    ratio = (info["refined_validation_freerun_rmse_mv"]
+             / info["refined_train_freerun_rmse_mv"])
+    assert min(by_soc["std_v"]) == pytest.approx(max(ratio, 1.0) * overall, rel=1e-12)
+
+
+def test_generalisation_factor() -> None:
+    from lmncell.identification.train import generalisation_factor
+
+    assert generalisation_factor({"refined_validation_freerun_rmse_mv": 6.0,
+                                  "refined_train_freerun_rmse_mv": 4.0}) == 1.5
+    assert generalisation_factor({"refined_validation_freerun_rmse_mv": 3.0,
+                                  "refined_train_freerun_rmse_mv": 4.0}) == 1.0
+    assert generalisation_factor({"refined_validation_freerun_rmse_mv": None,
+                                  "refined_train_freerun_rmse_mv": 4.0}) == 1.0
+    assert generalisation_factor({}) == 1.0
 
 
 @pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])

@@ -55,7 +55,9 @@ class TrainConfig:
     temperatures where the partition splits along temperature, else 8 (with one budget of 8 for
     two chamber temperatures, the 25 °C records got fewer local models than when trained alone:
     Panasonic 25 + 10 °C leave-one-record-out, C/20 OCV, 25 °C records 8.86 / 17.41 mV with 8,
-    7.21 / 16.45 mV with 16; 10 °C records 13.15 / 26.26 and 11.77 / 24.48 mV).
+    7.21 / 16.45 mV with 16; 10 °C records 13.15 / 26.26 and 11.77 / 24.48 mV). Beyond the
+    training temperatures the extra splits along temperature can extrapolate worse (A123 trained
+    at −5 and 5 °C, its 25 °C record: 5.94 / 30.1 mV with 8, 6.56 / 31.3 mV with 16).
     stop: "validation" (free-run error) or "aicc".
     validation: "block" (the middle validation_fraction of every record's time), "record"
     (the last record given), or "none" (then stop = "aicc").

@@ -121,7 +121,8 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     residual_v = 1e-3 * pooled(train_metrics)
     model.noise = {"residual_std_v": residual_v,
                    "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s),
-                   "residual_std_by_soc": residual_std_by_soc(segs, sims, residual_v)}
+                   "residual_std_by_soc": residual_std_by_soc(
+                       segs, sims, residual_v, generalisation_factor(result.info))}
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
@@ -159,8 +160,19 @@ SOC_BINS = 10            # residual_std_by_soc: bins of 0.1 SoC
 MIN_BIN_SAMPLES = 300
 
 
+def generalisation_factor(info: dict) -> float:
+    """The identification's free-run RMSE on its validation blocks over that on the samples it
+    was fitted on, at least 1 (1 without validation): how much larger the model's error on
+    new data is than on its own training data."""
+    val = info.get("refined_validation_freerun_rmse_mv")
+    fit = info.get("refined_train_freerun_rmse_mv")
+    if val is None or fit is None or not (np.isfinite(val) and np.isfinite(fit)) or fit <= 0:
+        return 1.0
+    return max(1.0, float(val) / float(fit))
+
+
 def residual_std_by_soc(segs: list[Segment], model_v: list[np.ndarray],
-                        overall_v: float) -> dict:
+                        overall_v: float, factor: float = 1.0) -> dict:
     """The free-run training error's RMS (V) per SoC bin of the reference SoC, at the bin
     centres, never below the overall RMS (a bin with fewer than MIN_BIN_SAMPLES samples gets
     the overall): the observers' persistent model error σ_m(SoC), larger near empty where the
@@ -173,7 +185,7 @@ def residual_std_by_soc(segs: list[Segment], model_v: list[np.ndarray],
     for b in range(SOC_BINS):
         e = err[idx == b]
         rms = float(np.sqrt(np.mean(e * e))) if e.size >= MIN_BIN_SAMPLES else overall_v
-        std.append(max(rms, overall_v) if np.isfinite(rms) else overall_v)
+        std.append(factor * (max(rms, overall_v) if np.isfinite(rms) else overall_v))
     return {"soc": (0.5 * (edges[:-1] + edges[1:])).tolist(), "std_v": std}
 
 
