@@ -50,6 +50,16 @@ def test_identification_recovers_known_parameters() -> None:
     assert fitted.resistance_k_per_w == pytest.approx(TRUE.resistance_k_per_w, rel=0.03)
     assert fitted.time_constant_s == pytest.approx(TRUE.time_constant_s, rel=0.05)
     assert fitted.offset_k == pytest.approx(TRUE.offset_k, abs=0.05)
+    assert info["at_bound"] == []
+
+
+def test_parameters_on_a_bound_are_named() -> None:
+    from lmncell.identification.thermal import parameters_at_bound
+
+    lower, upper = np.array([-3.0, 2.3, -5.0]), np.array([5.3, 13.8, 5.0])
+    assert parameters_at_bound(np.array([1.0, 6.0, 0.2]), lower, upper) == []
+    assert parameters_at_bound(np.array([5.3, 6.0, -5.0]), lower, upper) == [
+        "resistance_k_per_w", "offset_k"]
 
 
 def test_no_thermal_model_without_a_measured_rise() -> None:

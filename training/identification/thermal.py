@@ -56,10 +56,25 @@ def fit_thermal(model: LmnModel, segs: list[Segment]) -> tuple[ThermalModel | No
                                for s, q in zip(usable, heats, strict=True)])
 
     x0 = np.array([np.log(5.0), np.log(1000.0), 0.0])
+    lower = np.array([np.log(0.05), np.log(10.0 * ts), -5.0])
+    upper = np.array([np.log(200.0), np.log(1e6), 5.0])
     sol = least_squares(residuals, x0, method="trf", x_scale=np.array([1.0, 1.0, 1.0]),
-                        bounds=([np.log(0.05), np.log(10.0 * ts), -5.0],
-                                [np.log(200.0), np.log(1e6), 5.0]))
+                        bounds=(lower, upper))
     params = unpack(sol.x)
     rmse = float(np.sqrt(np.mean(sol.fun ** 2)))
     return params, {"used": True, "rmse_k": rmse, "segments": [s.name for s in usable],
-                    "heat_capacity_j_per_k": params.heat_capacity_j_per_k}
+                    "heat_capacity_j_per_k": params.heat_capacity_j_per_k,
+                    "at_bound": parameters_at_bound(sol.x, lower, upper)}
+
+
+THERMAL_PARAMETERS = ("resistance_k_per_w", "time_constant_s", "offset_k")
+
+
+def parameters_at_bound(x: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
+    """The names of the fitted parameters that ended on a bound of their search range (then
+    the records did not determine them: e.g. one short record that never reaches its thermal
+    steady state)."""
+    tol = 1e-6 * np.maximum(1.0, upper - lower)
+    return [name for name, v, lo, hi, t in zip(THERMAL_PARAMETERS, x, lower, upper, tol,
+                                               strict=True)
+            if v - lo <= t or hi - v <= t]

@@ -117,6 +117,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
         f"R = {model.thermal.resistance_k_per_w:.2f} K/W, τ = {model.thermal.time_constant_s:.0f}"
         f" s, rested {model.thermal.offset_k:+.2f} K above ambient; cell temperature RMSE "
         f"{thermal_info['rmse_k']:.2f} K on {len(thermal_info['segments'])} segment(s)"
+        + (f"; at the bound of the search range, so not determined by these records: "
+           f"{', '.join(thermal_info['at_bound'])} (records that warm up and cool down "
+           "determine R and τ)" if thermal_info.get("at_bound") else "")
         if model.thermal is not None else f"off ({thermal_info['reason']})"))
     residual_v = 1e-3 * pooled(train_metrics)
     model.noise = {"residual_std_v": residual_v,
