@@ -70,6 +70,7 @@ class CellCosim:
         self.steps = 0
         self._start_temperature_c = t_cell
         self._bounds = self._range_bounds()
+        self._i_max = MAX_C_RATE * p.capacity_ah
 
     @property
     def voltage_v(self) -> float:
@@ -128,7 +129,7 @@ class CellCosim:
         voltage_measured_v ≤ 0 means "not measured". Raises InputError (naming the variable)
         before changing any state.
         """
-        i_max = MAX_C_RATE * self.params.capacity_ah
+        i_max = self._i_max
         if not (-i_max <= current_a <= i_max and MIN_TEMPERATURE_C <= temperature_c
                 <= MAX_TEMPERATURE_C and 0.0 < step_s < math.inf
                 and math.isfinite(voltage_measured_v)):

@@ -113,8 +113,8 @@ class LmnCellSlave(Fmi2Slave):
         # the per-step calls' fast path: the Real variables that get_real may read and the
         # inputs that set_real may always set (anything else goes through the checks)
         self._real_getters = {vr: v.getter for vr, v in self.vars.items() if isinstance(v, Real)}
-        self._input_setters = {vr: v.setter for vr, v in self.vars.items()
-                               if isinstance(v, Real) and v.causality == Fmi2Causality.input}
+        self._input_names = {vr: v.local_name for vr, v in self.vars.items()
+                             if isinstance(v, Real) and v.causality == Fmi2Causality.input}
 
     def _dedupe_sys_path(self) -> None:
         """The wrapper inserts the resources folder into sys.path at every instantiation: keep
@@ -189,11 +189,9 @@ class LmnCellSlave(Fmi2Slave):
 
     def get_real(self, vrs: list[int]) -> list[float]:
         try:
-            calls = [self._real_getters[vr] for vr in vrs]
-        except (KeyError, TypeError):
-            calls = None
-        if calls is not None:
-            return [float(get()) for get in calls]
+            return [float(get()) for get in map(self._real_getters.__getitem__, vrs)]
+        except (KeyError, TypeError):   # a reference that is not a Real: the checked path
+            pass
         return [float(v) for v in self._get(vrs, Real, "fmi2GetReal", math.nan)]
 
     def get_integer(self, vrs: list[int]) -> list[int]:
@@ -209,12 +207,12 @@ class LmnCellSlave(Fmi2Slave):
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
         try:
-            calls = [self._input_setters[vr] for vr in vrs]
+            names = [self._input_names[vr] for vr in vrs]
         except (KeyError, TypeError):
-            calls = None
-        if calls is not None and len(calls) == len(values):
-            for set_value, value in zip(calls, values, strict=True):
-                set_value(value)
+            names = None
+        if names is not None and len(names) == len(values):
+            for name, value in zip(names, values, strict=True):
+                setattr(self, name, value)
             return
         self._set(vrs, values, Real, "fmi2SetReal")
 
@@ -269,24 +267,24 @@ class LmnCellSlave(Fmi2Slave):
         self._terminated = True
 
     def do_step(self, current_time: float, step_size: float) -> bool:
-        if self._cosim is None or self._terminated:
+        cosim, now = self._cosim, self._time
+        if cosim is None or self._terminated:
             self._error("do_step called " + ("after terminate" if self._terminated else
                                              "before initialisation"))
             return False
-        if not abs(current_time - self._time) <= 1e-9 * max(1.0, abs(self._time)):  # NaN too
+        if not abs(current_time - now) <= 1e-9 * max(1.0, abs(now)):  # NaN too
             self._error(f"do_step: currentCommunicationPoint {current_time!r} s is not the FMU's "
-                        f"time {self._time!r} s (steps must follow on from each other)")
+                        f"time {now!r} s (steps must follow on from each other)")
             return False
         try:
-            was = self._cosim.out_of_range
-            self._cosim.advance(step_size, self.current, self.temperature,
-                                self.voltage_measured)
+            was = cosim.out_of_range
+            cosim.advance(step_size, self.current, self.temperature, self.voltage_measured)
         except InputError as exc:
             self._error(f"t = {current_time} s: {exc}; the step was not taken")
             return False
-        self._time += step_size
-        if self._cosim.out_of_range and not was:
-            self.log(f"{self.instance_name}: t = {current_time} s: {self._cosim.range_message}",
+        self._time = now + step_size
+        if cosim.out_of_range and not was:
+            self.log(f"{self.instance_name}: t = {current_time} s: {cosim.range_message}",
                      Fmi2Status.warning)
         return True
 

@@ -74,8 +74,9 @@ class ExoStepper:
         self.coef = [math.exp(-ts / tau) for f in model.filters for tau in f]
         self.soc_gain = ts / (3600.0 * self.capacity_ah)
         self.gamma = model.hysteresis_gamma
-        pv = model.partition_variables
-        self._zi = {name: pv.index(name) for name in pv}
+        pv = model.partition_variables     # where each partition input goes in z (or None)
+        self._z_index = tuple(pv.index(name) if name in pv else None for name in
+                              ("soc", "current", "filtered_current", "temperature"))
         self._inv_tref = 1.0 / (model.reference_temperature_c + 273.15)
         self._temperature_source_cols = model.temperature_source_indices()
 
@@ -116,15 +117,15 @@ class ExoStepper:
                  x: np.ndarray, z: np.ndarray) -> None:
         """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken."""
         m = self.model
-        g = self.temperature_gain(temperature_c)
-        col = 0
-        x[col] = g * current_a
-        col += 1
+        g = 1.0 if m.arrhenius_k is None else self.temperature_gain(temperature_c)
+        lp = s.lp
+        x[0] = g * current_a
+        col = 1
         for past in s.past_current:
             x[col] = g * past
             col += 1
-        for f in range(len(m.filters)):
-            x[col] = g * (s.lp[2 * f] - s.lp[2 * f + 1])
+        for k in range(0, 2 * len(m.filters), 2):
+            x[col] = g * (lp[k] - lp[k + 1])
             col += 1
         if m.hysteresis_gamma is not None:
             x[col] = s.h
@@ -140,15 +141,15 @@ class ExoStepper:
             col += 1
         if m.temperature_terms:
             self._temperature_terms(x, col, temperature_c)
-        zi = self._zi
-        if "soc" in zi:
-            z[zi["soc"]] = s.soc
-        if "current" in zi:
-            z[zi["current"]] = current_a
-        if "filtered_current" in zi:
-            z[zi["filtered_current"]] = s.lp[1] if s.lp else current_a
-        if "temperature" in zi:
-            z[zi["temperature"]] = temperature_c
+        z_soc, z_current, z_filtered, z_temperature = self._z_index
+        if z_soc is not None:
+            z[z_soc] = s.soc
+        if z_current is not None:
+            z[z_current] = current_a
+        if z_filtered is not None:
+            z[z_filtered] = lp[1] if lp else current_a
+        if z_temperature is not None:
+            z[z_temperature] = temperature_c
 
     def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
         """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
@@ -326,16 +327,11 @@ class _OneSample:
         slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
         return slope * (soc - xs[j]) + ys[j]
 
-    def blend(self, u: np.ndarray, direction: int
-              ) -> tuple[list[float], float, Sequence[float], list[float]]:
-        """(blended lag coefficients, exogenous part, validities, each local model's
-        exogenous part θ_exo,j·x) of one sample; u is [1, raw partition inputs, exogenous
-        regressors]."""
-        return self.combine((self.block @ u).tolist(), direction)
-
     def combine(self, products: list[float], direction: int
                 ) -> tuple[list[float], float, Sequence[float], list[float]]:
-        """blend() from block·u (the nodes' activations, then each local model's θ_exo,j·x)."""
+        """(blended lag coefficients, exogenous part, validities, each local model's exogenous
+        part θ_exo,j·x) of one sample from products = block·u, u = [1, raw partition inputs,
+        exogenous regressors]: the nodes' activations, then each local model's θ_exo,j·x."""
         v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
         exp = math.exp
         try:
@@ -420,12 +416,12 @@ class CellStepper:
 
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
-        m, s = self.model, self.state
-        self.exo.update(s, current_a)
-        x, z = self._x, self._z
-        self.exo.features(s, current_a, temperature_c, x, z)
-        self.exo.shift(s, current_a)
-        a, acc, Phi, _ = self._one.blend(self._u, s.direction)
+        m, s, exo = self.model, self.state, self.exo
+        exo.update(s, current_a)
+        exo.features(s, current_a, temperature_c, self._x, self._z)
+        exo.shift(s, current_a)
+        one = self._one
+        a, acc, Phi, _ = one.combine((one.block @ self._u).tolist(), s.direction)
         if m.output_lags:
             lags = self.lags
             self.prev_lags = list(lags)
@@ -434,7 +430,7 @@ class CellStepper:
             lags.pop()
             lags.insert(0, acc)
         self.validity = Phi
-        self.voltage_v = acc + self._one.ocv(s.soc) if m.relative_ocv else acc
+        self.voltage_v = acc + one.ocv(s.soc) if m.relative_ocv else acc
         return self.voltage_v
 
     def outputs_at_socs(self, socs: list[float]
@@ -508,10 +504,12 @@ class CellThermal:
         if not self.active:
             self.temperature_c = input_c
             return
-        m = self.model
-        q = heat_w(current_a, stepper.voltage_v, stepper.ocv(stepper.soc))
-        self.temperature_c = next_temperature(m.thermal, self.cell_temperature(input_c),
-                                              input_c, q, m.sample_time_s, self._coefficients)
+        m, start = self.model, self.temperature_c
+        if start is None:
+            start = self.cell_temperature(input_c)
+        q = heat_w(current_a, stepper.voltage_v, stepper.ocv(stepper.state.soc))
+        self.temperature_c = next_temperature(m.thermal, start, input_c, q, m.sample_time_s,
+                                              self._coefficients)
 
 
 def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarray | float,

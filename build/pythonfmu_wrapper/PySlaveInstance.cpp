@@ -8,9 +8,11 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <initializer_list>
 #include <mutex>
 #include <regex>
 #include <sstream>
+#include <utility>
 #include <string>
 #include <utility>
 
@@ -174,6 +176,11 @@ public:
     void clearLogBuffer() const
     {
         clearLogStrBuffer();
+        // LMNCell: with no message waiting (nearly every call) return before creating the three
+        // attribute-name strings and deleting an empty slice: this runs after every call
+        if (pMessages_ == nullptr || !PyList_Check(pMessages_) || PyList_Size(pMessages_) == 0) {
+            return;
+        }
 
         PyObject* msgField = Py_BuildValue("s", "msg");
         PyObject* categoryField = Py_BuildValue("s", "category");
@@ -237,6 +244,16 @@ public:
             handle_py_exception("[initialize] PyObject_Call", gilState);
         }
         pMessages_ = PyObject_CallMethod(pInstance_, "_get_log_queue", nullptr);
+        // LMNCell: the per-step calls' method names, made once (not parsed from C strings and a
+        // format at every call)
+        for (auto [slot, name] : {std::pair<PyObject**, const char*>{&nameDoStep_, "do_step"},
+                                  {&nameSetReal_, "set_real"}, {&nameGetReal_, "get_real"}}) {
+            Py_XDECREF(*slot);
+            *slot = PyUnicode_InternFromString(name);
+            if (*slot == nullptr) {
+                handle_py_exception("[initialize] PyUnicode_InternFromString", gilState);
+            }
+        }
     }
 
     void SetupExperiment(double startTime, std::optional<double> stop, std::optional<double> tolerance) override
@@ -286,7 +303,12 @@ public:
     {
         bool status;
         py_safe_run([this, &status, currentTime, stepSize](PyGILState_STATE gilState) {
-            auto f = PyObject_CallMethod(pInstance_, "do_step", "(dd)", currentTime, stepSize);
+            // LMNCell: call by the method name object made once (upstream: name and "(dd)" parsed)
+            PyObject* t = PyFloat_FromDouble(currentTime);
+            PyObject* h = PyFloat_FromDouble(stepSize);
+            auto f = PyObject_CallMethodObjArgs(pInstance_, nameDoStep_, t, h, nullptr);
+            Py_DECREF(t);
+            Py_DECREF(h);
             if (f == nullptr) {
                 handle_py_exception("[doStep] PyObject_CallMethod", gilState);
             }
@@ -322,12 +344,12 @@ public:
         py_safe_run([this, &vr, nvr, &values](PyGILState_STATE gilState) {
             PyObject* vrs = PyList_New(nvr);
             PyObject* refs = PyList_New(nvr);
-            for (int i = 0; i < nvr; i++) {
-                PyList_SetItem(vrs, i, Py_BuildValue("i", vr[i]));
-                PyList_SetItem(refs, i, Py_BuildValue("d", values[i]));
+            for (int i = 0; i < nvr; i++) {   // LMNCell: no Py_BuildValue format per value
+                PyList_SetItem(vrs, i, PyLong_FromLong(static_cast<long>(vr[i])));
+                PyList_SetItem(refs, i, PyFloat_FromDouble(values[i]));
             }
 
-            auto f = PyObject_CallMethod(pInstance_, "set_real", "(OO)", vrs, refs);
+            auto f = PyObject_CallMethodObjArgs(pInstance_, nameSetReal_, vrs, refs, nullptr);
             Py_DECREF(vrs);
             Py_DECREF(refs);
             if (f == nullptr) {
@@ -405,11 +427,11 @@ public:
     {
         py_safe_run([this, &vr, nvr, &values](PyGILState_STATE gilState) {
             PyObject* vrs = PyList_New(nvr);
-            for (int i = 0; i < nvr; i++) {
-                PyList_SetItem(vrs, i, Py_BuildValue("i", vr[i]));
+            for (int i = 0; i < nvr; i++) {   // LMNCell: no Py_BuildValue format per value
+                PyList_SetItem(vrs, i, PyLong_FromLong(static_cast<long>(vr[i])));
             }
 
-            auto refs = PyObject_CallMethod(pInstance_, "get_real", "O", vrs);
+            auto refs = PyObject_CallMethodObjArgs(pInstance_, nameGetReal_, vrs, nullptr);
             Py_DECREF(vrs);
             if (refs == nullptr) {
                 handle_py_exception("[getReal] PyObject_CallMethod", gilState);
@@ -590,6 +612,9 @@ private:
     PyObject* pClass_;
     PyObject* pInstance_{};
     PyObject* pMessages_{};
+    PyObject* nameDoStep_{};     // LMNCell: method names of the per-step calls
+    PyObject* nameSetReal_{};
+    PyObject* nameGetReal_{};
 
     mutable std::vector<PyObject*> strBuffer;
     mutable std::vector<PyObject*> logStrBuffer;
@@ -637,6 +662,9 @@ private:
         Py_XDECREF(pClass_);
         Py_XDECREF(pInstance_);
         Py_XDECREF(pMessages_);
+        Py_XDECREF(nameDoStep_);
+        Py_XDECREF(nameSetReal_);
+        Py_XDECREF(nameGetReal_);
     }
 
 
