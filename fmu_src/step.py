@@ -404,6 +404,7 @@ class CellStepper:
                               for name in ("ocv(k)", "soc(k)") if name in exo]
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity: Sequence[float] = [0.0] * model.n_local_models   # Φ of the last step
+        self._last_ocv = (math.nan, math.nan)      # (SoC, OCV) of the last step
         self._one = _OneSample(model)
 
     @property
@@ -411,8 +412,10 @@ class CellStepper:
         return self.state.soc
 
     def ocv(self, soc: float) -> float:
-        """The model's OCV at one SoC (V), as np.interp gives it."""
-        return self._one.ocv(soc)
+        """The model's OCV at one SoC (V), as np.interp gives it (the last step's value again
+        when asked at that step's SoC: the FMU's heat term asks for it right after the step)."""
+        last_soc, last_ocv = self._last_ocv
+        return last_ocv if soc == last_soc else self._one.ocv(soc)
 
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
@@ -430,7 +433,10 @@ class CellStepper:
             lags.pop()
             lags.insert(0, acc)
         self.validity = Phi
-        self.voltage_v = acc + one.ocv(s.soc) if m.relative_ocv else acc
+        if m.relative_ocv:
+            self._last_ocv = (s.soc, one.ocv(s.soc))
+            acc += self._last_ocv[1]
+        self.voltage_v = acc
         return self.voltage_v
 
     def outputs_at_socs(self, socs: list[float]
