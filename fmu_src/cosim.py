@@ -182,12 +182,8 @@ class CellCosim:
         i = self.charge_as / ts
         temp_input = self.temp_int / ts
         temp = self.thermal.cell_temperature(temp_input)
-        ilo, ihi, slo, shi, tlo, thi = self._bounds
-        if ilo <= i <= ihi and slo <= self.stepper.state.soc <= shi and tlo <= temp <= thi:
-            self.range_message, self.out_of_range = "", False
-        else:
-            self.range_message = self.check_range(i, temp)
-            self.out_of_range = bool(self.range_message)
+        self.range_message = self.check_range(i, temp)
+        self.out_of_range = bool(self.range_message)
         if self.observer:
             v = self.volt_int / self.volt_time if self.volt_time >= ts * (1 - STEP_TOL) else 0.0
             self.observer.step(i, v if v > 0 else math.nan, temp)
