@@ -171,7 +171,7 @@ class CellCosim:
         if not math.isfinite(voltage_measured_v):
             raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
                              "finite number (0 when not measured)")
-        if abs(current_a) > MAX_C_RATE * self.params.capacity_ah:
+        if abs(current_a) > self._i_max:
             raise InputError(f"input 'current' = {current_a!r} A: beyond {MAX_C_RATE:g} C of "
                              f"{self.params.capacity_ah:g} Ah, not a current a cell carries")
         raise InputError(f"input 'temperature' = {temperature_c!r} °C: expected "

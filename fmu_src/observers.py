@@ -174,11 +174,6 @@ class SocObserver:
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
-        exo = model.columns()[model.output_lags:]
-        self._soc_entries = (exo.index("ocv(k)") if "ocv(k)" in exo else None,
-                             exo.index("soc(k)") if "soc(k)" in exo else None,
-                             model.partition_variables.index("soc")
-                             if "soc" in model.partition_variables else None)
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
 
     # ----- measurement model ---------------------------------------------------------------
@@ -199,24 +194,12 @@ class SocObserver:
         x = np.zeros((n, m.n_exo))
         z = np.zeros((n, len(m.partition_variables)))
         base = st.state
-        soc_only = n > 1 and (states.shape[1] == 1 or bool(np.all(states[1:, 1:] == states[0, 1:])))
-        for r in range(1 if soc_only else n):
+        for r in range(n):
             row = states[r]
             lp = row[1:1 + nlp].tolist() if row.size > 1 else list(base.lp)
             h = float(row[1 + nlp]) if row.size > 1 + nlp else base.h
             cand = ExoState(float(row[0]), lp, h, base.direction, past)
             st.exo.features(cand, current, temperature, x[r], z[r])
-        if soc_only:        # rows that differ in SoC only: patch the SoC-dependent entries
-            x[1:], z[1:] = x[0], z[0]
-            ocv_col, soc_col, soc_z = self._soc_entries
-            for r in range(1, n):
-                soc = float(states[r, 0])
-                if ocv_col is not None:
-                    x[r, ocv_col] = float(m.ocv(soc))
-                if soc_col is not None:
-                    x[r, soc_col] = soc
-                if soc_z is not None:
-                    z[r, soc_z] = soc
         return x, z
 
     def _outputs_for(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

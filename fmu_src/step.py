@@ -334,16 +334,14 @@ class _OneSample:
         exogenous regressors]: the nodes' activations, then each local model's θ_exo,j·x."""
         v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
         exp = math.exp
-        try:
-            for (into, out), act in zip(self.plan, products, strict=False):
-                parent = v[into]             # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
-                v[out] = side = parent / (1.0 + exp(-act))
-                v[out + 1] = parent - side
-        except OverflowError:                # act < −709.78: φ = 0 (as numpy's inf gives)
-            for (into, out), act in zip(self.plan, products, strict=False):
-                parent = v[into]
-                v[out] = side = parent / (1.0 + (exp(-act) if act > -709.0 else math.inf))
-                v[out + 1] = parent - side
+        for (into, out), act in zip(self.plan, products, strict=False):
+            parent = v[into]                 # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
+            try:
+                side = parent / (1.0 + exp(-act))
+            except OverflowError:            # act < −709.78: φ = 0, as numpy's inf gives
+                side = parent / math.inf
+            v[out] = side
+            v[out + 1] = parent - side
         validity = self.leaves(v)
         if self.gated:
             validity = [0.0 if gate and gate != direction else vj

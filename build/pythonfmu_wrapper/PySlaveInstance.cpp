@@ -12,7 +12,6 @@
 #include <mutex>
 #include <regex>
 #include <sstream>
-#include <utility>
 #include <string>
 #include <utility>
 
