@@ -12,7 +12,10 @@ filter and hysteresis states with SoC.
   network deterministically. The prediction is the runtime's own step, with the Jacobian
   F = diag(1, a_k, e_h); the gain uses H = ∂u/∂ξ of the whole network at the current operating
   point (OCV slope, local models' SoC inputs, the validity functions' dependence on SoC, the
-  filter and hysteresis regressors), by central differences through the runtime's features().
+  filter and hysteresis regressors): the SoC column a secant over ±σ_SoC through the step's own
+  regressors with the SoC replaced (CellStepper.voltages_at_socs), the other columns from the
+  regressors they enter (state_gradient; by central differences through the runtime's
+  features() where the filtered current is a partition input).
   A start "at rest" (default) knows the low-pass states (0); with history_current_sigma_a > 0 they
   start unknown, as if the cell had carried a steady unknown current of that spread (prior
   σ²·11ᵀ): the EKF then estimates the relaxation under way when it starts under load.
@@ -54,7 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .model import TEMPERATURE_STEP_K, LmnModel
-from .step import CellStepper, ExoState
+from .step import CellStepper, ExoState, interp_one
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5
@@ -96,7 +99,7 @@ class ObserverSettings:
         model_error_v."""
         if self.model_error_by_soc is None:
             return self.model_error_v
-        return float(np.interp(soc, *self.model_error_by_soc))
+        return interp_one(soc, *self.model_error_by_soc)
 
     def drift(self, kind: str) -> float:
         """The SoC random walk (per √hour) of an observer kind."""
@@ -171,6 +174,9 @@ class SocObserver:
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
         self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
         self.state_columns = state_columns(model) if kind == "ekf" else []
+        self._gradient = gradient_matrices(self.state_columns, model.n_exo)
+        self._theta_exo = model.theta[:, model.output_lags:]
+        self._fd_states = "filtered_current" in model.partition_variables
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
@@ -232,7 +238,8 @@ class SocObserver:
     def _jacobian(self, xi: np.ndarray, soc_spread: float = FD_SOC
                   ) -> tuple[float, np.ndarray, float, float]:
         """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
-        δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (difference FD_SOC).
+        δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (one-sided difference
+        FD_SOC, towards SoC 0 only at SoC 1: three network evaluations besides the step's own).
 
         The SoC difference d of H is soc_spread (at least FD_SOC): with d = σ_SoC the SoC
         column is the secant over ±σ, a statistical linearisation that does not take the OCV
@@ -243,38 +250,41 @@ class SocObserver:
         The low-pass states and h enter u only through the regressors (unless the filtered
         current is a partition input, then by central differences): their columns are
         ∂x/∂state (state_columns) times the network's blended coefficients at ξ."""
-        n = xi.size
+        n, st = xi.size, self.stepper
         clipped = min(max(float(xi[0]), 0.0), 1.0)  # differences around the clipped SoC:
         spread = max(FD_SOC, soc_spread)              # beyond 0 or 1 both sides would clip
-        soc_rows = np.tile(xi, (5, 1))
-        soc_rows[:, 0] = np.clip(clipped + np.array([0.0, spread, -spread, FD_SOC, -FD_SOC]),
-                                 0.0, 1.0)
+        socs = [clipped, min(clipped + spread, 1.0), max(clipped - spread, 0.0),
+                clipped + FD_SOC if clipped + FD_SOC <= 1.0 else clipped - FD_SOC]
         h = np.empty(n)
-        if "filtered_current" not in self.model.partition_variables:
-            at = self.stepper.outputs_at_socs(soc_rows[:, 0].tolist())
-            u5 = [u for u, _, _ in at]
-            blended = np.asarray(at[0][1]) @ self.model.theta[:, self.model.output_lags:]
+        if not self._fd_states:
+            if clipped == st.soc:          # the step's own SoC: its voltage and validities
+                u4 = [st.voltage_v, *st.voltages_at_socs(socs[1:])]
+                validity = st.validity
+            else:
+                u0, validity, _ = st.outputs_at_socs(socs[:1])[0]
+                u4 = [u0, *st.voltages_at_socs(socs[1:])]
             _, temperature, _ = self._step_inputs
-            h[1:] = state_gradient(self.state_columns, blended,
-                                   self.stepper.exo.temperature_gain(temperature),
+            h[1:] = state_gradient(self._gradient, np.dot(validity, self._theta_exo),
+                                   st.exo.temperature_gain(temperature),
                                    (temperature - self.model.reference_temperature_c)
                                    / TEMPERATURE_STEP_K)
         else:
             steps = np.full(n - 1, FD_CURRENT_A)
             if self.model.hysteresis_gamma is not None:
                 steps[-1] = FD_HYSTERESIS
-            rows = np.tile(xi, (2 * (n - 1), 1))
-            rows[:, 0] = clipped
+            rows = np.tile(xi, (4 + 2 * (n - 1), 1))
+            rows[:4, 0] = socs
+            rows[4:, 0] = clipped
             for k in range(1, n):
-                rows[2 * k - 2, k] += steps[k - 1]
-                rows[2 * k - 1, k] -= steps[k - 1]
-            u_all = self._outputs_for(np.vstack([soc_rows, rows]))[0]
-            u5 = u_all[:5]
-            h[1:] = (u_all[5::2] - u_all[6::2]) / (2.0 * steps)
-        h[0] = (u5[1] - u5[2]) / (soc_rows[1, 0] - soc_rows[2, 0])
-        curvature = 0.5 * (float(u5[1]) + float(u5[2])) - float(u5[0])
-        tangent = float(u5[3] - u5[4]) / float(soc_rows[3, 0] - soc_rows[4, 0])
-        return float(u5[0]), h, curvature, tangent
+                rows[2 + 2 * k, k] += steps[k - 1]
+                rows[3 + 2 * k, k] -= steps[k - 1]
+            u_all = self._outputs_for(rows)[0]
+            u4 = u_all[:4].tolist()
+            h[1:] = (u_all[4::2] - u_all[5::2]) / (2.0 * steps)
+        h[0] = (u4[1] - u4[2]) / (socs[1] - socs[2])
+        curvature = 0.5 * (u4[1] + u4[2]) - u4[0]
+        tangent = (u4[3] - u4[0]) / (socs[3] - socs[0])
+        return float(u4[0]), h, curvature, tangent
 
     # ----- one step ------------------------------------------------------------------------
     def step(self, current_a: float, voltage_measured_v: float,
@@ -356,7 +366,7 @@ class SocObserver:
         k = ph / innovation_var
         xi = xi + k * (v_meas - u)
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
-        p = p - np.outer(ph, ph) / innovation_var
+        p = p - ph[:, None] * k
         p = 0.5 * (p + p.T)
         s.var_floor = soc_variance_floor(self.settings.model_error_at(soc_prior), tangent)
         s.cov = p.ravel()
@@ -477,21 +487,29 @@ def state_columns(model: LmnModel) -> list[list[tuple[int, int, bool, float]]]:
     return out
 
 
-def state_gradient(columns: list[list[tuple[int, int, bool, float]]], blended: np.ndarray,
-                   gain: float, dt: float) -> np.ndarray:
-    """∂u/∂state for the states of state_columns: Σ sign·(g)·dTᵖ·∂u/∂x_col (blended: the
-    network's coefficients of the regressors at the operating point; dTᵖ by repeated
-    multiplication, as the step computes it)."""
-    out = np.empty(len(columns))
-    coefficients = blended.tolist()
+def gradient_matrices(columns: list[list[tuple[int, int, bool, float]]], n_exo: int
+                      ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """state_columns as matrices per power p of dT: (A_p, B_p), the signs of the unscaled and
+    of the temperature-gain-scaled regressor columns (rows: states, columns: regressors)."""
+    degree = max((p for cols in columns for _, p, _, _ in cols), default=0)
+    mats = [(np.zeros((len(columns), n_exo)), np.zeros((len(columns), n_exo)))
+            for _ in range(degree + 1)]
     for a, cols in enumerate(columns):
-        acc = 0.0
         for col, p, scaled, sign in cols:
-            power = 1.0
-            for _ in range(p):
-                power *= dt
-            acc += sign * (gain if scaled else 1.0) * power * coefficients[col]
-        out[a] = acc
+            mats[p][1 if scaled else 0][a, col] += sign
+    return mats
+
+
+def state_gradient(matrices: list[tuple[np.ndarray, np.ndarray]], blended: np.ndarray,
+                   gain: float, dt: float) -> np.ndarray:
+    """∂u/∂state for the states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x (blended: the
+    network's coefficients of the regressors at the operating point, g the temperature gain of
+    the scaled columns; gradient_matrices gives A_p, B_p)."""
+    out = np.zeros(matrices[0][0].shape[0])
+    power = 1.0
+    for unscaled, scaled in matrices:
+        out += power * (unscaled @ blended + gain * (scaled @ blended))
+        power *= dt
     return out
 
 

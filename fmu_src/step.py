@@ -318,14 +318,7 @@ class _OneSample:
 
     def ocv(self, soc: float) -> float:
         """np.interp(soc, ocv_soc, ocv_v) for one value: linear, held beyond the ends."""
-        xs, ys = self.ocv_soc, self.ocv_v
-        if not soc > xs[0]:
-            return ys[0] if soc == soc else math.nan
-        if soc >= xs[-1]:
-            return ys[-1]
-        j = bisect.bisect_right(xs, soc) - 1
-        slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
-        return slope * (soc - xs[j]) + ys[j]
+        return interp_one(soc, self.ocv_soc, self.ocv_v)
 
     def combine(self, products: list[float], direction: int
                 ) -> tuple[list[float], float, Sequence[float], list[float]]:
@@ -354,6 +347,18 @@ class _OneSample:
                 for l in range(self.na):
                     a[l] += vj * row[l]
         return a, b, validity, local
+
+
+def interp_one(x: float, xs: list[float], ys: list[float]) -> float:
+    """np.interp(x, xs, ys) for one value (xs increasing): linear, held beyond the ends, NaN
+    for NaN; without numpy's per-call array conversion."""
+    if not x > xs[0]:
+        return ys[0] if x == x else math.nan
+    if x >= xs[-1]:
+        return ys[-1]
+    j = bisect.bisect_right(xs, x) - 1
+    slope = (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    return slope * (x - xs[j]) + ys[j]
 
 
 def tree_plan(leaf_paths: list[list[tuple[int, int]]]
@@ -437,6 +442,31 @@ class CellStepper:
         self.voltage_v = acc
         return self.voltage_v
 
+    def _products_at_socs(self, socs: list[float]) -> tuple[list[list[float]], list[float]]:
+        """block·u of the last step with only its SoC entries replaced, one row per SoC, and
+        the OCV at each SoC."""
+        one = self._one
+        rows = np.empty((len(socs), self._u.size))
+        rows[:] = self._u
+        ocv = [one.ocv(soc) for soc in socs]
+        for index, is_ocv in self._soc_entries:
+            rows[:, index] = ocv if is_ocv else socs
+        return (rows @ one.block.T).tolist(), ocv
+
+    def voltages_at_socs(self, socs: list[float]) -> list[float]:
+        """The last step's terminal voltage (V) had its SoC been each of socs (the first
+        entries of outputs_at_socs alone)."""
+        m, one, lags = self.model, self._one, self.prev_lags
+        direction = self.state.direction
+        rows, ocv = self._products_at_socs(socs)
+        out = []
+        for products, soc_ocv in zip(rows, ocv, strict=True):
+            a, b, _, _ = one.combine(products, direction)
+            for l in range(m.output_lags):
+                b += a[l] * lags[l]
+            out.append(b + soc_ocv if m.relative_ocv else b)
+        return out
+
     def outputs_at_socs(self, socs: list[float]
                         ) -> list[tuple[float, Sequence[float], list[float]]]:
         """Per SoC: the last step's terminal voltage (V), validities and each local model's
@@ -444,13 +474,10 @@ class CellStepper:
         the step had them: the observers' measurement model at candidate SoCs (at the step's
         own SoC, the step's voltage and validities)."""
         m, one = self.model, self._one
-        rows = np.tile(self._u, (len(socs), 1))
-        ocv = [one.ocv(soc) for soc in socs]
-        for index, is_ocv in self._soc_entries:
-            rows[:, index] = ocv if is_ocv else socs
+        rows, ocv = self._products_at_socs(socs)
         out = []
         lags = self.prev_lags
-        for products, soc_ocv in zip((rows @ one.block.T).tolist(), ocv, strict=True):
+        for products, soc_ocv in zip(rows, ocv, strict=True):
             a, b, validity, local = one.combine(products, self.state.direction)
             for l in range(m.output_lags):
                 b += a[l] * lags[l]

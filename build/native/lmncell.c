@@ -50,6 +50,7 @@ typedef struct {
     /* network state (runtime.CellStepper) */
     double lags[NA + 1], prev_lags[NA + 1], voltage;
     double x[NEXO + 1], z[ND + 1];
+    double phi[NM], local[NM];                 /* the step's validities and local outputs */
     int d;
     /* co-simulation accumulators (cosim.CellCosim) */
     double covered, charge, temp_int, volt_int, volt_time;
@@ -247,14 +248,14 @@ static void stepper_init(State *s, double soc0, double t) {
 }
 
 static void stepper_step(State *s, double i, double t) {
-    double phi[NM], local[NM], y;
+    double y;
     int k;
     exo_update(s, i, s->capacity);
     features(s, i, t, s->x, s->z);
     shift_past(s, i);
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
-    y = network(s->x, s->z, s->d, s->prev_lags, phi, local);
+    y = network(s->x, s->z, s->d, s->prev_lags, s->phi, s->local);
     for (k = NA - 1; k > 0; k--) s->lags[k] = s->lags[k - 1];
     if (NA > 0) s->lags[0] = y;
     s->voltage = RELATIVE_OCV ? y + ocv(s->soc) : y;
@@ -281,8 +282,36 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
     return base + u;
 }
 
+/* the same at another SoC alone, from the step's own regressors and partition inputs with only
+   the SoC entries replaced (runtime.CellStepper.outputs_at_socs); no features recomputed, and
+   without SoC among the regressors the step's local outputs re-blended */
 static double outputs_at(const State *s, double soc, double *phi, double *uj) {
-    return outputs_for(s, &soc, 1, phi, uj);
+    double z[ND + 1], base = RELATIVE_OCV ? ocv(soc) : 0.0, u = 0.0;
+    int k;
+    memcpy(z, s->z, sizeof z);
+    for (k = 0; k < ND; k++)
+        if (PART_VAR[k] == 0) z[k] = soc;
+#if OCV_INPUT || SOC_INPUT
+    {
+        double x[NEXO + 1], local[NM];
+        memcpy(x, s->x, sizeof x);
+#if OCV_INPUT
+        x[OCV_COL] = ocv(soc);
+#endif
+#if SOC_INPUT
+        x[SOC_COL] = soc;
+#endif
+        u = network(x, z, s->d, s->prev_lags, phi, local);
+        for (k = 0; k < NM; k++) uj[k] = base + local[k];
+    }
+#else
+    validities(z, s->d, phi);
+    for (k = 0; k < NM; k++) {
+        u += phi[k] * s->local[k];
+        uj[k] = base + s->local[k];
+    }
+#endif
+    return base + u;
 }
 
 /* EKF (observers.SocObserver._ekf_predict / _ekf_update) */
@@ -351,7 +380,7 @@ static double soc_variance_floor(double err, double slope) {
 }
 
 static double ekf_update(State *s, double v) {
-    double xi[NX], hv[NX], ph[NX], k[NX], np_[NX][NX];
+    double xi[NX], hv[NX], ph[NX], k[NX];
     double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent, soc_prior;
     int a, b, c;
     xi[0] = s->soc;
@@ -360,24 +389,28 @@ static double ekf_update(State *s, double v) {
     xi[NX - 1] = s->h;
 #endif
     soc_prior = clip01(xi[0]);
-    {   /* the base point at the clipped SoC (observers.SocObserver._jacobian) */
-        double xc[NX];
-        memcpy(xc, xi, sizeof xc);
-        xc[0] = soc_prior;
-        u = outputs_for(s, xc, NX, phi, uj);
+    /* the base point at the clipped SoC (observers.SocObserver._jacobian): the step's own */
+    if (soc_prior == s->soc) {
+        u = s->voltage;
+        memcpy(phi, s->phi, sizeof phi);
+    } else {
+        u = outputs_at(s, soc_prior, phi, uj);
     }
-    /* SoC column: the secant over ±σ, δ² added to r; the tangent sets the variance floor */
+    /* SoC column: the secant over ±σ, δ² added to r; the tangent (one-sided, towards SoC 0
+       only at SoC 1) sets the variance floor */
     spread = sqrt(s->ob_p[0][0] > 0.0 ? s->ob_p[0][0] : 0.0);
     if (spread > SPREAD_MAX) spread = SPREAD_MAX;
     if (spread < FD_SOC) spread = FD_SOC;
     {
-        double hi, lo, uh = output_moved(s, xi, 0, spread, &hi), ul;
-        ul = output_moved(s, xi, 0, -spread, &lo);
+        double phi2[NM], uj2[NM], uh, ul;
+        double hi = soc_prior + spread < 1.0 ? soc_prior + spread : 1.0;
+        double lo = soc_prior - spread > 0.0 ? soc_prior - spread : 0.0;
+        double at = soc_prior + FD_SOC <= 1.0 ? soc_prior + FD_SOC : soc_prior - FD_SOC;
+        uh = outputs_at(s, hi, phi2, uj2);
+        ul = outputs_at(s, lo, phi2, uj2);
         hv[0] = (uh - ul) / (hi - lo);
         curvature = 0.5 * (uh + ul) - u;
-        uh = output_moved(s, xi, 0, FD_SOC, &hi);
-        ul = output_moved(s, xi, 0, -FD_SOC, &lo);
-        tangent = (uh - ul) / (hi - lo);
+        tangent = (outputs_at(s, at, phi2, uj2) - u) / (at - soc_prior);
     }
     /* the other states: through the regressors only (the validities do not depend on them),
        so their columns are ∂x/∂state times the blended coefficients at ξ (state_gradient) */
@@ -420,11 +453,14 @@ static double ekf_update(State *s, double v) {
         k[a] = ph[a] / (hph + r);
         xi[a] += k[a] * innov;
     }
-    /* P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²) */
+    /* P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²),
+       symmetrised ((P' + P'ᵀ)/2) in place, each pair once */
     for (a = 0; a < NX; a++)
-        for (b = 0; b < NX; b++) np_[a][b] = s->ob_p[a][b] - ph[a] * ph[b] / (hph + r);
-    for (a = 0; a < NX; a++)
-        for (b = 0; b < NX; b++) s->ob_p[a][b] = 0.5 * (np_[a][b] + np_[b][a]);
+        for (b = a; b < NX; b++) {
+            double sym = 0.5 * ((s->ob_p[a][b] - ph[a] * k[b]) + (s->ob_p[b][a] - ph[b] * k[a]));
+            s->ob_p[a][b] = sym;
+            s->ob_p[b][a] = sym;
+        }
     s->ob_floor = soc_variance_floor(model_error_at(soc_prior), tangent);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
     for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
