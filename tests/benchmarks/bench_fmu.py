@@ -141,17 +141,23 @@ def main() -> None:
     shutil.rmtree(out, ignore_errors=True)
 
 
-def observers_main(model_path: Path, fmu: Path) -> None:
-    """Per-step cost of each observer in the runtime and through the FMU (fmpy, h = Ts)."""
+def observers_main(model_path: Path, fmu: Path, blocks: int = 21, n: int = 500) -> None:
+    """Per-step cost of each observer in the runtime (the observers take turns in blocks of n
+    steps, medians of the blocks; the EKF/fuzzy ratio is the median of the blocks' ratios) and
+    through the FMU (fmpy, h = Ts)."""
     from lmncell.runtime.observers import SocObserver
 
     model = load_model(model_path)
-    for code, kind in ((1, "ekf"), (2, "fuzzy"), (3, "imm")):
-        ob = SocObserver(model, kind, 0.5)
-        t0 = time.perf_counter()
-        for k in range(5000):
-            ob.step(-1.0 - 0.5 * (k % 7), 3.7, 25.0)
-        rt = 1e6 * (time.perf_counter() - t0) / 5000
+    kinds = ("ekf", "fuzzy", "imm")
+    observers = {kind: SocObserver(model, kind, 0.5) for kind in kinds}
+    runtime: dict[str, list[float]] = {kind: [] for kind in kinds}
+    for _ in range(blocks):
+        for kind, ob in observers.items():
+            t0 = time.perf_counter()
+            for k in range(n):
+                ob.step(-1.0 - 0.5 * (k % 7), 3.7, 25.0)
+            runtime[kind].append(1e6 * (time.perf_counter() - t0) / n)
+    for code, kind in enumerate(kinds, start=1):
         d = extract(str(fmu))
         inst = Instance(fmu, start={"soc0": 0.5}, unzipped=d, observer=code)
         t0 = time.perf_counter()
@@ -162,7 +168,11 @@ def observers_main(model_path: Path, fmu: Path) -> None:
         fm = 1e6 * (time.perf_counter() - t0) / 2000
         inst.free()
         shutil.rmtree(d, ignore_errors=True)
-        print(f"observer {kind:5s}: runtime {rt:7.1f} µs/step, through fmpy {fm:7.1f} µs/step")
+        print(f"observer {kind:5s}: runtime {statistics.median(runtime[kind]):7.1f} µs/step "
+              f"(median of {blocks} blocks of {n} steps), through fmpy {fm:7.1f} µs/step")
+    ratio = statistics.median(e / f for e, f in zip(runtime["ekf"], runtime["fuzzy"],
+                                                    strict=True))
+    print(f"runtime EKF / fuzzy: {ratio:.2f} (median of the blocks' ratios)")
 
 
 if __name__ == "__main__":
