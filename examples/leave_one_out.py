@@ -21,11 +21,13 @@ the folds. --hold-out PATTERN holds out only the records whose name contains PAT
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
+from lmncell.cli import USER_ERRORS
 from lmncell.config import parse_setting
-from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.evaluation.evaluate import evaluate_model, leave_one_out_folds
 from lmncell.evaluation.metrics import pooled
 from lmncell.identification.train import train_files
 
@@ -49,8 +51,7 @@ def main() -> None:
         settings["ocv_tests"] = a.ocv_tests
     means: dict[str, list[tuple[float, float]]] = {}
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
-    for held in [p for p in a.records if a.hold_out in Path(p).name]:
-        train = [p for p in a.records if p != held]
+    for held, train in leave_one_out_folds(a.records, a.hold_out):
         model, _ = train_files(train, Path(tmp) / "model.json",
                                capacity_ah=a.capacity_ah, soc0=a.soc0,
                                baselines=not a.no_baselines, progress=lambda _m: None,
@@ -77,4 +78,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except USER_ERRORS as exc:      # a user's mistake: the message, not a traceback
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)

@@ -19,13 +19,16 @@ records whose name contains PATTERN (e.g. 10degC).
 from __future__ import annotations
 
 import argparse
+import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
+from lmncell.cli import USER_ERRORS
 from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
+from lmncell.evaluation.evaluate import leave_one_out_folds
 from lmncell.evaluation.observe import run_observer, soc_metrics
 from lmncell.identification.train import train_files
 from lmncell.runtime.model import load_model
@@ -48,10 +51,7 @@ def main() -> None:
         settings["ocv_tests"] = a.ocv_tests
     results: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
     with tempfile.TemporaryDirectory() as tmp:
-        for held in a.records:
-            if a.hold_out not in Path(held).name:
-                continue
-            train = [r for r in a.records if r != held]
+        for held, train in leave_one_out_folds(a.records, a.hold_out):
             out = Path(tmp) / "model.json"
             train_files(train, out, a.capacity_ah, 1.0, progress=lambda _m: None, **settings)
             model = load_model(out)
@@ -72,4 +72,8 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except USER_ERRORS as exc:      # a user's mistake: the message, not a traceback
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)

@@ -223,18 +223,6 @@ class SocObserver:
         ocv = np.asarray(m.ocv(states[:, 0]), dtype=float) if m.relative_ocv else np.zeros(n)
         return ocv + np.sum(phi * local, axis=1), phi, ocv[:, None] + local
 
-    def _outputs_at(self, soc: float) -> tuple[float, np.ndarray, np.ndarray]:
-        """Network voltage, validities and per-local-model voltages at a SoC (other states as
-        the stepper holds them after the step just predicted)."""
-        u, phi, local = self.stepper.outputs_at_socs([soc])[0]
-        return u, np.asarray(phi), np.asarray(local)
-
-    def _slopes(self, soc: float) -> tuple[float, np.ndarray]:
-        """∂u/∂SoC of the network and of each local model (central difference)."""
-        hi, lo = min(soc + FD_SOC, 1.0), max(soc - FD_SOC, 0.0)
-        (u_hi, _, loc_hi), (u_lo, _, loc_lo) = self.stepper.outputs_at_socs([hi, lo])
-        return (u_hi - u_lo) / (hi - lo), (np.asarray(loc_hi) - np.asarray(loc_lo)) / (hi - lo)
-
     def _jacobian(self, xi: np.ndarray, soc_spread: float = FD_SOC
                   ) -> tuple[float, np.ndarray, float, float]:
         """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
@@ -310,11 +298,11 @@ class SocObserver:
         soc = st.soc
         if self.kind == "ekf":
             soc = self._ekf_update(voltage_measured_v)
-        elif self.kind == "fuzzy":
-            u, phi, _ = self._outputs_at(soc)
-            gain = float(phi @ self.fuzzy_gains[0])
-            soc += gain * (voltage_measured_v - u)
-            slope = float(phi @ self.fuzzy_slopes)
+        elif self.kind == "fuzzy":         # at the step's own SoC: its voltage and validities
+            phi = st.validity
+            gain = float(np.dot(phi, self.fuzzy_gains[0]))
+            soc += gain * (voltage_measured_v - st.voltage_v)
+            slope = float(np.dot(phi, self.fuzzy_slopes))
             s.var = fixed_gain_variance(s.var, gain, slope, self.r)
             s.var_floor = soc_variance_floor(self.settings.model_error_at(st.soc), slope)
         else:
@@ -405,10 +393,16 @@ class SocObserver:
         ps = np.asarray(s.mode_var)
         lik = np.empty(xs.size)
         slopes = np.empty(xs.size)
+        # each mode at its SoC: the network and its own local model, and that local model's
+        # slope by a central difference (local voltages alone, no validities needed)
+        socs = [_clip01(x) for x in s.mode_soc]
+        his, los = [min(x + FD_SOC, 1.0) for x in socs], [max(x - FD_SOC, 0.0) for x in socs]
+        at = self.stepper.outputs_at_socs(socs)
+        ends = self.stepper.local_voltages_at_socs(his + los)
         for j in range(xs.size):
-            u_net, _, local = self._outputs_at(_clip01(xs[j]))
+            u_net, _, local = at[j]
             u_j = local[j]
-            h_j = self._slopes(_clip01(xs[j]))[1][j]
+            h_j = (ends[j][j] - ends[xs.size + j][j]) / (his[j] - los[j])
             sj = h_j * h_j * ps[j] + self.r + (u_net - u_j) ** 2
             k = ps[j] * h_j / sj
             innov = v_meas - u_j

@@ -481,12 +481,27 @@ class CellStepper:
             a, b, validity, local = one.combine(products, self.state.direction)
             for l in range(m.output_lags):
                 b += a[l] * lags[l]
-            if m.output_lags:
-                local = [x + sum(t * y for t, y in zip(row, lags, strict=True))
-                         for x, row in zip(local, one.theta_lags, strict=True)]
             base = soc_ocv if m.relative_ocv else 0.0
-            out.append((b + base, validity, [x + base for x in local]))
+            out.append((b + base, validity, self._local_voltages(local, base)))
         return out
+
+    def local_voltages_at_socs(self, socs: list[float]) -> list[list[float]]:
+        """Per SoC each local model's voltage (V), the third entries of outputs_at_socs alone
+        (no validities: no walk through the tree)."""
+        rows, ocv = self._products_at_socs(socs)
+        n = self._one.n_nodes
+        relative = self.model.relative_ocv
+        return [self._local_voltages(products[n:], soc_ocv if relative else 0.0)
+                for products, soc_ocv in zip(rows, ocv, strict=True)]
+
+    def _local_voltages(self, local: list[float], base: float) -> list[float]:
+        """Each local model's voltage from its exogenous part θ_exo,j·x: plus its output-lag
+        part at the step's lags, plus base (the OCV, or 0 for an absolute output)."""
+        if self.model.output_lags:
+            lags = self.prev_lags
+            local = [x + sum(t * y for t, y in zip(row, lags, strict=True))
+                     for x, row in zip(local, self._one.theta_lags, strict=True)]
+        return [x + base for x in local]
 
     def get_state(self) -> list[float]:
         """Everything the next step depends on, as a flat list of floats."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 
+import pytest
 from lmncell.cli import main
 
 from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
@@ -80,3 +81,20 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     (tmp_path / "bad.json").write_text("{}")
     assert main(["explain", str(tmp_path / "bad.json")]) == 2
     assert "bad.json" in capsys.readouterr().err
+
+
+def test_leave_one_out_folds_name_what_is_wrong() -> None:
+    """The leave-one-out examples' folds: each held-out record beside all the others; a
+    pattern that matches nothing, or a single record, is a clear DataError."""
+    from lmncell.data.records import DataError
+    from lmncell.evaluation.evaluate import leave_one_out_folds
+
+    recs = ["d/a_10degC.mat", "d/b_25degC.mat", "d/c_10degC.mat"]
+    assert leave_one_out_folds(recs, "10degC") == [
+        ("d/a_10degC.mat", ["d/b_25degC.mat", "d/c_10degC.mat"]),
+        ("d/c_10degC.mat", ["d/a_10degC.mat", "d/b_25degC.mat"])]
+    assert len(leave_one_out_folds(recs)) == 3
+    with pytest.raises(DataError, match="'P25' is in none of the 3"):
+        leave_one_out_folds(recs, "P25")
+    with pytest.raises(DataError, match="at least two different records, got 1"):
+        leave_one_out_folds(["d/a.csv"])

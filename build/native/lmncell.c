@@ -202,19 +202,25 @@ static void validities(const double *z_raw, int d, double *phi) {
     }
 }
 
-/* per-local-model exogenous outputs and blended network output for given features and lags */
-static double network(const double *x, const double *z, int d, const double *lags,
-                      double *phi, double *local) {
-    double out = 0.0;
+/* per-local-model outputs (exogenous and lag parts) for given features and lags */
+static void local_outputs(const double *x, const double *lags, double *local) {
     int j, c;
-    validities(z, d, phi);
     for (j = 0; j < NM; j++) {
         double acc = 0.0;
         for (c = 0; c < NEXO; c++) acc += x[c] * THETA[j][NA + c];
         for (c = 0; c < NA; c++) acc += THETA[j][c] * lags[c];
         local[j] = acc;
-        out += phi[j] * acc;
     }
+}
+
+/* per-local-model outputs and blended network output for given features and lags */
+static double network(const double *x, const double *z, int d, const double *lags,
+                      double *phi, double *local) {
+    double out = 0.0;
+    int j;
+    validities(z, d, phi);
+    local_outputs(x, lags, local);
+    for (j = 0; j < NM; j++) out += phi[j] * local[j];
     return out;
 }
 
@@ -282,36 +288,50 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
     return base + u;
 }
 
+/* each local model's output (exogenous and lag parts) at another SoC: the step's own unless
+   SoC is among the regressors (runtime.CellStepper.local_voltages_at_socs) */
+static const double *locals_at(const State *s, double soc, double *local) {
+#if OCV_INPUT || SOC_INPUT
+    double x[NEXO + 1];
+    memcpy(x, s->x, sizeof x);
+#if OCV_INPUT
+    x[OCV_COL] = ocv(soc);
+#endif
+#if SOC_INPUT
+    x[SOC_COL] = soc;
+#endif
+    local_outputs(x, s->prev_lags, local);
+    return local;
+#else
+    (void)soc;
+    (void)local;
+    return s->local;
+#endif
+}
+
 /* the same at another SoC alone, from the step's own regressors and partition inputs with only
-   the SoC entries replaced (runtime.CellStepper.outputs_at_socs); no features recomputed, and
-   without SoC among the regressors the step's local outputs re-blended */
+   the SoC entries replaced (runtime.CellStepper.outputs_at_socs); no features recomputed */
 static double outputs_at(const State *s, double soc, double *phi, double *uj) {
-    double z[ND + 1], base = RELATIVE_OCV ? ocv(soc) : 0.0, u = 0.0;
+    double z[ND + 1], buf[NM], base = RELATIVE_OCV ? ocv(soc) : 0.0, u = 0.0;
+    const double *local = locals_at(s, soc, buf);
     int k;
     memcpy(z, s->z, sizeof z);
     for (k = 0; k < ND; k++)
         if (PART_VAR[k] == 0) z[k] = soc;
-#if OCV_INPUT || SOC_INPUT
-    {
-        double x[NEXO + 1], local[NM];
-        memcpy(x, s->x, sizeof x);
-#if OCV_INPUT
-        x[OCV_COL] = ocv(soc);
-#endif
-#if SOC_INPUT
-        x[SOC_COL] = soc;
-#endif
-        u = network(x, z, s->d, s->prev_lags, phi, local);
-        for (k = 0; k < NM; k++) uj[k] = base + local[k];
-    }
-#else
     validities(z, s->d, phi);
     for (k = 0; k < NM; k++) {
-        u += phi[k] * s->local[k];
-        uj[k] = base + s->local[k];
+        u += phi[k] * local[k];
+        uj[k] = base + local[k];
     }
-#endif
     return base + u;
+}
+
+/* each local model's voltage at another SoC (the uj of outputs_at without the validities) */
+static void local_voltages_at(const State *s, double soc, double *uj) {
+    double buf[NM], base = RELATIVE_OCV ? ocv(soc) : 0.0;
+    const double *local = locals_at(s, soc, buf);
+    int k;
+    for (k = 0; k < NM; k++) uj[k] = base + local[k];
 }
 
 /* EKF (observers.SocObserver._ekf_predict / _ekf_update) */
@@ -539,8 +559,8 @@ static double imm_update(State *s, double v) {
         double hi = xs + FD_SOC < 1.0 ? xs + FD_SOC : 1.0, lo = xs - FD_SOC > 0.0 ? xs - FD_SOC : 0.0;
         double hj, sj, k, innov;
         double unet = outputs_at(s, xs, phi, uj);
-        outputs_at(s, hi, phi, ujh);
-        outputs_at(s, lo, phi, ujl);
+        local_voltages_at(s, hi, ujh);
+        local_voltages_at(s, lo, ujl);
         hj = (ujh[j] - ujl[j]) / (hi - lo);
         /* the local model's disagreement with the network counts as its measurement error */
         sj = hj * hj * s->mode_var[j] + s->r + (unet - uj[j]) * (unet - uj[j]);
@@ -566,7 +586,7 @@ static double imm_update(State *s, double v) {
 }
 
 static void observer_step(State *s, double i, double v, double t) {
-    double soc, phi[NM], uj[NM];
+    double soc;
     int valid;
     double before = s->ob_soc;
     int k;
@@ -588,12 +608,13 @@ static void observer_step(State *s, double i, double v, double t) {
     if (s->observer == 1) {
         soc = ekf_update(s, v);
     } else if (s->observer == 2) {
-        /* fixed-gain variance, observers.fixed_gain_variance */
-        double u = outputs_at(s, soc, phi, uj), kk = 0.0, slope = 0.0, c;
+        /* at the step's own SoC: its voltage and validities; fixed-gain variance,
+           observers.fixed_gain_variance */
+        double u = s->voltage, kk = 0.0, slope = 0.0, c;
         int j;
         for (j = 0; j < NM; j++) {
-            kk += phi[j] * s->fuzzy_gain[j];
-            slope += phi[j] * LOCAL_SLOPE[j];
+            kk += s->phi[j] * s->fuzzy_gain[j];
+            slope += s->phi[j] * LOCAL_SLOPE[j];
         }
         c = fabs(slope) > 1e-6 ? slope : 1e-6;
         soc += kk * (v - u);

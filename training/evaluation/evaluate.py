@@ -96,6 +96,21 @@ def evaluate_model(model: LmnModel, paths: list[str | Path], soc0: float | None 
     return traces, rows
 
 
+def leave_one_out_folds(records: list[str], hold_out: str = "") -> list[tuple[str, list[str]]]:
+    """(held-out record, training records) for each record whose file name contains hold_out
+    (every record for ""); DataError where a fold would have nothing to train or test on."""
+    from lmncell.data.records import DataError
+
+    if len(set(records)) < 2:
+        raise DataError(f"leave-one-out needs at least two different records, got "
+                        f"{len(set(records))}: {', '.join(records) or '(none)'}")
+    held = [p for p in records if hold_out in Path(p).name]
+    if not held:
+        raise DataError(f"hold-out pattern {hold_out!r} is in none of the {len(records)} record "
+                        "names: expected part of a file name, e.g. 10degC")
+    return [(h, [p for p in records if p != h]) for h in held]
+
+
 def check_range(model: LmnModel, seg: Segment) -> list[str]:
     """Warnings for inputs outside what the model was trained on (they are not clamped)."""
     import warnings
