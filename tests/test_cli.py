@@ -98,3 +98,25 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
         leave_one_out_folds(recs, "P25")
     with pytest.raises(DataError, match="at least two different records, got 1"):
         leave_one_out_folds(["d/a.csv"])
+
+
+def test_start_soc_per_file(tmp_path, capsys) -> None:
+    """--soc0 takes one value for all files or one per file; a count that fits neither is
+    refused with a message that names soc0 and both counts."""
+    from lmncell.data.dataset import start_socs
+    from lmncell.data.records import DataError
+
+    assert start_socs(None, 2) == [None, None]
+    assert start_socs(0.5, 2) == [0.5, 0.5]
+    assert start_socs([1.0, 0.0], 2) == [1.0, 0.0]
+    assert start_socs([0.3], 3) == [0.3, 0.3, 0.3]
+    with pytest.raises(DataError, match="soc0 = 1.5"):
+        start_socs([1.0, 1.5], 2)
+    out = tmp_path / "m.json"
+    assert main(["train", str(PAN_US06), str(PAN_US06), "--out", str(out), "--capacity",
+                 "2.85", "--soc0", "1,1,0"]) == 2
+    err = capsys.readouterr().err
+    assert "soc0: 3 start SoC values for 2 data file(s)" in err
+    with pytest.raises(SystemExit):
+        main(["train", str(PAN_US06), "--out", str(out), "--soc0", "1,x"])
+    assert "'x': expected a SoC fraction within 0…1" in capsys.readouterr().err

@@ -29,16 +29,18 @@ __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_mod
 
 
 def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | None = None,
-          soc0: float | None = None, *, ocv_tests: Sequence[str | Path] | None = None,
+          soc0: float | Sequence[float] | None = None, *,
+          ocv_tests: Sequence[str | Path] | None = None,
           baselines: bool = False, config: str | Path | None = None,
           read_options: Mapping[str, Any] | None = None, progress: Progress = print_progress,
           **settings: Any) -> LmnModel:
     """Identify an LMN from cycler files and write it to `out` (model file, JSON).
 
     capacity_ah: the cell's capacity (default: the charge of the full discharges found);
-    soc0: every record's start SoC (default: 1.0 for records that start rested at full
-    charge); ocv_tests: slow OCV test files that fix the OCV; settings: training settings of
-    lmncell.config.TrainConfig (e.g. max_local_models=4, partition=["soc", "current"]);
+    soc0: every record's start SoC, or one per file in order (default: 1.0 for records that
+    start rested at full charge); ocv_tests: slow OCV test files that fix the OCV;
+    settings: training settings of lmncell.config.TrainConfig (e.g. max_local_models=4,
+    partition=["soc", "current"]);
     read_options: a column mapping and reader options for your own CSV (see read_record).
     Returns the model (also written to `out`)."""
     if ocv_tests:
@@ -76,11 +78,11 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
 
 
 def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
-             soc0: float | None = None,
+             soc0: float | Sequence[float] | None = None,
              read_options: Mapping[str, Any] | None = None) -> list[dict]:
     """Free-run error of a model (and its baselines) on records: one row per segment with,
     per model, RMSE, MAE and maximum error in mV over the whole record and RMSE over the
-    20–80 % SoC window (`rmse_mv`, `window_rmse_mv`, …)."""
+    20–80 % SoC window (`rmse_mv`, `window_rmse_mv`, …). soc0 as in train."""
     if not isinstance(model, LmnModel):
         model = load_model(model)
     from lmncell.evaluation.evaluate import evaluate_model

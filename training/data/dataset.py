@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -67,6 +68,24 @@ def start_soc(rec: Record, soc0: float | None) -> float:
         return 1.0
     raise DataError(f"{rec.meta.source}: cannot tell the start SoC (the record does not start "
                     "with a rest at its top voltage); give --soc0")
+
+
+def start_socs(soc0: float | Sequence[float] | None, n: int) -> list[float | None]:
+    """One start SoC per record, from None (each record's own, see start_soc), one value for
+    every record, or one value per record in the order of the files."""
+    if soc0 is None or isinstance(soc0, (int, float)):
+        values = [soc0] * n
+    else:
+        values = list(soc0)
+        if len(values) == 1:
+            values = values * n
+        if len(values) != n:
+            raise DataError(f"soc0: {len(values)} start SoC values for {n} data file(s): "
+                            "expected one for every file, or one per file in order")
+    for v in values:
+        if v is not None and not 0.0 <= float(v) <= 1.0:
+            raise DataError(f"soc0 = {v!r}: expected a SoC fraction within 0…1")
+    return [None if v is None else float(v) for v in values]
 
 
 def estimate_capacity(records: list[Record]) -> float:

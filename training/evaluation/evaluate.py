@@ -7,13 +7,13 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lmncell.data.dataset import Segment, record_to_segments, start_soc
+from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
 from lmncell.evaluation.metrics import WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
@@ -58,11 +58,13 @@ def ambient_of(seg: Segment) -> np.ndarray:
     return np.full(len(seg), 25.0)
 
 
-def evaluate_model(model: LmnModel, paths: list[str | Path], soc0: float | None = None,
+def evaluate_model(model: LmnModel, paths: list[str | Path],
+                   soc0: float | Sequence[float] | None = None,
                    capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None,
                    ambient: bool = False) -> tuple[list[Trace], list[dict]]:
     """Free-run simulation of each record's segments with the LMN and its baselines
-    (read_options go to read_record).
+    (soc0: one start SoC for all records, one per file in order, or None for records that
+    start rested at full charge; read_options go to read_record).
 
     ambient False: the measured cell temperature drives the models (the FMU with
     temperature_is_cell = true); True: only the ambient (chamber) temperature, the LMN's thermal
@@ -70,9 +72,9 @@ def evaluate_model(model: LmnModel, paths: list[str | Path], soc0: float | None 
     take the ambient as the cell temperature."""
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
-    for p in paths:
+    for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
-        for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), cap):
+        for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0), cap):
             check_range(model, seg)
             cell = None
             if ambient:
@@ -146,7 +148,8 @@ def write_trace(trace: Trace, path: str | Path) -> Path:
     return path
 
 
-def evaluate_files(model_path: str | Path, paths: list[str | Path], soc0: float | None = None,
+def evaluate_files(model_path: str | Path, paths: list[str | Path],
+                   soc0: float | Sequence[float] | None = None,
                    plot_dir: str | Path | None = None, trace: str | Path | None = None,
                    as_json: bool = False, progress: Progress = _print, ambient: bool = False,
                    read_options: Mapping[str, Any] | None = None) -> list[dict]:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lmncell.data.dataset import Segment, record_to_segments, start_soc
+from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.observers import ObserverSettings, SocObserver
@@ -101,16 +101,17 @@ def observer_runs(model: LmnModel, seg: Segment, kinds: list[str], soc0_est: flo
 
 
 def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kind: str,
-                            soc0: float | None, soc0_est: float, start_at: float | None,
+                            soc0: float | Sequence[float] | None, soc0_est: float,
+                            start_at: float | None,
                             plot_dir: str | Path | None = None, as_json: bool = False,
                             read_options: Mapping[str, Any] | None = None) -> list:
     """`lmncell evaluate --observer`: SoC error of an observer on records (read_options go to
     read_record)."""
     model = load_model(model_path)
     results = []
-    for p in paths:
+    for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
-        seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0),
+        seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0),
                                  model.capacity_ah)[0]
         runs = observer_runs(model, seg, [kind], soc0_est, start_at)
         row = {"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),

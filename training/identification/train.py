@@ -6,7 +6,7 @@ from __future__ import annotations
 import copy
 import platform
 import time
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +19,7 @@ from lmncell.data.dataset import (
     file_sha256,
     record_to_segments,
     start_soc,
+    start_socs,
 )
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
@@ -37,7 +38,7 @@ from lmncell.runtime.step import exo_series, initial_hysteresis
 
 
 def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float | None,
-                  soc0: float | None, progress: Progress = _print,
+                  soc0: float | Sequence[float] | None, progress: Progress = _print,
                   read_options: Mapping[str, Any] | None = None
                   ) -> tuple[list[Segment], list[Record], float]:
     """Read files, fix capacity and start SoC, split and resample to the model rate."""
@@ -56,8 +57,10 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
                  "(a lower bound; give --capacity for a measured value)")
     segs: list[Segment] = []
     weights = cfg.record_weights or [1.0] * len(records)
-    for rec, weight in zip(records, weights, strict=True):
-        for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, soc0), capacity_ah,
+    for rec, weight, rec_soc0 in zip(records, weights, start_socs(soc0, len(records)),
+                                     strict=True):
+        for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, rec_soc0),
+                                      capacity_ah,
                                       tuple(cfg.soc_window), cfg.outside_weight):
             seg.weight = seg.weight * float(weight)
             seg.record_weight = float(weight)
@@ -91,13 +94,16 @@ def _recent_current_rms(segs: list[Segment], ts: float) -> float:
 
 
 def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | None = None,
-                soc0: float | None = None, partition: list[str] | None = None,
+                soc0: float | Sequence[float] | None = None,
+                partition: list[str] | None = None,
                 baselines: bool = False, config: str | Path | None = None,
                 progress: Progress = _print, read_options: Mapping[str, Any] | None = None,
                 **overrides) -> tuple[LmnModel, dict]:
     """Train an LMN (and baselines if asked) on files and write the model file.
 
-    read_options go to read_record (a column mapping and its options for your own CSV);
+    soc0: each record's start SoC: one value for all, one per file in order, or None (1.0 for
+    records that start rested at full charge); read_options go to read_record (a column
+    mapping and its options for your own CSV);
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
