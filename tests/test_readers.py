@@ -32,6 +32,21 @@ def test_plett_sign_and_counters() -> None:
     assert held == pytest.approx(rec.charge_ah[-1], rel=0.03)
 
 
+def test_chamber_temperature_of_the_25c_scripts() -> None:
+    """Plett's procedure runs the dynamic test's s2/s3 and the OCV test's S2/S4 at 25 °C,
+    whatever test temperature the file name carries; s1 and S1/S3 run at that temperature."""
+    rec = read_record(DATA / "a123_plett/dyn/A123_DYN_30_N05_s3.csv.gz")
+    assert rec.meta.chamber_temp_c == 25.0
+    assert read_record(DATA / "a123_plett/dyn/A123_DYN_30_N05_s1.csv.gz"
+                       ).meta.chamber_temp_c == -5.0
+    from lmncell.data.readers import chamber_temp_from_name as named
+
+    assert [named(n) for n in ("A123_OCV_N15_S2.csv", "A123_OCV_N15_S3.csv",
+                               "A123_OCV_P45_S4.csv.gz", "A123_DYN_10_N25_s2.csv",
+                               "03-27-17_09.06_10degC_HWFET_Pan18650PF.mat")] == [
+        25.0, -15.0, 25.0, 25.0, 10.0]
+
+
 def test_arbin_and_panasonic_formats() -> None:
     assert detect_format(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz") == "arbin"
     rec = read_record(PAN_US06)

@@ -36,9 +36,19 @@ class DataWarning(UserWarning):
     """Data that loads but looks suspicious (units, sign)."""
 
 
+# Plett's ESC procedure runs these scripts at 25 °C whatever the test temperature in the name:
+# the dynamic test's s2 (discharge to the 0 % anchor) and s3 (charge back to full), and the OCV
+# test's S2 and S4 (dither to 0 % and to 100 %)
+PLETT_25C_SCRIPT = re.compile(r"^A123_(?:DYN_\d+_[NP]\d{2}_s[23]|OCV_[NP]\d{2}_S[24])\.",
+                              flags=re.IGNORECASE)
+
+
 def chamber_temp_from_name(path: str | Path) -> float | None:
-    """Chamber temperature (°C) from a file name: A123 ``_N25_``/``_P45_`` or ``25degC``."""
+    """Chamber temperature (°C) from a file name: A123 ``_N25_``/``_P45_`` (25 °C for the
+    scripts that Plett's procedure runs at 25 °C, PLETT_25C_SCRIPT) or ``25degC``."""
     name = Path(path).name
+    if PLETT_25C_SCRIPT.match(name):
+        return 25.0
     m = re.search(r"_([NP])(\d{2})(?:_|\.)", name)
     if m:
         return (-1.0 if m.group(1) == "N" else 1.0) * float(m.group(2))
