@@ -1,0 +1,117 @@
+"""Charge records in the training: does the LMN then follow the charge branch of an LFP cell
+(hysteresis), and what does it do to the discharge? Leave-one-temperature-out on Plett's A123
+tests: per held-out test temperature, one model trained on the other tests' discharge records
+(s1) alone and one trained on them plus the charge records (s3, which Plett's procedure runs at
+25 °C and which start empty), both judged free-run on the held-out test's discharge (s1) and
+charge (s3) records.
+
+Usage:
+    python examples/charge_and_discharge.py CAPACITY_AH DYN_DIR [--temperatures N15,N05,P05,P25,P45]
+        [--hold-out P05,P25] [--plot DIR]
+
+Example (../shared/data):
+    python examples/charge_and_discharge.py 2.0307 ../shared/data/a123_plett/dyn --plot charge
+
+Prints RMSE over the 20–80 % SoC window / the whole record (mV) and the hysteresis rate the
+training chose; --plot writes, per fold, the held-out charge record with both models.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+from pathlib import Path
+
+from lmncell.cli import USER_ERRORS
+from lmncell.data.records import DataError
+from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.evaluation.metrics import pooled
+from lmncell.identification.train import train_files
+
+
+def test_file(dyn: Path, temperature: str, script: str) -> Path:
+    """The A123 dynamic-test file of one test temperature (e.g. P05) and script (s1, s3)."""
+    found = sorted(dyn.glob(f"A123_DYN_*_{temperature}_{script}.csv*"))
+    if not found:
+        raise DataError(f"{dyn}: no A123_DYN_*_{temperature}_{script}.csv[.gz]: expected "
+                        "Plett's dynamic-test files (s1 discharge, s3 charge)")
+    return found[0]
+
+
+def judged(model, path: Path, soc0: float) -> tuple[float, float, object]:
+    """Free-run RMSE (mV) over the 20–80 % window and the whole record, and the traces."""
+    traces, rows = evaluate_model(model, [path], soc0=soc0)
+    per = [r["lmn"] for r in rows]
+    return pooled(per, "window_"), pooled(per), traces
+
+
+def plot_fold(held: str, traces: dict[str, list], out: Path) -> Path:
+    from lmncell.report.plots import plt
+
+    fig, ax = plt.subplots(figsize=(9, 4.5))
+    first = next(iter(traces.values()))
+    for t in first:
+        ax.plot(t.segment.time_s / 3600, t.segment.voltage_v, "k", lw=0.8)
+    for name, ts in traces.items():
+        for k, t in enumerate(ts):
+            ax.plot(t.segment.time_s / 3600, t.voltage["lmn"], lw=0.8,
+                    label=name if k == 0 else None)
+    ax.set_xlabel("time / h")
+    ax.set_ylabel("terminal voltage / V")
+    ax.set_title(f"held-out charge record of the {held} test (25 °C, from empty); black: "
+                 "measured", fontsize=9)
+    ax.legend(fontsize=8)
+    path = out / f"charge_{held}.png"
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("capacity_ah", type=float)
+    ap.add_argument("dyn_dir", type=Path)
+    ap.add_argument("--temperatures", default="N15,N05,P05,P25,P45")
+    ap.add_argument("--hold-out", default="P05,P25")
+    ap.add_argument("--plot", type=Path, metavar="DIR")
+    a = ap.parse_args()
+    temps = a.temperatures.split(",")
+    if a.plot:
+        a.plot.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix="lmncell-charge-"))
+    for held in a.hold_out.split(","):
+        if held not in temps:
+            raise DataError(f"--hold-out {held}: not among --temperatures {a.temperatures}")
+        others = [t for t in temps if t != held]
+        discharges = [test_file(a.dyn_dir, t, "s1") for t in others]
+        charges = [test_file(a.dyn_dir, t, "s3") for t in others]
+        records = {"discharge": test_file(a.dyn_dir, held, "s1"),
+                   "charge": test_file(a.dyn_dir, held, "s3")}
+        traces = {}
+        for name, files, soc0 in (
+                ("s1 only", discharges, [1.0] * len(discharges)),
+                ("s1 + s3", discharges + charges, [1.0] * len(discharges) + [0.0] * len(charges))):
+            model, _ = train_files(files, tmp / "model.json", capacity_ah=a.capacity_ah,
+                                   soc0=soc0, progress=lambda _m: None)
+            cells = []
+            for kind, path in records.items():
+                window, whole, tr = judged(model, path, 1.0 if kind == "discharge" else 0.0)
+                cells.append(f"{kind} {window:5.2f} / {whole:5.1f}")
+                if kind == "charge":
+                    traces[f"trained on {name}"] = tr
+            gamma = model.hysteresis_gamma
+            print(f"held out {held}, trained on {name:7s} (M={model.n_local_models}, hysteresis "
+                  f"{'off' if gamma is None else f'γ = {gamma:g}'}): " + "  ".join(cells),
+                  flush=True)
+        if a.plot:
+            print(f"  wrote {plot_fold(held, traces, a.plot)}")
+
+
+if __name__ == "__main__":
+    try:
+        main()
+    except USER_ERRORS as exc:      # a user's mistake: the message, not a traceback
+        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)
