@@ -29,7 +29,7 @@ from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
 from lmncell.evaluation.evaluate import leave_one_out_folds
-from lmncell.evaluation.observe import run_observer, soc_metrics
+from lmncell.evaluation.observe import run_observer, soc_metrics, start_index
 from lmncell.identification.train import train_files
 from lmncell.runtime.model import load_model
 
@@ -57,7 +57,7 @@ def main() -> None:
             model = load_model(out)
             seg = record_to_segments(read_record(held), model.sample_time_s, 1.0,
                                      a.capacity_ah)[0]
-            k0 = int(np.argmax(seg.soc_ref <= a.start_soc))
+            k0 = start_index(seg, a.start_soc)
             for kind in KINDS:
                 m = soc_metrics(run_observer(model, seg, kind, a.soc0_est, k0))
                 results[kind].append((m["rmse_pct"], 100 * m["outside_3sigma_share"]))

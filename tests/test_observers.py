@@ -204,3 +204,21 @@ def test_observers_are_consistent_on_an_unseen_record(a123_two_temperatures, kin
     print(kind, m)
     assert m["outside_3sigma_share"] <= 0.05
     assert m["rmse_pct"] <= (4.0 if kind == "ekf" else 6.0)
+
+
+def test_observer_start_where_the_reference_reaches_the_start_soc() -> None:
+    """A discharge starts the observer where its reference falls to the start SoC, a charge
+    where it rises to it; a start SoC outside the record's range is a clear DataError."""
+    from lmncell.data.dataset import Segment
+    from lmncell.data.records import DataError
+    from lmncell.evaluation.observe import start_index
+
+    def seg(soc: np.ndarray) -> Segment:
+        n = soc.size
+        return Segment("rec#0", np.arange(1.0, n + 1), np.zeros(n), np.full(n, 3.3), None,
+                       float(soc[0]), soc, np.ones(n))
+
+    assert start_index(seg(np.linspace(1.0, 0.1, 91)), 0.6) == 40     # 1.0 - 0.01·40 = 0.6
+    assert start_index(seg(np.linspace(0.0, 1.0, 101)), 0.6) == 60
+    with pytest.raises(DataError, match="never reaches the observer start SoC 0.05"):
+        start_index(seg(np.linspace(1.0, 0.1, 91)), 0.05)

@@ -92,11 +92,26 @@ def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
     return path
 
 
+def start_index(seg: Segment, start_at: float) -> int:
+    """The first sample where the segment's reference SoC reaches start_at: falling to it on a
+    record that starts above it (a discharge), rising to it otherwise (a charge)."""
+    soc = seg.soc_ref
+    reached = soc <= start_at if soc[0] > start_at else soc >= start_at
+    if not reached.any():
+        from lmncell.data.records import DataError
+
+        raise DataError(f"{seg.name}: the reference SoC ({float(soc.min()):.3f} … "
+                        f"{float(soc.max()):.3f}) never reaches the observer start SoC "
+                        f"{start_at:g}: expected a start SoC within the record's range")
+    return int(np.argmax(reached))
+
+
 def observer_runs(model: LmnModel, seg: Segment, kinds: list[str], soc0_est: float,
                   start_at: float | None) -> list[ObserverRun]:
     """Each observer kind and plain coulomb counting on a segment, started with soc0_est where
-    the reference first falls to start_at (under load), or at the segment start if None."""
-    k0 = int(np.argmax(seg.soc_ref <= start_at)) if start_at is not None else 0
+    the reference first reaches start_at (under load, start_index), or at the segment start if
+    None."""
+    k0 = start_index(seg, start_at) if start_at is not None else 0
     return [run_observer(model, seg, kind, soc0_est, k0) for kind in [*kinds, "coulomb"]]
 
 
