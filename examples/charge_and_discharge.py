@@ -19,11 +19,10 @@ training chose; --plot writes, per fold, the held-out charge record with both mo
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
-from lmncell.cli import USER_ERRORS
+from lmncell.cli import run_script
 from lmncell.data.records import DataError
 from lmncell.evaluation.evaluate import evaluate_model
 from lmncell.evaluation.metrics import pooled
@@ -110,8 +109,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except USER_ERRORS as exc:      # a user's mistake: the message, not a traceback
-        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+    run_script(main, __file__)

@@ -21,11 +21,10 @@ the folds. --hold-out PATTERN holds out only the records whose name contains PAT
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
-from lmncell.cli import USER_ERRORS
+from lmncell.cli import run_script
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import evaluate_model, leave_one_out_folds
 from lmncell.evaluation.metrics import pooled
@@ -78,8 +77,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except USER_ERRORS as exc:      # a user's mistake: the message, not a traceback
-        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+    run_script(main, __file__)

@@ -19,12 +19,11 @@ records whose name contains PATTERN (e.g. 10degC).
 from __future__ import annotations
 
 import argparse
-import sys
 import tempfile
 from pathlib import Path
 
 import numpy as np
-from lmncell.cli import USER_ERRORS
+from lmncell.cli import run_script
 from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
@@ -72,8 +71,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    try:
-        main()
-    except USER_ERRORS as exc:      # a user's mistake: the message, not a traceback
-        print(f"{Path(__file__).name}: error: {exc}", file=sys.stderr)
-        sys.exit(2)
+    run_script(main, __file__)

@@ -374,6 +374,16 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def run_script(main_function, script: str) -> None:
+    """Run an example script's main(): a user's mistake (USER_ERRORS) ends it with the message
+    on stderr and exit status 2, as on the command line, not with a traceback."""
+    try:
+        main_function()
+    except USER_ERRORS as exc:
+        print(f"{Path(script).name}: error: {exc}", file=sys.stderr)
+        sys.exit(2)
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
