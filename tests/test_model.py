@@ -93,7 +93,8 @@ def test_step_path_takes_any_node_numbering() -> None:
 def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int) -> None:
     """CellStepper.outputs_at_socs (the observers' measurement model) equals the batch path
     (LmnModel.blend on the step's regressors with the SoC replaced), and at the step's own
-    SoC the step's voltage and validities; voltages_at_socs gives the same voltages."""
+    SoC the step's voltage and validities; voltages_at_socs and local_voltages_at_socs give
+    the same voltages and local voltages."""
     m = random_tree_model("current_sign", temperature_terms=temperature_terms)
     st = CellStepper(m, 0.7, temperature_c=18.0)
     rng = np.random.default_rng(4)
@@ -104,6 +105,7 @@ def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int)
     assert got[0][0] == pytest.approx(st.voltage_v, abs=1e-12)
     assert np.allclose(got[0][1], st.validity, atol=1e-15)
     assert st.voltages_at_socs(socs) == [u for u, _, _ in got]     # the voltages alone
+    assert st.local_voltages_at_socs(socs) == [local for _, _, local in got]
     na = m.output_lags
     for soc, (u, phi, local) in zip(socs, got, strict=True):
         z = st._z.copy()
