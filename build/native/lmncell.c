@@ -28,7 +28,7 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
 #define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
-#define STATE_MAGIC 0x4C4D4E33u /* "LMN3": the State layout (the step's validities and local outputs added) */
+#define STATE_MAGIC 0x4C4D4E33u /* "LMN3" (LMN2 before the step's phi and local) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
 #define MIN_TEMPERATURE_C -273.15
 #define MAX_TEMPERATURE_C 1000.0
