@@ -35,7 +35,8 @@ class Report:
     def figure(self, path: Path, caption: str) -> None:
         rel = Path(path).relative_to(self.out)
         self.sections[-1][1].append(
-            f'<figure><img src="{html.escape(str(rel))}" alt="{html.escape(caption)}">'
+            f'<figure><img src="{html.escape(str(rel))}" '
+            f'alt="{html.escape(caption.replace("`", ""))}">'
             f"<figcaption>{_inline(caption)}</figcaption></figure>")
 
     def table(self, rows: list[dict], columns: list[tuple[str, str, str]],
