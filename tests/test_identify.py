@@ -17,7 +17,7 @@ from lmncell.identification.train import train_files
 from lmncell.identification.tree import build_design, poles, skeleton, stabilise, wls
 from lmncell.runtime.model import load_model
 
-from tests.conftest import PAN_HWFET
+from tests.conftest import DATA, PAN_HWFET
 
 
 @pytest.fixture(scope="module")
@@ -341,3 +341,26 @@ def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature
     assert scores[f"{info['arrhenius_k']:g}"] == best
     assert scores["4000"] <= 1.01 * best
     assert scores["1000"] > 1.5 * best
+
+
+@pytest.mark.slow
+def test_charge_records_teach_the_charge_branch(tmp_path) -> None:
+    """LFP (shipped A123 data): a model trained on discharges alone misses the charge branch of
+    the OCV on an untrained 25 °C charge from empty; trained with charge records beside them
+    (start SoC 0 per file, discharge and charge both at 25 °C) it follows it."""
+    from lmncell.evaluation.evaluate import evaluate_model
+    from lmncell.evaluation.metrics import pooled
+
+    dyn = DATA / "a123_plett/dyn"
+    discharges = [dyn / f"A123_DYN_{t}_s1.csv.gz" for t in ("30_N05", "50_P25", "50_P45")]
+    charges = [dyn / f"A123_DYN_{t}_s3.csv.gz" for t in ("30_N05", "50_P45")]
+    held_out = dyn / "A123_DYN_50_P25_s3.csv.gz"
+    window = {}
+    for name, files, soc0 in (("discharges", discharges, 1.0),
+                              ("both", discharges + charges, [1.0, 1.0, 1.0, 0.0, 0.0])):
+        model, _ = train_files(files, tmp_path / f"{name}.json", capacity_ah=2.0307, soc0=soc0,
+                               progress=lambda _m: None)
+        _, rows = evaluate_model(model, [held_out], soc0=0.0)
+        window[name] = pooled([r["lmn"] for r in rows], "window_")
+    assert window["both"] < 0.5 * window["discharges"], window
+    assert window["both"] < 3.0, window
