@@ -2,7 +2,7 @@
 held-out record free-run, and compare the LMN with its baselines fitted on the same files.
 
 Usage:
-    python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 1] [--set KEY=VALUE ...]
+    python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 F[,F...]] [--set KEY=VALUE ...]
         [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
@@ -24,7 +24,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from lmncell.cli import run_script
+from lmncell.cli import run_script, soc_list_argument
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import evaluate_model, leave_one_out_folds
 from lmncell.evaluation.metrics import pooled
@@ -37,7 +37,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("capacity_ah", type=float)
     ap.add_argument("records", nargs="+")
-    ap.add_argument("--soc0", type=float, default=1.0)
+    ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
+                    help="start SoC: one for every record or one per record, in order")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a training setting, e.g. 'partition=[\"soc\",\"current\"]'")
     ap.add_argument("--ocv-tests", nargs="*", default=[])
@@ -50,13 +51,14 @@ def main() -> None:
         settings["ocv_tests"] = a.ocv_tests
     means: dict[str, list[tuple[float, float]]] = {}
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
-    for held, train in leave_one_out_folds(a.records, a.hold_out):
+    for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
+                                                                   a.soc0):
         model, _ = train_files(train, Path(tmp) / "model.json",
-                               capacity_ah=a.capacity_ah, soc0=a.soc0,
+                               capacity_ah=a.capacity_ah, soc0=train_soc0,
                                baselines=not a.no_baselines, progress=lambda _m: None,
                                **settings)
         for ambient in (False, True):
-            _, rows = evaluate_model(model, [held], soc0=a.soc0, ambient=ambient)
+            _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient)
             if ambient and "cell_temperature_rmse_k" not in rows[0]:
                 continue                  # no measured cell temperature: one run says it all
             names = [m for m in MODELS if m in rows[0]]

@@ -4,7 +4,8 @@ observer on the held-out record from a wrong start under load, report SoC RMSE a
 
 Usage:
     python examples/observer_leave_one_out.py CAPACITY_AH RECORD... [--ocv-tests FILE ...]
-        [--hold-out PATTERN] [--start-soc 0.6] [--soc0-est 0.3] [--set KEY=VALUE ...]
+        [--hold-out PATTERN] [--start-soc 0.6] [--soc0-est 0.3] [--soc0 F[,F...]]
+        [--set KEY=VALUE ...]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
     P=../shared/data/panasonic_18650pf/25degC
@@ -23,9 +24,9 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from lmncell.cli import run_script
+from lmncell.cli import run_script, soc_list_argument
 from lmncell.config import parse_setting
-from lmncell.data.dataset import record_to_segments
+from lmncell.data.dataset import record_to_segments, start_soc
 from lmncell.data.readers import read_record
 from lmncell.evaluation.evaluate import leave_one_out_folds
 from lmncell.evaluation.observe import run_observer, soc_metrics, start_index
@@ -43,6 +44,8 @@ def main() -> None:
     ap.add_argument("--hold-out", default="", metavar="PATTERN")
     ap.add_argument("--start-soc", type=float, default=0.6)
     ap.add_argument("--soc0-est", type=float, default=0.3)
+    ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
+                    help="start SoC: one for every record or one per record, in order")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     a = ap.parse_args()
     settings = dict(parse_setting(s) for s in a.set)
@@ -50,11 +53,14 @@ def main() -> None:
         settings["ocv_tests"] = a.ocv_tests
     results: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
     with tempfile.TemporaryDirectory() as tmp:
-        for held, train in leave_one_out_folds(a.records, a.hold_out):
+        for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
+                                                                       a.soc0):
             out = Path(tmp) / "model.json"
-            train_files(train, out, a.capacity_ah, 1.0, progress=lambda _m: None, **settings)
+            train_files(train, out, a.capacity_ah, train_soc0, progress=lambda _m: None,
+                        **settings)
             model = load_model(out)
-            seg = record_to_segments(read_record(held), model.sample_time_s, 1.0,
+            rec = read_record(held)
+            seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, held_soc0),
                                      a.capacity_ah)[0]
             k0 = start_index(seg, a.start_soc)
             for kind in KINDS:

@@ -46,7 +46,7 @@ _float01 = _number(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…
 _positive = _number(float, lambda v: v > 0, "a number > 0")
 
 
-def _soc_list(text: str) -> list[float]:
+def soc_list_argument(text: str) -> list[float]:
     """An argparse type: F or F,F,… → start SoCs within 0…1 (one for all files, or one per
     file in order)."""
     return [_float01(part.strip()) for part in text.split(",")]
@@ -230,10 +230,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("data", nargs="+", help="training data files")
     s.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
     s.add_argument("--capacity", type=_positive, help="Ah (default: from full discharges)")
-    s.add_argument("--soc0", type=_soc_list, help="start SoC: one value for every record, or "
-                   "a comma list with one per data file in order, e.g. 1,1,0 for two records "
-                   "that start full and one that starts empty (default: 1.0 for records that "
-                   "start rested at full charge)")
+    s.add_argument("--soc0", type=soc_list_argument, help="start SoC: one value for every "
+                   "record, or a comma list with one per data file in order, e.g. 1,1,0 for "
+                   "two records that start full and one that starts empty (default: 1.0 for "
+                   "records that start rested at full charge)")
     s.add_argument("--partition", help="comma list of soc, current, filtered_current, "
                    "temperature (default: auto = soc, plus temperature where the records lie at "
                    "two or more temperatures)")
@@ -253,9 +253,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("evaluate", help="free-run error of a model on records", **fmt)
     s.add_argument("model", help="model file (JSON)")
     s.add_argument("data", nargs="+", help="data files")
-    s.add_argument("--soc0", type=_soc_list, help="start SoC: one value for every record, or "
-                   "a comma list with one per data file in order (default: 1.0 for records "
-                   "that start rested at full charge)")
+    s.add_argument("--soc0", type=soc_list_argument, help="start SoC: one value for every "
+                   "record, or a comma list with one per data file in order (default: 1.0 for "
+                   "records that start rested at full charge)")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
     s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table")
     s.add_argument("--trace", metavar="OUT.csv", help="write time, current, measured and "

@@ -98,19 +98,28 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
     return traces, rows
 
 
-def leave_one_out_folds(records: list[str], hold_out: str = "") -> list[tuple[str, list[str]]]:
-    """(held-out record, training records) for each record whose file name contains hold_out
-    (every record for ""); DataError where a fold would have nothing to train or test on."""
+def leave_one_out_folds(records: list[str], hold_out: str = "",
+                        soc0: float | Sequence[float] | None = None
+                        ) -> list[tuple[str, float | None, list[str], list[float | None]]]:
+    """(held-out record, its start SoC, training records, their start SoCs) for each record
+    whose file name contains hold_out (every record for ""); soc0 as in start_socs (one for
+    all, one per record in order, or None). DataError where a fold would have nothing to
+    train or test on."""
     from lmncell.data.records import DataError
 
     if len(set(records)) < 2:
         raise DataError(f"leave-one-out needs at least two different records, got "
                         f"{len(set(records))}: {', '.join(records) or '(none)'}")
+    start = dict(zip(records, start_socs(soc0, len(records)), strict=True))
     held = [p for p in records if hold_out in Path(p).name]
     if not held:
         raise DataError(f"hold-out pattern {hold_out!r} is in none of the {len(records)} record "
                         "names: expected part of a file name, e.g. 10degC")
-    return [(h, [p for p in records if p != h]) for h in held]
+    folds = []
+    for h in held:
+        train = [p for p in records if p != h]
+        folds.append((h, start[h], train, [start[p] for p in train]))
+    return folds
 
 
 def check_range(model: LmnModel, seg: Segment) -> list[str]:
