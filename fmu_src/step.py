@@ -456,16 +456,9 @@ class CellStepper:
     def voltages_at_socs(self, socs: list[float]) -> list[float]:
         """The last step's terminal voltage (V) had its SoC been each of socs (the first
         entries of outputs_at_socs alone)."""
-        m, one, lags = self.model, self._one, self.prev_lags
-        direction = self.state.direction
         rows, ocv = self._products_at_socs(socs)
-        out = []
-        for products, soc_ocv in zip(rows, ocv, strict=True):
-            a, b, _, _ = one.combine(products, direction)
-            for l in range(m.output_lags):
-                b += a[l] * lags[l]
-            out.append(b + soc_ocv if m.relative_ocv else b)
-        return out
+        return [self._row_output(products, soc_ocv)[0]
+                for products, soc_ocv in zip(rows, ocv, strict=True)]
 
     def outputs_at_socs(self, socs: list[float]
                         ) -> list[tuple[float, Sequence[float], list[float]]]:
@@ -473,17 +466,24 @@ class CellStepper:
         voltage (V) had its SoC been that one, every other regressor and partition input as
         the step had them: the observers' measurement model at candidate SoCs (at the step's
         own SoC, the step's voltage and validities)."""
-        m, one = self.model, self._one
         rows, ocv = self._products_at_socs(socs)
         out = []
-        lags = self.prev_lags
         for products, soc_ocv in zip(rows, ocv, strict=True):
-            a, b, validity, local = one.combine(products, self.state.direction)
-            for l in range(m.output_lags):
-                b += a[l] * lags[l]
-            base = soc_ocv if m.relative_ocv else 0.0
-            out.append((b + base, validity, self._local_voltages(local, base)))
+            u, validity, local, base = self._row_output(products, soc_ocv)
+            out.append((u, validity, self._local_voltages(local, base)))
         return out
+
+    def _row_output(self, products: list[float], soc_ocv: float
+                    ) -> tuple[float, Sequence[float], list[float], float]:
+        """(terminal voltage, validities, local exogenous parts, base) of one row of
+        _products_at_socs; base is the OCV added to the network output (0 for an absolute
+        output)."""
+        m = self.model
+        a, b, validity, local = self._one.combine(products, self.state.direction)
+        for l in range(m.output_lags):
+            b += a[l] * self.prev_lags[l]
+        base = soc_ocv if m.relative_ocv else 0.0
+        return b + base, validity, local, base
 
     def local_voltages_at_socs(self, socs: list[float]) -> list[list[float]]:
         """Per SoC each local model's voltage (V), the third entries of outputs_at_socs alone

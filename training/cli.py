@@ -44,15 +44,15 @@ def _number(cast: type, ok, expected: str):
 
 _float01 = _number(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = _number(float, lambda v: v > 0, "a number > 0")
+_positive_int = _number(int, lambda v: v >= 1, "a whole number ≥ 1")
+_temperature = _number(float, lambda v: MIN_TEMPERATURE_C < v < MAX_TEMPERATURE_C,
+                       "a temperature in °C above absolute zero")
 
 
 def soc_list_argument(text: str) -> list[float]:
     """An argparse type: F or F,F,… → start SoCs within 0…1 (one for all files, or one per
     file in order)."""
     return [_float01(part.strip()) for part in text.split(",")]
-_positive_int = _number(int, lambda v: v >= 1, "a whole number ≥ 1")
-_temperature = _number(float, lambda v: MIN_TEMPERATURE_C < v < MAX_TEMPERATURE_C,
-                       "a temperature in °C above absolute zero")
 
 
 def _columns(text: str) -> dict[str, str]:
