@@ -10,6 +10,7 @@ rebuilds it for win64 or darwin64.
 from __future__ import annotations
 
 import html
+import math
 import shutil
 import subprocess
 import tempfile
@@ -69,6 +70,8 @@ def model_header(model: LmnModel, guid: str) -> str:
     lp = [np.exp(-m.sample_time_s / tau) for f in m.filters for tau in f]
     settings = ObserverSettings.for_model(m)
     merr = settings.model_error_by_soc or ([0.5], [float(settings.model_error_v)])
+    tau = settings.innovation_tau_s
+    innovation_decay = math.exp(-m.sample_time_s / tau) if tau > 0 else 0.0
     lim = m.limits
     path = m._path_index
     gate = [{"all": 0, "charge": 1, "discharge": 2}[g] for g in m.leaf_gates]
@@ -123,6 +126,8 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define VOLTAGE_SIGMA_V {float(settings.voltage_sigma_v)!r}",
         f"#define EKF_ERROR_SCALE {EKF_ERROR_SCALE!r}",
         f"#define SOC0_SIGMA {settings.soc0_sigma!r}", f"#define IMM_STAY {settings.imm_stay!r}",
+        f"#define INNOVATION_ON {int(settings.innovation_tau_s > 0)}",
+        f"#define INNOVATION_DECAY {innovation_decay!r}",
         "#ifndef M_PI", "#define M_PI 3.14159265358979323846", "#endif",
         f"static const double OCV_SOC[NOCV] = {_arr(m.ocv_soc)};",
         f"static const double OCV_V[NOCV] = {_arr(m.ocv_v)};",

@@ -29,7 +29,12 @@ from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments, start_soc
 from lmncell.data.readers import read_record
 from lmncell.evaluation.evaluate import leave_one_out_folds
-from lmncell.evaluation.observe import run_observer, soc_metrics, start_index
+from lmncell.evaluation.observe import (
+    observer_segment,
+    run_observer,
+    soc_metrics,
+    start_index,
+)
 from lmncell.identification.train import train_files
 from lmncell.runtime.model import load_model
 
@@ -60,8 +65,9 @@ def main() -> None:
                         **settings)
             model = load_model(out)
             rec = read_record(held)
-            seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, held_soc0),
-                                     a.capacity_ah)[0]
+            seg = observer_segment(record_to_segments(rec, model.sample_time_s,
+                                                      start_soc(rec, held_soc0), a.capacity_ah),
+                                   a.start_soc)
             k0 = start_index(seg, a.start_soc)
             for kind in KINDS:
                 m = soc_metrics(run_observer(model, seg, kind, a.soc0_est, k0))

@@ -41,8 +41,12 @@ estimate. In the EKF the current-sensor error drives SoC and the low-pass states
 Consistency of ±3σ: the EKF's SoC column of H is the secant over ±σ_SoC (at most SPREAD_MAX) and
 the curvature over that range is added to r (statistical linearisation); the fuzzy observer's
 variance is propagated exactly for its fixed blended gain, (1 − K·c)²·P + K²·r, from σ_SoC0; and
-every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor, σ_m the
-model's free-run training RMSE), because the model's error is correlated, not white; that floor
+every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor),
+because the model's error is correlated, not white; σ_m is the larger of the model's free-run
+training RMSE at that SoC and the RMS of the recent innovations (measured minus predicted
+voltage, exponentially weighted over innovation_tau_s): where the cell leaves what the model was
+trained on (a colder cell's voltage collapse at a SoC where the training records never went)
+the model's error is far larger than in training, and the innovations show it. That floor
 widens the reported band only and does not change the gains.
 A measurement that is NaN, ≤ 0 (not measured) or more than GATE_V away from the model's voltage
 range is skipped and counted. SoC is kept within [0, 1] (the estimate is projected onto the
@@ -69,6 +73,7 @@ FD_HYSTERESIS = 1e-4
 SPREAD_MAX = 0.2      # largest SoC half-width of the EKF's secant (statistical linearisation)
 EKF_DRIFT_PER_SQRT_H = 0.005
 SOC_ONLY_DRIFT_PER_SQRT_H = 0.05
+INNOVATION_TAU_S = 300.0   # the window (s) of the innovation RMS that can raise σ_m
 HYSTERESIS_PRIOR_VAR = (1.0 / 3.0, 0.05)   # h0 unknown (0): uniform on [−1, 1]; h0 = ±1 assumed
 
 
@@ -82,7 +87,8 @@ class ObserverSettings:
     steady current before the start (A), 0 for a start at rest; model_error_v: the model's
     persistent voltage error σ_m (V; its free-run training RMSE by default) and
     model_error_by_soc ([SoC…], [σ_m…]; the model file's noise.residual_std_by_soc by
-    default), which set the floor of the reported SoC variance (soc_variance_floor)."""
+    default), which set the floor of the reported SoC variance (soc_variance_floor), raised to
+    the RMS of the innovations over the last innovation_tau_s (s; 0: not raised)."""
 
     current_sigma_a: float = 0.05
     soc_drift_per_sqrt_h: float | None = None
@@ -91,6 +97,7 @@ class ObserverSettings:
     imm_stay: float = 0.95
     hysteresis_drift_per_sqrt_h: float = 0.06
     history_current_sigma_a: float = 0.0
+    innovation_tau_s: float = INNOVATION_TAU_S
     model_error_v: float = 0.0
     model_error_by_soc: tuple[list[float], list[float]] | None = None
 
@@ -140,6 +147,8 @@ class ObserverState:
     mode_var: list[float] = field(default_factory=list)
     mode_prob: list[float] = field(default_factory=list)
     var_floor: float = 0.0        # the reported variance's floor (soc_variance_floor), SoC²
+    innovation_ms: float = 0.0    # innovations' exponentially weighted mean square (V²)
+    innovation_weight: float = 0.0  # its weights' sum (the average is unbiased from the start)
 
     def covariance(self) -> np.ndarray:
         """The EKF's covariance P of ξ as a square matrix."""
@@ -181,6 +190,8 @@ class SocObserver:
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
+        tau = self.settings.innovation_tau_s
+        self._innovation_decay = math.exp(-ts / tau) if tau > 0 else None
 
     # ----- measurement model ---------------------------------------------------------------
     def _state_vector(self) -> np.ndarray:
@@ -296,6 +307,7 @@ class SocObserver:
             st.state.soc = s.soc
             return s.soc
         soc = st.soc
+        self._track_innovation(voltage_measured_v - st.voltage_v)
         if self.kind == "ekf":
             soc = self._ekf_update(voltage_measured_v)
         elif self.kind == "fuzzy":         # at the step's own SoC: its voltage and validities
@@ -304,7 +316,7 @@ class SocObserver:
             soc += gain * (voltage_measured_v - st.voltage_v)
             slope = float(np.dot(phi, self.fuzzy_slopes))
             s.var = fixed_gain_variance(s.var, gain, slope, self.r)
-            s.var_floor = soc_variance_floor(self.settings.model_error_at(st.soc), slope)
+            s.var_floor = soc_variance_floor(self._model_error(st.soc), slope)
         else:
             soc = self._imm_update(voltage_measured_v)
         s.soc = _clip01(soc)
@@ -356,7 +368,7 @@ class SocObserver:
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
         p = p - ph[:, None] * k
         p = 0.5 * (p + p.T)
-        s.var_floor = soc_variance_floor(self.settings.model_error_at(soc_prior), tangent)
+        s.var_floor = soc_variance_floor(self._model_error(soc_prior), tangent)
         s.cov = p.ravel()
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
@@ -364,6 +376,21 @@ class SocObserver:
         if self.model.hysteresis_gamma is not None:
             st.state.h = min(1.0, max(-1.0, float(xi[-1])))
         return float(xi[0])
+
+    def _track_innovation(self, innovation_v: float) -> None:
+        """Update the innovations' exponentially weighted mean square (weights decaying by
+        exp(−Ts/innovation_tau_s), normalised by their sum)."""
+        decay = self._innovation_decay
+        if decay is None:
+            return
+        s = self.state
+        s.innovation_weight = decay * s.innovation_weight + 1.0
+        s.innovation_ms += (innovation_v * innovation_v - s.innovation_ms) / s.innovation_weight
+
+    def _model_error(self, soc: float) -> float:
+        """σ_m (V) for the variance floor: the training error at the SoC, or the recent
+        innovations' RMS where that is larger."""
+        return max(self.settings.model_error_at(soc), math.sqrt(self.state.innovation_ms))
 
     @property
     def soc_std(self) -> float:
@@ -415,7 +442,7 @@ class SocObserver:
         s.mode_soc, s.mode_var, s.mode_prob = xs.tolist(), ps.tolist(), mu.tolist()
         x = float(mu @ xs)
         s.var = float(mu @ (ps + (xs - x) ** 2))
-        s.var_floor = soc_variance_floor(self.settings.model_error_at(x), float(mu @ slopes))
+        s.var_floor = soc_variance_floor(self._model_error(x), float(mu @ slopes))
         return x
 
     # ----- state ---------------------------------------------------------------------------
@@ -424,14 +451,16 @@ class SocObserver:
         return {"stepper": self.stepper.get_state(), "soc": s.soc, "var": s.var,
                 "skipped": s.skipped, "cov": s.cov.tolist(), "mode_soc": list(s.mode_soc),
                 "mode_var": list(s.mode_var), "mode_prob": list(s.mode_prob),
-                "var_floor": s.var_floor}
+                "var_floor": s.var_floor, "innovation_ms": s.innovation_ms,
+                "innovation_weight": s.innovation_weight}
 
     def set_state(self, d: dict) -> None:
         self.stepper.set_state(list(d["stepper"]))
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
                                    np.array([float(v) for v in d["cov"]]), list(d["mode_soc"]),
                                    list(d["mode_var"]),
-                                   list(d["mode_prob"]), float(d["var_floor"]))
+                                   list(d["mode_prob"]), float(d["var_floor"]),
+                                   float(d["innovation_ms"]), float(d["innovation_weight"]))
 
 
 def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.ndarray]:

@@ -211,7 +211,7 @@ def test_observer_start_where_the_reference_reaches_the_start_soc() -> None:
     where it rises to it; a start SoC outside the record's range is a clear DataError."""
     from lmncell.data.dataset import Segment
     from lmncell.data.records import DataError
-    from lmncell.evaluation.observe import start_index
+    from lmncell.evaluation.observe import observer_segment, start_index
 
     def seg(soc: np.ndarray) -> Segment:
         n = soc.size
@@ -222,3 +222,46 @@ def test_observer_start_where_the_reference_reaches_the_start_soc() -> None:
     assert start_index(seg(np.linspace(0.0, 1.0, 101)), 0.6) == 60
     with pytest.raises(DataError, match="never reaches the observer start SoC 0.05"):
         start_index(seg(np.linspace(1.0, 0.1, 91)), 0.05)
+    # a record split by a logging gap: the observer runs on the segment that reaches the start
+    first, second = seg(np.linspace(1.0, 0.75, 26)), seg(np.linspace(0.74, 0.1, 65))
+    assert observer_segment([first, second], 0.6) is second
+    assert observer_segment([first, second], None) is first
+    with pytest.raises(DataError, match=r"rec: the reference SoC \(0.100 … 1.000\) never"):
+        observer_segment([first, second], 0.05)
+
+
+@pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])
+def test_band_widens_where_the_model_is_wrong(us06, kind) -> None:
+    """Measurements that the model predicts exactly keep the reported band at the training
+    error's floor; a ±60 mV disagreement that no SoC explains (the sign flips every 100 s, as
+    where a cell's dynamics leave what the model was trained on) raises σ_m to the
+    innovations' RMS, and the band widens, without changing the gains (the estimate is the same
+    as with the floor from training alone). A constant offset the observers absorb into SoC
+    instead: that error the innovations cannot show."""
+    model, seg = us06
+    current = seg.current_a[:1500]
+
+    def run(error_v: float, tau_s: float) -> tuple[list[float], list[float], SocObserver]:
+        settings = ObserverSettings.for_model(model)
+        settings.innovation_tau_s = tau_s
+        ob = SocObserver(model, kind, 0.8, settings=settings)
+        truth = CellStepper(model, 0.8)
+        soc, std = [], []
+        for k, i in enumerate(current.tolist()):
+            v = truth.step(i) + (error_v if (k // 100) % 2 else -error_v)
+            soc.append(ob.step(i, v))
+            std.append(ob.soc_std)
+        return soc, std, ob
+
+    _, _, exact = run(0.0, 300.0)
+    floor = math.sqrt(exact.state.var_floor)
+    trained = exact.settings.model_error_at(exact.state.soc)
+    assert math.sqrt(exact.state.innovation_ms) < trained     # the model explains the voltage
+    soc_off, std_off, off = run(0.06, 300.0)
+    assert math.sqrt(off.state.innovation_ms) > 0.03
+    assert off.state.var_floor > 4 * exact.state.var_floor
+    assert std_off[-1] > 2 * floor
+    soc_plain, _, plain = run(0.06, 0.0)                        # the setting switches it off
+    assert plain.state.innovation_ms == 0.0
+    assert soc_plain == soc_off                                 # the floor leaves the gains alone
+    assert plain.state.var_floor < off.state.var_floor

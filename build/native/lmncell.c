@@ -28,7 +28,7 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
 #define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
-#define STATE_MAGIC 0x4C4D4E33u /* "LMN3" (LMN2 before the step's phi and local) */
+#define STATE_MAGIC 0x4C4D4E34u /* "LMN4" (LMN3 before the observer's innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
 #define MIN_TEMPERATURE_C -273.15
 #define MAX_TEMPERATURE_C 1000.0
@@ -57,6 +57,7 @@ typedef struct {
     int out_of_range, steps;
     /* observer (observers.SocObserver) */
     double q, r, ob_soc, ob_var, ob_floor;
+    double ob_innov_ms, ob_innov_w;            /* innovations' weighted mean square (V²), weights */
     int skipped;
     double ob_p[NX][NX];                       /* EKF covariance of [SoC, lp…, h] */
     double ob_i, ob_t, ob_past[NB + 1];        /* the step's current, temperature, past currents */
@@ -391,6 +392,23 @@ static double model_error_at(double soc) {
     return MERR_V[k] + (MERR_V[k + 1] - MERR_V[k]) * (soc - MERR_SOC[k]) / (MERR_SOC[k + 1] - MERR_SOC[k]);
 }
 
+/* SocObserver._model_error: the training error at a SoC, or the recent innovations' RMS */
+static double model_error(const State *s, double soc) {
+    double trained = model_error_at(soc), recent = sqrt(s->ob_innov_ms);
+    return recent > trained ? recent : trained;
+}
+
+/* SocObserver._track_innovation: exponentially weighted mean square, normalised by the weights */
+static void track_innovation(State *s, double innovation) {
+#if INNOVATION_ON
+    s->ob_innov_w = INNOVATION_DECAY * s->ob_innov_w + 1.0;
+    s->ob_innov_ms += (innovation * innovation - s->ob_innov_ms) / s->ob_innov_w;
+#else
+    (void)s;
+    (void)innovation;
+#endif
+}
+
 /* observers.soc_variance_floor: (σ_m/|∂u/∂SoC|)², at most 1 */
 static double soc_variance_floor(double err, double slope) {
     double m = fabs(slope) > 1e-6 ? fabs(slope) : 1e-6, f;
@@ -481,7 +499,7 @@ static double ekf_update(State *s, double v) {
             s->ob_p[a][b] = sym;
             s->ob_p[b][a] = sym;
         }
-    s->ob_floor = soc_variance_floor(model_error_at(soc_prior), tangent);
+    s->ob_floor = soc_variance_floor(model_error(s, soc_prior), tangent);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
     for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
 #if HAS_HYSTERESIS
@@ -510,6 +528,8 @@ static void observer_init(State *s, double soc0) {
     s->ob_soc = soc0;
     s->ob_var = var0;
     s->ob_floor = 0.0;
+    s->ob_innov_ms = 0.0;
+    s->ob_innov_w = 0.0;
     s->skipped = 0;
     for (j = 0; j < NM; j++) {
         s->mode_soc[j] = soc0;
@@ -581,7 +601,7 @@ static double imm_update(State *s, double v) {
         slope += s->mode_prob[j] * slopes[j];
     }
     s->ob_var = var;
-    s->ob_floor = soc_variance_floor(model_error_at(x), slope);
+    s->ob_floor = soc_variance_floor(model_error(s, x), slope);
     return x;
 }
 
@@ -605,6 +625,7 @@ static void observer_step(State *s, double i, double v, double t) {
         return;
     }
     soc = s->soc;
+    track_innovation(s, v - s->voltage);
     if (s->observer == 1) {
         soc = ekf_update(s, v);
     } else if (s->observer == 2) {
@@ -619,7 +640,7 @@ static void observer_step(State *s, double i, double v, double t) {
         c = fabs(slope) > 1e-6 ? slope : 1e-6;
         soc += kk * (v - u);
         s->ob_var = (1.0 - kk * c) * (1.0 - kk * c) * s->ob_var + kk * kk * s->r;
-        s->ob_floor = soc_variance_floor(model_error_at(s->soc), slope);
+        s->ob_floor = soc_variance_floor(model_error(s, s->soc), slope);
     } else {
         soc = imm_update(s, v);
     }

@@ -106,6 +106,24 @@ def start_index(seg: Segment, start_at: float) -> int:
     return int(np.argmax(reached))
 
 
+def observer_segment(segs: list[Segment], start_at: float | None) -> Segment:
+    """The segment of a record that the observer runs on: the first whose reference SoC
+    reaches start_at (a record split by a logging gap can reach it in a later segment), or
+    the first segment if start_at is None; DataError (start_index's) if none reaches it."""
+    if start_at is None:
+        return segs[0]
+    for seg in segs:
+        if float(seg.soc_ref.min()) <= start_at <= float(seg.soc_ref.max()):
+            return seg
+    from lmncell.data.records import DataError
+
+    low = min(float(seg.soc_ref.min()) for seg in segs)
+    high = max(float(seg.soc_ref.max()) for seg in segs)
+    raise DataError(f"{segs[0].name.split('#')[0]}: the reference SoC ({low:.3f} … {high:.3f}) "
+                    f"never reaches the observer start SoC {start_at:g}: expected a start SoC "
+                    "within the record's range")
+
+
 def observer_runs(model: LmnModel, seg: Segment, kinds: list[str], soc0_est: float,
                   start_at: float | None) -> list[ObserverRun]:
     """Each observer kind and plain coulomb counting on a segment, started with soc0_est where
@@ -126,8 +144,9 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
     results = []
     for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
-        seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0),
-                                 model.capacity_ah)[0]
+        seg = observer_segment(record_to_segments(rec, model.sample_time_s,
+                                                  start_soc(rec, rec_soc0), model.capacity_ah),
+                               start_at)
         runs = observer_runs(model, seg, [kind], soc0_est, start_at)
         row = {"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),
                "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}}
