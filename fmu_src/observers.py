@@ -41,8 +41,11 @@ estimate. In the EKF the current-sensor error drives SoC and the low-pass states
 Consistency of ±3σ: the EKF's SoC column of H is the secant over ±σ_SoC (at most SPREAD_MAX) and
 the curvature over that range is added to r (statistical linearisation); the fuzzy observer's
 variance is propagated exactly for its fixed blended gain, (1 − K·c)²·P + K²·r, from σ_SoC0; and
-every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor),
-because the model's error is correlated, not white; σ_m is the larger of the model's free-run
+every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor), and
+at least the square of the spread that σ_m means on the OCV curve around the estimate
+(ocv_interval_sigma: the tangent at an estimate on the steep side of the knee near empty says
+nothing of the flat side just above it, where the truth may be), because the model's error is
+correlated, not white; σ_m is the larger of the model's free-run
 training RMSE at that SoC and the RMS of the recent innovations (measured minus predicted
 voltage, exponentially weighted over innovation_tau_s): where the cell leaves what the model was
 trained on (a colder cell's voltage collapse at a SoC where the training records never went)
@@ -55,6 +58,7 @@ interval after each update), h within [−1, 1].
 
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass, field
 
@@ -190,6 +194,7 @@ class SocObserver:
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
+        self._ocv_knots = (model.ocv_soc.tolist(), model.ocv_v.tolist())
         tau = self.settings.innovation_tau_s
         self._innovation_decay = math.exp(-ts / tau) if tau > 0 else None
 
@@ -316,7 +321,7 @@ class SocObserver:
             soc += gain * (voltage_measured_v - st.voltage_v)
             slope = float(np.dot(phi, self.fuzzy_slopes))
             s.var = fixed_gain_variance(s.var, gain, slope, self.r)
-            s.var_floor = soc_variance_floor(self._model_error(st.soc), slope)
+            s.var_floor = self._variance_floor(st.soc, slope)
         else:
             soc = self._imm_update(voltage_measured_v)
         s.soc = _clip01(soc)
@@ -368,7 +373,7 @@ class SocObserver:
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
         p = p - ph[:, None] * k
         p = 0.5 * (p + p.T)
-        s.var_floor = soc_variance_floor(self._model_error(soc_prior), tangent)
+        s.var_floor = self._variance_floor(soc_prior, tangent)
         s.cov = p.ravel()
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
@@ -391,6 +396,15 @@ class SocObserver:
         """σ_m (V) for the variance floor: the training error at the SoC, or the recent
         innovations' RMS where that is larger."""
         return max(self.settings.model_error_at(soc), math.sqrt(self.state.innovation_ms))
+
+    def _variance_floor(self, soc: float, slope_v: float) -> float:
+        """The reported variance's floor at a SoC estimate (SoC²): the model error σ_m over
+        the local slope (soc_variance_floor), and at least the square of ocv_interval_sigma,
+        the spread σ_m means on the OCV curve around the estimate (the tangent at an estimate
+        on the steep side of the knee is no measure of the flat side where the truth may be)."""
+        error = self._model_error(soc)
+        return max(soc_variance_floor(error, slope_v),
+                   ocv_interval_sigma(soc, error, *self._ocv_knots) ** 2)
 
     @property
     def soc_std(self) -> float:
@@ -442,7 +456,7 @@ class SocObserver:
         s.mode_soc, s.mode_var, s.mode_prob = xs.tolist(), ps.tolist(), mu.tolist()
         x = float(mu @ xs)
         s.var = float(mu @ (ps + (xs - x) ** 2))
-        s.var_floor = soc_variance_floor(self._model_error(x), float(mu @ slopes))
+        s.var_floor = self._variance_floor(x, float(mu @ slopes))
         return x
 
     # ----- state ---------------------------------------------------------------------------
@@ -534,6 +548,35 @@ def state_gradient(matrices: list[tuple[np.ndarray, np.ndarray]], blended: np.nd
         out += power * (unscaled @ blended + gain * (scaled @ blended))
         power *= dt
     return out
+
+
+def ocv_interval_sigma(soc: float, error_v: float, xs: list[float], ys: list[float]) -> float:
+    """Half the width of the SoC interval [s_lo, s_hi] around soc whose ends are where the OCV
+    (knots xs, ys, linear between) first rises by error_v above OCV(soc) and first falls by
+    error_v below it, going up and down from soc (0 or 1 where it never gets that far): the SoC
+    spread that a voltage error error_v means on the curve itself. On a straight curve it is
+    error_v/slope; where the curve is steep on one side and flat on the other (the knee near
+    empty, an LFP plateau's edge) it is far wider than error_v over the local tangent."""
+    if not error_v > 0.0:
+        return 0.0
+    u0 = interp_one(soc, xs, ys)
+    j = bisect.bisect_right(xs, soc)
+    high = _first_crossing(soc, u0, u0 + error_v, xs[j:], ys[j:], 1.0)
+    below = bisect.bisect_left(xs, soc)
+    low = _first_crossing(soc, u0, u0 - error_v, xs[:below][::-1], ys[:below][::-1], 0.0)
+    return 0.5 * (high - low)
+
+
+def _first_crossing(x0: float, y0: float, target: float, xs: list[float], ys: list[float],
+                    end: float) -> float:
+    """Walking from (x0, y0) through the knots (xs, ys) in the order given, the first x where
+    the piecewise-linear curve reaches target; end if it never does."""
+    rising = target > y0
+    for x1, y1 in zip(xs, ys, strict=True):
+        if (y1 >= target) if rising else (y1 <= target):
+            return x0 + (x1 - x0) * (target - y0) / (y1 - y0)
+        x0, y0 = x1, y1
+    return end
 
 
 def soc_variance_floor(model_error_v: float, slope_v: float) -> float:

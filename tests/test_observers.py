@@ -265,3 +265,28 @@ def test_band_widens_where_the_model_is_wrong(us06, kind) -> None:
     assert plain.state.innovation_ms == 0.0
     assert soc_plain == soc_off                                 # the floor leaves the gains alone
     assert plain.state.var_floor < off.state.var_floor
+
+
+def test_ocv_interval_sigma_sees_the_flat_side_of_a_knee() -> None:
+    """On a straight OCV the spread is error/slope; on a knee (steep below 5 %, flat above) an
+    estimate on the steep side gets the flat side's width; at the ends the interval stops at
+    0 and 1; no error, no spread."""
+    from lmncell.runtime.observers import ocv_interval_sigma
+
+    line = ([0.0, 1.0], [3.0, 4.0])
+    assert ocv_interval_sigma(0.5, 0.01, *line) == pytest.approx(0.01, rel=1e-9)
+    assert ocv_interval_sigma(0.0, 0.1, *line) == pytest.approx(0.05, rel=1e-9)
+    assert ocv_interval_sigma(1.0, 0.1, *line) == pytest.approx(0.05, rel=1e-9)
+    knee = ([0.0, 0.05, 1.0], [2.7, 3.3, 3.49])                  # 12 V and 0.2 V per unit SoC
+    tangent = 0.02 / 12.0
+    spread = ocv_interval_sigma(0.04, 0.02, *knee)
+    # up: OCV(0.04) = 3.18 reaches 3.20 at 0.04 + 0.02/12; down: 3.16 at 0.04 − 0.02/12
+    assert spread == pytest.approx(tangent, rel=1e-9)
+    spread = ocv_interval_sigma(0.049, 0.05, *knee)
+    # up: 3.288 + 0.05 passes the knot 0.05 (3.30) and climbs 0.038 V at 0.2 V per unit
+    high = 0.05 + 0.038 / 0.2
+    low = 0.049 - 0.05 / 12.0
+    assert spread == pytest.approx(0.5 * (high - low), rel=1e-9)
+    assert spread > 20 * 0.05 / 12.0
+    assert ocv_interval_sigma(0.5, 0.0, *knee) == 0.0
+    assert ocv_interval_sigma(0.5, 1.0, *knee) == pytest.approx(0.5)   # never reached: 0 … 1

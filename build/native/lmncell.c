@@ -417,6 +417,43 @@ static double soc_variance_floor(double err, double slope) {
     return f < 1.0 ? f : 1.0;
 }
 
+/* observers._first_crossing: walking from (x0, y0) through the OCV knots k = from, from + step,
+   …, the first SoC where the curve reaches target; end if it never does */
+static double first_crossing(double x0, double y0, double target, int from, int step,
+                             double end) {
+    int rising = target > y0, k;
+    for (k = from; k >= 0 && k < NOCV; k += step) {
+        double x1 = OCV_SOC[k], y1 = OCV_V[k];
+        if (rising ? y1 >= target : y1 <= target)
+            return x0 + (x1 - x0) * (target - y0) / (y1 - y0);
+        x0 = x1;
+        y0 = y1;
+    }
+    return end;
+}
+
+/* observers.ocv_interval_sigma: half the SoC interval over which the OCV moves by ±err */
+static double ocv_interval_sigma(double soc, double err) {
+    int right, left, k;
+    double u0;
+    if (!(err > 0.0)) return 0.0;
+    u0 = ocv(soc);
+    for (k = 0; k < NOCV && OCV_SOC[k] < soc; k++) {}   /* the knots ascend: bisect_left */
+    left = k;
+    for (; k < NOCV && OCV_SOC[k] <= soc; k++) {}       /* bisect_right */
+    right = k;
+    return 0.5 * (first_crossing(soc, u0, u0 + err, right, 1, 1.0) -
+                  first_crossing(soc, u0, u0 - err, left - 1, -1, 0.0));
+}
+
+/* SocObserver._variance_floor: σ_m over the slope, at least the OCV interval's spread */
+static double variance_floor(const State *s, double soc, double slope) {
+    double err = model_error(s, soc);
+    double by_slope = soc_variance_floor(err, slope), spread = ocv_interval_sigma(soc, err);
+    spread *= spread;
+    return spread > by_slope ? spread : by_slope;
+}
+
 static double ekf_update(State *s, double v) {
     double xi[NX], hv[NX], ph[NX], k[NX];
     double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent, soc_prior;
@@ -499,7 +536,7 @@ static double ekf_update(State *s, double v) {
             s->ob_p[a][b] = sym;
             s->ob_p[b][a] = sym;
         }
-    s->ob_floor = soc_variance_floor(model_error(s, soc_prior), tangent);
+    s->ob_floor = variance_floor(s, soc_prior, tangent);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
     for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
 #if HAS_HYSTERESIS
@@ -601,7 +638,7 @@ static double imm_update(State *s, double v) {
         slope += s->mode_prob[j] * slopes[j];
     }
     s->ob_var = var;
-    s->ob_floor = soc_variance_floor(model_error(s, x), slope);
+    s->ob_floor = variance_floor(s, x, slope);
     return x;
 }
 
@@ -640,7 +677,7 @@ static void observer_step(State *s, double i, double v, double t) {
         c = fabs(slope) > 1e-6 ? slope : 1e-6;
         soc += kk * (v - u);
         s->ob_var = (1.0 - kk * c) * (1.0 - kk * c) * s->ob_var + kk * kk * s->r;
-        s->ob_floor = soc_variance_floor(model_error(s, s->soc), slope);
+        s->ob_floor = variance_floor(s, s->soc, slope);
     } else {
         soc = imm_update(s, v);
     }
