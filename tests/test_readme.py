@@ -35,6 +35,9 @@ def test_demo_writes_report_figures_and_summary(demo) -> None:
     soc = summary["soc_rmse_pct_from_0_6_with_0_3"]
     assert set(soc) == {"ekf", "fuzzy", "imm", "coulomb"}
     assert max(soc["ekf"], soc["fuzzy"], soc["imm"]) < soc["coulomb"] / 3
+    outside = summary["soc_outside_3sigma_pct"]
+    assert set(outside) == {"ekf", "fuzzy", "imm"}
+    assert max(outside.values()) <= 5.0                   # the bands hold the truth (issue)
     assert summary["fmu_max_dv_v"] < 1e-9
     whole, window = summary["validation_rmse_mv"], summary["validation_window_rmse_mv"]
     assert set(whole) == set(window) and all(whole[k] >= window[k] for k in whole)

@@ -32,9 +32,12 @@ def render_figures(summary: dict) -> str:
              "| model | RMSE whole record / mV | RMSE 20–80 % SoC / mV |", "|---|---|---|"]
     lines += [f"| {MODEL_NAMES.get(k, k)} | {whole[k]:.2f} | {window[k]:.2f} |" for k in window]
     soc = summary["soc_rmse_pct_from_0_6_with_0_3"]
+    outside = summary["soc_outside_3sigma_pct"]
     lines += ["", "SoC estimation on the same record, started under load at true SoC 0.6 with "
               "the estimate 0.3 (RMSE after the first 10 minutes): "
               + ", ".join(f"{OBSERVER_NAMES.get(k, k)} {v:.2f} %" for k, v in soc.items())
+              + ". Share of samples whose true SoC lies outside the observer's ±3σ band: "
+              + ", ".join(f"{OBSERVER_NAMES.get(k, k)} {v:.1f} %" for k, v in outside.items())
               + ".", "",
               f"The FMU driven by fmpy reproduces the pipeline within "
               f"{summary['fmu_max_dv_v']:.1e} V.", "", FIGURES_END]
