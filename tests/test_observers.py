@@ -290,3 +290,19 @@ def test_ocv_interval_sigma_sees_the_flat_side_of_a_knee() -> None:
     assert spread > 20 * 0.05 / 12.0
     assert ocv_interval_sigma(0.5, 0.0, *knee) == 0.0
     assert ocv_interval_sigma(0.5, 1.0, *knee) == pytest.approx(0.5)   # never reached: 0 … 1
+
+
+def test_soc_metrics_report_how_wide_the_band_is() -> None:
+    """Beside the share outside ±3σ, soc_metrics gives the band's median half-width after the
+    first 10 minutes (a band can hold the truth by being wide)."""
+    from lmncell.evaluation.observe import ObserverRun
+
+    t = np.arange(0.0, 1200.0)
+    ref = np.full(t.size, 0.5)
+    est = ref + np.where(t < 600, 0.05, 0.001)
+    std = np.where(t < 600, 0.1, 0.002)
+    std[-100:] = 0.0002                            # the last 100 s: 1e-3 error beyond 3σ
+    m = soc_metrics(ObserverRun("ekf", t, ref, est, std, 0))
+    assert m["median_3sigma_pct"] == pytest.approx(0.6)
+    assert m["outside_3sigma_share"] == pytest.approx(100 / 1200)
+    assert m["rmse_pct"] == pytest.approx(0.1)

@@ -297,7 +297,8 @@ def _observer_section(rep: Report, model: LmnModel, record: Record, capacity: fl
     rep.table(rows, [("observer", "observer", ""), ("rmse_pct", "RMSE / %", ".2f"),
                      ("mae_pct", "MAE / %", ".2f"), ("max_pct", "max / %", ".1f"),
                      ("time_to_2pct_s", "within 2 % after / s", ".0f"),
-                     ("outside_3sigma_share", "outside ±3σ (share)", ".2f")],
+                     ("outside_3sigma_share", "outside ±3σ (share)", ".2f"),
+                     ("median_3sigma_pct", "median 3σ / %", ".1f")],
               "SoC error after the first 10 minutes against the reference (the tester's "
               "counters from the true start); coulomb counting from the same wrong start is "
               "the baseline.")
