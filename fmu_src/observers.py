@@ -41,16 +41,16 @@ estimate. In the EKF the current-sensor error drives SoC and the low-pass states
 Consistency of ±3σ: the EKF's SoC column of H is the secant over ±σ_SoC (at most SPREAD_MAX) and
 the curvature over that range is added to r (statistical linearisation); the fuzzy observer's
 variance is propagated exactly for its fixed blended gain, (1 − K·c)²·P + K²·r, from σ_SoC0; and
-every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor), and
-at least the square of the spread that σ_m means on the OCV curve around the estimate
+every observer reports at least the SoC variance (σ_m/|∂u/∂SoC|)² (soc_variance_floor), and at
+least the square of the spread that σ_m means on the OCV curve around the estimate
 (ocv_interval_sigma: the tangent at an estimate on the steep side of the knee near empty says
 nothing of the flat side just above it, where the truth may be), because the model's error is
-correlated, not white; σ_m is the larger of the model's free-run
-training RMSE at that SoC and the RMS of the recent innovations (measured minus predicted
-voltage, exponentially weighted over innovation_tau_s): where the cell leaves what the model was
-trained on (a colder cell's voltage collapse at a SoC where the training records never went)
-the model's error is far larger than in training, and the innovations show it. That floor
-widens the reported band only and does not change the gains.
+correlated, not white. σ_m is the larger of the model's free-run training RMSE at that SoC and
+the RMS of the recent innovations (measured minus predicted voltage, exponentially weighted over
+innovation_tau_s): where the cell leaves what the model was trained on (a colder cell's voltage
+collapse at a SoC where the training records never went) the model's error is far larger than
+in training, and the innovations show it. That floor widens the reported band only and does
+not change the gains.
 A measurement that is NaN, ≤ 0 (not measured) or more than GATE_V away from the model's voltage
 range is skipped and counted. SoC is kept within [0, 1] (the estimate is projected onto the
 interval after each update), h within [−1, 1].
@@ -150,7 +150,7 @@ class ObserverState:
     mode_soc: list[float] = field(default_factory=list)
     mode_var: list[float] = field(default_factory=list)
     mode_prob: list[float] = field(default_factory=list)
-    var_floor: float = 0.0        # the reported variance's floor (soc_variance_floor), SoC²
+    var_floor: float = 0.0        # the reported variance's floor (_variance_floor), SoC²
     innovation_ms: float = 0.0    # innovations' exponentially weighted mean square (V²)
     innovation_weight: float = 0.0  # its weights' sum (the average is unbiased from the start)
 
@@ -409,7 +409,7 @@ class SocObserver:
     @property
     def soc_std(self) -> float:
         """The reported SoC standard deviation: the filter's own, but at least the floor of
-        soc_variance_floor (which does not feed back into the gains)."""
+        _variance_floor (which does not feed back into the gains)."""
         return math.sqrt(max(self.state.var, self.state.var_floor, 0.0))
 
     def _imm_predict(self, dsoc: float) -> None:
