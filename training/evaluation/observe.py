@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
+from lmncell.data.records import DataError
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.observers import ObserverSettings, SocObserver
 from lmncell.runtime.step import exo_series
@@ -96,36 +97,40 @@ def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
     return path
 
 
+def _reached(seg: Segment, start_at: float) -> np.ndarray:
+    """Samples where the segment's reference SoC has reached start_at: fallen to it on a
+    segment that starts above it (a discharge), risen to it otherwise (a charge)."""
+    soc = seg.soc_ref
+    return soc <= start_at if soc[0] > start_at else soc >= start_at
+
+
+def _never_reached(name: str, socs: list[np.ndarray], start_at: float) -> DataError:
+    low = min(float(soc.min()) for soc in socs)
+    high = max(float(soc.max()) for soc in socs)
+    return DataError(f"{name}: the reference SoC ({low:.3f} … {high:.3f}) never reaches the "
+                     f"observer start SoC {start_at:g}: expected a start SoC within the "
+                     "record's range")
+
+
 def start_index(seg: Segment, start_at: float) -> int:
     """The first sample where the segment's reference SoC reaches start_at: falling to it on a
     record that starts above it (a discharge), rising to it otherwise (a charge)."""
-    soc = seg.soc_ref
-    reached = soc <= start_at if soc[0] > start_at else soc >= start_at
+    reached = _reached(seg, start_at)
     if not reached.any():
-        from lmncell.data.records import DataError
-
-        raise DataError(f"{seg.name}: the reference SoC ({float(soc.min()):.3f} … "
-                        f"{float(soc.max()):.3f}) never reaches the observer start SoC "
-                        f"{start_at:g}: expected a start SoC within the record's range")
+        raise _never_reached(seg.name, [seg.soc_ref], start_at)
     return int(np.argmax(reached))
 
 
 def observer_segment(segs: list[Segment], start_at: float | None) -> Segment:
     """The segment of a record that the observer runs on: the first whose reference SoC
     reaches start_at (a record split by a logging gap can reach it in a later segment), or
-    the first segment if start_at is None; DataError (start_index's) if none reaches it."""
+    the first segment if start_at is None; DataError if none reaches it."""
     if start_at is None:
         return segs[0]
     for seg in segs:
-        if float(seg.soc_ref.min()) <= start_at <= float(seg.soc_ref.max()):
+        if _reached(seg, start_at).any():
             return seg
-    from lmncell.data.records import DataError
-
-    low = min(float(seg.soc_ref.min()) for seg in segs)
-    high = max(float(seg.soc_ref.max()) for seg in segs)
-    raise DataError(f"{segs[0].name.split('#')[0]}: the reference SoC ({low:.3f} … {high:.3f}) "
-                    f"never reaches the observer start SoC {start_at:g}: expected a start SoC "
-                    "within the record's range")
+    raise _never_reached(segs[0].name.split("#")[0], [seg.soc_ref for seg in segs], start_at)
 
 
 def observer_runs(model: LmnModel, seg: Segment, kinds: list[str], soc0_est: float,
