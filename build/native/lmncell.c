@@ -560,8 +560,9 @@ static void observer_init(State *s, double soc0) {
     double var0 = SOC0_SIGMA * SOC0_SIGMA;
     double drift = s->observer == 1 ? EKF_DRIFT_PER_SQRT_H : SOC_ONLY_DRIFT_PER_SQRT_H;
     s->q = pow(CURRENT_SIGMA_A * TS / (3600.0 * s->capacity), 2) + drift * drift * TS / 3600.0;
-    s->r = s->observer == 1 ? pow(VOLTAGE_SIGMA_V * EKF_ERROR_SCALE, 2)
-                            : VOLTAGE_SIGMA_V * VOLTAGE_SIGMA_V;
+    s->r = s->observer == 1   ? pow(VOLTAGE_SIGMA_V * EKF_ERROR_SCALE, 2)
+           : s->observer == 3 ? pow(VOLTAGE_SIGMA_V * IMM_ERROR_SCALE, 2)
+                              : VOLTAGE_SIGMA_V * VOLTAGE_SIGMA_V;
     s->ob_soc = soc0;
     s->ob_var = var0;
     s->ob_floor = 0.0;
