@@ -1,7 +1,7 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 2 (version 1 files, which have no ``thermal`` key, are read
-too). Keys (units in the names, current > 0 charges, SoC 0…1):
+Format ``lmncell-model``, version 3 (versions 1 and 2, which have no ``thermal`` or no
+``regressors.depletion`` key, are read too). Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
 - ``cell``: ``capacity_ah``, ``efficiency_charge``, ``efficiency_discharge`` (coulombic, η(i)),
@@ -16,8 +16,13 @@ too). Keys (units in the names, current > 0 charges, SoC 0…1):
   ``arrhenius_k`` (null, or E in K: the current and filter regressors are multiplied by
   g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``),
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
-  regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K).
-  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, OCV, SoC, 1,
+  regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K),
+  ``depletion`` (version 3; null or absent: none, or {``tau_s``, ``power``, ``soc_scale``,
+  ``soc_min``}: the regressor d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC, soc_min))^power, LP_τ the
+  filters' low-pass state of time constant τ = ``tau_s``: a polarisation that grows as the cell
+  nears empty, the voltage collapse before cut-off; its coefficient is a resistance at
+  SoC = soc_scale, ≥ 0 in an RC-ladder model).
+  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, d, OCV, SoC, 1,
   then those of the temperature terms ``<column>*dT^1`` …, (absent ones left out); ``columns``
   lists their names.
 - ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
@@ -61,8 +66,8 @@ import numpy as np
 from .thermal import ThermalModel
 
 FORMAT = "lmncell-model"
-VERSION = 2
-READABLE_VERSIONS = (1, 2)
+VERSION = 3
+READABLE_VERSIONS = (1, 2, 3)
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -71,6 +76,39 @@ GATES = ("all", "charge", "discharge")
 
 class ModelFileError(ValueError):
     """A model file that cannot be used; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class Depletion:
+    """The depletion regressor d(k) = g(T)·LP_τ(i)·factor(SoC) (see the module docstring):
+    tau_s (s) picks the filters' low-pass state, factor(SoC) = (soc_scale/max(SoC, soc_min))^power
+    (1 at SoC = soc_scale, held below soc_min)."""
+
+    tau_s: float
+    power: float
+    soc_scale: float = 0.1
+    soc_min: float = 0.02
+
+    def factor(self, soc: float) -> float:
+        """(soc_scale/max(SoC, soc_min))^power for one SoC."""
+        return (self.soc_scale / max(soc, self.soc_min)) ** self.power
+
+    def factors(self, soc: np.ndarray) -> np.ndarray:
+        """factor for an array of SoC."""
+        return np.power(self.soc_scale / np.maximum(soc, self.soc_min), self.power)
+
+    def state_index(self, filters: list[tuple[float, float]]) -> int:
+        """Index of the low-pass state of time constant tau_s among the filters' states
+        [fast_1, slow_1, fast_2, …] (the first that has it)."""
+        taus = [tau for f in filters for tau in f]
+        if self.tau_s not in taus:
+            raise ValueError(f"depletion tau_s {self.tau_s:g} s is none of the filters' time "
+                             f"constants {taus}")
+        return taus.index(self.tau_s)
+
+    def to_dict(self) -> dict:
+        return {"tau_s": self.tau_s, "power": self.power, "soc_scale": self.soc_scale,
+                "soc_min": self.soc_min}
 
 
 @dataclass
@@ -104,6 +142,7 @@ class LmnModel:
     arrhenius_k: float | None = None
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
+    depletion: Depletion | None = None
     thermal: ThermalModel | None = None
     limits: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
@@ -179,6 +218,8 @@ class LmnModel:
         cols += [f"v{f + 1}(k)" for f in range(len(self.filters))]
         if self.hysteresis_gamma is not None:
             cols.append("h(k)")
+        if self.depletion is not None:
+            cols.append("d(k)")
         if self.ocv_input:
             cols.append("ocv(k)")
         if self.soc_input:
@@ -191,9 +232,9 @@ class LmnModel:
         """Columns that also enter multiplied by dT, dT², … up to ``temperature_terms``
         (dT = (T − T_ref)/TEMPERATURE_STEP_K): the current, filter and hysteresis regressors and
         the offset (resistances, time-constant gains and the OCV offset varying smoothly with
-        temperature beyond the Arrhenius gain)."""
+        temperature beyond the Arrhenius gain); not the depletion, OCV and SoC columns."""
         return [c for c in self._plain_columns()[self.output_lags:]
-                if c not in ("ocv(k)", "soc(k)")]
+                if c not in ("d(k)", "ocv(k)", "soc(k)")]
 
     def temperature_source_indices(self) -> list[int]:
         """Positions of temperature_term_sources() among the exogenous columns (those after the
@@ -282,6 +323,25 @@ def _thermal(doc: object, source: str) -> ThermalModel | None:
         return ThermalModel(**{k: doc[k] for k in keys}).check(source)
     except ValueError as exc:
         raise ModelFileError(str(exc)) from None
+
+
+def _depletion(doc: object, filters: list[tuple[float, float]], where: str
+               ) -> Depletion | None:
+    """regressors.depletion of a model document, or None (absent or null)."""
+    if doc is None:
+        return None
+    keys = {"tau_s", "power", "soc_scale", "soc_min"}
+    if (not isinstance(doc, dict) or set(doc) != keys
+            or not all(isinstance(doc[k], (int, float)) and not isinstance(doc[k], bool)
+                       and math.isfinite(doc[k]) and doc[k] > 0 for k in keys)):
+        raise ModelFileError(f"{where}: 'depletion' must be null or an object with exactly the "
+                             f"keys {sorted(keys)}, each a finite number > 0, got {doc!r}")
+    dep = Depletion(**{k: float(doc[k]) for k in keys})
+    try:
+        dep.state_index(filters)
+    except ValueError as exc:
+        raise ModelFileError(f"{where}: {exc}") from None
+    return dep
 
 
 def _noise(doc: object, source: str) -> dict:
@@ -402,6 +462,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
+        depletion=_depletion(reg.get("depletion"), filters, w),
         thermal=_thermal(doc.get("thermal"), source),
         limits=dict(doc.get("limits", {})), cell=dict(cell),
         noise=_noise(doc.get("noise", {}), source),
@@ -436,7 +497,9 @@ def model_to_dict(model: LmnModel) -> dict:
                        "ocv_input": model.ocv_input, "soc_input": model.soc_input,
                        "offset": model.offset, "arrhenius_k": model.arrhenius_k,
                        "reference_temperature_c": model.reference_temperature_c,
-                       "temperature_terms": model.temperature_terms},
+                       "temperature_terms": model.temperature_terms,
+                       "depletion": (None if model.depletion is None
+                                     else model.depletion.to_dict())},
         "partition": {"variables": model.partition_variables,
                       "center": model.partition_center.tolist(),
                       "scale": model.partition_scale.tolist()},

@@ -195,6 +195,9 @@ class SocObserver:
         self._gradient = gradient_matrices(self.state_columns, model.n_exo)
         self._theta_exo = model.theta[:, model.output_lags:]
         self._fd_states = "filtered_current" in model.partition_variables
+        exo_cols = model.columns()[model.output_lags:]
+        self._depletion = ((exo_cols.index("d(k)"), self.stepper.exo.depletion_state)
+                           if model.depletion is not None else None)
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
@@ -273,10 +276,15 @@ class SocObserver:
                 u0, validity, _ = st.outputs_at_socs(socs[:1])[0]
                 u4 = [u0, *st.voltages_at_socs(socs[1:])]
             _, temperature, _ = self._step_inputs
-            h[1:] = state_gradient(self._gradient, np.dot(validity, self._theta_exo),
-                                   st.exo.temperature_gain(temperature),
+            blended = np.dot(validity, self._theta_exo)
+            gain = st.exo.temperature_gain(temperature)
+            h[1:] = state_gradient(self._gradient, blended, gain,
                                    (temperature - self.model.reference_temperature_c)
                                    / TEMPERATURE_STEP_K)
+            if self._depletion is not None:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
+                column, state = self._depletion
+                h[1 + state] += (float(blended[column]) * gain
+                                 * self.model.depletion.factor(clipped))
         else:
             steps = np.full(n - 1, FD_CURRENT_A)
             if self.model.hysteresis_gamma is not None:

@@ -79,6 +79,8 @@ class ExoStepper:
                               ("soc", "current", "filtered_current", "temperature"))
         self._inv_tref = 1.0 / (model.reference_temperature_c + 273.15)
         self._temperature_source_cols = model.temperature_source_indices()
+        dep = model.depletion
+        self.depletion_state = None if dep is None else dep.state_index(model.filters)
 
     def temperature_gain(self, temperature_c: float) -> float:
         """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
@@ -130,6 +132,9 @@ class ExoStepper:
         if m.hysteresis_gamma is not None:
             x[col] = s.h
             col += 1
+        if m.depletion is not None:
+            x[col] = self.depletion_source(s, g) * m.depletion.factor(s.soc)
+            col += 1
         if m.ocv_input:
             x[col] = float(m.ocv(s.soc))
             col += 1
@@ -150,6 +155,10 @@ class ExoStepper:
             z[z_filtered] = lp[1] if lp else current_a
         if z_temperature is not None:
             z[z_temperature] = temperature_c
+
+    def depletion_source(self, s: ExoState, gain: float) -> float:
+        """g(T)·LP_τ(i) of the depletion regressor (A), gain = g(T); its SoC factor apart."""
+        return gain * s.lp[self.depletion_state]
 
     def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
         """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
@@ -405,6 +414,8 @@ class CellStepper:
         self._soc_entries = [(1 + pv.index("soc"), False)] if "soc" in pv else []
         self._soc_entries += [(1 + d + exo.index(name), name == "ocv(k)")
                               for name in ("ocv(k)", "soc(k)") if name in exo]
+        self._depletion_entry = 1 + d + exo.index("d(k)") if "d(k)" in exo else None
+        self._temperature_c = temperature_c          # of the last step
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity: Sequence[float] = [0.0] * model.n_local_models   # Φ of the last step
         self._last_ocv = (math.nan, math.nan)      # (SoC, OCV) of the last step
@@ -423,6 +434,7 @@ class CellStepper:
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
         m, s, exo = self.model, self.state, self.exo
+        self._temperature_c = temperature_c
         exo.update(s, current_a)
         exo.features(s, current_a, temperature_c, self._x, self._z)
         exo.shift(s, current_a)
@@ -444,13 +456,19 @@ class CellStepper:
 
     def _products_at_socs(self, socs: list[float]) -> tuple[list[list[float]], list[float]]:
         """block·u of the last step with only its SoC entries replaced, one row per SoC, and
-        the OCV at each SoC."""
+        the OCV at each SoC (the depletion regressor from the step's low-pass state as the step
+        left it)."""
         one = self._one
         rows = np.empty((len(socs), self._u.size))
         rows[:] = self._u
         ocv = [one.ocv(soc) for soc in socs]
         for index, is_ocv in self._soc_entries:
             rows[:, index] = ocv if is_ocv else socs
+        if self._depletion_entry is not None:
+            source = self.exo.depletion_source(self.state,
+                                               self.exo.temperature_gain(self._temperature_c))
+            factor = self.model.depletion.factor
+            rows[:, self._depletion_entry] = [source * factor(soc) for soc in socs]
         return (rows @ one.block.T).tolist(), ocv
 
     def voltages_at_socs(self, socs: list[float]) -> list[float]:

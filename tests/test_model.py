@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -16,6 +17,7 @@ from lmncell.runtime.model import (
     save_model,
 )
 from lmncell.runtime.step import CellStepper, simulate
+from lmncell.runtime.vector import VectorCells
 
 
 def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
@@ -107,16 +109,20 @@ def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int)
     assert st.voltages_at_socs(socs) == [u for u, _, _ in got]     # the voltages alone
     assert st.local_voltages_at_socs(socs) == [local for _, _, local in got]
     na = m.output_lags
+    assert m.depletion is not None             # the SoC enters its regressor d(k) too
+    d_col = m.columns().index("d(k)") - na
     for soc, (u, phi, local) in zip(socs, got, strict=True):
         z = st._z.copy()
         z[m.partition_variables.index("soc")] = soc
-        A, b, Phi = m.blend(st._x[None, :], m.normalise(z[None, :]),
+        x = st._x.copy()
+        x[d_col] = st._x[d_col] / m.depletion.factor(st.soc) * m.depletion.factor(soc)
+        A, b, Phi = m.blend(x[None, :], m.normalise(z[None, :]),
                             np.array([st.state.direction]))
         ocv = float(m.ocv(soc))
         assert u == pytest.approx(ocv + float(b[0] + A[0] @ np.asarray(st.prev_lags)),
                                   abs=1e-12)
         assert np.allclose(phi, Phi[0], atol=1e-14)
-        expect = ocv + st._x @ m.theta[:, na:].T + m.theta[:, :na] @ np.asarray(st.prev_lags)
+        expect = ocv + x @ m.theta[:, na:].T + m.theta[:, :na] @ np.asarray(st.prev_lags)
         assert np.allclose(local, expect, atol=1e-12)
 
 
@@ -149,7 +155,12 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=3), r"version 3; this LMNCell reads versions \[1, 2\]"),
+    (lambda d: d.update(version=4), r"version 4; this LMNCell reads versions \[1, 2, 3\]"),
+    (lambda d: d["regressors"].update(depletion={"tau_s": 150.0}), "'depletion' must be null"),
+    (lambda d: d["regressors"]["depletion"].update(power=-1.0), "'depletion' must be null"),
+    (lambda d: d["regressors"]["depletion"].update(tau_s=7.0),
+     "depletion tau_s 7 s is none of the filters' time constants"),
+    (lambda d: d["regressors"].update(depletion=None), "theta has shape"),
     (lambda d: d.update(version=True), "version True"),
     (lambda d: d.update(thermal={"resistance_k_per_w": 2.0}), "'thermal' must be null"),
     (lambda d: d.update(thermal={"resistance_k_per_w": -2.0, "time_constant_s": 900.0,
@@ -189,6 +200,29 @@ def test_not_json_is_refused(tmp_path) -> None:
         load_model(p)
     with pytest.raises(ModelFileError, match="expected a JSON object"):
         model_from_dict([1, 2], "list")
+
+
+def test_depletion_regressor_is_the_low_pass_current_times_the_soc_factor() -> None:
+    """d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC, soc_min))^power, τ the filters' 150 s state,
+    in the step, the batch path and the vectorised stepper alike."""
+    m = random_tree_model(temperature_terms=0)
+    dep = m.depletion
+    assert (dep.tau_s, dep.power, dep.soc_scale, dep.soc_min) == (150.0, 4.0, 0.1, 0.02)
+    col = m.columns().index("d(k)") - m.output_lags
+    st = CellStepper(m, 0.1)
+    cells = VectorCells(m, 0.1, n=1)
+    rng = np.random.default_rng(7)
+    cur = rng.normal(-2.0, 1.0, 300)
+    lp, a = 0.0, math.exp(-m.sample_time_s / 150.0)
+    for i in cur:
+        st.step(float(i), 25.0)
+        lp = a * lp + (1.0 - a) * float(i)
+        expected = lp * (0.1 / max(st.soc, 0.02)) ** 4
+        assert st._x[col] == pytest.approx(expected, rel=1e-12, abs=1e-15)
+        assert cells.step(np.array([i]), 25.0)[0] == pytest.approx(st.voltage_v, abs=1e-9)
+    assert st.soc < 0.02                  # the factor is held below soc_min
+    batch = simulate(m, cur, None, 0.1).voltage_v
+    assert abs(batch[-1] - st.voltage_v) <= 1e-9
 
 
 def test_version_1_files_without_thermal_model_still_load(tmp_path) -> None:

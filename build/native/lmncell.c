@@ -108,6 +108,11 @@ static double temperature_gain(double t) {
 
 static double eta(double i) { return i > 0 ? ETA_CHARGE : ETA_DISCHARGE; }
 
+/* the depletion regressor's SoC factor (soc_scale/max(SoC, soc_min))^power (model.Depletion) */
+static double depletion_factor(double soc) {
+    return pow(DEP_SOC_SCALE / (soc >= DEP_SOC_MIN ? soc : DEP_SOC_MIN), DEP_POWER);
+}
+
 static void exo_init(State *s, double soc0, double h0) {
     int k;
     s->soc = soc0;
@@ -142,6 +147,9 @@ static void features(const State *s, double i, double t, double *x, double *z) {
     for (k = 0; k < NF; k++) x[col++] = g * (s->lp[2 * k] - s->lp[2 * k + 1]);
 #if HAS_HYSTERESIS
     x[col++] = s->h;
+#endif
+#if HAS_DEPLETION
+    x[col++] = g * s->lp[DEP_STATE] * depletion_factor(s->soc);
 #endif
 #if OCV_INPUT
     x[col++] = ocv(s->soc);
@@ -292,7 +300,7 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
 /* each local model's output (exogenous and lag parts) at another SoC: the step's own unless
    SoC is among the regressors (runtime.CellStepper.local_voltages_at_socs) */
 static const double *locals_at(const State *s, double soc, double *local) {
-#if OCV_INPUT || SOC_INPUT
+#if OCV_INPUT || SOC_INPUT || HAS_DEPLETION
     double x[NEXO + 1];
     memcpy(x, s->x, sizeof x);
 #if OCV_INPUT
@@ -300,6 +308,9 @@ static const double *locals_at(const State *s, double soc, double *local) {
 #endif
 #if SOC_INPUT
     x[SOC_COL] = soc;
+#endif
+#if HAS_DEPLETION
+    x[DEP_COL] = temperature_gain(s->ob_t) * s->lp[DEP_STATE] * depletion_factor(soc);
 #endif
     local_outputs(x, s->prev_lags, local);
     return local;
@@ -508,6 +519,9 @@ static double ekf_update(State *s, double v) {
             }
             hv[a] = acc;
         }
+#if HAS_DEPLETION   /* d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor */
+        hv[1 + DEP_STATE] += blended[DEP_COL] * g * depletion_factor(soc_prior);
+#endif
 #else
         for (a = 1; a < NX; a++) {
             double step = (HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A;

@@ -253,7 +253,8 @@ def local_ladder(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         progress("  local models: free (the structure is not an RC ladder)")
         return None
     progress("  local models: RC ladders, R0, R_τ (τ = " + ", ".join(
-        f"{t:g}" for t in ladder_keys(base.filters, base.sample_time_s)) + " s) and H ≥ 0"
+        f"{t:g}" for t in ladder_keys(base.filters, base.sample_time_s)) + " s)"
+             + (", R_d" if base.depletion is not None else "") + " and H ≥ 0"
              + (f" at {t_min:.0f} … {t_max:.0f} °C" if base.temperature_terms else ""))
     return ladder
 

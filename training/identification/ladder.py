@@ -4,14 +4,15 @@ A feedback-free local model (output_lags = 0) whose filters form a chain (each f
 v = LP_fast(i) − LP_slow(i), every time constant at or above the sample time Ts shared by the
 filters exactly as in a ladder) is, term by term, an equivalent circuit:
 
-    u − OCV = R0·i(k) + Σ_l b_l·i(k−l) + Σ_τ R_τ·LP_τ(i) + H·h + U_off
+    u − OCV = R0·i(k) + Σ_l b_l·i(k−l) + Σ_τ R_τ·LP_τ(i) + H·h + R_d·d + U_off
 
 (R0 the instantaneous resistance including the sub-Ts filters and the current lags' sum, R_τ an RC
-element of time constant τ, H the hysteresis voltage, U_off the local OCV offset). The map from
+element of time constant τ, H the hysteresis voltage, R_d the depletion resistance at SoC 0.1 of
+the depletion regressor d (model.Depletion), U_off the local OCV offset). The map from
 the regressor coefficients θ to these parameters is linear; with temperature terms (θ then
 holds polynomials in dT) it is taken at a grid of temperatures across the training range. The
-identification solves its (locally weighted) least-squares problems under C·θ ≥ 0, R0, R_τ and
-H ≥ 0 at every grid temperature (least squares with linear inequality constraints, by the
+identification solves its (locally weighted) least-squares problems under C·θ ≥ 0, R0, R_τ, H
+and R_d ≥ 0 at every grid temperature (least squares with linear inequality constraints, by the
 Lawson–Hanson reduction to a least-distance problem solved by NNLS: exact, deterministic), so
 that the runtime, the model file and the FMUs are unchanged.
 """
@@ -107,8 +108,13 @@ def lsi(H: np.ndarray, c: np.ndarray, C: np.ndarray, h: np.ndarray) -> np.ndarra
     E = np.vstack([A.T, b[None, :]])
     target = np.zeros(p + 1)
     target[-1] = 1.0
-    u, _ = nnls(E, target, maxiter=50 * E.shape[1])
-    r = E @ u - target
+    # NNLS on unit columns (u = v/‖E_i‖ ≥ 0 is the same problem): with columns whose norms
+    # span four decades (a depletion regressor near empty beside the others) the unscaled
+    # NNLS stopped at a point that broke constraints by up to 0.14 V/A
+    norms = np.linalg.norm(E, axis=0)
+    norms = np.where(norms > 0.0, norms, 1.0)
+    v, _ = nnls(E / norms[None, :], target, maxiter=50 * E.shape[1])
+    r = E @ (v / norms) - target
     if not abs(r[-1]) > 1e-12:
         raise InfeasibleError("the inequality constraints have no solution")
     z = -r[:p] / r[-1]
@@ -157,4 +163,7 @@ def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0) ->
         if "h(k)" in sources:
             rows.append(coefficient_row(model, "h(k)", t))
             names.append(f"H{tag}")
+    if model.depletion is not None:       # no temperature terms: one row
+        rows.append(coefficient_row(model, "d(k)", model.reference_temperature_c))
+        names.append("R_depletion")
     return Ladder(np.array(rows), names)

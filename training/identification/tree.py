@@ -11,7 +11,7 @@ import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
 from lmncell.identification.ladder import Ladder
-from lmncell.runtime.model import LmnModel
+from lmncell.runtime.model import Depletion, LmnModel
 from lmncell.runtime.step import ExoSeries, exo_series, initial_hysteresis, simulate_exo
 
 
@@ -32,7 +32,9 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
         partition_center=center, partition_scale=scale, roots=roots,
         node_weights=np.zeros((0, d + 1)), node_children=[],
         theta=np.zeros((len(roots), 1)), gating_mode=cfg.pre_partition,
-        rest_current_a=cfg.rest_current_a, temperature_terms=temperature_terms)
+        rest_current_a=cfg.rest_current_a, temperature_terms=temperature_terms,
+        depletion=(Depletion(cfg.depletion_time_constant_s(), float(cfg.depletion_power))
+                   if cfg.depletion_power else None))
     m.theta = np.zeros((len(roots), len(m.columns())))
     m._build_paths()
     return m

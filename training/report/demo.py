@@ -147,15 +147,19 @@ def run_demo(out: Path) -> Path:
         cols.append(("time_constants_s", "time constants / s", ".1f"))
     if "hysteresis_mv" in table[0]:
         cols.append(("hysteresis_mv", "hysteresis H / mV", ".1f"))
+    if "r_depletion_mohm" in table[0]:
+        cols.append(("r_depletion_mohm", "depletion R_d at SoC 0.1 / mΩ", ".2f"))
     if "ocv_offset_mv" in table[0]:
         cols.append(("ocv_offset_mv", "OCV offset / mV", ".1f"))
     rep.table(table, cols, "Local models (`lmncell explain MODEL` prints the same): operating "
                            "point (validity-weighted centre), instantaneous resistance R0, "
                            "static resistance (R0 plus all RC elements), the RC elements at the "
-                           "model's fixed time constants (the filters of the structure) and the "
-                           "local OCV offset, at the reference temperature (25 °C)"
+                           "model's fixed time constants (the filters of the structure), the "
+                           "depletion resistance R_d (its regressor grows as (0.1/SoC)⁴ near "
+                           "empty: the collapse before cut-off) and the local OCV offset, at the "
+                           "reference temperature (25 °C)"
               + (" (resistances × the Arrhenius factor elsewhere)" if model.arrhenius_k else "")
-              + ". " + ("Identified as RC ladders: every R and the hysteresis voltage are "
+              + ". " + ("Identified as RC ladders: every R, R_d and the hysteresis voltage are "
                         "constrained ≥ 0 (setting local_model_form). " if ladder else "")
               + "SoC as a fraction, temperature in °C. Current > 0 charges, so a resistance is "
                 "u − OCV per ampere.")
