@@ -1,7 +1,8 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
 Format ``lmncell-model``, version 3 (versions 1 and 2, which have no ``thermal`` or no
-``regressors.depletion`` key, are read too). Keys (units in the names, current > 0 charges, SoC 0…1):
+``regressors.depletion`` key, are read too).
+Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
 - ``cell``: ``capacity_ah``, ``efficiency_charge``, ``efficiency_discharge`` (coulombic, η(i)),

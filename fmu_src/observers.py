@@ -35,7 +35,8 @@ new data is correlated over minutes, and with σ_u alone its ±3σ band held the
 of the time on a held-out Panasonic cycle; with 4·σ_u 97 %, SoC RMSE 0.47 → 0.26 %; the IMM's
 mode filters take IMM_ERROR_SCALE·σ_u = √2·σ_u for the same reason: with σ_u its mixture
 variance collapsed on the flat A123 plateau at −5 °C, held out, and 5.3 % of the samples fell
-outside ±3σ; with √2·σ_u 1.7 %, SoC RMSE 5.9 → 6.2 %). σ_d defaults to
+outside ±3σ; with √2·σ_u 1.7 %, SoC RMSE 5.9 → 6.2 %, measured before the depletion
+regressor; with it 6.2 % outside, and 5.5 % with 2·σ_u). σ_d defaults to
 EKF_DRIFT_PER_SQRT_H for the EKF (it estimates the dynamic state, so the walk only stands for a
 capacity error of about 1.5 % at 1/3 C) and SOC_ONLY_DRIFT_PER_SQRT_H for the fuzzy observer and
 the IMM, whose SoC also absorbs the error of the hysteresis and filter states they do not

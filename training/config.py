@@ -11,7 +11,6 @@ from pathlib import Path
 from lmncell.identification.ladder import is_ladder
 from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES
 
-
 DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant for "auto" (s)
 
 
@@ -48,12 +47,13 @@ class TrainConfig:
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
     depletion_power / depletion_tau_s: the depletion regressor d = g(T)·LP_τ(i)·(0.1/SoC)^p
     (SoC held at 0.02 below; τ = depletion_tau_s, one of the filters' time constants, "auto":
-    the one nearest 150 s on a log scale; p = depletion_power, 0: no such regressor) in every local model, whose coefficient (≥ 0 in an
-    RC ladder) is a resistance that grows as the cell nears empty: the voltage collapse under
-    load before cut-off, which local linear models in SoC follow only late (leave-one-out,
-    20–80 % / whole record mV, without → with p = 4, τ = 150 s: Panasonic 25 °C 6.68 / 15.69 →
-    6.83 / 13.85; A123 5 °C held out 2.75 / 14.3 → 2.88 / 11.8, 25 °C 3.57 / 24.5 →
-    3.24 / 22.8 with a free coefficient).
+    the one nearest 150 s on a log scale; p = depletion_power, 0: no such regressor) in every
+    local model, whose coefficient (≥ 0 in an RC ladder) is a resistance that grows as the
+    cell nears empty: the voltage collapse under load before cut-off, which local linear models
+    in SoC follow only late. Leave-one-out, 20–80 % / whole record mV, p = 0 → 4 (τ 150 s):
+    Panasonic 25 °C 6.68 / 15.69 → 6.74 / 13.65; Panasonic 25 + 10 °C, 10 °C held out
+    11.77 / 24.48 → 11.32 / 24.19, 25 °C held out 7.21 / 16.45 → 7.61 / 13.55; A123 (−15, −5,
+    5, 25, 45 °C) 5 °C held out 2.75 / 14.29 → 2.83 / 12.47, 25 °C 3.18 / 24.53 → 3.17 / 23.44.
     partition: partition-space variables (soc, current, filtered_current, temperature), or
     "auto": soc, plus temperature where the training records lie at two or more distinct
     temperatures (see lmncell.identification.prefit.temperature_levels): local models per
