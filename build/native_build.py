@@ -110,6 +110,8 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define DEP_COL {cols.index('d(k)') - na if dep else 0}",
         f"#define DEP_STATE {dep.state_index(m.filters) if dep else 0}",
         f"#define DEP_POWER {(dep.power if dep else 1.0)!r}",
+        f"#define DEP_INTEGER_POWER "
+        f"{int(dep.power) if dep and int(dep.power) == dep.power else 0}",
         f"#define DEP_SOC_SCALE {(dep.soc_scale if dep else 1.0)!r}",
         f"#define DEP_SOC_MIN {(dep.soc_min if dep else 1.0)!r}",
         f"#define GATING_CURRENT_SIGN {int(m.gating_mode == 'current_sign')}",

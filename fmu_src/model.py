@@ -91,12 +91,27 @@ class Depletion:
     soc_min: float = 0.02
 
     def factor(self, soc: float) -> float:
-        """(soc_scale/max(SoC, soc_min))^power for one SoC."""
-        return (self.soc_scale / max(soc, self.soc_min)) ** self.power
+        """(soc_scale/max(SoC, soc_min))^power for one SoC (an integer power by repeated
+        multiplication, as the native FMU does: exact mirror, and no pow() per step)."""
+        q = self.soc_scale / max(soc, self.soc_min)
+        n = int(self.power)
+        if n != self.power:
+            return q ** self.power
+        out = 1.0
+        for _ in range(n):
+            out *= q
+        return out
 
     def factors(self, soc: np.ndarray) -> np.ndarray:
-        """factor for an array of SoC."""
-        return np.power(self.soc_scale / np.maximum(soc, self.soc_min), self.power)
+        """factor for an array of SoC (the same operations element by element)."""
+        q = self.soc_scale / np.maximum(soc, self.soc_min)
+        n = int(self.power)
+        if n != self.power:
+            return np.power(q, self.power)
+        out = np.ones_like(q)
+        for _ in range(n):
+            out = out * q
+        return out
 
     def state_index(self, filters: list[tuple[float, float]]) -> int:
         """Index of the low-pass state of time constant tau_s among the filters' states

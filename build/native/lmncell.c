@@ -28,7 +28,7 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
 #define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
-#define STATE_MAGIC 0x4C4D4E34u /* "LMN4" (LMN3 before the observer's innovation RMS) */
+#define STATE_MAGIC 0x4C4D4E35u /* "LMN5" (LMN4 before dep_source, LMN3 before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
 #define MIN_TEMPERATURE_C -273.15
 #define MAX_TEMPERATURE_C 1000.0
@@ -51,6 +51,7 @@ typedef struct {
     double lags[NA + 1], prev_lags[NA + 1], voltage;
     double x[NEXO + 1], z[ND + 1];
     double phi[NM], local[NM];                 /* the step's validities and local outputs */
+    double dep_source;                         /* the step's g(T)·LP_τ(i) of d(k) */
     int d;
     /* co-simulation accumulators (cosim.CellCosim) */
     double covered, charge, temp_int, volt_int, volt_time;
@@ -110,7 +111,15 @@ static double eta(double i) { return i > 0 ? ETA_CHARGE : ETA_DISCHARGE; }
 
 /* the depletion regressor's SoC factor (soc_scale/max(SoC, soc_min))^power (model.Depletion) */
 static double depletion_factor(double soc) {
-    return pow(DEP_SOC_SCALE / (soc >= DEP_SOC_MIN ? soc : DEP_SOC_MIN), DEP_POWER);
+    double q = DEP_SOC_SCALE / (soc >= DEP_SOC_MIN ? soc : DEP_SOC_MIN);
+#if DEP_INTEGER_POWER          /* repeated multiplication, as model.Depletion.factor */
+    double out = 1.0;
+    int k;
+    for (k = 0; k < DEP_INTEGER_POWER; k++) out *= q;
+    return out;
+#else
+    return pow(q, DEP_POWER);
+#endif
 }
 
 static void exo_init(State *s, double soc0, double h0) {
@@ -139,7 +148,8 @@ static void exo_update(State *s, double i, double cap) {
     else if (i < -REST_CURRENT_A) s->direction = DISCHARGE;
 }
 
-static void features(const State *s, double i, double t, double *x, double *z) {
+static void features(const State *s, double i, double t, double *x, double *z,
+                     double *dep_source) {
     int col = 0, k;
     double g = temperature_gain(t);
     x[col++] = g * i;
@@ -149,7 +159,13 @@ static void features(const State *s, double i, double t, double *x, double *z) {
     x[col++] = s->h;
 #endif
 #if HAS_DEPLETION
-    x[col++] = g * s->lp[DEP_STATE] * depletion_factor(s->soc);
+    {
+        double source = g * s->lp[DEP_STATE];   /* ExoStepper.depletion_source */
+        if (dep_source) *dep_source = source;
+        x[col++] = source * depletion_factor(s->soc);
+    }
+#else
+    (void)dep_source;
 #endif
 #if OCV_INPUT
     x[col++] = ocv(s->soc);
@@ -238,7 +254,7 @@ static double fixed_point(double soc0, double t, double h0) {
     double phi[NM], a = 0.0, b;
     int j, c;
     exo_init(&tmp, soc0, h0);
-    features(&tmp, 0.0, t, tmp.x, tmp.z);
+    features(&tmp, 0.0, t, tmp.x, tmp.z, NULL);
     validities(tmp.z, tmp.direction, phi);
     b = 0.0;
     for (j = 0; j < NM; j++) {
@@ -266,7 +282,7 @@ static void stepper_step(State *s, double i, double t) {
     double y;
     int k;
     exo_update(s, i, s->capacity);
-    features(s, i, t, s->x, s->z);
+    features(s, i, t, s->x, s->z, &s->dep_source);
     shift_past(s, i);
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
@@ -290,7 +306,7 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
     for (k = 0; k < 2 * NF + 1; k++) tmp.lp[k] = (nxi > 1 && k < 2 * NF) ? xi[1 + k] : s->lp[k];
     tmp.h = nxi > 1 + 2 * NF ? xi[1 + 2 * NF] : s->h;
     for (k = 0; k < NB + 1; k++) tmp.past[k] = s->ob_past[k];
-    features(&tmp, s->ob_i, s->ob_t, x, z);
+    features(&tmp, s->ob_i, s->ob_t, x, z, NULL);
     u = network(x, z, s->d, s->prev_lags, phi, local);
     base = RELATIVE_OCV ? ocv(xi[0]) : 0.0;
     for (k = 0; k < NM; k++) uj[k] = base + local[k];
@@ -300,7 +316,13 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
 /* each local model's output (exogenous and lag parts) at another SoC: the step's own unless
    SoC is among the regressors (runtime.CellStepper.local_voltages_at_socs) */
 static const double *locals_at(const State *s, double soc, double *local) {
-#if OCV_INPUT || SOC_INPUT || HAS_DEPLETION
+#if HAS_DEPLETION && !OCV_INPUT && !SOC_INPUT
+    /* only d(k) depends on SoC: the step's local outputs moved along its column */
+    double dx = s->dep_source * depletion_factor(soc) - s->x[DEP_COL];
+    int j;
+    for (j = 0; j < NM; j++) local[j] = s->local[j] + THETA[j][NA + DEP_COL] * dx;
+    return local;
+#elif OCV_INPUT || SOC_INPUT || HAS_DEPLETION
     double x[NEXO + 1];
     memcpy(x, s->x, sizeof x);
 #if OCV_INPUT
@@ -310,7 +332,7 @@ static const double *locals_at(const State *s, double soc, double *local) {
     x[SOC_COL] = soc;
 #endif
 #if HAS_DEPLETION
-    x[DEP_COL] = temperature_gain(s->ob_t) * s->lp[DEP_STATE] * depletion_factor(soc);
+    x[DEP_COL] = s->dep_source * depletion_factor(soc);
 #endif
     local_outputs(x, s->prev_lags, local);
     return local;
