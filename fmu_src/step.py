@@ -116,8 +116,9 @@ class ExoStepper:
             s.direction = DISCHARGE
 
     def features(self, s: ExoState, current_a: float, temperature_c: float,
-                 x: np.ndarray, z: np.ndarray) -> None:
-        """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken."""
+                 x: np.ndarray, z: np.ndarray) -> float:
+        """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken;
+        returns the depletion regressor's g(T)·LP_τ(i) (its SoC factor apart; 0 without one)."""
         m = self.model
         g = 1.0 if m.arrhenius_k is None else self.temperature_gain(temperature_c)
         lp = s.lp
@@ -132,8 +133,10 @@ class ExoStepper:
         if m.hysteresis_gamma is not None:
             x[col] = s.h
             col += 1
+        source = 0.0
         if m.depletion is not None:
-            x[col] = self.depletion_source(s, g) * m.depletion.factor(s.soc)
+            source = g * lp[self.depletion_state]
+            x[col] = source * m.depletion.factor(s.soc)
             col += 1
         if m.ocv_input:
             x[col] = float(m.ocv(s.soc))
@@ -155,10 +158,7 @@ class ExoStepper:
             z[z_filtered] = lp[1] if lp else current_a
         if z_temperature is not None:
             z[z_temperature] = temperature_c
-
-    def depletion_source(self, s: ExoState, gain: float) -> float:
-        """g(T)·LP_τ(i) of the depletion regressor (A), gain = g(T); its SoC factor apart."""
-        return gain * s.lp[self.depletion_state]
+        return source
 
     def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
         """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
@@ -415,7 +415,7 @@ class CellStepper:
         self._soc_entries += [(1 + d + exo.index(name), name == "ocv(k)")
                               for name in ("ocv(k)", "soc(k)") if name in exo]
         self._depletion_entry = 1 + d + exo.index("d(k)") if "d(k)" in exo else None
-        self._temperature_c = temperature_c          # of the last step
+        self._depletion_source = 0.0     # the last step's g(T)·LP_τ(i) (ExoStepper.features)
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity: Sequence[float] = [0.0] * model.n_local_models   # Φ of the last step
         self._last_ocv = (math.nan, math.nan)      # (SoC, OCV) of the last step
@@ -434,9 +434,8 @@ class CellStepper:
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
         m, s, exo = self.model, self.state, self.exo
-        self._temperature_c = temperature_c
         exo.update(s, current_a)
-        exo.features(s, current_a, temperature_c, self._x, self._z)
+        self._depletion_source = exo.features(s, current_a, temperature_c, self._x, self._z)
         exo.shift(s, current_a)
         one = self._one
         a, acc, Phi, _ = one.combine((one.block @ self._u).tolist(), s.direction)
@@ -465,9 +464,7 @@ class CellStepper:
         for index, is_ocv in self._soc_entries:
             rows[:, index] = ocv if is_ocv else socs
         if self._depletion_entry is not None:
-            source = self.exo.depletion_source(self.state,
-                                               self.exo.temperature_gain(self._temperature_c))
-            factor = self.model.depletion.factor
+            source, factor = self._depletion_source, self.model.depletion.factor
             rows[:, self._depletion_entry] = [source * factor(soc) for soc in socs]
         return (rows @ one.block.T).tolist(), ocv
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lmncell.identification.ladder import is_ladder
-from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES
+from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES, Depletion
 
 DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant for "auto" (s)
 
@@ -161,12 +161,14 @@ class TrainConfig:
                       f"expected 'auto' or a degree 0…{MAX_TEMPERATURE_TERMS}")
         if not (isinstance(self.depletion_power, (int, float)) and 0 <= self.depletion_power <= 8):
             raise bad("depletion_power", "expected 0 (off) … 8")
-        taus = [float(t) for f in self.filters for t in f]
-        if self.depletion_power and self.depletion_tau_s != "auto" and not (
-                isinstance(self.depletion_tau_s, (int, float))
-                and float(self.depletion_tau_s) in taus):
-            raise bad("depletion_tau_s", f"expected 'auto' or one of the filters' time constants "
-                                         f"{taus} (or depletion_power = 0)")
+        if self.depletion_power and self.depletion_tau_s != "auto":
+            if not isinstance(self.depletion_tau_s, (int, float)):
+                raise bad("depletion_tau_s", "expected 'auto' or a time constant in s")
+            try:
+                Depletion(float(self.depletion_tau_s), 1.0).state_index(
+                    [(float(a), float(b)) for a, b in self.filters])
+            except ValueError as exc:
+                raise bad("depletion_tau_s", f"{exc} (or set depletion_power = 0)") from None
         if self.local_model_form not in ("auto", "rc_ladder", "free"):
             raise bad("local_model_form", "expected 'auto', 'rc_ladder' or 'free'")
         if self.local_model_form == "rc_ladder" and not is_ladder(

@@ -160,7 +160,7 @@ static void features(const State *s, double i, double t, double *x, double *z,
 #endif
 #if HAS_DEPLETION
     {
-        double source = g * s->lp[DEP_STATE];   /* ExoStepper.depletion_source */
+        double source = g * s->lp[DEP_STATE];   /* what ExoStepper.features returns */
         if (dep_source) *dep_source = source;
         x[col++] = source * depletion_factor(s->soc);
     }
