@@ -26,6 +26,7 @@ from lmncell.runtime.observers import (
     FD_CURRENT_A,
     FD_HYSTERESIS,
     FD_SOC,
+    HISTORY_FORGOTTEN_A,
     HYSTERESIS_PRIOR_VAR,
     IMM_ERROR_SCALE,
     SPREAD_MAX,
@@ -128,6 +129,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define SOC_ONLY_DRIFT_PER_SQRT_H {settings.drift('fuzzy')!r}",
         f"#define HYST_DRIFT_PER_SQRT_H {settings.hysteresis_drift_per_sqrt_h!r}",
         f"#define HISTORY_CURRENT_SIGMA_A {settings.history_current_sigma_a!r}",
+        f"#define HISTORY_FORGOTTEN_A {HISTORY_FORGOTTEN_A!r}",
         f"#define HYST_PRIOR_UNKNOWN {HYSTERESIS_PRIOR_VAR[0]!r}",
         f"#define HYST_PRIOR_ASSUMED {HYSTERESIS_PRIOR_VAR[1]!r}",
         f"#define FD_SOC {FD_SOC!r}", f"#define FD_CURRENT_A {FD_CURRENT_A!r}",
@@ -174,12 +176,11 @@ def _state_column_tables(m: LmnModel) -> list[str]:
                                          * (width - len(r))) + "}" for r in rows)
         return f"static const {kind} {name}[{len(rows)}][{width}] = {{{body}}};"
 
-    return ["#if LINEAR_STATES",
-            f"static const int STATE_NCOL[{len(rows)}] = "
+    return [f"static const int STATE_NCOL[{len(rows)}] = "
             f"{{{', '.join(str(len(r)) for r in rows)}}};",
             table("int", "STATE_COL", lambda c: c[0]), table("int", "STATE_POW", lambda c: c[1]),
             table("int", "STATE_SCALED", lambda c: int(c[2])),
-            table("double", "STATE_SIGN", lambda c: repr(float(c[3]))), "#endif"]
+            table("double", "STATE_SIGN", lambda c: repr(float(c[3])))]
 
 
 VARIABLES = [  # name, vr, causality, variability, type, unit, start, description

@@ -69,6 +69,38 @@ def test_ladder_solution_equals_least_squares_where_that_is_feasible_and_bounds_
     assert ladder.C[k] @ theta == pytest.approx(0.0, abs=1e-9)
 
 
+def test_offset_bound_holds_the_local_ocv_offset_within_it() -> None:
+    """With offset_bound_v the ladder also bounds |U_off|: a fit whose least-squares offset
+    lies within it is unchanged, one beyond it ends on the bound."""
+    cfg = load_config(hysteresis="off", temperature_scaling="off")
+    base = skeleton(cfg, 2.0, np.array([0.0, 1.0]), np.array([3.3, 4.1]), None,
+                    np.zeros(1), np.ones(1))
+    ladder = ladder_for(base, offset_bound_v=0.05)
+    plain = ladder_for(base)
+    assert ladder is not None and plain is not None
+    assert ladder.names[-2:] == ["U_off≥−max", "U_off≤max"]
+    assert "U_off≤max" not in plain.names
+    rng = np.random.default_rng(2)
+    p = ladder.C.shape[1]
+    X = rng.standard_normal((500, p))
+    X[:, base.columns().index("1")] = 1.0
+    theta = np.linalg.lstsq(plain.C, np.linspace(0.02, 0.005, plain.C.shape[0]), rcond=None)[0]
+    w = np.ones(500)
+    col = base.columns().index("1")
+    for offset, expected in ((0.02, 0.02), (0.3, 0.05), (-0.3, -0.05)):
+        theta[col] = offset
+        fit = ladder.solve(X, X @ theta, w)
+        assert ladder.holds(fit, 1e-12)
+        assert fit[col] == pytest.approx(expected, abs=1e-9)
+        assert plain.solve(X, X @ theta, w)[col] == pytest.approx(offset, abs=1e-9)
+    with pytest.raises(ConfigError, match="offset_bound_mv"):
+        load_config(offset_bound_mv=-1.0)
+    # "auto": bounded where slow OCV tests fix the OCV, free where it is estimated
+    assert load_config().offset_bound_v() == 0.0
+    assert load_config(ocv_tests=["ocv.mat"]).offset_bound_v() == pytest.approx(0.05)
+    assert load_config(offset_bound_mv=20).offset_bound_v() == pytest.approx(0.02)
+
+
 def test_local_models_of_measured_records_are_positive_rc_ladders(tmp_path) -> None:
     """Panasonic HWFET + HPPC (no OCV test: OCV and slow polarisation are confounded, and
     free local models take negative RC elements of hundreds of mΩ there)."""

@@ -92,7 +92,7 @@ def test_ekf_estimates_soc_and_the_dynamic_state_of_a_hysteresis_model(a123_mode
     assert model.hysteresis_gamma is not None
     seg = record_to_segments(read_record(A123_S1), 1.0, 1.0, 2.2)[0]
     k0 = int(np.argmax(seg.soc_ref <= 0.6))
-    settings = ObserverSettings.for_model(model, at_rest=False)
+    settings = ObserverSettings.for_model(model)
     assert settings.history_current_sigma_a == model.noise["recent_current_rms_a"] > 0
     ob = SocObserver(model, "ekf", 0.3, settings=settings)
     n_lp = 2 * len(model.filters)
@@ -118,11 +118,40 @@ def test_ekf_estimates_soc_and_the_dynamic_state_of_a_hysteresis_model(a123_mode
 def test_ekf_started_at_rest_knows_the_filter_states(us06) -> None:
     # at rest the low-pass states are 0 with no spread: only the current-sensor noise opens them
     model, _ = us06
-    ob = SocObserver(model, "ekf", 0.5)
+    ob = SocObserver(model, "ekf", 0.5, settings=ObserverSettings.for_model(model, at_rest=True))
     p0 = ob.state.covariance()
     assert np.all(p0[1:, :] == 0) and p0[0, 0] == pytest.approx(0.3 ** 2)
-    loaded = SocObserver(model, "ekf", 0.5, settings=ObserverSettings.for_model(model, False))
+    loaded = SocObserver(model, "ekf", 0.5)      # the default: the load history unknown
     assert loaded.state.covariance()[1:, 1:].min() > 0
+
+
+@pytest.mark.parametrize("kind", ["fuzzy", "imm"])
+def test_soc_only_observers_count_the_unknown_load_history_in_their_band(us06, kind) -> None:
+    """The fuzzy observer and the IMM do not estimate the low-pass states: by default (the load
+    history unknown) their band holds the voltage that the states' spread means, which decays
+    with the filters' coefficients, so that it is wider than from a known rest at first and
+    the same once the slowest filter has forgotten the start."""
+    model, seg = us06
+    known = SocObserver(model, kind, 0.5, settings=ObserverSettings.for_model(model,
+                                                                              at_rest=True))
+    unknown = SocObserver(model, kind, 0.5)
+    sigma = model.noise["recent_current_rms_a"]
+    assert unknown.state.history == [sigma] * len(unknown.stepper.state.lp) and sigma > 0
+    assert known.state.history == []
+    wider, n = [], len(seg)
+    for k in range(n):
+        i, v = float(seg.current_a[k]), float(seg.voltage_v[k])
+        known.step(i, v, 25.0)
+        unknown.step(i, v, 25.0)
+        wider.append(math.sqrt(unknown.state.var_floor) - math.sqrt(known.state.var_floor))
+    coef = np.asarray(unknown.stepper.exo.coef)
+    assert np.allclose(unknown.state.history, sigma * coef ** n, rtol=1e-9, atol=1e-300)
+    print(f"floor's σ wider by {max(wider[:600]):.4f} at most in the first 10 min, "
+          f"{wider[-1]:.2g} at the end")
+    assert max(wider[:600]) > 1e-4                      # wider at first …
+    assert min(wider) >= -1e-12 and wider[-1] < 0.3 * max(wider[:600])   # … then less so
+    # the gains are the filters' own: the estimates are equal
+    assert unknown.state.soc == pytest.approx(known.state.soc, abs=1e-12)
 
 
 @pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])

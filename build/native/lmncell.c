@@ -28,7 +28,8 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
 #define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
-#define STATE_MAGIC 0x4C4D4E35u /* "LMN5" (LMN4 before dep_source, LMN3 before the innovation RMS) */
+#define STATE_MAGIC 0x4C4D4E36u /* "LMN6" (LMN5 before ob_hist, LMN4 before dep_source, LMN3
+                                      before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
 #define MIN_TEMPERATURE_C -273.15
 #define MAX_TEMPERATURE_C 1000.0
@@ -59,6 +60,9 @@ typedef struct {
     /* observer (observers.SocObserver) */
     double q, r, ob_soc, ob_var, ob_floor;
     double ob_innov_ms, ob_innov_w;            /* innovations' weighted mean square (V²), weights */
+    double ob_hist[2 * NF + 1];                /* fuzzy, IMM: the low-pass states' remaining
+                                                  spread from the unknown load history (A) */
+    int ob_hist_on;                            /* ob_hist still counted (ObserverState.history) */
     int skipped;
     double ob_p[NX][NX];                       /* EKF covariance of [SoC, lp…, h] */
     double ob_i, ob_t, ob_past[NB + 1];        /* the step's current, temperature, past currents */
@@ -416,6 +420,33 @@ static double output_moved(const State *s, const double *xi, int a, double delta
 }
 
 /* ObserverSettings.model_error_at: σ_m (V) at a SoC, numpy.interp of the training error */
+/* SocObserver._regressor_gradient: ∂u/∂state for the states after SoC (hv[1 … NX − 1]) through
+   the regressors they enter, at the validities phi and SoC soc and the step's temperature */
+static void regressor_gradient(const State *s, const double *phi, double soc, double *hv) {
+    double blended[NEXO + 1], g = temperature_gain(s->ob_t);
+    double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
+    int a, c, j, m, p;
+    for (c = 0; c < NEXO; c++) {
+        blended[c] = 0.0;
+        for (j = 0; j < NM; j++) blended[c] += phi[j] * THETA[j][NA + c];
+    }
+    for (a = 1; a < NX; a++) {
+        double acc = 0.0;
+        for (m = 0; m < STATE_NCOL[a]; m++) {
+            double power = 1.0;
+            for (p = 0; p < STATE_POW[a][m]; p++) power *= dt;
+            acc += STATE_SIGN[a][m] * (STATE_SCALED[a][m] ? g : 1.0) * power
+                   * blended[STATE_COL[a][m]];
+        }
+        hv[a] = acc;
+    }
+#if HAS_DEPLETION   /* d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor */
+    hv[1 + DEP_STATE] += blended[DEP_COL] * g * depletion_factor(soc);
+#else
+    (void)soc;
+#endif
+}
+
 static double model_error_at(double soc) {
     int k;
     if (!(soc > MERR_SOC[0])) return MERR_V[0];
@@ -425,10 +456,19 @@ static double model_error_at(double soc) {
     return MERR_V[k] + (MERR_V[k + 1] - MERR_V[k]) * (soc - MERR_SOC[k]) / (MERR_SOC[k + 1] - MERR_SOC[k]);
 }
 
-/* SocObserver._model_error: the training error at a SoC, or the recent innovations' RMS */
+/* SocObserver._model_error: the training error at a SoC, or the recent innovations' RMS; for
+   the fuzzy observer and the IMM in quadrature with the voltage of the load history's spread */
 static double model_error(const State *s, double soc) {
     double trained = model_error_at(soc), recent = sqrt(s->ob_innov_ms);
-    return recent > trained ? recent : trained;
+    double err = recent > trained ? recent : trained;
+    if (s->ob_hist_on) {
+        double hv[NX + 1], uh = 0.0;
+        int a;
+        regressor_gradient(s, s->phi, soc, hv);
+        for (a = 0; a < 2 * NF; a++) uh += hv[1 + a] * s->ob_hist[a];
+        err = sqrt(err * err + uh * uh);
+    }
+    return err;
 }
 
 /* SocObserver._track_innovation: exponentially weighted mean square, normalised by the weights */
@@ -490,7 +530,7 @@ static double variance_floor(const State *s, double soc, double slope) {
 static double ekf_update(State *s, double v) {
     double xi[NX], hv[NX], ph[NX], k[NX];
     double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent, soc_prior;
-    int a, b, c;
+    int a, b;
     xi[0] = s->soc;
     for (a = 0; a < 2 * NF; a++) xi[1 + a] = s->lp[a];
 #if HAS_HYSTERESIS
@@ -524,26 +564,7 @@ static double ekf_update(State *s, double v) {
        so their columns are ∂x/∂state times the blended coefficients at ξ (state_gradient) */
     {
 #if LINEAR_STATES
-        double blended[NEXO + 1], g = temperature_gain(s->ob_t);
-        double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
-        int j, m, p;
-        for (c = 0; c < NEXO; c++) {
-            blended[c] = 0.0;
-            for (j = 0; j < NM; j++) blended[c] += phi[j] * THETA[j][NA + c];
-        }
-        for (a = 1; a < NX; a++) {
-            double acc = 0.0;
-            for (m = 0; m < STATE_NCOL[a]; m++) {
-                double power = 1.0;
-                for (p = 0; p < STATE_POW[a][m]; p++) power *= dt;
-                acc += STATE_SIGN[a][m] * (STATE_SCALED[a][m] ? g : 1.0) * power
-                       * blended[STATE_COL[a][m]];
-            }
-            hv[a] = acc;
-        }
-#if HAS_DEPLETION   /* d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor */
-        hv[1 + DEP_STATE] += blended[DEP_COL] * g * depletion_factor(soc_prior);
-#endif
+        regressor_gradient(s, phi, soc_prior, hv);
 #else
         for (a = 1; a < NX; a++) {
             double step = (HAS_HYSTERESIS && a == NX - 1) ? FD_HYSTERESIS : FD_CURRENT_A;
@@ -604,6 +625,8 @@ static void observer_init(State *s, double soc0) {
     s->ob_floor = 0.0;
     s->ob_innov_ms = 0.0;
     s->ob_innov_w = 0.0;
+    s->ob_hist_on = s->observer != 1 && HISTORY_CURRENT_SIGMA_A > 0.0;
+    for (j = 0; j < 2 * NF; j++) s->ob_hist[j] = s->ob_hist_on ? HISTORY_CURRENT_SIGMA_A : 0.0;
     s->skipped = 0;
     for (j = 0; j < NM; j++) {
         s->mode_soc[j] = soc0;
@@ -688,6 +711,14 @@ static void observer_step(State *s, double i, double v, double t) {
     s->ob_t = t;
     for (k = 0; k < NB + 1; k++) s->ob_past[k] = s->past[k];
     stepper_step(s, i, t);
+    if (s->ob_hist_on) {   /* SocObserver.step: decay, emptied below HISTORY_FORGOTTEN_A */
+        double most = 0.0;
+        for (k = 0; k < 2 * NF; k++) {
+            s->ob_hist[k] *= LP_COEF[k];
+            if (s->ob_hist[k] > most) most = s->ob_hist[k];
+        }
+        if (most < HISTORY_FORGOTTEN_A) s->ob_hist_on = 0;
+    }
     if (s->observer == 1) ekf_predict(s, i);
     else s->ob_var += s->q;
     if (s->observer == 3) imm_predict(s, s->soc - before);

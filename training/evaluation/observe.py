@@ -32,15 +32,15 @@ class ObserverRun:
 
 def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
                  start: int = 0) -> ObserverRun:
-    """The observer (or 'coulomb' counting) from sample `start` with the estimate soc0_est. A
-    start at sample 0 is at rest (records begin rested); a later one is under load, with the
-    filters' load history unknown to the observer (ObserverSettings.for_model, at_rest)."""
+    """The observer (or 'coulomb' counting) from sample `start` with the estimate soc0_est and
+    the FMUs' default settings (ObserverSettings.for_model: the load history before the start
+    unknown to the observer, at rest or under load)."""
     k0 = start
     if kind == "coulomb":
         est = exo_series(model, seg.current_a[k0:], None, soc0_est).soc
         return ObserverRun(kind, seg.time_s[k0:], seg.soc_ref[k0:], est, np.zeros_like(est), 0)
     temp = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
-    settings = ObserverSettings.for_model(model, at_rest=k0 == 0)
+    settings = ObserverSettings.for_model(model)
     ob = SocObserver(model, kind, soc0_est, temperature_c=float(temp[k0]), settings=settings)
     est, std = np.empty(len(seg) - k0), np.empty(len(seg) - k0)
     for j, k in enumerate(range(k0, len(seg))):

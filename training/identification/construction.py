@@ -244,7 +244,7 @@ def local_ladder(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     temps = [s.temperature_c for s in segs if s.temperature_c is not None]
     t_min = min((float(np.min(t)) for t in temps), default=base.reference_temperature_c)
     t_max = max((float(np.max(t)) for t in temps), default=base.reference_temperature_c)
-    ladder = ladder_for(base, t_min, t_max)
+    ladder = ladder_for(base, t_min, t_max, cfg.offset_bound_v())
     if ladder is None:
         if cfg.local_model_form == "rc_ladder":
             raise ConfigError("setting 'local_model_form' = 'rc_ladder': the local models of "

@@ -123,24 +123,28 @@ def lsi(H: np.ndarray, c: np.ndarray, C: np.ndarray, h: np.ndarray) -> np.ndarra
 
 @dataclass(frozen=True)
 class Ladder:
-    """The constraints C·θ ≥ 0 of an RC-ladder local model (rows named in `names`)."""
+    """The constraints C·θ ≥ h of an RC-ladder local model (rows named in `names`; h is 0 but
+    for the offset bound's rows, −U_max)."""
 
     C: np.ndarray
     names: list[str]
+    h: np.ndarray
 
     def solve(self, X: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
         """Weighted least squares of y ≈ X·θ under the ladder's constraints; returns θ."""
         Xw = X * w[:, None]
-        return lsi(X.T @ Xw, Xw.T @ y, self.C, np.zeros(self.C.shape[0]))
+        return lsi(X.T @ Xw, Xw.T @ y, self.C, self.h)
 
     def holds(self, theta: np.ndarray, tol: float = 1e-9) -> bool:
         """True where θ satisfies the constraints (to tol, V/A or V)."""
-        return bool(np.all(self.C @ theta >= -tol))
+        return bool(np.all(self.C @ theta >= self.h - tol))
 
 
-def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0) -> Ladder | None:
+def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0,
+               offset_bound_v: float = 0.0) -> Ladder | None:
     """The ladder constraints of a model's local models, or None where they are not ladders
-    (is_ladder). t_min_c … t_max_c: the training temperature range (for temperature terms)."""
+    (is_ladder). t_min_c … t_max_c: the training temperature range (for temperature terms);
+    offset_bound_v > 0 also bounds |U_off| by it at those temperatures (0: unbounded)."""
     if not is_ladder(model.filters, model.sample_time_s, model.output_lags):
         return None
     n = model.temperature_terms
@@ -166,4 +170,12 @@ def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0) ->
     if model.depletion is not None:       # no temperature terms: one row
         rows.append(coefficient_row(model, "d(k)", model.reference_temperature_c))
         names.append("R_depletion")
-    return Ladder(np.array(rows), names)
+    h = [0.0] * len(rows)
+    if offset_bound_v > 0.0 and "1" in model.columns():
+        for t in temps:
+            tag = "" if n == 0 else f"@{t:g}C"
+            row = coefficient_row(model, "1", t)
+            rows += [row, -row]
+            names += [f"U_off≥−max{tag}", f"U_off≤max{tag}"]
+            h += [-offset_bound_v, -offset_bound_v]
+    return Ladder(np.array(rows), names, np.array(h))

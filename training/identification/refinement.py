@@ -168,18 +168,19 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
 
 
 def _ladder_constraints(ladder: Ladder | None, M: int, p: int, lower: np.ndarray
-                        ) -> np.ndarray | None:
-    """Rows G with G·x ≥ lower-bound terms for the refinement's x = [θ of every local model,
-    OCV increments]: the ladder's C·θ_j ≥ 0 for every local model j, and one identity row per
-    finitely bounded entry (the OCV increments ≥ 0). None where there is no ladder."""
+                        ) -> tuple[np.ndarray, np.ndarray] | None:
+    """G and h of G·x ≥ h for the refinement's x = [θ of every local model, OCV increments]:
+    the ladder's C·θ_j ≥ h_ladder for every local model j, and one identity row per finitely
+    bounded entry (the OCV increments ≥ 0). None where there is no ladder."""
     if ladder is None:
         return None
-    n = lower.size
-    blocks = np.zeros((M * ladder.C.shape[0], n))
+    n, c = lower.size, ladder.C.shape[0]
+    blocks = np.zeros((M * c, n))
     for j in range(M):
-        blocks[j * ladder.C.shape[0]:(j + 1) * ladder.C.shape[0], j * p:(j + 1) * p] = ladder.C
+        blocks[j * c:(j + 1) * c, j * p:(j + 1) * p] = ladder.C
     bounded = np.flatnonzero(np.isfinite(lower))
-    return np.vstack([blocks, np.eye(n)[bounded]])
+    return (np.vstack([blocks, np.eye(n)[bounded]]),
+            np.concatenate([np.tile(ladder.h, M), lower[bounded]]))
 
 
 HUBER_K = 1.345      # Huber threshold in robust standard deviations (95 % efficiency)
@@ -195,22 +196,18 @@ def _robust_scale(r: np.ndarray) -> float:
 
 def _robust_linear_solve(J: np.ndarray, b: np.ndarray, n_res: int,
                          bounds: tuple[np.ndarray, np.ndarray], cfg: TrainConfig,
-                         constraints: np.ndarray | None = None) -> _Solution:
+                         constraints: tuple[np.ndarray, np.ndarray] | None = None
+                         ) -> _Solution:
     """min Σ ρ(J·x − b) over the first n_res rows (data) plus plain squares of the rest
     (regularisation), ρ = squares ("none") or Huber ("huber", by iteratively reweighted least
     squares with the scale fixed from the unweighted solution). Deterministic.
-    constraints: rows G of G·x ≥ h (h: the finite lower bounds of x, else 0; see
-    _ladder_constraints), which then replace `bounds`."""
+    constraints: (G, h) of G·x ≥ h (_ladder_constraints), which then replace `bounds`."""
     method = "bvls" if np.isfinite(bounds[0]).any() else "trf"
 
     def solve(weights: np.ndarray):
         if constraints is not None:
             Jw = J * weights[:, None]
-            h = np.zeros(constraints.shape[0])
-            finite = np.flatnonzero(np.isfinite(bounds[0]))
-            if finite.size:
-                h[-finite.size:] = bounds[0][finite]
-            x = lsi(J.T @ Jw, Jw.T @ b, constraints, h)
+            x = lsi(J.T @ Jw, Jw.T @ b, *constraints)
             return _Solution(x, 0.0, 1, 0)
         sw = np.sqrt(weights)
         return lsq_linear(J * sw[:, None], b * sw, bounds=bounds, method=method,
