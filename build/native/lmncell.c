@@ -419,7 +419,6 @@ static double output_moved(const State *s, const double *xi, int a, double delta
     return outputs_for(s, row, NX, phi, uj);
 }
 
-/* ObserverSettings.model_error_at: σ_m (V) at a SoC, numpy.interp of the training error */
 /* SocObserver._regressor_gradient: ∂u/∂state for the states after SoC (hv[1 … NX − 1]) through
    the regressors they enter, at the validities phi and SoC soc and the step's temperature */
 static void regressor_gradient(const State *s, const double *phi, double soc, double *hv) {
@@ -447,6 +446,7 @@ static void regressor_gradient(const State *s, const double *phi, double soc, do
 #endif
 }
 
+/* ObserverSettings.model_error_at: σ_m (V) at a SoC, numpy.interp of the training error */
 static double model_error_at(double soc) {
     int k;
     if (!(soc > MERR_SOC[0])) return MERR_V[0];

@@ -11,8 +11,9 @@ element of time constant τ, H the hysteresis voltage, R_d the depletion resista
 the depletion regressor d (model.Depletion), U_off the local OCV offset). The map from
 the regressor coefficients θ to these parameters is linear; with temperature terms (θ then
 holds polynomials in dT) it is taken at a grid of temperatures across the training range. The
-identification solves its (locally weighted) least-squares problems under C·θ ≥ 0, R0, R_τ, H
-and R_d ≥ 0 at every grid temperature (least squares with linear inequality constraints, by the
+identification solves its (locally weighted) least-squares problems under C·θ ≥ h: R0, R_τ, H
+and R_d ≥ 0, and with an offset bound U_max (TrainConfig.offset_bound_mv) |U_off| ≤ U_max, at
+every grid temperature (least squares with linear inequality constraints, by the
 Lawson–Hanson reduction to a least-distance problem solved by NNLS: exact, deterministic), so
 that the runtime, the model file and the FMUs are unchanged.
 """
