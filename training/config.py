@@ -12,13 +12,11 @@ from lmncell.identification.ladder import is_ladder
 from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES, Depletion
 
 DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant for "auto" (s)
+OFFSET_BOUND_MV = 50.0     # offset_bound_mv 'auto' where slow OCV tests fix the OCV
 
 
 class ConfigError(ValueError):
     """A training setting that cannot be used; the message names the setting."""
-
-
-OFFSET_BOUND_MV = 50.0   # offset_bound_mv 'auto' where slow OCV tests fix the OCV
 
 
 @dataclass
@@ -50,10 +48,10 @@ class TrainConfig:
     offset is free; "auto": OFFSET_BOUND_MV = 50 where ocv_tests fix the OCV, else free: on one
     Panasonic US06 record without an OCV test, 2 local models, the estimated OCV needed offsets
     of 64 and 602 mV, and bounded at 50 mV the free-run RMSE went 22 → 116 mV). A local model
-    fitted where the cell is under load cannot tell an offset
-    from a slow RC element's voltage (its low-pass current hardly moves there); free, it traded
-    +0.57 V against 243 mΩ at 3000 s (Panasonic 25 + 10 °C, SoC 0.14, 16 °C) and put the
-    voltage at rest far above the OCV, where an observer then found the wrong SoC.
+    fitted where the cell is under load cannot tell an offset from a slow RC element's voltage
+    (its low-pass current hardly moves there); free, it traded +0.57 V against 243 mΩ at 3000 s
+    (Panasonic 25 + 10 °C, SoC 0.14, 16 °C) and put the voltage at rest far above the OCV,
+    where an observer then found the wrong SoC.
     Leave-one-out, 20–80 % / whole record mV, free → 50 mV: Panasonic 25 °C (C/20 OCV test)
     6.74 / 13.65 → 6.74 / 13.60; 25 + 10 °C, 10 °C held out 11.32 / 24.19 → 11.97 / 24.47
     (25 mV: 11.36 / 23.72, 100 mV: 11.18 / 23.84, the folds' noise), and there the fuzzy
