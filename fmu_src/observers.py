@@ -370,17 +370,19 @@ class SocObserver:
         """P ← F·P·Fᵀ + Q for the step the stepper just took."""
         s, exo = self.state, self.stepper.exo
         p = s.covariance()
-        f, q = self._ekf_f_and_q(exo.eta(current_a))
+        ff, q = self._ekf_f_and_q(exo.eta(current_a))
         if self.model.hysteresis_gamma is not None:
-            f = f.copy()
+            f = self._ekf_fg[0].copy()
             f[-1] = math.exp(-exo.gamma * abs(current_a) * exo.soc_gain)
-        p = f[:, None] * p * f[None, :] + q
+            ff = np.outer(f, f)
+        p = ff * p + q             # F diagonal: (f_a·f_b)·P_ab keeps a symmetric P symmetric
         s.cov = p.ravel()
         s.var = float(p[0, 0])
 
     def _ekf_f_and_q(self, eta: float) -> tuple[np.ndarray, np.ndarray]:
-        """F (h entry still 1) and Q of the prediction for a step with coulombic efficiency
-        eta: Q = σ_i²·G·Gᵀ plus the SoC and hysteresis random walks; computed once per eta."""
+        """F·Fᵀ of the diagonal F (h entry still 1) and Q of the prediction for a step with
+        coulombic efficiency eta: Q = σ_i²·G·Gᵀ plus the SoC and hysteresis random walks;
+        computed once per eta."""
         cached = self._ekf_q.get(eta)
         if cached is None:
             cfg, exo = self.settings, self.stepper.exo
@@ -391,7 +393,7 @@ class SocObserver:
             if self.model.hysteresis_gamma is not None:
                 q[-1, -1] += (cfg.hysteresis_drift_per_sqrt_h ** 2 * self.model.sample_time_s
                               / 3600.0)
-            cached = self._ekf_q[eta] = (f, q)
+            cached = self._ekf_q[eta] = (np.outer(f, f), q)
         return cached
 
     def _ekf_update(self, v_meas: float) -> float:

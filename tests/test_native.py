@@ -63,30 +63,34 @@ def test_native_equals_pipeline_on_a_real_record(quick_model, native_fmu) -> Non
 
 def _observer_gap(model, fmu, seg, observer: int, kind: str, start: int, n: int,
                   soc0: float) -> tuple[float, float, SocObserver]:
-    """Largest |Δvoltage| and |ΔSoC|, |Δσ| between the native FMU's observer and the runtime's
+    """Largest |Δvoltage|, |ΔSoC| and |Δσ| between the native FMU's observer and the runtime's
     over n steps of a record from sample start."""
     ob = SocObserver(model, kind, soc0, temperature_c=25.0)
     inst = Instance(fmu, start={"soc0": soc0}, observer=observer)
     try:
-        worst_v = worst_s = 0.0
+        worst_v = worst_s = worst_sd = 0.0
         for k in range(start, start + n):
             ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]), 25.0)
             inst.slave.setReal([inst.vr["voltage_measured"]], [float(seg.voltage_v[k])])
             inst.step(float(seg.current_a[k]))
             v, s, sd = inst.get("voltage", "soc", "soc_std")
             worst_v = max(worst_v, abs(v - ob.stepper.voltage_v))
-            worst_s = max(worst_s, abs(s - ob.state.soc), abs(sd - ob.soc_std))
+            worst_s = max(worst_s, abs(s - ob.state.soc))
+            worst_sd = max(worst_sd, abs(sd - ob.soc_std))
     finally:
         inst.free()
-    return worst_v, worst_s, ob
+    return worst_v, worst_s, worst_sd, ob
 
 
 @pytest.mark.parametrize("observer, kind", [(1, "ekf"), (2, "fuzzy"), (3, "imm")])
 def test_native_observers_equal_the_runtime(native_fmu, us06, observer, kind) -> None:
     model, seg = us06
     n = 1500
-    worst_v, worst_s, ob = _observer_gap(model, native_fmu, seg, observer, kind, 0, n, 0.4)
-    assert worst_v <= 1e-9 and worst_s <= 1e-12
+    worst_v, worst_s, worst_sd, ob = _observer_gap(model, native_fmu, seg, observer, kind, 0, n,
+                                                   0.4)
+    # σ = √P₀₀ comes out of O(n²) sums in a different order in C than in numpy: seen 1.3e-12
+    # for the EKF (numpy 2.4), hence 1e-9 for σ as in the tests below
+    assert worst_v <= 1e-9 and worst_s <= 1e-12 and worst_sd <= 1e-9
     assert abs(ob.state.soc - seg.soc_ref[n - 1]) < 0.05   # corrected from 0.4
 
 
@@ -99,10 +103,10 @@ def test_native_ekf_with_hysteresis_equals_the_runtime(a123_model, tmp_path) -> 
     model = load_model(a123_model)
     fmu = build_native_fmu(a123_model, tmp_path / "a123.fmu")
     seg = record_to_segments(read_record(A123_S1), 1.0, 1.0, 2.2)[0]
-    worst_v, worst_s, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 3000, 0.7)
+    worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 3000, 0.7)
     # 1e-9: the EKF's secant is as wide as σ, so the round-off of σ (C loops against numpy
     # sums) feeds back into H; seen: 1e-10 in σ for a few steps, voltage within 1e-15 V
-    assert worst_v <= 1e-9 and worst_s <= 1e-9
+    assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
 
 
 def test_nan_is_an_fmi_error_and_state_round_trips(native_fmu, capfd) -> None:
@@ -354,5 +358,5 @@ def test_native_ekf_with_the_filtered_current_in_the_partition_equals_the_runtim
     assert model.n_local_models > 1 and np.any(model.node_weights[:, 2] != 0.0)
     fmu = build_native_fmu(out, tmp_path / "fc.fmu")
     seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
-    worst_v, worst_s, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 1500, 0.6)
-    assert worst_v <= 1e-9 and worst_s <= 1e-9
+    worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 1500, 0.6)
+    assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9

@@ -93,12 +93,22 @@ static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt,
 }
 
 /* ----- model functions ------------------------------------------------------------------------ */
+/* the knot interval [OCV_SOC[k], OCV_SOC[k + 1]) that holds soc, OCV_SOC[0] < soc <
+   OCV_SOC[NOCV − 1]: a guess as if the knots were even, moved to the first k with
+   soc < OCV_SOC[k + 1] (what a scan from the left finds, for any knots; O(1) for even ones) */
+static int ocv_interval(double soc) {
+    double at = (soc - OCV_SOC[0]) / (OCV_SOC[NOCV - 1] - OCV_SOC[0]) * (NOCV - 1);
+    int k = at < 0.0 ? 0 : (at > NOCV - 2 ? NOCV - 2 : (int)at);
+    while (k > 0 && soc < OCV_SOC[k]) k--;
+    while (k < NOCV - 2 && soc >= OCV_SOC[k + 1]) k++;
+    return k;
+}
+
 static double ocv(double soc) { /* numpy.interp: linear, held beyond the ends */
     int k;
     if (!(soc > OCV_SOC[0])) return OCV_V[0]; /* NaN too: never index past the table */
     if (soc >= OCV_SOC[NOCV - 1]) return OCV_V[NOCV - 1];
-    for (k = 0; k < NOCV - 1; k++)
-        if (soc < OCV_SOC[k + 1]) break;
+    k = ocv_interval(soc);
     return OCV_V[k] + (OCV_V[k + 1] - OCV_V[k]) * (soc - OCV_SOC[k]) / (OCV_SOC[k + 1] - OCV_SOC[k]);
 }
 
@@ -398,9 +408,13 @@ static void ekf_predict(State *s, double i) {
     f[NX - 1] = exp(-HYSTERESIS_GAMMA * fabs(i) * gain);
     g[NX - 1] = 0.0;
 #endif
-    for (a = 0; a < NX; a++)
-        for (b = 0; b < NX; b++)
-            s->ob_p[a][b] = f[a] * s->ob_p[a][b] * f[b] + CURRENT_SIGMA_A * CURRENT_SIGMA_A * (g[a] * g[b]);
+    for (a = 0; a < NX; a++)   /* (f_a·f_b)·P_ab + σ²·g_a·g_b, F diagonal: P stays symmetric */
+        for (b = a; b < NX; b++) {
+            double p = (f[a] * f[b]) * s->ob_p[a][b]
+                       + CURRENT_SIGMA_A * CURRENT_SIGMA_A * (g[a] * g[b]);
+            s->ob_p[a][b] = p;
+            s->ob_p[b][a] = p;
+        }
     s->ob_p[0][0] += EKF_DRIFT_PER_SQRT_H * EKF_DRIFT_PER_SQRT_H * TS / 3600.0;
 #if HAS_HYSTERESIS
     s->ob_p[NX - 1][NX - 1] += HYST_DRIFT_PER_SQRT_H * HYST_DRIFT_PER_SQRT_H * TS / 3600.0;
