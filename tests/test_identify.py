@@ -195,9 +195,9 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
 
 
 def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None:
-    """partition "auto": soc for records at one temperature (self-heating included), soc and
-    temperature for records at two chamber temperatures; a given list is kept. The same for
-    max_local_models "auto"."""
+    """partition "auto": soc and current for records at one temperature (self-heating
+    included), soc and temperature for records at two chamber temperatures; a given list is
+    kept. The same for max_local_models "auto"."""
     from lmncell.data.dataset import Segment
     from lmncell.identification.construction import resolve_max_local_models, resolve_partition
 
@@ -207,16 +207,22 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
                        t0 + np.linspace(0.0, 6.0, n), 1.0, np.linspace(1.0, 0.97, n), np.ones(n))
 
     auto = load_config()
-    assert resolve_partition(auto, [seg(25.0), seg(26.0)]).partition == ["soc"]
+    one = [seg(25.0), seg(26.0)]
+    assert resolve_partition(auto, one).partition == ["soc", "current"]
     assert resolve_partition(auto, [seg(25.0), seg(10.0)]).partition == ["soc", "temperature"]
     given = load_config(partition=["soc", "current"])
     assert resolve_partition(given, [seg(25.0), seg(10.0)]).partition == ["soc", "current"]
-    # the local-model budget: 8 per temperature the tree splits along, else 8; a given one kept
+    # the local-model budget: 8 per temperature the tree splits along, else 8, twice that with
+    # the current in the partition; a given one kept
     two = [seg(25.0), seg(10.0)]
     split = resolve_partition(auto, two)
     assert resolve_max_local_models(split, two, temperature_fixed=False).max_local_models == 16
     assert resolve_max_local_models(split, two, temperature_fixed=True).max_local_models == 8
-    assert resolve_max_local_models(given, two, temperature_fixed=False).max_local_models == 8
+    assert resolve_max_local_models(given, two, temperature_fixed=False).max_local_models == 16
+    by_soc = load_config(partition=["soc"])
+    assert resolve_max_local_models(by_soc, one, temperature_fixed=False).max_local_models == 8
+    assert resolve_max_local_models(resolve_partition(auto, one), one, temperature_fixed=False
+                                    ).max_local_models == 16
     own = load_config(max_local_models=5)
     assert resolve_max_local_models(own, two, temperature_fixed=False).max_local_models == 5
 

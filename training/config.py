@@ -74,13 +74,20 @@ class TrainConfig:
     temperatures (see lmncell.identification.prefit.temperature_levels): local models per
     temperature region instead of one set shared by them (Panasonic, 25 and 10 °C drive cycles,
     leave-one-record-out, 20–80 % / whole record: partition soc, current 13.9/35.5 mV; soc,
-    temperature 11.9/23.6 mV).
+    temperature 11.9/23.6 mV); at one temperature soc plus current: local models per load
+    level follow the overpotential's growth with current, steepest in the collapse before
+    cut-off (Panasonic drive cycles, C/20 OCV test, leave-one-record-out, 20–80 % / whole
+    record mV, soc → soc, current with 16 local models at most: 25 °C 6.74 / 13.60 →
+    6.93 / 10.89, chamber temperature only 6.95 / 13.79 → 7.14 / 10.97; 10 °C 17.68 / 28.99 →
+    14.56 / 23.51; soc, current at 25 °C with 12: 7.04 / 11.05; soc, filtered_current with 16:
+    7.80 / 13.25).
     pre_partition: "none" or "current_sign" (separate charge and discharge trees).
     oblique: optimise all split weights (True) or only the split's own axis (False).
     max_local_models: upper bound on M, or "auto": LOCAL_MODELS_PER_REGION (8) for each
     temperature region the tree may split into, i.e. 8 times the number of distinct training
-    temperatures where the partition splits along temperature, else 8 (with one budget of 8 for
-    two chamber temperatures, the 25 °C records got fewer local models than when trained alone:
+    temperatures where the partition splits along temperature, else 8; twice that where the
+    partition has the current too (with one budget of 8 for two chamber temperatures, the
+    25 °C records got fewer local models than when trained alone:
     Panasonic 25 + 10 °C leave-one-record-out, C/20 OCV, 25 °C records 8.86 / 17.41 mV with 8,
     7.21 / 16.45 mV with 16; 10 °C records 13.15 / 26.26 and 11.77 / 24.48 mV). Beyond the
     training temperatures the extra splits along temperature can extrapolate worse (A123 trained

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from lmncell.data.dataset import Segment
+from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ocvfit import hat_basis, second_difference
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
@@ -104,6 +105,7 @@ def _unpack(x: np.ndarray, k: int, with_h: bool, gamma: float | None, cap: float
 PROGRESS_EVERY_S = 3.0   # seconds between progress lines of a fit
 
 
+@one_blas_thread
 def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
                ocv_v: np.ndarray, capacity_ah: float, ts: float, gamma: float | None,
                h0s: list[float], max_nfev: int = 60,

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from lmncell.config import ConfigError, TrainConfig
 from lmncell.data.dataset import Segment
+from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ladder import Ladder, ladder_for, ladder_keys
 from lmncell.identification.prefit import (
     CHAMBER_SPAN_K,
@@ -109,11 +110,13 @@ def partition_normalisation(base: LmnModel, segs: list[Segment]
 def resolve_partition(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
                       ) -> TrainConfig:
     """The settings with partition "auto" replaced: soc, plus temperature where the segments
-    lie at two or more distinct temperatures (temperature_levels)."""
+    lie at two or more distinct temperatures (temperature_levels), else plus current (the
+    overpotential's current dependence, strongest in the collapse before cut-off: local models
+    per load level follow it where one linear model per SoC range cannot; see TrainConfig)."""
     if cfg.partition != "auto":
         return cfg
     levels = temperature_levels(segs)
-    partition = ["soc", "temperature"] if len(levels) >= 2 else ["soc"]
+    partition = ["soc", "temperature"] if len(levels) >= 2 else ["soc", "current"]
     progress(f"  partition (auto): {', '.join(partition)} (training temperatures "
              + (", ".join(f"{t:.0f}" for t in levels) or "none") + " °C)")
     return dataclasses.replace(cfg, partition=partition)
@@ -126,19 +129,23 @@ def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_
                              progress: Progress = _quiet) -> TrainConfig:
     """The settings with max_local_models "auto" replaced: LOCAL_MODELS_PER_REGION per
     distinct training temperature where the tree splits along temperature (temperature in the
-    partition and no temperature terms), else LOCAL_MODELS_PER_REGION; at most 64."""
+    partition and no temperature terms), else LOCAL_MODELS_PER_REGION, twice that where the
+    partition has the current too (the tree then splits along two axes); at most 64."""
     if cfg.max_local_models != "auto":
         return cfg
     regions = 1
     if "temperature" in cfg.partition and not temperature_fixed:
         regions = max(len(temperature_levels(segs)), 1)
-    m = min(LOCAL_MODELS_PER_REGION * regions, 64)
-    if regions > 1:
-        progress(f"  at most {m} local models (auto: {LOCAL_MODELS_PER_REGION} for each of the "
-                 f"{regions} training temperatures)")
+    per_region = LOCAL_MODELS_PER_REGION * (2 if "current" in cfg.partition else 1)
+    m = min(per_region * regions, 64)
+    if m != LOCAL_MODELS_PER_REGION:
+        progress(f"  at most {m} local models (auto: {per_region} for each of the {regions} "
+                 "training temperature(s)" + (", the partition has the current" if per_region
+                                               > LOCAL_MODELS_PER_REGION else "") + ")")
     return dataclasses.replace(cfg, max_local_models=m)
 
 
+@one_blas_thread
 def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
               progress: Progress = _quiet) -> TrainResult:
     """Identify an LMN from model-rate segments (see the module docstring)."""
