@@ -410,9 +410,9 @@ class SocObserver:
         innovation_var = float(h @ ph) + r
         k = ph / innovation_var
         xi = xi + k * (v_meas - u)
-        # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²)
-        p = p - ph[:, None] * k
-        p = 0.5 * (p + p.T)
+        # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²);
+        # (Ph_a·Ph_b)/s keeps the symmetric P of the prediction symmetric, bit for bit
+        p = p - np.outer(ph, ph) / innovation_var
         s.var_floor = self._variance_floor(soc_prior, tangent)
         s.cov = p.ravel()
         s.var = max(float(p[0, 0]), 1e-12)

@@ -599,11 +599,11 @@ static double ekf_update(State *s, double v) {
         k[a] = ph[a] / (hph + r);
         xi[a] += k[a] * innov;
     }
-    /* P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²),
-       symmetrised ((P' + P'ᵀ)/2) in place, each pair once */
+    /* P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²);
+       (Ph_a·Ph_b)/s keeps the symmetric P of the prediction symmetric, each pair once */
     for (a = 0; a < NX; a++)
         for (b = a; b < NX; b++) {
-            double sym = 0.5 * ((s->ob_p[a][b] - ph[a] * k[b]) + (s->ob_p[b][a] - ph[b] * k[a]));
+            double sym = s->ob_p[a][b] - (ph[a] * ph[b]) / (hph + r);
             s->ob_p[a][b] = sym;
             s->ob_p[b][a] = sym;
         }
