@@ -161,7 +161,7 @@ class ObserverState:
     soc: float
     var: float
     skipped: int = 0
-    cov: np.ndarray = field(default_factory=lambda: np.zeros(0))   # EKF: P of ξ, row by row
+    cov: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))   # EKF: P of ξ
     mode_soc: list[float] = field(default_factory=list)
     mode_var: list[float] = field(default_factory=list)
     mode_prob: list[float] = field(default_factory=list)
@@ -172,9 +172,8 @@ class ObserverState:
     # remaining spread from the unknown load history (A), decaying with their coefficients
 
     def covariance(self) -> np.ndarray:
-        """The EKF's covariance P of ξ as a square matrix."""
-        n = math.isqrt(self.cov.size)
-        return self.cov.reshape(n, n)
+        """The EKF's covariance P of ξ (square; empty for the fuzzy observer and the IMM)."""
+        return self.cov
 
 
 class SocObserver:
@@ -201,17 +200,18 @@ class SocObserver:
                                  else None) if kind == "ekf" else np.zeros((0, 0))
         history = ([self.settings.history_current_sigma_a] * len(self.stepper.state.lp)
                    if kind != "ekf" and self.settings.history_current_sigma_a > 0 else [])
-        self.state = ObserverState(soc0_est, var0, 0, cov.ravel().copy(), [soc0_est] * m,
+        self.state = ObserverState(soc0_est, var0, 0, cov.copy(), [soc0_est] * m,
                                    [var0] * m, [1.0 / m] * m, history=history)
         self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
         self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
         self.state_columns = state_columns(model)
-        self._gradient = gradient_matrices(self.state_columns, model.n_exo)
-        self._theta_exo = model.theta[:, model.output_lags:]
         self._fd_states = "filtered_current" in model.partition_variables
         exo_cols = model.columns()[model.output_lags:]
         self._depletion = ((exo_cols.index("d(k)"), self.stepper.exo.depletion_state)
                            if model.depletion is not None else None)
+        self._gradient = local_gradients(gradient_matrices(self.state_columns, model.n_exo),
+                                         model.theta[:, model.output_lags:],
+                                         self._depletion[0] if self._depletion else None)
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
                         else None)
@@ -314,14 +314,14 @@ class SocObserver:
         of the blended coefficients, plus the depletion regressor's g·factor(SoC) on its
         low-pass state."""
         _, temperature, _ = self._step_inputs
-        blended = np.dot(validity, self._theta_exo)
         gain = self.stepper.exo.temperature_gain(temperature)
-        out = state_gradient(self._gradient, blended, gain,
+        per_validity = np.dot(validity, self._gradient)
+        out = state_gradient(per_validity, len(self.state_columns), gain,
                              (temperature - self.model.reference_temperature_c)
                              / TEMPERATURE_STEP_K)
         if self._depletion is not None:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
-            column, state = self._depletion
-            out[state] += float(blended[column]) * gain * self.model.depletion.factor(soc)
+            out[self._depletion[1]] += (float(per_validity[-1]) * gain
+                                        * self.model.depletion.factor(soc))
         return out
 
     # ----- one step ------------------------------------------------------------------------
@@ -374,9 +374,9 @@ class SocObserver:
         if self.model.hysteresis_gamma is not None:
             f = self._ekf_fg[0].copy()
             f[-1] = math.exp(-exo.gamma * abs(current_a) * exo.soc_gain)
-            ff = np.outer(f, f)
+            ff = f[:, None] * f       # np.outer(f, f) without its Python overhead
         p = ff * p + q             # F diagonal: (f_a·f_b)·P_ab keeps a symmetric P symmetric
-        s.cov = p.ravel()
+        s.cov = p
         s.var = float(p[0, 0])
 
     def _ekf_f_and_q(self, eta: float) -> tuple[np.ndarray, np.ndarray]:
@@ -393,7 +393,7 @@ class SocObserver:
             if self.model.hysteresis_gamma is not None:
                 q[-1, -1] += (cfg.hysteresis_drift_per_sqrt_h ** 2 * self.model.sample_time_s
                               / 3600.0)
-            cached = self._ekf_q[eta] = (np.outer(f, f), q)
+            cached = self._ekf_q[eta] = (f[:, None] * f, q)
         return cached
 
     def _ekf_update(self, v_meas: float) -> float:
@@ -412,9 +412,9 @@ class SocObserver:
         xi = xi + k * (v_meas - u)
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²);
         # (Ph_a·Ph_b)/s keeps the symmetric P of the prediction symmetric, bit for bit
-        p = p - np.outer(ph, ph) / innovation_var
+        p = p - ph[:, None] * ph / innovation_var
         s.var_floor = self._variance_floor(soc_prior, tangent)
-        s.cov = p.ravel()
+        s.cov = p
         s.var = max(float(p[0, 0]), 1e-12)
         nlp = len(st.state.lp)
         st.state.lp = xi[1:1 + nlp].tolist()
@@ -512,15 +512,21 @@ class SocObserver:
     def get_state(self) -> dict:
         s = self.state
         return {"stepper": self.stepper.get_state(), "soc": s.soc, "var": s.var,
-                "skipped": s.skipped, "cov": s.cov.tolist(), "mode_soc": list(s.mode_soc),
+                "skipped": s.skipped, "cov": s.cov.ravel().tolist(),
+                "mode_soc": list(s.mode_soc),
                 "mode_var": list(s.mode_var), "mode_prob": list(s.mode_prob),
                 "var_floor": s.var_floor, "innovation_ms": s.innovation_ms,
                 "innovation_weight": s.innovation_weight, "history": list(s.history)}
 
     def set_state(self, d: dict) -> None:
         self.stepper.set_state(list(d["stepper"]))
+        cov = np.array([float(v) for v in d["cov"]])
+        n = math.isqrt(cov.size)
+        if n * n != cov.size:
+            raise ValueError(f"observer state: cov has {cov.size} entries, expected a square "
+                             "matrix row by row")
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
-                                   np.array([float(v) for v in d["cov"]]), list(d["mode_soc"]),
+                                   cov.reshape(n, n), list(d["mode_soc"]),
                                    list(d["mode_var"]),
                                    list(d["mode_prob"]), float(d["var_floor"]),
                                    float(d["innovation_ms"]), float(d["innovation_weight"]),
@@ -587,15 +593,27 @@ def gradient_matrices(columns: list[list[tuple[int, int, bool, float]]], n_exo: 
     return mats
 
 
-def state_gradient(matrices: list[tuple[np.ndarray, np.ndarray]], blended: np.ndarray,
-                   gain: float, dt: float) -> np.ndarray:
-    """∂u/∂state for the states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x (blended: the
-    network's coefficients of the regressors at the operating point, g the temperature gain of
-    the scaled columns; gradient_matrices gives A_p, B_p)."""
-    out = np.zeros(matrices[0][0].shape[0])
-    power = 1.0
-    for unscaled, scaled in matrices:
-        out += power * (unscaled @ blended + gain * (scaled @ blended))
+def local_gradients(matrices: list[tuple[np.ndarray, np.ndarray]], theta_exo: np.ndarray,
+                    depletion_column: int | None) -> np.ndarray:
+    """Per local model (rows) the blocks [θ_j·A_0ᵀ, θ_j·B_0ᵀ, θ_j·A_1ᵀ, …] of gradient_matrices
+    (θ_j: its exogenous coefficients), then its depletion coefficient where the model has
+    one: the validities times this matrix give state_gradient its terms in one product."""
+    blocks = [theta_exo @ m.T for pair in matrices for m in pair]
+    if depletion_column is not None:
+        blocks.append(theta_exo[:, depletion_column:depletion_column + 1])
+    return np.ascontiguousarray(np.hstack(blocks))
+
+
+def state_gradient(per_validity: np.ndarray, n: int, gain: float, dt: float) -> np.ndarray:
+    """∂u/∂state for the n states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x, from
+    per_validity = Φ·local_gradients (Φ: the validities; blocks of n: A_0·θᵀΦ, B_0·θᵀΦ, …; θᵀΦ
+    the network's coefficients of the regressors at the operating point), g the temperature
+    gain of the scaled columns."""
+    out = per_validity[:n] + gain * per_validity[n:2 * n]
+    power = dt
+    for start in range(2 * n, per_validity.size - 1, 2 * n):
+        unscaled, scaled = per_validity[start:start + n], per_validity[start + n:start + 2 * n]
+        out += power * (unscaled + gain * scaled)
         power *= dt
     return out
 
