@@ -196,8 +196,9 @@ def test_paper_arx_form_trains_stable_local_models(tmp_path) -> None:
 
 def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None:
     """partition "auto": soc and current for records at one temperature (self-heating
-    included), soc and temperature for records at two chamber temperatures; a given list is
-    kept. The same for max_local_models "auto"."""
+    included), soc, current and temperature for records at two chamber temperatures (soc and
+    temperature with temperature terms, at three and more); a given list is kept. The same for
+    max_local_models "auto"."""
     from lmncell.data.dataset import Segment
     from lmncell.identification.construction import resolve_max_local_models, resolve_partition
 
@@ -209,15 +210,18 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     auto = load_config()
     one = [seg(25.0), seg(26.0)]
     assert resolve_partition(auto, one).partition == ["soc", "current"]
-    assert resolve_partition(auto, [seg(25.0), seg(10.0)]).partition == ["soc", "temperature"]
+    assert resolve_partition(auto, [seg(25.0), seg(10.0)]).partition == ["soc", "current",
+                                                                         "temperature"]
+    assert resolve_partition(auto, [seg(-5.0), seg(5.0), seg(45.0)]).partition == [
+        "soc", "temperature"]
     given = load_config(partition=["soc", "current"])
     assert resolve_partition(given, [seg(25.0), seg(10.0)]).partition == ["soc", "current"]
-    # the local-model budget: 8 per temperature the tree splits along, else 8, twice that with
-    # the current in the partition; a given one kept
+    # the local-model budget: 8 per temperature region, else 8, twice that with the current in
+    # the partition; a given one kept
     two = [seg(25.0), seg(10.0)]
     split = resolve_partition(auto, two)
-    assert resolve_max_local_models(split, two, temperature_fixed=False).max_local_models == 16
-    assert resolve_max_local_models(split, two, temperature_fixed=True).max_local_models == 8
+    assert resolve_max_local_models(split, two, temperature_fixed=False).max_local_models == 32
+    assert resolve_max_local_models(split, two, temperature_fixed=True).max_local_models == 16
     assert resolve_max_local_models(given, two, temperature_fixed=False).max_local_models == 16
     by_soc = load_config(partition=["soc"])
     assert resolve_max_local_models(by_soc, one, temperature_fixed=False).max_local_models == 8
@@ -273,6 +277,46 @@ def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
     assert np.array_equal(m.ocv_v, expect)
     mid = (m.ocv_soc > 0.2) & (m.ocv_soc < 0.8)
     assert np.all((m.ocv_v[mid] > 3.2) & (m.ocv_v[mid] < 3.4))     # LFP plateau
+
+
+def _two_chamber_cell() -> tuple[list, float]:
+    """Segments of a synthetic cell at chamber temperatures 10 and 25 °C that warms up by up to
+    6 K inside each (R0 twice as large at 10 °C, rising towards empty), and its capacity."""
+    from lmncell.data.dataset import Segment
+
+    rng = np.random.default_rng(3)
+    cap, n = 2.0, 6000
+    segs = []
+    for k, t_amb in enumerate((10.0, 10.0, 25.0, 25.0)):
+        i = np.repeat(rng.choice([-3.0, -1.0, 0.0, 1.0], size=n // 20), 20)
+        soc = 1.0 + np.cumsum(i) / 3600.0 / cap
+        temp = t_amb + 6.0 * (1.0 - np.exp(-np.arange(n) / 1500.0))
+        r0 = (0.04 if t_amb < 20 else 0.02) * (1.0 + (1.0 - soc) ** 2)
+        u = 3.3 + 0.8 * soc + r0 * i
+        segs.append(Segment(f"chamber{k}", np.arange(1.0, n + 1), i, u, temp, 1.0, soc,
+                            np.ones(n)))
+    return segs, cap
+
+
+def test_temperature_regions_split_only_between_the_chamber_temperatures() -> None:
+    """Two chamber temperatures whose cells warm up inside each record: the one split along
+    temperature is the fixed one, centred in the gap between the levels' cell temperatures
+    (10…16 and 25…31 °C), and every other split keeps its temperature weight at 0."""
+    from lmncell.identification.construction import train_lmn
+    from lmncell.identification.regions import region_boundaries
+
+    segs, cap = _two_chamber_cell()
+    (centre, width), = region_boundaries(segs)
+    assert 16.0 < centre < 25.0 and width >= 0.5
+    cfg = load_config(max_local_models=4, oe_refinement=False, hysteresis="off")
+    model = train_lmn(segs, cfg, cap).model
+    assert model.partition_variables == ["soc", "current", "temperature"]
+    k = 1 + model.partition_variables.index("temperature")
+    along = np.flatnonzero(model.node_weights[:, k] != 0.0)
+    assert along.size == 1
+    w = model.node_weights[along[0]]
+    t0 = model.partition_center[k - 1] - w[0] * model.partition_scale[k - 1] / w[k]
+    assert t0 == pytest.approx(centre)           # act = 0 at the boundary's centre
 
 
 def _warming_cell(knee: bool) -> tuple[list, float]:

@@ -235,8 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
                    "two records that start full and one that starts empty (default: 1.0 for "
                    "records that start rested at full charge)")
     s.add_argument("--partition", help="comma list of soc, current, filtered_current, "
-                   "temperature (default: auto = soc, plus temperature where the records lie at "
-                   "two or more temperatures)")
+                   "temperature (default: auto = soc and current, plus temperature where the "
+                   "records lie at two or more chamber temperatures)")
     s.add_argument("--baselines", action="store_true", help="also fit ARX and 2RC baselines")
     s.add_argument("--config", metavar="FILE.toml", help="training settings ([train] table)")
     s.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",

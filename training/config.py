@@ -70,22 +70,32 @@ class TrainConfig:
     11.77 / 24.48 → 11.32 / 24.19, 25 °C held out 7.21 / 16.45 → 7.61 / 13.55; A123 (−15, −5,
     5, 25, 45 °C) 5 °C held out 2.75 / 14.29 → 2.83 / 12.47, 25 °C 3.18 / 24.53 → 3.17 / 23.44.
     partition: partition-space variables (soc, current, filtered_current, temperature), or
-    "auto": soc, plus temperature where the training records lie at two or more distinct
-    temperatures (see lmncell.identification.prefit.temperature_levels): local models per
-    temperature region instead of one set shared by them (Panasonic, 25 and 10 °C drive cycles,
-    leave-one-record-out, 20–80 % / whole record: partition soc, current 13.9/35.5 mV; soc,
-    temperature 11.9/23.6 mV); at one temperature soc plus current: local models per load
-    level follow the overpotential's growth with current, steepest in the collapse before
+    "auto": soc and current, plus temperature where the training records lie at two or more
+    distinct temperatures (see lmncell.identification.prefit.temperature_levels; soc and
+    temperature where temperature terms carry the temperature dependence). Local models per
+    load level follow the overpotential's growth with current, steepest in the collapse before
     cut-off (Panasonic drive cycles, C/20 OCV test, leave-one-record-out, 20–80 % / whole
     record mV, soc → soc, current with 16 local models at most: 25 °C 6.74 / 13.60 →
     6.93 / 10.89, chamber temperature only 6.95 / 13.79 → 7.14 / 10.97; 10 °C 17.68 / 28.99 →
     14.56 / 23.51; soc, current at 25 °C with 12: 7.04 / 11.05; soc, filtered_current with 16:
-    7.80 / 13.25).
+    7.80 / 13.25). At two chamber temperatures see temperature_regions.
     pre_partition: "none" or "current_sign" (separate charge and discharge trees).
+    temperature_regions: "auto" (where temperature is in the partition and no temperature
+    terms carry it: one set of local models per chamber-temperature level, split apart by fixed
+    sigmoids in the gaps between the levels' cell temperatures, and no other split along
+    temperature; lmncell.identification.regions) or "off" (the tree may split along
+    temperature anywhere, the cells' warm-up inside a record included). Panasonic 25 + 10 °C
+    drive cycles, C/20 OCV test, leave-one-record-out, 20–80 % / whole record mV, partition
+    soc, temperature (the former default) → soc, current, temperature with regions (32 local
+    models at most): 25 °C records held out 7.74 / 15.05 → 7.21 / 10.91, 10 °C records
+    11.97 / 24.47 → 11.12 / 18.58; soc, current, temperature without regions (32):
+    25 °C 10.12 / 19.38. The 25 °C records alone with soc, temperature: 7.36 / 13.69 (soc
+    alone 6.74 / 13.60): splits along a record's own warm-up, which follows SoC and load, do
+    not generalise.
     oblique: optimise all split weights (True) or only the split's own axis (False).
     max_local_models: upper bound on M, or "auto": LOCAL_MODELS_PER_REGION (8) for each
-    temperature region the tree may split into, i.e. 8 times the number of distinct training
-    temperatures where the partition splits along temperature, else 8; twice that where the
+    temperature region, i.e. 8 times the number of distinct training temperatures where the
+    local models differ by temperature (regions, or splits along it), else 8; twice that where the
     partition has the current too (with one budget of 8 for two chamber temperatures, the
     25 °C records got fewer local models than when trained alone:
     Panasonic 25 + 10 °C leave-one-record-out, C/20 OCV, 25 °C records 8.86 / 17.41 mV with 8,
@@ -130,6 +140,7 @@ class TrainConfig:
     soc_input: bool = False
     partition: str | list[str] = "auto"
     pre_partition: str = "none"
+    temperature_regions: str = "auto"
     oblique: bool = True
     max_local_models: int | str = "auto"
     stop: str = "validation"
@@ -219,6 +230,8 @@ class TrainConfig:
                       f"{PARTITION_VARIABLES}")
         if self.pre_partition not in ("none", "current_sign"):
             raise bad("pre_partition", "expected 'none' or 'current_sign'")
+        if self.temperature_regions not in ("auto", "off"):
+            raise bad("temperature_regions", "expected 'auto' or 'off'")
         if not (self.max_local_models == "auto" or (
                 isinstance(self.max_local_models, int)
                 and not isinstance(self.max_local_models, bool)

@@ -38,6 +38,7 @@ from lmncell.identification.prefit import (
     with_soc_reference_weights,
 )
 from lmncell.identification.refinement import refine_output_error
+from lmncell.identification.regions import region_boundaries, temperature_region_tree
 from lmncell.identification.splitting import optimise_split
 from lmncell.identification.tree import (
     Tree,
@@ -109,14 +110,20 @@ def partition_normalisation(base: LmnModel, segs: list[Segment]
 
 def resolve_partition(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
                       ) -> TrainConfig:
-    """The settings with partition "auto" replaced: soc, plus temperature where the segments
-    lie at two or more distinct temperatures (temperature_levels), else plus current (the
-    overpotential's current dependence, strongest in the collapse before cut-off: local models
-    per load level follow it where one linear model per SoC range cannot; see TrainConfig)."""
+    """The settings with partition "auto" replaced: soc and current (the overpotential's
+    current dependence, strongest in the collapse before cut-off: local models per load level
+    follow it where one linear model per SoC range cannot; see TrainConfig), plus temperature
+    where the segments lie at two or more distinct temperatures (temperature_levels); with
+    temperature terms soc and temperature (the terms carry the temperature dependence)."""
     if cfg.partition != "auto":
         return cfg
     levels = temperature_levels(segs)
-    partition = ["soc", "temperature"] if len(levels) >= 2 else ["soc", "current"]
+    if len(levels) < 2:
+        partition = ["soc", "current"]
+    elif temperature_degree(cfg, segs):
+        partition = ["soc", "temperature"]
+    else:
+        partition = ["soc", "current", "temperature"]
     progress(f"  partition (auto): {', '.join(partition)} (training temperatures "
              + (", ".join(f"{t:.0f}" for t in levels) or "none") + " °C)")
     return dataclasses.replace(cfg, partition=partition)
@@ -128,9 +135,10 @@ LOCAL_MODELS_PER_REGION = 8
 def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_fixed: bool,
                              progress: Progress = _quiet) -> TrainConfig:
     """The settings with max_local_models "auto" replaced: LOCAL_MODELS_PER_REGION per
-    distinct training temperature where the tree splits along temperature (temperature in the
-    partition and no temperature terms), else LOCAL_MODELS_PER_REGION, twice that where the
-    partition has the current too (the tree then splits along two axes); at most 64."""
+    distinct training temperature where the local models differ by temperature region
+    (temperature in the partition and no temperature terms: regions or splits along
+    temperature), else LOCAL_MODELS_PER_REGION, twice that where the partition has the current
+    too (the tree then splits along two axes); at most 64."""
     if cfg.max_local_models != "auto":
         return cfg
     regions = 1
@@ -171,6 +179,13 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         progress("  temperature acts through the temperature terms, not through splits: "
                  "sigmoid splits between a few training temperatures interpolate badly")
     cfg = resolve_max_local_models(cfg, segs, bool(fixed_axes), progress)
+    boundaries = (region_boundaries(segs) if cfg.temperature_regions == "auto"
+                  and "temperature" in cfg.partition and not fixed_axes else [])
+    if boundaries:
+        fixed_axes = frozenset({cfg.partition.index("temperature")})
+        progress("  temperature regions: fixed splits at " + ", ".join(
+            f"{c:.1f} °C (width {w:.2f} K)" for c, w in boundaries)
+                 + "; no other splits along temperature")
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     ladder = local_ladder(cfg, base, segs, progress)
     e_scores: dict[str, float] = {}
@@ -184,6 +199,8 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     X, y, w = design.X, design.y, design.w_fit
     n_eff = float(w.sum())
     tree = root_tree(base, design, cfg)
+    if boundaries:
+        tree = temperature_region_tree(tree, base, design, cfg, boundaries)
     stages: list[Tree] = []
     curve: list[dict] = []
     stop_stage = "validation" if cfg.stop == "validation" and cfg.validation != "none" else "aicc"
