@@ -58,6 +58,11 @@ def main() -> None:
                      d / "hppc/03-11-17_08.47_25degC_5Pulse_HPPC_Pan18650PF.mat"], model,
                     capacity_ah=2.85, soc0=1.0, partition=["soc", "current"],
                     progress=lambda _m: None)
+    from lmncell.runtime.model import load_model
+
+    m = load_model(model)
+    print(f"model: M = {m.n_local_models} local models, {len(m.node_weights)} nodes, "
+          f"{len(m.columns())} regressors, Ts = {m.sample_time_s} s")
     native = build_native_fmu(model, tmp / "native.fmu")
     floor = build_native_fmu(model, tmp / "floor.fmu", trivial=True)
     py = build_fmu(model, tmp / "py.fmu")
