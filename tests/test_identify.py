@@ -238,6 +238,7 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     ({"output": "volts"}, "'output'"),
     ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
     ({"robust_loss": "cauchy"}, "'robust_loss'"),
+    ({"temperature_regions": "on"}, "'temperature_regions'"),
     ({"record_weights": [1.0, -1.0]}, "'record_weights'"),
     ({"record_weights": [float("nan")]}, "'record_weights'"),
     ({"record_weights": [0.0, 0.0]}, "'record_weights'"),
@@ -296,6 +297,30 @@ def _two_chamber_cell() -> tuple[list, float]:
         segs.append(Segment(f"chamber{k}", np.arange(1.0, n + 1), i, u, temp, 1.0, soc,
                             np.ones(n)))
     return segs, cap
+
+
+def test_region_boundaries_lie_in_the_gap_or_the_overlap_of_the_levels() -> None:
+    """One boundary per pair of neighbouring levels, centred between the lower level's 99th and
+    the upper level's 1st percentile of cell temperature; where they overlap, centred in the
+    overlap at the smallest width; none at one level or without temperatures."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.regions import MIN_WIDTH_K, region_boundaries
+
+    def seg(lo: float, hi: float) -> Segment:
+        n = 1001
+        return Segment("s", np.arange(1.0, n + 1), -np.ones(n), np.full(n, 3.6),
+                       np.linspace(lo, hi, n), 1.0, np.linspace(1.0, 0.9, n), np.ones(n))
+
+    (c, w), = region_boundaries([seg(10.0, 14.0), seg(25.0, 29.0)])
+    assert c == pytest.approx(0.5 * (13.96 + 25.04)) and w == pytest.approx((25.04 - 13.96) / 8)
+    (c, w), = region_boundaries([seg(10.0, 22.0), seg(18.0, 30.0)])     # warm-ups overlap
+    assert c == pytest.approx(0.5 * (21.88 + 18.12)) and w == MIN_WIDTH_K
+    three = region_boundaries([seg(-5.0, -5.0), seg(5.0, 5.0), seg(25.0, 25.0)])
+    assert [b[0] for b in three] == pytest.approx([0.0, 15.0])
+    assert region_boundaries([seg(25.0, 29.0), seg(26.0, 30.0)]) == []
+    no_temp = Segment("s", np.arange(1.0, 11.0), -np.ones(10), np.full(10, 3.6), None, 1.0,
+                      np.linspace(1.0, 0.99, 10), np.ones(10))
+    assert region_boundaries([no_temp]) == []
 
 
 def test_temperature_regions_split_only_between_the_chamber_temperatures() -> None:
