@@ -209,8 +209,9 @@ class SocObserver:
         exo_cols = model.columns()[model.output_lags:]
         self._depletion = ((exo_cols.index("d(k)"), self.stepper.exo.depletion_state)
                            if model.depletion is not None else None)
-        self._gradient = local_gradients(gradient_matrices(self.state_columns, model.n_exo),
-                                         model.theta[:, model.output_lags:],
+        matrices = gradient_matrices(self.state_columns, model.n_exo)
+        self._gradient_powers = len(matrices)
+        self._gradient = local_gradients(matrices, model.theta[:, model.output_lags:],
                                          self._depletion[0] if self._depletion else None)
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
@@ -316,7 +317,7 @@ class SocObserver:
         _, temperature, _ = self._step_inputs
         gain = self.stepper.exo.temperature_gain(temperature)
         per_validity = np.dot(validity, self._gradient)
-        out = state_gradient(per_validity, len(self.state_columns), gain,
+        out = state_gradient(per_validity, len(self.state_columns), self._gradient_powers, gain,
                              (temperature - self.model.reference_temperature_c)
                              / TEMPERATURE_STEP_K)
         if self._depletion is not None:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
@@ -604,14 +605,16 @@ def local_gradients(matrices: list[tuple[np.ndarray, np.ndarray]], theta_exo: np
     return np.ascontiguousarray(np.hstack(blocks))
 
 
-def state_gradient(per_validity: np.ndarray, n: int, gain: float, dt: float) -> np.ndarray:
-    """∂u/∂state for the n states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x, from
-    per_validity = Φ·local_gradients (Φ: the validities; blocks of n: A_0·θᵀΦ, B_0·θᵀΦ, …; θᵀΦ
-    the network's coefficients of the regressors at the operating point), g the temperature
-    gain of the scaled columns."""
+def state_gradient(per_validity: np.ndarray, n: int, powers: int, gain: float,
+                   dt: float) -> np.ndarray:
+    """∂u/∂state for the n states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x, p < powers,
+    from per_validity = Φ·local_gradients (Φ: the validities; blocks of n: A_0·θᵀΦ, B_0·θᵀΦ, …;
+    θᵀΦ the network's coefficients of the regressors at the operating point), g the
+    temperature gain of the scaled columns."""
     out = per_validity[:n] + gain * per_validity[n:2 * n]
     power = dt
-    for start in range(2 * n, per_validity.size - 1, 2 * n):
+    for p in range(1, powers):
+        start = 2 * n * p
         unscaled, scaled = per_validity[start:start + n], per_validity[start + n:start + 2 * n]
         out += power * (unscaled + gain * scaled)
         power *= dt

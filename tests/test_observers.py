@@ -336,3 +336,20 @@ def test_soc_metrics_report_how_wide_the_band_is() -> None:
     assert m["median_3sigma_pct"] == pytest.approx(0.6)
     assert m["outside_3sigma_share"] == pytest.approx(100 / 1200)
     assert m["rmse_pct"] == pytest.approx(0.1)
+
+
+@pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])
+def test_observers_run_on_a_model_without_filters_or_hysteresis(tmp_path, kind) -> None:
+    """No low-pass or hysteresis state (filters = [], no depletion): the EKF's state is the SoC
+    alone and the regressor gradient is empty; every observer still steps and stays finite."""
+    from lmncell.identification.train import train_files
+
+    from tests.conftest import PAN_HWFET
+
+    model, _ = train_files([PAN_HWFET], tmp_path / "m.json", capacity_ah=2.85, soc0=1.0,
+                           progress=lambda _m: None, filters=[], depletion_power=0,
+                           hysteresis="off", max_local_models=2, oe_refinement=False)
+    ob = SocObserver(model, kind, 0.5)
+    for k in range(50):
+        soc = ob.step(-1.0 - 0.5 * (k % 3), 3.7, 25.0)
+        assert math.isfinite(soc) and math.isfinite(ob.soc_std)
