@@ -19,7 +19,7 @@ import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
 from lmncell.identification.prefit import temperature_levels
-from lmncell.identification.tree import Design, Tree, one_step, stabilise
+from lmncell.identification.tree import Design, Tree, fit_leaves, one_step
 from lmncell.runtime.model import LmnModel
 
 MIN_WIDTH_K = 0.5        # the fixed sigmoids' smallest width (K)
@@ -69,11 +69,9 @@ def temperature_region_tree(tree: Tree, base: LmnModel, design: Design, cfg: Tra
     boundary; then every leaf fitted by least squares weighted with its validity."""
     for centre, width in boundaries:
         psi = region_weights(base, centre, width)
-        warm = list(range(tree.theta.shape[0]))[-len(tree.roots):]   # the warmest leaves
-        for leaf in warm:
+        n = tree.theta.shape[0]
+        for leaf in range(n - len(tree.roots), n):       # the warmest leaves, one per root
             tree = tree.split(leaf, psi, tree.theta[leaf], tree.theta[leaf])
     phi, _ = one_step(tree.apply(base), design)
-    X, y, w = design.X, design.y, design.w_fit
-    theta = np.vstack([stabilise(design.fit(X, y, w * phi[:, j]), cfg.output_lags, cfg.max_pole,
-                                 X, y, w * phi[:, j]) for j in range(phi.shape[1])])
+    theta = fit_leaves(design, [design.w_fit * phi[:, j] for j in range(phi.shape[1])], cfg)
     return Tree(tree.roots, tree.weights, tree.children, theta)

@@ -188,11 +188,17 @@ def one_step(model: LmnModel, design: Design) -> tuple[np.ndarray, np.ndarray]:
 def root_tree(base: LmnModel, design: Design, cfg: TrainConfig) -> Tree:
     """The start of the construction: one local model per root (one, or charge and
     discharge), each by weighted least squares over its gate, poles kept inside max_pole."""
-    X, y, w = design.X, design.y, design.w_fit
+    w = design.w_fit
     weights = [w * _gate_weight(design, g) for g in base.leaf_gates[:len(base.roots)]]
-    theta = np.vstack([stabilise(design.fit(X, y, wg), cfg.output_lags, cfg.max_pole, X, y, wg)
-                       for wg in weights])
-    return Tree(list(base.roots), [], [], theta)
+    return Tree(list(base.roots), [], [], fit_leaves(design, weights, cfg))
+
+
+def fit_leaves(design: Design, weights: list[np.ndarray], cfg: TrainConfig) -> np.ndarray:
+    """One local model per sample-weight vector (θ rows): weighted least squares (in the
+    ladder's bounds if any), poles kept inside max_pole."""
+    X, y = design.X, design.y
+    return np.vstack([stabilise(design.fit(X, y, wj), cfg.output_lags, cfg.max_pole, X, y, wj)
+                      for wj in weights])
 
 
 def _gate_weight(design: Design, gate: str) -> np.ndarray:
