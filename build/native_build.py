@@ -34,6 +34,7 @@ from lmncell.runtime.observers import (
     local_ocv_slopes,
     state_columns,
 )
+from lmncell.runtime.step import tree_plan
 
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
@@ -75,7 +76,7 @@ def model_header(model: LmnModel, guid: str) -> str:
     tau = settings.innovation_tau_s
     innovation_decay = math.exp(-m.sample_time_s / tau) if tau > 0 else 0.0
     lim = m.limits
-    path = m._path_index
+    order, into, leaf_slots, n_slots = tree_plan(m.leaf_paths)
     gate = [{"all": 0, "charge": 1, "discharge": 2}[g] for g in m.leaf_gates]
     t_lim = lim.get("temperature_c", [-1e9, 1e9])
     tsrc = m.temperature_source_indices()
@@ -89,7 +90,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define ETA_DISCHARGE {m.efficiency_discharge!r}",
         f"#define NA {na}", f"#define NB {nb}", f"#define NF {nf}", f"#define ND {nd}",
         f"#define NNODES {nn}", f"#define NM {nm}", f"#define NEXO {len(cols) - na}",
-        f"#define DEPTH {path.shape[1]}", f"#define NOCV {m.ocv_soc.size}",
+        f"#define NSLOTS {n_slots}", f"#define NOCV {m.ocv_soc.size}",
         f"#define HAS_HYSTERESIS {int(m.hysteresis_gamma is not None)}",
         f"#define HYSTERESIS_GAMMA {float(m.hysteresis_gamma or 0.0)!r}",
         f"#define HAS_ARRHENIUS {int(m.arrhenius_k is not None)}",
@@ -149,12 +150,17 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"{{{', '.join(str(PART_CODES[v]) for v in m.partition_variables)}, 0}};",
         f"static const double PART_CENTER[ND + 1] = {_arr([*m.partition_center, 0.0])};",
         f"static const double PART_SCALE[ND + 1] = {_arr([*m.partition_scale, 1.0])};",
-        "/* tree: node weights [bias, w_1 … w_d]; each leaf's path as indices into"
-        " q = [phi_0…phi_n-1, 1-phi_0…1-phi_n-1, 1] */",
+        "/* tree: node weights [bias, w_1 … w_d]; the nodes in an order with parents first"
+        " (TREE_NODE), each one's parent slot (TREE_INTO: 0 for a root, 1 + 2n + side for"
+        " node n's side) and each leaf's slot (runtime.step.tree_plan) */",
         f"static const double NODE_W[NNODES + 1][ND + 1] = "
         f"{_arr2(np.vstack([m.node_weights, np.zeros((1, nd + 1))]))};",
-        "static const int PATH_INDEX[NM][DEPTH] = {"
-        + ", ".join("{" + ", ".join(str(int(v)) for v in row) + "}" for row in path) + "};",
+        "/* each node's ∂act/∂SoC: its SoC weight over the SoC's partition scale */",
+        f"static const double NODE_SOC_W[NNODES + 1] = {_arr(_soc_weights(m))};",
+        f"static const int TREE_NODE[NNODES + 1] = {{{', '.join(map(str, [*order, 0]))}}};",
+        "static const int TREE_INTO[NNODES + 1] = "
+        f"{{{', '.join(str(into[n]) for n in order) + (', ' if order else '')}0}};",
+        f"static const int LEAF_SLOT[NM] = {{{', '.join(map(str, leaf_slots))}}};",
         f"static const int LEAF_GATE[NM] = {{{', '.join(map(str, gate))}}};",
         f"/* local models: columns {', '.join(cols)} */",
         f"static const double THETA[NM][NA + NEXO] = {_arr2(m.theta)};",
@@ -300,6 +306,16 @@ BUILD_DESCRIPTION = f"""<?xml version="1.0" encoding="UTF-8"?>
   </BuildConfiguration>
 </fmiBuildDescription>
 """
+
+
+def _soc_weights(m: LmnModel) -> list[float]:
+    """Each node's ∂act/∂SoC (the SoC's weight over its partition scale; 0 without a SoC
+    partition input), then a 0 for the padding node."""
+    pv = m.partition_variables
+    if "soc" not in pv:
+        return [0.0] * (len(m.node_weights) + 1)
+    k = pv.index("soc")
+    return [float(w[k + 1]) / float(m.partition_scale[k]) for w in m.node_weights] + [0.0]
 
 
 def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) -> None:

@@ -265,8 +265,10 @@ class SocObserver:
     def _jacobian(self, xi: np.ndarray, soc_spread: float = FD_SOC
                   ) -> tuple[float, np.ndarray, float, float]:
         """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
-        δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (one-sided difference
-        FD_SOC, towards SoC 0 only at SoC 1: three network evaluations besides the step's own).
+        δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (analytic,
+        CellStepper.soc_slope; one-sided where the OCV or the depletion factor has a kink,
+        towards SoC 0 only within FD_SOC of SoC 1): two network evaluations besides the
+        step's own.
 
         The SoC difference d of H is soc_spread (at least FD_SOC): with d = σ_SoC the SoC
         column is the secant over ±σ, a statistical linearisation that does not take the OCV
@@ -280,34 +282,33 @@ class SocObserver:
         n, st = xi.size, self.stepper
         clipped = min(max(float(xi[0]), 0.0), 1.0)  # differences around the clipped SoC:
         spread = max(FD_SOC, soc_spread)              # beyond 0 or 1 both sides would clip
-        socs = [clipped, min(clipped + spread, 1.0), max(clipped - spread, 0.0),
-                clipped + FD_SOC if clipped + FD_SOC <= 1.0 else clipped - FD_SOC]
+        socs = [clipped, min(clipped + spread, 1.0), max(clipped - spread, 0.0)]
         h = np.empty(n)
         if not self._fd_states:
             if clipped == st.soc:          # the step's own SoC: its voltage and validities
-                u4 = [st.voltage_v, *st.voltages_at_socs(socs[1:])]
+                u3 = [st.voltage_v, *st.voltages_at_socs(socs[1:])]
                 validity = st.validity
             else:
                 u0, validity, _ = st.outputs_at_socs(socs[:1])[0]
-                u4 = [u0, *st.voltages_at_socs(socs[1:])]
+                u3 = [u0, *st.voltages_at_socs(socs[1:])]
             h[1:] = self._regressor_gradient(validity, clipped)
         else:
             steps = np.full(n - 1, FD_CURRENT_A)
             if self.model.hysteresis_gamma is not None:
                 steps[-1] = FD_HYSTERESIS
-            rows = np.tile(xi, (4 + 2 * (n - 1), 1))
-            rows[:4, 0] = socs
-            rows[4:, 0] = clipped
+            rows = np.tile(xi, (3 + 2 * (n - 1), 1))
+            rows[:3, 0] = socs
+            rows[3:, 0] = clipped
             for k in range(1, n):
-                rows[2 + 2 * k, k] += steps[k - 1]
-                rows[3 + 2 * k, k] -= steps[k - 1]
+                rows[1 + 2 * k, k] += steps[k - 1]
+                rows[2 + 2 * k, k] -= steps[k - 1]
             u_all = self._outputs_for(rows)[0]
-            u4 = u_all[:4].tolist()
-            h[1:] = (u_all[4::2] - u_all[5::2]) / (2.0 * steps)
-        h[0] = (u4[1] - u4[2]) / (socs[1] - socs[2])
-        curvature = 0.5 * (u4[1] + u4[2]) - u4[0]
-        tangent = (u4[3] - u4[0]) / (socs[3] - socs[0])
-        return float(u4[0]), h, curvature, tangent
+            u3 = u_all[:3].tolist()
+            h[1:] = (u_all[3::2] - u_all[4::2]) / (2.0 * steps)
+        h[0] = (u3[1] - u3[2]) / (socs[1] - socs[2])
+        curvature = 0.5 * (u3[1] + u3[2]) - u3[0]
+        tangent = st.soc_slope(clipped, clipped + FD_SOC <= 1.0)
+        return float(u3[0]), h, curvature, tangent
 
     def _regressor_gradient(self, validity: np.ndarray, soc: float) -> np.ndarray:
         """∂u/∂state for the states after SoC (low-pass states, h) through the regressors
@@ -408,12 +409,12 @@ class SocObserver:
                                                           SPREAD_MAX))
         r = self.r + curvature * curvature
         ph = p @ h
-        innovation_var = float(h @ ph) + r
-        k = ph / innovation_var
+        inv_s = 1.0 / (float(h @ ph) + r)        # 1/(hᵀPh + r)
+        k = ph * inv_s
         xi = xi + k * (v_meas - u)
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²);
-        # (Ph_a·Ph_b)/s keeps the symmetric P of the prediction symmetric, bit for bit
-        p = p - ph[:, None] * ph / innovation_var
+        # (Ph_a·Ph_b)·(1/s) keeps the symmetric P of the prediction symmetric, bit for bit
+        p = p - ph[:, None] * ph * inv_s
         s.var_floor = self._variance_floor(soc_prior, tangent)
         s.cov = p
         s.var = max(float(p[0, 0]), 1e-12)

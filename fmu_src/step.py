@@ -318,7 +318,15 @@ class _OneSample:
                                + theta_exo.shape[1]))
         self.block[:self.n_nodes, :node_w.shape[1]] = node_w
         self.block[self.n_nodes:, node_w.shape[1]:] = theta_exo
+        pv = model.partition_variables
+        soc_k = pv.index("soc") if "soc" in pv else None   # ∂act/∂SoC of each node, in order
+        self.soc_weights = ([weights[node][1][soc_k] for node in order] if soc_k is not None
+                            else [])
+        exo = model.columns()[na:]   # each local model's coefficient of the SoC regressors
+        self.soc_columns = {name: (theta_exo[:, exo.index(name)].tolist() if name in exo
+                                   else None) for name in ("soc(k)", "ocv(k)", "d(k)")}
         self.gates = [GATE_CODES[g] for g in model.leaf_gates]
+        self.slots: list[float] = []       # the last combine's tree slots
         self.gated = model.gating_mode == "current_sign"
         self.theta_lags = model.theta[:, :na].tolist()
         self.na = na
@@ -344,6 +352,7 @@ class _OneSample:
                 side = parent / math.inf
             v[out] = side
             v[out + 1] = parent - side
+        self.slots = v
         validity = self.leaves(v)
         if self.gated:
             validity = [0.0 if gate and gate != direction else vj
@@ -356,6 +365,47 @@ class _OneSample:
                 for l in range(self.na):
                     a[l] += vj * row[l]
         return a, b, validity, local
+
+
+    def soc_slope(self, products: list[float], slots: list[float],
+                  validity: Sequence[float], direction: int, lag_part: list[float],
+                  ocv_slope: float, depletion_slope: float) -> float:
+        """∂/∂SoC of the network output Σ_j Φ_j·y_j of one sample (V per unit SoC, without
+        the OCV added to a relative output), y_j = θ_exo,j·x + lag_part_j, from its products,
+        tree slots and validities (combine): the validities' derivative forward through the
+        tree (a node's side φ·v has ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC, φ = side/v) times y_j,
+        plus Φ_j·∂y_j/∂SoC through the regressors soc(k), ocv(k) (ocv_slope, V per unit SoC)
+        and d(k) (depletion_slope: g·LP_τ·∂factor/∂SoC)."""
+        mul = operator.mul
+        slope = 0.0
+        if self.soc_weights:
+            dv = [0.0] * self.n_slots
+            for (into, out), w in zip(self.plan, self.soc_weights, strict=True):
+                parent, side = slots[into], slots[out]
+                if parent != 0.0:      # φ·∂v + side·(1 − φ)·w, φ = side/v
+                    d = side * (dv[into] + (parent - side) * w) / parent
+                    dv[out] = d
+                    dv[out + 1] = dv[into] - d
+            dphi = self.leaves(dv)
+            if self.gated:
+                dphi = [0.0 if gate and gate != direction else dj
+                        for dj, gate in zip(dphi, self.gates, strict=True)]
+            local = products[self.n_nodes:]
+            slope = sum(map(mul, dphi, local)) + sum(map(mul, dphi, lag_part))
+        col = self.soc_columns
+        for name, factor in (("soc(k)", 1.0), ("ocv(k)", ocv_slope), ("d(k)", depletion_slope)):
+            if col[name] is not None and factor != 0.0:
+                slope += factor * sum(map(mul, validity, col[name]))
+        return slope
+
+
+def ocv_slope(x: float, xs: list[float], ys: list[float], upward: bool) -> float:
+    """The one-sided slope (towards SoC 1 if upward, else towards 0) of np.interp(x, xs, ys)
+    at x: the knot interval's slope on that side, 0 beyond the ends (held)."""
+    j = (bisect.bisect_right(xs, x) if upward else bisect.bisect_left(xs, x)) - 1
+    if 0 <= j < len(xs) - 1:
+        return (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
+    return 0.0
 
 
 def interp_one(x: float, xs: list[float], ys: list[float]) -> float:
@@ -420,6 +470,8 @@ class CellStepper:
         self.validity: Sequence[float] = [0.0] * model.n_local_models   # Φ of the last step
         self._last_ocv = (math.nan, math.nan)      # (SoC, OCV) of the last step
         self._one = _OneSample(model)
+        self._products: list[float] = []     # block·u of the last step (_OneSample)
+        self._slots: list[float] = []        # and its tree slots (_OneSample.combine)
 
     @property
     def soc(self) -> float:
@@ -438,7 +490,9 @@ class CellStepper:
         self._depletion_source = exo.features(s, current_a, temperature_c, self._x, self._z)
         exo.shift(s, current_a)
         one = self._one
-        a, acc, Phi, _ = one.combine((one.block @ self._u).tolist(), s.direction)
+        self._products = (one.block @ self._u).tolist()
+        a, acc, Phi, _ = one.combine(self._products, s.direction)
+        self._slots = one.slots
         if m.output_lags:
             lags = self.lags
             self.prev_lags = list(lags)
@@ -474,6 +528,28 @@ class CellStepper:
         rows, ocv = self._products_at_socs(socs)
         return [self._row_output(products, soc_ocv)[0]
                 for products, soc_ocv in zip(rows, ocv, strict=True)]
+
+    def soc_slope(self, soc: float, upward: bool) -> float:
+        """∂u/∂SoC (V per unit SoC) of the last step's terminal voltage had its SoC been soc,
+        every other regressor and partition input as the step had them (the derivative of
+        outputs_at_socs' voltage), one-sided where the OCV or the depletion factor has a kink
+        (upward: towards SoC 1): OCV slope, validities and the SoC regressors. At the step's
+        own SoC from its products and validities; elsewhere one more walk through the tree."""
+        m, one = self.model, self._one
+        if soc == self.state.soc and self._products:
+            products, slots, validity = self._products, self._slots, self.validity
+        else:
+            products = self._products_at_socs([soc])[0][0]
+            validity = one.combine(products, self.state.direction)[2]
+            slots = one.slots
+        lag_part = ([sum(map(operator.mul, row, self.prev_lags)) for row in one.theta_lags]
+                    if m.output_lags else [])
+        slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
+        slope_dep = (self._depletion_source * m.depletion.slope(soc, upward)
+                     if self._depletion_entry is not None else 0.0)
+        slope = one.soc_slope(products, slots, validity, self.state.direction, lag_part,
+                              slope_ocv, slope_dep)
+        return slope + slope_ocv if m.relative_ocv else slope
 
     def outputs_at_socs(self, socs: list[float]
                         ) -> list[tuple[float, Sequence[float], list[float]]]:

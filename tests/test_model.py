@@ -126,6 +126,28 @@ def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int)
         assert np.allclose(local, expect, atol=1e-12)
 
 
+@pytest.mark.parametrize("gating", ["none", "current_sign"])
+def test_soc_slope_is_the_derivative_of_the_voltage_at_other_socs(gating: str) -> None:
+    """CellStepper.soc_slope (the EKF's tangent, analytic through validities, OCV and the SoC
+    regressors) equals a one-sided difference of voltages_at_socs over 1e-7, towards SoC 0
+    at SoC 1, at the step's own SoC and elsewhere, below the depletion floor too; a wrong
+    validity derivative (∂act/∂SoC dropped) would miss by the validities' share."""
+    m = random_tree_model(gating)
+    st = CellStepper(m, 0.7, temperature_c=18.0)
+    rng = np.random.default_rng(5)
+    checked = 0
+    for i in rng.normal(0, 2, 60):
+        st.step(float(i), 18.0)
+        for soc in (st.soc, 0.0, 0.01, 0.33, 0.71, 1.0):
+            upward = soc + 1e-4 <= 1.0
+            at = soc + 1e-7 if upward else soc - 1e-7
+            u0, u1 = st.voltages_at_socs([soc, at])
+            fd = (u1 - u0) / (at - soc)
+            assert st.soc_slope(soc, upward) == pytest.approx(fd, rel=1e-4, abs=1e-5)
+            checked += 1
+    assert checked == 360
+
+
 def test_temperature_terms_are_the_source_columns_times_powers_of_dt() -> None:
     m = random_tree_model(temperature_terms=2)
     cols = m.columns()

@@ -11,6 +11,7 @@
  */
 #include <math.h>
 #include <stdarg.h>
+#include <stddef.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
@@ -50,9 +51,6 @@ typedef struct {
     int direction;
     /* network state (runtime.CellStepper) */
     double lags[NA + 1], prev_lags[NA + 1], voltage;
-    double x[NEXO + 1], z[ND + 1];
-    double phi[NM], local[NM];                 /* the step's validities and local outputs */
-    double dep_source;                         /* the step's g(T)·LP_τ(i) of d(k) */
     int d;
     /* co-simulation accumulators (cosim.CellCosim) */
     double covered, charge, temp_int, volt_int, volt_time;
@@ -66,9 +64,22 @@ typedef struct {
     int skipped;
     double ob_p[NX][NX];                       /* EKF covariance of [SoC, lp…, h] */
     double ob_i, ob_t, ob_past[NB + 1];        /* the step's current, temperature, past currents */
-    double mode_soc[NM], mode_var[NM], mode_prob[NM];
+    double mode_soc[NM], mode_var[NM], mode_prob[NM];   /* IMM only */
+    /* what a step refused after the fact (fmi2DoStep) need not restore (state_kept): the
+       fuzzy gains, fixed at initialisation, and the last step's working values, each
+       recomputed by stepper_step before any use */
     double fuzzy_gain[NM];
+    double x[NEXO + 1], z[ND + 1];
+    double phi[NM], local[NM];                 /* the step's validities and local outputs */
+    double slots[NSLOTS];                      /* the step's tree slots (tree_slots) */
+    double act[NNODES + 1], ex[NNODES + 1];    /* the step's node activations and e^−act */
+    double dep_source;                         /* the step's g(T)·LP_τ(i) of d(k) */
 } State;
+
+/* the leading bytes of a State that a step can change (the IMM's modes with the IMM only) */
+static size_t state_kept(const State *s) {
+    return s->observer == 3 ? offsetof(State, fuzzy_gain) : offsetof(State, mode_soc);
+}
 
 /* FMI 2.0 co-simulation states (the standard's state machine) */
 enum { MODE_INSTANTIATED, MODE_INITIALIZATION, MODE_STEP, MODE_TERMINATED };
@@ -217,28 +228,54 @@ static void shift_past(State *s, double i) {
     if (NB > 1) s->past[0] = i;
 }
 
-/* validities Φ (runtime: LmnModel.validities) for raw partition inputs z and direction d */
-static void validities(const double *z_raw, int d, double *phi) {
-    double q[2 * NNODES + 1], zn[ND + 1];
-    int j, k, n;
+/* the nodes' activations act and e^−act (by node index) for raw partition inputs z */
+static void node_activations(const double *z_raw, double *act, double *ex) {
+    double zn[ND + 1];
+    int k, n;
     for (k = 0; k < ND; k++) zn[k] = (z_raw[k] - PART_CENTER[k]) / PART_SCALE[k];
     for (n = 0; n < NNODES; n++) {
-        double act = NODE_W[n][0];
-        for (k = 0; k < ND; k++) act += zn[k] * NODE_W[n][k + 1];
-        q[n] = 1.0 / (1.0 + exp(-act));
-        q[NNODES + n] = 1.0 - q[n];
+        double a = NODE_W[n][0];
+        for (k = 0; k < ND; k++) a += zn[k] * NODE_W[n][k + 1];
+        act[n] = a;
+        ex[n] = exp(-a);
     }
-    q[2 * NNODES] = 1.0;
+}
+
+/* the tree's slots (runtime.step._OneSample.combine): slot 0 holds a root's validity, 1; node
+   n, parents first, writes its sides v·φ = v/(1 + e^−act) and v − v·φ into slots 1 + 2n and
+   2 + 2n, v being the value in its parent's slot */
+static void tree_slots(const double *ex, double *v) {
+    int k;
+    v[0] = 1.0;
+    for (k = 0; k < NNODES; k++) {
+        int n = TREE_NODE[k];
+        double parent = v[TREE_INTO[k]], side = parent / (1.0 + ex[n]);
+        v[1 + 2 * n] = side;
+        v[2 + 2 * n] = parent - side;
+    }
+}
+
+/* each leaf's validity: its slot, 0 where a current-sign gate does not match the direction d */
+static void leaf_validities(const double *v, int d, double *phi) {
+    int j;
     for (j = 0; j < NM; j++) {
-        double p = 1.0;
-        for (k = 0; k < DEPTH; k++) p *= q[PATH_INDEX[j][k]];
 #if GATING_CURRENT_SIGN
-        if (LEAF_GATE[j] != 0 && LEAF_GATE[j] != d) p = 0.0;
+        phi[j] = LEAF_GATE[j] != 0 && LEAF_GATE[j] != d ? 0.0 : v[LEAF_SLOT[j]];
 #else
         (void)d;
+        phi[j] = v[LEAF_SLOT[j]];
 #endif
-        phi[j] = p;
     }
+}
+
+/* validities Φ (runtime: LmnModel.validities) for raw partition inputs z and direction d;
+   slots (unless NULL) receives the tree's slots */
+static void validities(const double *z_raw, int d, double *phi, double *slots) {
+    double act[NNODES + 1], ex[NNODES + 1], v[NSLOTS];
+    node_activations(z_raw, act, ex);
+    tree_slots(ex, v);
+    leaf_validities(v, d, phi);
+    if (slots) memcpy(slots, v, sizeof v);
 }
 
 /* per-local-model outputs (exogenous and lag parts) for given features and lags */
@@ -257,7 +294,7 @@ static double network(const double *x, const double *z, int d, const double *lag
                       double *phi, double *local) {
     double out = 0.0;
     int j;
-    validities(z, d, phi);
+    validities(z, d, phi, NULL);
     local_outputs(x, lags, local);
     for (j = 0; j < NM; j++) out += phi[j] * local[j];
     return out;
@@ -269,7 +306,7 @@ static double fixed_point(double soc0, double t, double h0) {
     int j, c;
     exo_init(&tmp, soc0, h0);
     features(&tmp, 0.0, t, tmp.x, tmp.z, NULL);
-    validities(tmp.z, tmp.direction, phi);
+    validities(tmp.z, tmp.direction, phi, NULL);
     b = 0.0;
     for (j = 0; j < NM; j++) {
         double acc = 0.0;
@@ -300,7 +337,11 @@ static void stepper_step(State *s, double i, double t) {
     shift_past(s, i);
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
-    y = network(s->x, s->z, s->d, s->prev_lags, s->phi, s->local);
+    node_activations(s->z, s->act, s->ex);
+    tree_slots(s->ex, s->slots);
+    leaf_validities(s->slots, s->d, s->phi);
+    local_outputs(s->x, s->prev_lags, s->local);
+    for (y = 0.0, k = 0; k < NM; k++) y += s->phi[k] * s->local[k];
     for (k = NA - 1; k > 0; k--) s->lags[k] = s->lags[k - 1];
     if (NA > 0) s->lags[0] = y;
     s->voltage = RELATIVE_OCV ? y + ocv(s->soc) : y;
@@ -366,7 +407,7 @@ static double outputs_at(const State *s, double soc, double *phi, double *uj) {
     memcpy(z, s->z, sizeof z);
     for (k = 0; k < ND; k++)
         if (PART_VAR[k] == 0) z[k] = soc;
-    validities(z, s->d, phi);
+    validities(z, s->d, phi, NULL);
     for (k = 0; k < NM; k++) {
         u += phi[k] * local[k];
         uj[k] = base + local[k];
@@ -383,6 +424,115 @@ static void local_voltages_at(const State *s, double soc, double *uj) {
 }
 
 /* EKF (observers.SocObserver._ekf_predict / _ekf_update) */
+/* the one-sided slope (towards SoC 1 if upward, else towards 0) of ocv() at soc: the knot
+   interval's slope on that side, 0 beyond the ends (runtime.step.ocv_slope) */
+static double ocv_slope(double soc, int upward) {
+    int k;
+    if (upward ? (!(soc >= OCV_SOC[0]) || soc >= OCV_SOC[NOCV - 1])
+               : (!(soc > OCV_SOC[0]) || soc > OCV_SOC[NOCV - 1]))
+        return 0.0;
+    k = ocv_interval(soc);
+    if (!upward && k > 0 && soc == OCV_SOC[k]) k--;
+    return (OCV_V[k + 1] - OCV_V[k]) / (OCV_SOC[k + 1] - OCV_SOC[k]);
+}
+
+/* ∂(depletion factor)/∂SoC, one-sided (model.Depletion.slope) */
+static double depletion_slope(double soc, int upward) {
+    if (soc > DEP_SOC_MIN || (upward && soc == DEP_SOC_MIN))
+        return -DEP_POWER * depletion_factor(soc) / soc;
+    return 0.0;
+}
+
+/* ∂u/∂SoC at soc of the step's voltage with only its SoC entries changed (runtime
+   CellStepper.soc_slope), from the validities phi, tree slots v and local outputs (with their
+   lag parts) there: the validities' derivative forward through the tree (a side φ·v has
+   ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC, φ = side/v) times local_j, plus Φ_j·∂local_j/∂SoC
+   through soc(k), ocv(k) and d(k), plus the OCV slope of a relative output */
+static double soc_slope(const State *s, double soc, int upward, const double *phi,
+                        const double *v, const double *local) {
+    double dv[NSLOTS], dphi[NM], slope = 0.0, ocv_s = ocv_slope(soc, upward), dep_s = 0.0;
+    int j, k;
+#if HAS_DEPLETION
+    dep_s = s->dep_source * depletion_slope(soc, upward);
+#else
+    (void)s;
+#endif
+    for (k = 0; k < NSLOTS; k++) dv[k] = 0.0;
+    for (k = 0; k < NNODES; k++) {
+        int n = TREE_NODE[k], into = TREE_INTO[k];
+        double parent = v[into], side = v[1 + 2 * n];
+        if (parent != 0.0) {
+            double d = side * (dv[into] + (parent - side) * NODE_SOC_W[n]) / parent;
+            dv[1 + 2 * n] = d;
+            dv[2 + 2 * n] = dv[into] - d;
+        }
+    }
+    leaf_validities(dv, s->d, dphi);
+    for (j = 0; j < NM; j++) {
+        double dy = 0.0;
+#if SOC_INPUT
+        dy += THETA[j][NA + SOC_COL];
+#endif
+#if OCV_INPUT
+        dy += THETA[j][NA + OCV_COL] * ocv_s;
+#endif
+#if HAS_DEPLETION
+        dy += THETA[j][NA + DEP_COL] * dep_s;
+#endif
+        slope += dphi[j] * local[j] + phi[j] * dy;
+    }
+    (void)dep_s;
+    return RELATIVE_OCV ? slope + ocv_s : slope;
+}
+
+/* the same at a SoC other than the step's own (one more walk through the tree) */
+static double soc_slope_at(const State *s, double soc, int upward) {
+    double z[ND + 1], buf[NM], phi[NM], v[NSLOTS];
+    const double *local = locals_at(s, soc, buf);
+    int k;
+    memcpy(z, s->z, sizeof z);
+    for (k = 0; k < ND; k++)
+        if (PART_VAR[k] == 0) z[k] = soc;
+    validities(z, s->d, phi, v);
+    return soc_slope(s, soc, upward, phi, v, local);
+}
+
+/* the step's voltage at SoC hi = SoC + dh and lo = SoC − dl (its own SoC ± the EKF's spread,
+   dh, dl ≥ 0, as computed by the caller) as outputs_at gives them, the validities from the
+   step's own nodes: e^−act moved by e^∓∂act/∂SoC·d, one exp per node for both sides when
+   dh = dl, φ_lo = m/(m + e^−act) with m = e^−∂act/∂SoC·d; recomputed where a product is not a
+   number (an infinite e^−act times 0) */
+static void outputs_beside(const State *s, double hi, double lo, double dh, double dl,
+                           double *uh, double *ul) {
+    double vh[NSLOTS], vl[NSLOTS], phi_h[NM], phi_l[NM], bh[NM], bl[NM];
+    const double *loc_h = locals_at(s, hi, bh), *loc_l = locals_at(s, lo, bl);
+    double sum_h = 0.0, sum_l = 0.0;
+    int j, k;
+    vh[0] = vl[0] = 1.0;
+    for (k = 0; k < NNODES; k++) {
+        int n = TREE_NODE[k], into = TREE_INTO[k];
+        double w = NODE_SOC_W[n], move = exp(-w * dh), ex = s->ex[n], qh, ql, side;
+        qh = 1.0 / (1.0 + ex * move);
+        if (qh != qh) qh = 1.0 / (1.0 + exp(-(s->act[n] + w * dh)));
+        ql = dl == dh ? move / (move + ex) : 1.0 / (1.0 + ex * exp(w * dl));
+        if (ql != ql) ql = 1.0 / (1.0 + exp(-(s->act[n] - w * dl)));
+        side = vh[into] * qh;
+        vh[1 + 2 * n] = side;
+        vh[2 + 2 * n] = vh[into] - side;
+        side = vl[into] * ql;
+        vl[1 + 2 * n] = side;
+        vl[2 + 2 * n] = vl[into] - side;
+    }
+    leaf_validities(vh, s->d, phi_h);
+    leaf_validities(vl, s->d, phi_l);
+    for (j = 0; j < NM; j++) {
+        sum_h += phi_h[j] * loc_h[j];
+        sum_l += phi_l[j] * loc_l[j];
+    }
+    *uh = RELATIVE_OCV ? ocv(hi) + sum_h : sum_h;
+    *ul = RELATIVE_OCV ? ocv(lo) + sum_l : sum_l;
+}
+
 static void ekf_init(State *s) {
     int a, b;
     for (a = 0; a < NX; a++)
@@ -544,6 +694,7 @@ static double variance_floor(const State *s, double soc, double slope) {
 static double ekf_update(State *s, double v) {
     double xi[NX], hv[NX], ph[NX], k[NX];
     double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent, soc_prior;
+    double inv_s;
     int a, b;
     xi[0] = s->soc;
     for (a = 0; a < 2 * NF; a++) xi[1 + a] = s->lp[a];
@@ -555,11 +706,14 @@ static double ekf_update(State *s, double v) {
     if (soc_prior == s->soc) {
         u = s->voltage;
         memcpy(phi, s->phi, sizeof phi);
+        tangent = soc_slope(s, soc_prior, soc_prior + FD_SOC <= 1.0, s->phi, s->slots, s->local);
     } else {
         u = outputs_at(s, soc_prior, phi, uj);
+        tangent = soc_slope_at(s, soc_prior, soc_prior + FD_SOC <= 1.0);
     }
-    /* SoC column: the secant over ±σ, δ² added to r; the tangent (one-sided, towards SoC 0
-       only at SoC 1) sets the variance floor */
+    /* SoC column: the secant over ±σ, δ² added to r; the tangent (analytic, one-sided where
+       the OCV or the depletion factor has a kink, towards SoC 0 only within FD_SOC of SoC 1)
+       sets the variance floor */
     spread = sqrt(s->ob_p[0][0] > 0.0 ? s->ob_p[0][0] : 0.0);
     if (spread > SPREAD_MAX) spread = SPREAD_MAX;
     if (spread < FD_SOC) spread = FD_SOC;
@@ -567,12 +721,15 @@ static double ekf_update(State *s, double v) {
         double phi2[NM], uj2[NM], uh, ul;
         double hi = soc_prior + spread < 1.0 ? soc_prior + spread : 1.0;
         double lo = soc_prior - spread > 0.0 ? soc_prior - spread : 0.0;
-        double at = soc_prior + FD_SOC <= 1.0 ? soc_prior + FD_SOC : soc_prior - FD_SOC;
-        uh = outputs_at(s, hi, phi2, uj2);
-        ul = outputs_at(s, lo, phi2, uj2);
+        if (soc_prior == s->soc) {    /* the step's own nodes moved along SoC */
+            outputs_beside(s, hi, lo, hi < 1.0 ? spread : 1.0 - soc_prior,
+                           lo > 0.0 ? spread : soc_prior, &uh, &ul);
+        } else {
+            uh = outputs_at(s, hi, phi2, uj2);
+            ul = outputs_at(s, lo, phi2, uj2);
+        }
         hv[0] = (uh - ul) / (hi - lo);
         curvature = 0.5 * (uh + ul) - u;
-        tangent = (outputs_at(s, at, phi2, uj2) - u) / (at - soc_prior);
     }
     /* the other states: through the regressors only (the validities do not depend on them),
        so their columns are ∂x/∂state times the blended coefficients at ξ (state_gradient) */
@@ -595,15 +752,16 @@ static double ekf_update(State *s, double v) {
     }
     for (a = 0; a < NX; a++) hph += hv[a] * ph[a];
     innov = v - u;
+    inv_s = 1.0 / (hph + r);
     for (a = 0; a < NX; a++) {
-        k[a] = ph[a] / (hph + r);
+        k[a] = ph[a] * inv_s;
         xi[a] += k[a] * innov;
     }
     /* P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²);
-       (Ph_a·Ph_b)/s keeps the symmetric P of the prediction symmetric, each pair once */
+       (Ph_a·Ph_b)·(1/s) keeps the symmetric P of the prediction symmetric, each pair once */
     for (a = 0; a < NX; a++)
         for (b = a; b < NX; b++) {
-            double sym = s->ob_p[a][b] - (ph[a] * ph[b]) / (hph + r);
+            double sym = s->ob_p[a][b] - (ph[a] * ph[b]) * inv_s;
             s->ob_p[a][b] = sym;
             s->ob_p[b][a] = sym;
         }
@@ -1278,10 +1436,14 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
     return fmi2OK;
 #else
     {
-        State before = in->s;
-        fmi2Status st = cosim_advance(in, h);
+        State before;                   /* its first state_kept bytes: what a refused step
+                                           restores */
+        size_t kept = state_kept(&in->s);
+        fmi2Status st;
+        memcpy(&before, &in->s, kept);
+        st = cosim_advance(in, h);
         if (st == fmi2OK && !outputs_finite(&in->s)) {
-            in->s = before;
+            memcpy(&in->s, &before, kept);
             logf_(in, fmi2Error, "logStatusError", "t = %g s: the model produced a non-finite "
                   "output (inputs far outside the trained region?); the step was not taken", t);
             return fmi2Error;
