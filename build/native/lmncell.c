@@ -71,7 +71,7 @@ typedef struct {
     double fuzzy_gain[NM];
     double x[NEXO + 1], z[ND + 1];
     double phi[NM], local[NM];                 /* the step's validities and local outputs */
-    double slots[NSLOTS];                      /* the step's tree slots (tree_slots) */
+    double slots[NSLOTS], q_node[NNODES + 1];  /* the step's tree slots and sigmoids */
     double act[NNODES + 1], ex[NNODES + 1];    /* the step's node activations and e^−act */
     double dep_source;                         /* the step's g(T)·LP_τ(i) of d(k) */
 } State;
@@ -241,15 +241,17 @@ static void node_activations(const double *z_raw, double *act, double *ex) {
     }
 }
 
-/* the tree's slots (runtime.step._OneSample.combine): slot 0 holds a root's validity, 1; node
-   n, parents first, writes its sides v·φ = v/(1 + e^−act) and v − v·φ into slots 1 + 2n and
-   2 + 2n, v being the value in its parent's slot */
-static void tree_slots(const double *ex, double *v) {
+/* the tree's slots (runtime.step._OneSample.combine) and the nodes' sigmoids φ = 1/(1 + e^−act):
+   slot 0 holds a root's validity, 1; node n, parents first, writes its sides v·φ and v − v·φ
+   into slots 1 + 2n and 2 + 2n, v being the value in its parent's slot */
+static void tree_slots(const double *ex, double *v, double *q) {
     int k;
     v[0] = 1.0;
     for (k = 0; k < NNODES; k++) {
         int n = TREE_NODE[k];
-        double parent = v[TREE_INTO[k]], side = parent / (1.0 + ex[n]);
+        double parent = v[TREE_INTO[k]], side;
+        q[n] = 1.0 / (1.0 + ex[n]);
+        side = parent * q[n];
         v[1 + 2 * n] = side;
         v[2 + 2 * n] = parent - side;
     }
@@ -269,13 +271,14 @@ static void leaf_validities(const double *v, int d, double *phi) {
 }
 
 /* validities Φ (runtime: LmnModel.validities) for raw partition inputs z and direction d;
-   slots (unless NULL) receives the tree's slots */
-static void validities(const double *z_raw, int d, double *phi, double *slots) {
-    double act[NNODES + 1], ex[NNODES + 1], v[NSLOTS];
+   slots and q (unless NULL) receive the tree's slots and the nodes' sigmoids */
+static void validities(const double *z_raw, int d, double *phi, double *slots, double *q) {
+    double act[NNODES + 1], ex[NNODES + 1], v[NSLOTS], qq[NNODES + 1];
     node_activations(z_raw, act, ex);
-    tree_slots(ex, v);
+    tree_slots(ex, v, qq);
     leaf_validities(v, d, phi);
     if (slots) memcpy(slots, v, sizeof v);
+    if (q) memcpy(q, qq, sizeof qq);
 }
 
 /* per-local-model outputs (exogenous and lag parts) for given features and lags */
@@ -294,7 +297,7 @@ static double network(const double *x, const double *z, int d, const double *lag
                       double *phi, double *local) {
     double out = 0.0;
     int j;
-    validities(z, d, phi, NULL);
+    validities(z, d, phi, NULL, NULL);
     local_outputs(x, lags, local);
     for (j = 0; j < NM; j++) out += phi[j] * local[j];
     return out;
@@ -306,7 +309,7 @@ static double fixed_point(double soc0, double t, double h0) {
     int j, c;
     exo_init(&tmp, soc0, h0);
     features(&tmp, 0.0, t, tmp.x, tmp.z, NULL);
-    validities(tmp.z, tmp.direction, phi, NULL);
+    validities(tmp.z, tmp.direction, phi, NULL, NULL);
     b = 0.0;
     for (j = 0; j < NM; j++) {
         double acc = 0.0;
@@ -338,7 +341,7 @@ static void stepper_step(State *s, double i, double t) {
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
     node_activations(s->z, s->act, s->ex);
-    tree_slots(s->ex, s->slots);
+    tree_slots(s->ex, s->slots, s->q_node);
     leaf_validities(s->slots, s->d, s->phi);
     local_outputs(s->x, s->prev_lags, s->local);
     for (y = 0.0, k = 0; k < NM; k++) y += s->phi[k] * s->local[k];
@@ -407,7 +410,7 @@ static double outputs_at(const State *s, double soc, double *phi, double *uj) {
     memcpy(z, s->z, sizeof z);
     for (k = 0; k < ND; k++)
         if (PART_VAR[k] == 0) z[k] = soc;
-    validities(z, s->d, phi, NULL);
+    validities(z, s->d, phi, NULL, NULL);
     for (k = 0; k < NM; k++) {
         u += phi[k] * local[k];
         uj[k] = base + local[k];
@@ -444,12 +447,12 @@ static double depletion_slope(double soc, int upward) {
 }
 
 /* ∂u/∂SoC at soc of the step's voltage with only its SoC entries changed (runtime
-   CellStepper.soc_slope), from the validities phi, tree slots v and local outputs (with their
-   lag parts) there: the validities' derivative forward through the tree (a side φ·v has
-   ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC, φ = side/v) times local_j, plus Φ_j·∂local_j/∂SoC
+   CellStepper.soc_slope), from the validities phi, tree slots v, node sigmoids q and local
+   outputs (with their lag parts) there: the validities' derivative forward through the tree
+   (a side φ·v has ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC) times local_j, plus Φ_j·∂local_j/∂SoC
    through soc(k), ocv(k) and d(k), plus the OCV slope of a relative output */
 static double soc_slope(const State *s, double soc, int upward, const double *phi,
-                        const double *v, const double *local) {
+                        const double *v, const double *q, const double *local) {
     double dv[NSLOTS], dphi[NM], slope = 0.0, ocv_s = ocv_slope(soc, upward), dep_s = 0.0;
     int j, k;
 #if HAS_DEPLETION
@@ -457,15 +460,12 @@ static double soc_slope(const State *s, double soc, int upward, const double *ph
 #else
     (void)s;
 #endif
-    for (k = 0; k < NSLOTS; k++) dv[k] = 0.0;
+    dv[0] = 0.0;                              /* every node writes both its slots */
     for (k = 0; k < NNODES; k++) {
         int n = TREE_NODE[k], into = TREE_INTO[k];
-        double parent = v[into], side = v[1 + 2 * n];
-        if (parent != 0.0) {
-            double d = side * (dv[into] + (parent - side) * NODE_SOC_W[n]) / parent;
-            dv[1 + 2 * n] = d;
-            dv[2 + 2 * n] = dv[into] - d;
-        }
+        double d = q[n] * dv[into] + v[1 + 2 * n] * (1.0 - q[n]) * NODE_SOC_W[n];
+        dv[1 + 2 * n] = d;
+        dv[2 + 2 * n] = dv[into] - d;
     }
     leaf_validities(dv, s->d, dphi);
     for (j = 0; j < NM; j++) {
@@ -487,14 +487,14 @@ static double soc_slope(const State *s, double soc, int upward, const double *ph
 
 /* the same at a SoC other than the step's own (one more walk through the tree) */
 static double soc_slope_at(const State *s, double soc, int upward) {
-    double z[ND + 1], buf[NM], phi[NM], v[NSLOTS];
+    double z[ND + 1], buf[NM], phi[NM], v[NSLOTS], q[NNODES + 1];
     const double *local = locals_at(s, soc, buf);
     int k;
     memcpy(z, s->z, sizeof z);
     for (k = 0; k < ND; k++)
         if (PART_VAR[k] == 0) z[k] = soc;
-    validities(z, s->d, phi, v);
-    return soc_slope(s, soc, upward, phi, v, local);
+    validities(z, s->d, phi, v, q);
+    return soc_slope(s, soc, upward, phi, v, q, local);
 }
 
 /* the step's voltage at SoC hi = SoC + dh and lo = SoC − dl (its own SoC ± the EKF's spread,
@@ -706,7 +706,7 @@ static double ekf_update(State *s, double v) {
     if (soc_prior == s->soc) {
         u = s->voltage;
         memcpy(phi, s->phi, sizeof phi);
-        tangent = soc_slope(s, soc_prior, soc_prior + FD_SOC <= 1.0, s->phi, s->slots, s->local);
+        tangent = soc_slope(s, soc_prior, soc_prior + FD_SOC <= 1.0, s->phi, s->slots, s->q_node, s->local);
     } else {
         u = outputs_at(s, soc_prior, phi, uj);
         tangent = soc_slope_at(s, soc_prior, soc_prior + FD_SOC <= 1.0);
