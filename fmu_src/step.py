@@ -318,13 +318,17 @@ class _OneSample:
                                + theta_exo.shape[1]))
         self.block[:self.n_nodes, :node_w.shape[1]] = node_w
         self.block[self.n_nodes:, node_w.shape[1]:] = theta_exo
+        # soc_slope: (parent slot, first side's slot, ∂act/∂SoC) of each node in order (none
+        # without a SoC partition input), and (0: soc(k), 1: ocv(k), 2: d(k), each local
+        # model's coefficient) of the SoC regressors the model has
         pv = model.partition_variables
-        soc_k = pv.index("soc") if "soc" in pv else None   # ∂act/∂SoC of each node, in order
-        self.soc_weights = ([weights[node][1][soc_k] for node in order] if soc_k is not None
-                            else [])
-        exo = model.columns()[na:]   # each local model's coefficient of the SoC regressors
-        self.soc_columns = {name: (theta_exo[:, exo.index(name)].tolist() if name in exo
-                                   else None) for name in ("soc(k)", "ocv(k)", "d(k)")}
+        self.slope_plan = ([(into, out, weights[node][1][pv.index("soc")])
+                            for (into, out), node in zip(self.plan, order, strict=True)]
+                           if "soc" in pv else [])
+        exo = model.columns()[na:]
+        self.slope_columns = [(which, theta_exo[:, exo.index(name)].tolist())
+                              for which, name in enumerate(("soc(k)", "ocv(k)", "d(k)"))
+                              if name in exo]
         self.gates = [GATE_CODES[g] for g in model.leaf_gates]
         self.slots: list[float] = []       # the last combine's tree slots
         self.gated = model.gating_mode == "current_sign"
@@ -378,11 +382,12 @@ class _OneSample:
         and d(k) (depletion_slope: g·LP_τ·∂factor/∂SoC)."""
         mul = operator.mul
         slope = 0.0
-        if self.soc_weights:
+        if self.slope_plan:
             dv = [0.0] * self.n_slots
-            for (into, out), w in zip(self.plan, self.soc_weights, strict=True):
-                parent, side = slots[into], slots[out]
+            for into, out, w in self.slope_plan:
+                parent = slots[into]
                 if parent != 0.0:      # φ·∂v + side·(1 − φ)·w, φ = side/v
+                    side = slots[out]
                     d = side * (dv[into] + (parent - side) * w) / parent
                     dv[out] = d
                     dv[out + 1] = dv[into] - d
@@ -390,12 +395,13 @@ class _OneSample:
             if self.gated:
                 dphi = [0.0 if gate and gate != direction else dj
                         for dj, gate in zip(dphi, self.gates, strict=True)]
-            local = products[self.n_nodes:]
-            slope = sum(map(mul, dphi, local)) + sum(map(mul, dphi, lag_part))
-        col = self.soc_columns
-        for name, factor in (("soc(k)", 1.0), ("ocv(k)", ocv_slope), ("d(k)", depletion_slope)):
-            if col[name] is not None and factor != 0.0:
-                slope += factor * sum(map(mul, validity, col[name]))
+            slope = sum(map(mul, dphi, products[self.n_nodes:]))
+            if lag_part:
+                slope += sum(map(mul, dphi, lag_part))
+        factors = (1.0, ocv_slope, depletion_slope)
+        for which, column in self.slope_columns:
+            if factors[which] != 0.0:
+                slope += factors[which] * sum(map(mul, validity, column))
         return slope
 
 
