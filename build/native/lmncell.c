@@ -401,16 +401,24 @@ static const double *locals_at(const State *s, double soc, double *local) {
 #endif
 }
 
-/* the same at another SoC alone, from the step's own regressors and partition inputs with only
-   the SoC entries replaced (runtime.CellStepper.outputs_at_socs); no features recomputed */
-static double outputs_at(const State *s, double soc, double *phi, double *uj) {
-    double z[ND + 1], buf[NM], base = RELATIVE_OCV ? ocv(soc) : 0.0, u = 0.0;
-    const double *local = locals_at(s, soc, buf);
+/* the validities (and, unless NULL, tree slots and node sigmoids) of the step's partition
+   inputs with the SoC replaced */
+static void validities_at(const State *s, double soc, double *phi, double *slots, double *q) {
+    double z[ND + 1];
     int k;
     memcpy(z, s->z, sizeof z);
     for (k = 0; k < ND; k++)
         if (PART_VAR[k] == 0) z[k] = soc;
-    validities(z, s->d, phi, NULL, NULL);
+    validities(z, s->d, phi, slots, q);
+}
+
+/* the same at another SoC alone, from the step's own regressors and partition inputs with only
+   the SoC entries replaced (runtime.CellStepper.outputs_at_socs); no features recomputed */
+static double outputs_at(const State *s, double soc, double *phi, double *uj) {
+    double buf[NM], base = RELATIVE_OCV ? ocv(soc) : 0.0, u = 0.0;
+    const double *local = locals_at(s, soc, buf);
+    int k;
+    validities_at(s, soc, phi, NULL, NULL);
     for (k = 0; k < NM; k++) {
         u += phi[k] * local[k];
         uj[k] = base + local[k];
@@ -487,13 +495,9 @@ static double soc_slope(const State *s, double soc, int upward, const double *ph
 
 /* the same at a SoC other than the step's own (one more walk through the tree) */
 static double soc_slope_at(const State *s, double soc, int upward) {
-    double z[ND + 1], buf[NM], phi[NM], v[NSLOTS], q[NNODES + 1];
+    double buf[NM], phi[NM], v[NSLOTS], q[NNODES + 1];
     const double *local = locals_at(s, soc, buf);
-    int k;
-    memcpy(z, s->z, sizeof z);
-    for (k = 0; k < ND; k++)
-        if (PART_VAR[k] == 0) z[k] = soc;
-    validities(z, s->d, phi, v, q);
+    validities_at(s, soc, phi, v, q);
     return soc_slope(s, soc, upward, phi, v, q, local);
 }
 
