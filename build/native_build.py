@@ -182,7 +182,14 @@ def _state_column_tables(m: LmnModel) -> list[str]:
                                          * (width - len(r))) + "}" for r in rows)
         return f"static const {kind} {name}[{len(rows)}][{width}] = {{{body}}};"
 
-    return [f"static const int STATE_NCOL[{len(rows)}] = "
+    used = sorted({c[0] for r in rows for c in r})
+    if m.depletion is not None:
+        used = sorted({*used, m.columns().index("d(k)") - m.output_lags})
+    return [f"#define NGRADCOL {len(used)}",
+            "/* the regressor columns whose blended coefficients the state gradient reads */",
+            f"static const int GRAD_COL[{max(1, len(used))}] = "
+            f"{{{', '.join(map(str, used or [0]))}}};",
+            f"static const int STATE_NCOL[{len(rows)}] = "
             f"{{{', '.join(str(len(r)) for r in rows)}}};",
             table("int", "STATE_COL", lambda c: c[0]), table("int", "STATE_POW", lambda c: c[1]),
             table("int", "STATE_SCALED", lambda c: int(c[2])),

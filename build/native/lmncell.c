@@ -593,7 +593,8 @@ static void regressor_gradient(const State *s, const double *phi, double soc, do
     double blended[NEXO + 1], g = temperature_gain(s->ob_t);
     double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
     int a, c, j, m, p;
-    for (c = 0; c < NEXO; c++) {
+    for (m = 0; m < NGRADCOL; m++) {       /* only the columns read below */
+        c = GRAD_COL[m];
         blended[c] = 0.0;
         for (j = 0; j < NM; j++) blended[c] += phi[j] * THETA[j][NA + c];
     }
