@@ -515,10 +515,11 @@ static void outputs_beside(const State *s, double hi, double lo, double dh, doub
     vh[0] = vl[0] = 1.0;
     for (k = 0; k < NNODES; k++) {
         int n = TREE_NODE[k], into = TREE_INTO[k];
-        double w = NODE_SOC_W[n], move = exp(-w * dh), ex = s->ex[n], qh, ql, side;
+        double w = NODE_SOC_W[n], ex = s->ex[n], qh, ql, side;
+        double move = w != 0.0 ? exp(-w * dh) : 1.0;   /* a node without SoC: e^0 = 1 */
         qh = 1.0 / (1.0 + ex * move);
         if (qh != qh) qh = 1.0 / (1.0 + exp(-(s->act[n] + w * dh)));
-        ql = dl == dh ? move / (move + ex) : 1.0 / (1.0 + ex * exp(w * dl));
+        ql = dl == dh || w == 0.0 ? move / (move + ex) : 1.0 / (1.0 + ex * exp(w * dl));
         if (ql != ql) ql = 1.0 / (1.0 + exp(-(s->act[n] - w * dl)));
         side = vh[into] * qh;
         vh[1 + 2 * n] = side;
