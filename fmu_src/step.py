@@ -357,10 +357,7 @@ class _OneSample:
             v[out] = side
             v[out + 1] = parent - side
         self.slots = v
-        validity = self.leaves(v)
-        if self.gated:
-            validity = [0.0 if gate and gate != direction else vj
-                        for vj, gate in zip(validity, self.gates, strict=True)]
+        validity = self.leaf_values(v, direction)
         local = products[self.n_nodes:]
         b = sum(map(operator.mul, validity, local))
         a = [0.0] * self.na
@@ -370,6 +367,14 @@ class _OneSample:
                     a[l] += vj * row[l]
         return a, b, validity, local
 
+    def leaf_values(self, slots: list[float], direction: int) -> Sequence[float]:
+        """Each leaf's entry of slots (its validity, or a derivative of it), 0 where a
+        current-sign gate does not match the direction."""
+        values = self.leaves(slots)
+        if not self.gated:
+            return values
+        return [0.0 if gate and gate != direction else value
+                for value, gate in zip(values, self.gates, strict=True)]
 
     def soc_slope(self, products: list[float], slots: list[float],
                   validity: Sequence[float], direction: int, lag_part: list[float],
@@ -391,10 +396,7 @@ class _OneSample:
                     d = side * (dv[into] + (parent - side) * w) / parent
                     dv[out] = d
                     dv[out + 1] = dv[into] - d
-            dphi = self.leaves(dv)
-            if self.gated:
-                dphi = [0.0 if gate and gate != direction else dj
-                        for dj, gate in zip(dphi, self.gates, strict=True)]
+            dphi = self.leaf_values(dv, direction)
             slope = sum(map(mul, dphi, products[self.n_nodes:]))
             if lag_part:
                 slope += sum(map(mul, dphi, lag_part))
