@@ -228,8 +228,9 @@ static void shift_past(State *s, double i) {
     if (NB > 1) s->past[0] = i;
 }
 
-/* the nodes' activations act and e^−act (by node index) for raw partition inputs z */
-static void node_activations(const double *z_raw, double *act, double *ex) {
+/* the nodes' activations act, e^−act and sigmoids q = 1/(1 + e^−act) (by node index) for raw
+   partition inputs z */
+static void node_activations(const double *z_raw, double *act, double *ex, double *q) {
     double zn[ND + 1];
     int k, n;
     for (k = 0; k < ND; k++) zn[k] = (z_raw[k] - PART_CENTER[k]) / PART_SCALE[k];
@@ -238,20 +239,19 @@ static void node_activations(const double *z_raw, double *act, double *ex) {
         for (k = 0; k < ND; k++) a += zn[k] * NODE_W[n][k + 1];
         act[n] = a;
         ex[n] = exp(-a);
+        q[n] = 1.0 / (1.0 + ex[n]);
     }
 }
 
-/* the tree's slots (runtime.step._OneSample.combine) and the nodes' sigmoids φ = 1/(1 + e^−act):
-   slot 0 holds a root's validity, 1; node n, parents first, writes its sides v·φ and v − v·φ
-   into slots 1 + 2n and 2 + 2n, v being the value in its parent's slot */
-static void tree_slots(const double *ex, double *v, double *q) {
+/* the tree's slots (runtime.step._OneSample.combine) from the nodes' sigmoids q: slot 0 holds
+   a root's validity, 1; node n, parents first, writes its sides v·q_n and v − v·q_n into
+   slots 1 + 2n and 2 + 2n, v being the value in its parent's slot */
+static void tree_slots(const double *q, double *v) {
     int k;
     v[0] = 1.0;
     for (k = 0; k < NNODES; k++) {
         int n = TREE_NODE[k];
-        double parent = v[TREE_INTO[k]], side;
-        q[n] = 1.0 / (1.0 + ex[n]);
-        side = parent * q[n];
+        double parent = v[TREE_INTO[k]], side = parent * q[n];
         v[1 + 2 * n] = side;
         v[2 + 2 * n] = parent - side;
     }
@@ -274,8 +274,8 @@ static void leaf_validities(const double *v, int d, double *phi) {
    slots and q (unless NULL) receive the tree's slots and the nodes' sigmoids */
 static void validities(const double *z_raw, int d, double *phi, double *slots, double *q) {
     double act[NNODES + 1], ex[NNODES + 1], v[NSLOTS], qq[NNODES + 1];
-    node_activations(z_raw, act, ex);
-    tree_slots(ex, v, qq);
+    node_activations(z_raw, act, ex, qq);
+    tree_slots(qq, v);
     leaf_validities(v, d, phi);
     if (slots) memcpy(slots, v, sizeof v);
     if (q) memcpy(q, qq, sizeof qq);
@@ -340,8 +340,8 @@ static void stepper_step(State *s, double i, double t) {
     shift_past(s, i);
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
-    node_activations(s->z, s->act, s->ex);
-    tree_slots(s->ex, s->slots, s->q_node);
+    node_activations(s->z, s->act, s->ex, s->q_node);
+    tree_slots(s->q_node, s->slots);
     leaf_validities(s->slots, s->d, s->phi);
     local_outputs(s->x, s->prev_lags, s->local);
     for (y = 0.0, k = 0; k < NM; k++) y += s->phi[k] * s->local[k];
@@ -508,26 +508,20 @@ static double soc_slope_at(const State *s, double soc, int upward) {
    number (an infinite e^−act times 0) */
 static void outputs_beside(const State *s, double hi, double lo, double dh, double dl,
                            double *uh, double *ul) {
-    double vh[NSLOTS], vl[NSLOTS], phi_h[NM], phi_l[NM], bh[NM], bl[NM];
+    double qh[NNODES + 1], ql[NNODES + 1], vh[NSLOTS], vl[NSLOTS], phi_h[NM], phi_l[NM];
+    double bh[NM], bl[NM], sum_h = 0.0, sum_l = 0.0;
     const double *loc_h = locals_at(s, hi, bh), *loc_l = locals_at(s, lo, bl);
-    double sum_h = 0.0, sum_l = 0.0;
-    int j, k;
-    vh[0] = vl[0] = 1.0;
-    for (k = 0; k < NNODES; k++) {
-        int n = TREE_NODE[k], into = TREE_INTO[k];
-        double w = NODE_SOC_W[n], ex = s->ex[n], qh, ql, side;
+    int j, n;
+    for (n = 0; n < NNODES; n++) {
+        double w = NODE_SOC_W[n], ex = s->ex[n];
         double move = w != 0.0 ? exp(-w * dh) : 1.0;   /* a node without SoC: e^0 = 1 */
-        qh = 1.0 / (1.0 + ex * move);
-        if (qh != qh) qh = 1.0 / (1.0 + exp(-(s->act[n] + w * dh)));
-        ql = dl == dh || w == 0.0 ? move / (move + ex) : 1.0 / (1.0 + ex * exp(w * dl));
-        if (ql != ql) ql = 1.0 / (1.0 + exp(-(s->act[n] - w * dl)));
-        side = vh[into] * qh;
-        vh[1 + 2 * n] = side;
-        vh[2 + 2 * n] = vh[into] - side;
-        side = vl[into] * ql;
-        vl[1 + 2 * n] = side;
-        vl[2 + 2 * n] = vl[into] - side;
+        qh[n] = 1.0 / (1.0 + ex * move);
+        if (qh[n] != qh[n]) qh[n] = 1.0 / (1.0 + exp(-(s->act[n] + w * dh)));
+        ql[n] = dl == dh || w == 0.0 ? move / (move + ex) : 1.0 / (1.0 + ex * exp(w * dl));
+        if (ql[n] != ql[n]) ql[n] = 1.0 / (1.0 + exp(-(s->act[n] - w * dl)));
     }
+    tree_slots(qh, vh);
+    tree_slots(ql, vl);
     leaf_validities(vh, s->d, phi_h);
     leaf_validities(vl, s->d, phi_l);
     for (j = 0; j < NM; j++) {
@@ -712,7 +706,8 @@ static double ekf_update(State *s, double v) {
     if (soc_prior == s->soc) {
         u = s->voltage;
         memcpy(phi, s->phi, sizeof phi);
-        tangent = soc_slope(s, soc_prior, soc_prior + FD_SOC <= 1.0, s->phi, s->slots, s->q_node, s->local);
+        tangent = soc_slope(s, soc_prior, soc_prior + FD_SOC <= 1.0, s->phi, s->slots,
+                            s->q_node, s->local);
     } else {
         u = outputs_at(s, soc_prior, phi, uj);
         tangent = soc_slope_at(s, soc_prior, soc_prior + FD_SOC <= 1.0);
