@@ -322,7 +322,7 @@ def _soc_weights(m: LmnModel) -> list[float]:
     if "soc" not in pv:
         return [0.0] * (len(m.node_weights) + 1)
     k = pv.index("soc")
-    return [float(w[k + 1]) / float(m.partition_scale[k]) for w in m.node_weights] + [0.0]
+    return [a[k] for _, a in m.raw_node_weights()] + [0.0]
 
 
 def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) -> None:

@@ -303,6 +303,19 @@ class LmnModel:
     def normalise(self, raw: np.ndarray) -> np.ndarray:
         return (raw - self.partition_center) / self.partition_scale
 
+    def raw_node_weights(self) -> list[tuple[float, list[float]]]:
+        """Each node's activation over the raw partition inputs z, with the normalisation
+        folded in: act = w0 + Σ w_k·(z_k − c_k)/s_k = b + Σ a_k·z_k; per node (b, [a_k…]),
+        a_k = w_k/s_k (a_k of the SoC input is ∂act/∂SoC). The one-sample step and the
+        native FMU both take these."""
+        center = self.partition_center.tolist()
+        scale = self.partition_scale.tolist()
+        out = []
+        for w in self.node_weights.tolist():
+            a = [wk / sk for wk, sk in zip(w[1:], scale, strict=True)]
+            out.append((w[0] - sum(ak * ck for ak, ck in zip(a, center, strict=True)), a))
+        return out
+
 
 # ----- reading and writing ---------------------------------------------------------------
 def _get(doc: dict, key: str, where: str, kind: type | tuple[type, ...]):

@@ -295,20 +295,13 @@ class _OneSample:
     stepper's)."""
 
     def __init__(self, model: LmnModel) -> None:
-        center = model.partition_center.tolist()
-        scale = model.partition_scale.tolist()
-        # act = w0 + Σ w_k·(z_k − c_k)/s_k = (w0 − Σ w_k·c_k/s_k) + Σ (w_k/s_k)·z_k
-        weights = []
-        for w in model.node_weights.tolist():
-            wz = [wk / sk for wk, sk in zip(w[1:], scale, strict=True)]
-            weights.append((w[0] - sum(a * c for a, c in zip(wz, center, strict=True)),
-                                 wz))
+        weights = model.raw_node_weights()
         order, into, leaf_slots, self.n_slots = tree_plan(model.leaf_paths)
         pick = operator.itemgetter(*leaf_slots)        # the leaves' validities from the slots
         self.leaves = pick if len(leaf_slots) > 1 else (lambda v: (pick(v),))
         self.plan = [(into[node], 1 + 2 * node) for node in order]
         node_w = np.array([[weights[node][0], *weights[node][1]] for node in order]
-                          ).reshape(len(order), 1 + len(center))
+                          ).reshape(len(order), 1 + len(model.partition_variables))
         na = model.output_lags
         theta_exo = model.theta[:, na:]
         # one product gives the nodes' activations and the local models' exogenous parts:
@@ -330,7 +323,6 @@ class _OneSample:
                               for which, name in enumerate(("soc(k)", "ocv(k)", "d(k)"))
                               if name in exo]
         self.gates = [GATE_CODES[g] for g in model.leaf_gates]
-        self.slots: list[float] = []       # the last combine's tree slots
         self.gated = model.gating_mode == "current_sign"
         self.theta_lags = model.theta[:, :na].tolist()
         self.na = na
@@ -342,10 +334,11 @@ class _OneSample:
         return interp_one(soc, self.ocv_soc, self.ocv_v)
 
     def combine(self, products: list[float], direction: int
-                ) -> tuple[list[float], float, Sequence[float], list[float]]:
+                ) -> tuple[list[float], float, Sequence[float], list[float], list[float]]:
         """(blended lag coefficients, exogenous part, validities, each local model's exogenous
-        part θ_exo,j·x) of one sample from products = block·u, u = [1, raw partition inputs,
-        exogenous regressors]: the nodes' activations, then each local model's θ_exo,j·x."""
+        part θ_exo,j·x, the tree's slots for soc_slope) of one sample from products = block·u,
+        u = [1, raw partition inputs, exogenous regressors]: the nodes' activations, then each
+        local model's θ_exo,j·x."""
         v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
         exp = math.exp
         for (into, out), act in zip(self.plan, products, strict=False):
@@ -356,7 +349,6 @@ class _OneSample:
                 side = parent / math.inf
             v[out] = side
             v[out + 1] = parent - side
-        self.slots = v
         validity = self.leaf_values(v, direction)
         local = products[self.n_nodes:]
         b = sum(map(operator.mul, validity, local))
@@ -365,7 +357,7 @@ class _OneSample:
             for vj, row in zip(validity, self.theta_lags, strict=True):
                 for l in range(self.na):
                     a[l] += vj * row[l]
-        return a, b, validity, local
+        return a, b, validity, local, v
 
     def leaf_values(self, slots: list[float], direction: int) -> Sequence[float]:
         """Each leaf's entry of slots (its validity, or a derivative of it), 0 where a
@@ -499,8 +491,7 @@ class CellStepper:
         exo.shift(s, current_a)
         one = self._one
         self._products = (one.block @ self._u).tolist()
-        a, acc, Phi, _ = one.combine(self._products, s.direction)
-        self._slots = one.slots
+        a, acc, Phi, _, self._slots = one.combine(self._products, s.direction)
         if m.output_lags:
             lags = self.lags
             self.prev_lags = list(lags)
@@ -548,8 +539,7 @@ class CellStepper:
             products, slots, validity = self._products, self._slots, self.validity
         else:
             products = self._products_at_socs([soc])[0][0]
-            validity = one.combine(products, self.state.direction)[2]
-            slots = one.slots
+            _, _, validity, _, slots = one.combine(products, self.state.direction)
         lag_part = ([sum(map(operator.mul, row, self.prev_lags)) for row in one.theta_lags]
                     if m.output_lags else [])
         slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
@@ -578,7 +568,7 @@ class CellStepper:
         _products_at_socs; base is the OCV added to the network output (0 for an absolute
         output)."""
         m = self.model
-        a, b, validity, local = self._one.combine(products, self.state.direction)
+        a, b, validity, local, _ = self._one.combine(products, self.state.direction)
         for l in range(m.output_lags):
             b += a[l] * self.prev_lags[l]
         base = soc_ocv if m.relative_ocv else 0.0
