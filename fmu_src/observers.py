@@ -7,8 +7,9 @@ SoC. The fuzzy observer and the IMM estimate SoC only and propagate the LMN's ot
 (filters, hysteresis, output lags) deterministically from the current; the EKF estimates the
 filter and hysteresis states with SoC.
 
-- EKF: the state is ξ = [SoC, the filters' low-pass states (A), the hysteresis state h (models
-  with hysteresis)], the LMN's dynamic state; the output lags of a model with na > 0 follow the
+- EKF: the state is ξ = [SoC, the filters' low-pass states (A; one per distinct time constant,
+  lowpass_states: a chain of filters shares them), the hysteresis state h (models with
+  hysteresis)], the LMN's dynamic state; the output lags of a model with na > 0 follow the
   network deterministically. The prediction is the runtime's own step, with the Jacobian
   F = diag(1, a_k, e_h); the gain uses H = ∂u/∂ξ of the whole network at the current operating
   point (OCV slope, local models' SoC inputs, the validity functions' dependence on SoC, the
@@ -67,6 +68,8 @@ from __future__ import annotations
 
 import bisect
 import math
+import operator
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -152,6 +155,14 @@ class ObserverSettings:
         return s
 
 
+def _picker(indices: list[int]) -> Callable[[Sequence[float]], Sequence[float]]:
+    """The entries at indices of a sequence, as a tuple (itemgetter, also for one index)."""
+    if not indices:
+        return lambda values: ()
+    pick = operator.itemgetter(*indices)
+    return pick if len(indices) != 1 else (lambda values: (pick(values),))
+
+
 def _clip01(x: float) -> float:
     return min(1.0, max(0.0, x))
 
@@ -195,10 +206,14 @@ class SocObserver:
         self.v_range = (v[0] - GATE_V, v[1] + GATE_V)
         m = model.n_local_models
         var0 = self.settings.soc0_sigma ** 2
-        cov = initial_covariance(self.settings, len(self.stepper.state.lp),
+        self.lowpass_slots, self.lowpass_state = lowpass_states(model)
+        coef = [self.stepper.exo.coef[slot] for slot in self.lowpass_slots]
+        self._pick_lowpass = _picker(self.lowpass_slots)      # EKF's from the stepper's
+        self._spread_lowpass = _picker(self.lowpass_state)    # and back
+        cov = initial_covariance(self.settings, len(self.lowpass_slots),
                                  self.stepper.state.h if model.hysteresis_gamma is not None
                                  else None) if kind == "ekf" else np.zeros((0, 0))
-        history = ([self.settings.history_current_sigma_a] * len(self.stepper.state.lp)
+        history = ([self.settings.history_current_sigma_a] * len(self.lowpass_slots)
                    if kind != "ekf" and self.settings.history_current_sigma_a > 0 else [])
         self.state = ObserverState(soc0_est, var0, 0, cov.copy(), [soc0_est] * m,
                                    [var0] * m, [1.0 / m] * m, history=history)
@@ -207,14 +222,16 @@ class SocObserver:
         self.state_columns = state_columns(model)
         self._fd_states = "filtered_current" in model.partition_variables
         exo_cols = model.columns()[model.output_lags:]
-        self._depletion = ((exo_cols.index("d(k)"), self.stepper.exo.depletion_state)
+        self._depletion = ((exo_cols.index("d(k)"),
+                            self.lowpass_state[self.stepper.exo.depletion_state])
                            if model.depletion is not None else None)
         matrices = gradient_matrices(self.state_columns, model.n_exo)
         self._gradient_powers = len(matrices)
         self._gradient = local_gradients(matrices, model.theta[:, model.output_lags:],
                                          self._depletion[0] if self._depletion else None)
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
-        self._ekf_fg = (ekf_transition(self.stepper.exo.coef, cov.shape[0]) if kind == "ekf"
+        self._lowpass_coef = coef
+        self._ekf_fg = (ekf_transition(coef, cov.shape[0]) if kind == "ekf"
                         else None)
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
         self._ocv_knots = (model.ocv_soc.tolist(), model.ocv_v.tolist())
@@ -223,10 +240,16 @@ class SocObserver:
 
     # ----- measurement model ---------------------------------------------------------------
     def _state_vector(self) -> np.ndarray:
-        """ξ = [SoC, low-pass states…, h (with hysteresis)] of the stepper."""
+        """ξ = [SoC, low-pass states…, h (with hysteresis)] of the stepper (one low-pass state
+        per distinct time constant, lowpass_states)."""
         s = self.stepper.state
         h = [s.h] if self.model.hysteresis_gamma is not None else []
-        return np.array([s.soc, *s.lp, *h])
+        return np.array([s.soc, *self._pick_lowpass(s.lp), *h])
+
+    def _stepper_lowpass(self, states: list[float]) -> list[float]:
+        """The stepper's low-pass states (one per filter side) from the EKF's (one per
+        distinct time constant)."""
+        return list(self._spread_lowpass(states))
 
     def _features_for(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Exogenous regressors x (n, p − na) and raw partition inputs z (n, d) of the step just
@@ -235,13 +258,14 @@ class SocObserver:
         ExoStepper.features with the step's current, temperature and past currents."""
         m, st = self.model, self.stepper
         current, temperature, past = self._step_inputs
-        n, nlp = states.shape[0], len(st.state.lp)
+        n, nlp = states.shape[0], len(self.lowpass_slots)
         x = np.zeros((n, m.n_exo))
         z = np.zeros((n, len(m.partition_variables)))
         base = st.state
         for r in range(n):
             row = states[r]
-            lp = row[1:1 + nlp].tolist() if row.size > 1 else list(base.lp)
+            lp = (self._stepper_lowpass(row[1:1 + nlp].tolist()) if row.size > 1
+                  else list(base.lp))
             h = float(row[1 + nlp]) if row.size > 1 + nlp else base.h
             cand = ExoState(float(row[0]), lp, h, base.direction, past)
             st.exo.features(cand, current, temperature, x[r], z[r])
@@ -335,7 +359,7 @@ class SocObserver:
         self._step_inputs = (current_a, temperature_c, list(st.state.past_current))
         st.step(current_a, temperature_c)
         if s.history:
-            s.history = [a * x for a, x in zip(st.exo.coef, s.history, strict=True)]
+            s.history = [a * x for a, x in zip(self._lowpass_coef, s.history, strict=True)]
             if max(s.history) < HISTORY_FORGOTTEN_A:
                 s.history = []
         if self.kind == "ekf":
@@ -418,8 +442,7 @@ class SocObserver:
         s.var_floor = self._variance_floor(soc_prior, tangent)
         s.cov = p
         s.var = max(float(p[0, 0]), 1e-12)
-        nlp = len(st.state.lp)
-        st.state.lp = xi[1:1 + nlp].tolist()
+        st.state.lp = self._stepper_lowpass(xi[1:1 + len(self.lowpass_slots)].tolist())
         if self.model.hysteresis_gamma is not None:
             st.state.h = min(1.0, max(-1.0, float(xi[-1])))
         return float(xi[0])
@@ -523,10 +546,10 @@ class SocObserver:
     def set_state(self, d: dict) -> None:
         self.stepper.set_state(list(d["stepper"]))
         cov = np.array([float(v) for v in d["cov"]])
-        n = math.isqrt(cov.size)
-        if n * n != cov.size:
-            raise ValueError(f"observer state: cov has {cov.size} entries, expected a square "
-                             "matrix row by row")
+        n = self.state.cov.shape[0]         # this observer's: ξ's size for the EKF, else 0
+        if cov.size != n * n:
+            raise ValueError(f"observer state: cov has {cov.size} entries, expected {n}×{n} "
+                             "(the covariance of this observer's state, row by row)")
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
                                    cov.reshape(n, n), list(d["mode_soc"]),
                                    list(d["mode_var"]),
@@ -560,10 +583,27 @@ def ekf_transition(coef: list[float], n: int) -> tuple[np.ndarray, np.ndarray]:
     return f, g
 
 
+def lowpass_states(model: LmnModel) -> tuple[list[int], list[int]]:
+    """The EKF's low-pass states: one per distinct time constant of the filters' states
+    [fast_1, slow_1, fast_2, …] (in a chain of filters the slow state of one is the fast state
+    of the next: the same recursion of the same current, always equal, which the EKF would
+    otherwise carry twice, with a singular covariance). Returns the first filter slot of each
+    EKF low-pass state and the EKF low-pass state of each slot."""
+    taus = [tau for f in model.filters for tau in f]
+    first: list[int] = []
+    state_of: list[int] = []
+    for slot, tau in enumerate(taus):
+        if tau not in taus[:slot]:
+            first.append(slot)
+        state_of.append(first.index(taus.index(tau)))
+    return first, state_of
+
+
 def state_columns(model: LmnModel) -> list[list[tuple[int, int, bool, float]]]:
-    """Per EKF state after SoC (the low-pass states, then h): the regressor columns it enters
-    linearly, as (exogenous column, power p of dT, times the Arrhenius gain g, sign): the
-    filter v_f = g·(lp_fast − lp_slow) and its temperature terms v_f·dTᵖ; h and h·dTᵖ."""
+    """Per EKF state after SoC (the low-pass states of lowpass_states, then h): the regressor
+    columns it enters linearly, as (exogenous column, power p of dT, times the Arrhenius gain
+    g, sign): each filter v_f = g·(lp_fast − lp_slow) it is a side of, and their temperature
+    terms v_f·dTᵖ; h and h·dTᵖ."""
     exo = model.columns()[model.output_lags:]
     powers = range(model.temperature_terms + 1)
 
@@ -573,10 +613,10 @@ def state_columns(model: LmnModel) -> list[list[tuple[int, int, bool, float]]]:
                                                                        strict=True)
                 if name in exo]
 
-    out = []
-    for f in range(len(model.filters)):
-        out.append(with_terms(f"v{f + 1}(k)", True, 1.0))
-        out.append(with_terms(f"v{f + 1}(k)", True, -1.0))
+    state_of = lowpass_states(model)[1]
+    out: list[list[tuple[int, int, bool, float]]] = [[] for _ in set(state_of)]
+    for slot, state in enumerate(state_of):
+        out[state] += with_terms(f"v{slot // 2 + 1}(k)", True, -1.0 if slot % 2 else 1.0)
     if model.hysteresis_gamma is not None:
         out.append(with_terms("h(k)", False, 1.0))
     return out

@@ -15,6 +15,7 @@ from lmncell.runtime.observers import (
     SocObserver,
     design_fuzzy_gains,
     local_ocv_slopes,
+    lowpass_states,
 )
 from lmncell.runtime.step import CellStepper
 
@@ -95,7 +96,7 @@ def test_ekf_estimates_soc_and_the_dynamic_state_of_a_hysteresis_model(a123_mode
     settings = ObserverSettings.for_model(model)
     assert settings.history_current_sigma_a == model.noise["recent_current_rms_a"] > 0
     ob = SocObserver(model, "ekf", 0.3, settings=settings)
-    n_lp = 2 * len(model.filters)
+    n_lp = len({tau for f in model.filters for tau in f})     # one per distinct time constant
     assert ob.state.covariance().shape == (2 + n_lp, 2 + n_lp)       # SoC, low-pass states, h
     open_loop = SocObserver(model, "ekf", 0.3, settings=settings).stepper
     dh = dlp = 0.0
@@ -113,6 +114,24 @@ def test_ekf_estimates_soc_and_the_dynamic_state_of_a_hysteresis_model(a123_mode
     # (σ_u·EKF_ERROR_SCALE: corrections are gentler; this model's H is 1–2 mV, so h moves
     # the voltage little and is corrected little)
     assert dh > 1e-4 and dlp > 0.01
+
+
+def test_ekf_carries_each_low_pass_time_constant_once(us06) -> None:
+    """In a chain of filters the slow state of one filter is the fast state of the next (the
+    same recursion of the same current): the EKF estimates it once, writes it back to both
+    filter sides, which stay equal, and keeps a positive definite covariance."""
+    model, seg = us06
+    taus = [tau for f in model.filters for tau in f]
+    assert len(set(taus)) < len(taus)           # the default filters form a chain
+    first, state_of = lowpass_states(model)
+    assert [taus[k] for k in first] == list(dict.fromkeys(taus))
+    assert all(taus[first[state]] == tau for tau, state in zip(taus, state_of, strict=True))
+    ob = SocObserver(model, "ekf", 0.5)
+    for k in range(600):
+        ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]) + 0.01, 25.0)
+    lp = ob.stepper.state.lp
+    assert all(lp[slot] == lp[first[state]] for slot, state in enumerate(state_of))
+    assert np.linalg.eigvalsh(ob.state.covariance()).min() > 0
 
 
 def test_ekf_started_at_rest_knows_the_filter_states(us06) -> None:
@@ -136,7 +155,7 @@ def test_soc_only_observers_count_the_unknown_load_history_in_their_band(us06, k
                                                                               at_rest=True))
     unknown = SocObserver(model, kind, 0.5)
     sigma = model.noise["recent_current_rms_a"]
-    assert unknown.state.history == [sigma] * len(unknown.stepper.state.lp) and sigma > 0
+    assert unknown.state.history == [sigma] * len(unknown.lowpass_slots) and sigma > 0
     assert known.state.history == []
     wider, n = [], len(seg)
     for k in range(n):
@@ -144,7 +163,7 @@ def test_soc_only_observers_count_the_unknown_load_history_in_their_band(us06, k
         known.step(i, v, 25.0)
         unknown.step(i, v, 25.0)
         wider.append(math.sqrt(unknown.state.var_floor) - math.sqrt(known.state.var_floor))
-    coef = np.asarray(unknown.stepper.exo.coef)
+    coef = np.asarray(unknown.stepper.exo.coef)[unknown.lowpass_slots]
     assert np.allclose(unknown.state.history, sigma * coef ** n, rtol=1e-9, atol=1e-300)
     print(f"floor's σ wider by {max(wider[:600]):.4f} at most in the first 10 min, "
           f"{wider[-1]:.2g} at the end")
@@ -353,3 +372,17 @@ def test_observers_run_on_a_model_without_filters_or_hysteresis(tmp_path, kind) 
     for k in range(50):
         soc = ob.step(-1.0 - 0.5 * (k % 3), 3.7, 25.0)
         assert math.isfinite(soc) and math.isfinite(ob.soc_std)
+
+
+def test_observer_state_of_another_size_is_refused(us06) -> None:
+    """A saved observer state whose covariance is not this observer's size (e.g. saved by a
+    runtime whose EKF had more states) is refused with the sizes, not taken silently."""
+    model, _ = us06
+    ob = SocObserver(model, "ekf", 0.5)
+    saved = ob.get_state()
+    n = ob.state.covariance().shape[0]
+    ob.set_state(saved)
+    assert ob.state.covariance().shape == (n, n)
+    bigger = dict(saved, cov=[0.0] * (n + 1) ** 2)
+    with pytest.raises(ValueError, match=f"expected {n}×{n}"):
+        ob.set_state(bigger)

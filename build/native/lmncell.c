@@ -28,9 +28,10 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define DISCHARGE 2
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
-#define NX (1 + 2 * NF + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states, h */
-#define STATE_MAGIC 0x4C4D4E36u /* "LMN6" (LMN5 before ob_hist, LMN4 before dep_source, LMN3
-                                      before the innovation RMS) */
+#define NX (1 + NLX + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states (NLX), h */
+#define STATE_MAGIC 0x4C4D4E37u /* "LMN7" (LMN6 before one EKF state per distinct low-pass
+                                      time constant, LMN5 before ob_hist, LMN4 before
+                                      dep_source, LMN3 before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
 #define MIN_TEMPERATURE_C -273.15
 #define MAX_TEMPERATURE_C 1000.0
@@ -58,7 +59,7 @@ typedef struct {
     /* observer (observers.SocObserver) */
     double q, r, ob_soc, ob_var, ob_floor;
     double ob_innov_ms, ob_innov_w;            /* innovations' weighted mean square (V²), weights */
-    double ob_hist[2 * NF + 1];                /* fuzzy, IMM: the low-pass states' remaining
+    double ob_hist[NLX + 1];                   /* fuzzy, IMM: the low-pass states' remaining
                                                   spread from the unknown load history (A) */
     int ob_hist_on;                            /* ob_hist still counted (ObserverState.history) */
     int skipped;
@@ -361,8 +362,9 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
     double x[NEXO + 1], z[ND + 1], local[NM], base, u;
     int k;
     tmp.soc = xi[0];
-    for (k = 0; k < 2 * NF + 1; k++) tmp.lp[k] = (nxi > 1 && k < 2 * NF) ? xi[1 + k] : s->lp[k];
-    tmp.h = nxi > 1 + 2 * NF ? xi[1 + 2 * NF] : s->h;
+    for (k = 0; k < 2 * NF + 1; k++)
+        tmp.lp[k] = (nxi > 1 && k < 2 * NF) ? xi[1 + SLOT_LX[k]] : s->lp[k];
+    tmp.h = nxi > 1 + NLX ? xi[1 + NLX] : s->h;
     for (k = 0; k < NB + 1; k++) tmp.past[k] = s->ob_past[k];
     features(&tmp, s->ob_i, s->ob_t, x, z, NULL);
     u = network(x, z, s->d, s->prev_lags, phi, local);
@@ -536,7 +538,7 @@ static void ekf_init(State *s) {
     int a, b;
     for (a = 0; a < NX; a++)
         for (b = 0; b < NX; b++)
-            s->ob_p[a][b] = (a >= 1 && a < 1 + 2 * NF && b >= 1 && b < 1 + 2 * NF)
+            s->ob_p[a][b] = (a >= 1 && a < 1 + NLX && b >= 1 && b < 1 + NLX)
                                 ? HISTORY_CURRENT_SIGMA_A * HISTORY_CURRENT_SIGMA_A : 0.0;
     s->ob_p[0][0] = SOC0_SIGMA * SOC0_SIGMA;
 #if HAS_HYSTERESIS
@@ -549,9 +551,9 @@ static void ekf_predict(State *s, double i) {
     int a, b;
     f[0] = 1.0;
     g[0] = gain * eta(i);
-    for (a = 0; a < 2 * NF; a++) {
-        f[1 + a] = LP_COEF[a];
-        g[1 + a] = 1.0 - LP_COEF[a];
+    for (a = 0; a < NLX; a++) {
+        f[1 + a] = LP_COEF[LX_SLOT[a]];
+        g[1 + a] = 1.0 - LP_COEF[LX_SLOT[a]];
     }
 #if HAS_HYSTERESIS
     f[NX - 1] = exp(-HYSTERESIS_GAMMA * fabs(i) * gain);
@@ -604,7 +606,7 @@ static void regressor_gradient(const State *s, const double *phi, double soc, do
         hv[a] = acc;
     }
 #if HAS_DEPLETION   /* d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor */
-    hv[1 + DEP_STATE] += blended[DEP_COL] * g * depletion_factor(soc);
+    hv[1 + DEP_LX] += blended[DEP_COL] * g * depletion_factor(soc);
 #else
     (void)soc;
 #endif
@@ -629,7 +631,7 @@ static double model_error(const State *s, double soc) {
         double hv[NX + 1], uh = 0.0;
         int a;
         regressor_gradient(s, s->phi, soc, hv);
-        for (a = 0; a < 2 * NF; a++) uh += hv[1 + a] * s->ob_hist[a];
+        for (a = 0; a < NLX; a++) uh += hv[1 + a] * s->ob_hist[a];
         err = sqrt(err * err + uh * uh);
     }
     return err;
@@ -697,7 +699,7 @@ static double ekf_update(State *s, double v) {
     double inv_s;
     int a, b;
     xi[0] = s->soc;
-    for (a = 0; a < 2 * NF; a++) xi[1 + a] = s->lp[a];
+    for (a = 0; a < NLX; a++) xi[1 + a] = s->lp[LX_SLOT[a]];
 #if HAS_HYSTERESIS
     xi[NX - 1] = s->h;
 #endif
@@ -768,7 +770,7 @@ static double ekf_update(State *s, double v) {
         }
     s->ob_floor = variance_floor(s, soc_prior, tangent);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
-    for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + a];
+    for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + SLOT_LX[a]];
 #if HAS_HYSTERESIS
     s->h = xi[NX - 1] < -1.0 ? -1.0 : (xi[NX - 1] > 1.0 ? 1.0 : xi[NX - 1]);
 #endif
@@ -799,7 +801,7 @@ static void observer_init(State *s, double soc0) {
     s->ob_innov_ms = 0.0;
     s->ob_innov_w = 0.0;
     s->ob_hist_on = s->observer != 1 && HISTORY_CURRENT_SIGMA_A > 0.0;
-    for (j = 0; j < 2 * NF; j++) s->ob_hist[j] = s->ob_hist_on ? HISTORY_CURRENT_SIGMA_A : 0.0;
+    for (j = 0; j < NLX; j++) s->ob_hist[j] = s->ob_hist_on ? HISTORY_CURRENT_SIGMA_A : 0.0;
     s->skipped = 0;
     for (j = 0; j < NM; j++) {
         s->mode_soc[j] = soc0;
@@ -886,8 +888,8 @@ static void observer_step(State *s, double i, double v, double t) {
     stepper_step(s, i, t);
     if (s->ob_hist_on) {   /* SocObserver.step: decay, emptied below HISTORY_FORGOTTEN_A */
         double most = 0.0;
-        for (k = 0; k < 2 * NF; k++) {
-            s->ob_hist[k] *= LP_COEF[k];
+        for (k = 0; k < NLX; k++) {
+            s->ob_hist[k] *= LP_COEF[LX_SLOT[k]];
             if (s->ob_hist[k] > most) most = s->ob_hist[k];
         }
         if (most < HISTORY_FORGOTTEN_A) s->ob_hist_on = 0;
