@@ -69,3 +69,19 @@ def test_readme_fmu_table_lists_the_fmu_variables(demo) -> None:
     rows = re.findall(r"^\| `(\w+)` \| (\w+) \| ([^|]+) \|", table, flags=re.M)
     documented = {name: (causality, unit.strip()) for name, causality, unit in rows}
     assert documented == actual
+
+
+def test_readme_update_names_a_missing_or_wrong_file(tmp_path, capsys) -> None:
+    """The maintainer's command that regenerates the README's figures refuses a missing file
+    or a summary that is not the demo's with a message naming it, not a traceback."""
+    from lmncell.report.readme import main as readme_main
+
+    missing = tmp_path / "README.md"
+    summary = tmp_path / "summary.json"
+    summary.write_text("{}", encoding="utf-8")
+    assert readme_main([str(summary), str(missing)]) == 2
+    assert str(missing) in capsys.readouterr().err
+    missing.write_text("no figures block here\n", encoding="utf-8")
+    assert readme_main([str(summary), str(missing)]) == 2
+    assert "summary.json" in capsys.readouterr().err
+    assert readme_main([]) == 2

@@ -64,7 +64,25 @@ def update_readme(summary_path: Path, readme_path: Path) -> None:
     readme_path.write_text(text.replace(figures_block(text), new), encoding="utf-8")
 
 
+def main(argv: list[str]) -> int:
+    """python -m lmncell.report.readme SUMMARY.json README.md: exit status 0, or 2 with a
+    message naming the file and what was expected."""
+    if len(argv) != 2:
+        print("usage: python -m lmncell.report.readme SUMMARY.json README.md", file=sys.stderr)
+        return 2
+    summary, readme = Path(argv[0]), Path(argv[1])
+    try:
+        update_readme(summary, readme)
+    except OSError as exc:
+        print(f"{exc.filename}: {exc.strerror}; expected the demo's summary.json and an "
+              "existing README.md to update", file=sys.stderr)
+        return 2
+    except (ValueError, KeyError) as exc:   # json.JSONDecodeError is a ValueError
+        print(f"{summary} / {readme}: {exc}; expected the summary.json that `lmncell demo` "
+              "wrote and a README with the generated figures block", file=sys.stderr)
+        return 2
+    return 0
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 3:
-        sys.exit("usage: python -m lmncell.report.readme SUMMARY.json README.md")
-    update_readme(Path(sys.argv[1]), Path(sys.argv[2]))
+    sys.exit(main(sys.argv[1:]))
