@@ -550,12 +550,16 @@ class SocObserver:
         if cov.size != n * n:
             raise ValueError(f"observer state: cov has {cov.size} entries, expected {n}×{n} "
                              "(the covariance of this observer's state, row by row)")
+        history = [float(v) for v in d["history"]]
+        if history and len(history) != len(self.lowpass_slots):
+            raise ValueError(f"observer state: history has {len(history)} entries, expected "
+                             f"0 or {len(self.lowpass_slots)} (one per low-pass state)")
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
                                    cov.reshape(n, n), list(d["mode_soc"]),
                                    list(d["mode_var"]),
                                    list(d["mode_prob"]), float(d["var_floor"]),
                                    float(d["innovation_ms"]), float(d["innovation_weight"]),
-                                   [float(v) for v in d["history"]])
+                                   history)
 
 
 def fuzzy_gains(model: LmnModel, q: float, r: float) -> tuple[np.ndarray, np.ndarray]:

@@ -386,3 +386,7 @@ def test_observer_state_of_another_size_is_refused(us06) -> None:
     bigger = dict(saved, cov=[0.0] * (n + 1) ** 2)
     with pytest.raises(ValueError, match=f"expected {n}×{n}"):
         ob.set_state(bigger)
+    fuzzy = SocObserver(model, "fuzzy", 0.5)
+    longer = dict(fuzzy.get_state(), history=[0.1] * (len(fuzzy.lowpass_slots) + 1))
+    with pytest.raises(ValueError, match="history has"):
+        fuzzy.set_state(longer)
