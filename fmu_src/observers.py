@@ -68,14 +68,12 @@ from __future__ import annotations
 
 import bisect
 import math
-import operator
-from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .model import TEMPERATURE_STEP_K, LmnModel
-from .step import CellStepper, ExoState, interp_one
+from .step import CellStepper, ExoState, interp_one, picker
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5
@@ -155,14 +153,6 @@ class ObserverSettings:
         return s
 
 
-def _picker(indices: list[int]) -> Callable[[Sequence[float]], Sequence[float]]:
-    """The entries at indices of a sequence, as a tuple (itemgetter, also for one index)."""
-    if not indices:
-        return lambda values: ()
-    pick = operator.itemgetter(*indices)
-    return pick if len(indices) != 1 else (lambda values: (pick(values),))
-
-
 def _clip01(x: float) -> float:
     return min(1.0, max(0.0, x))
 
@@ -208,8 +198,8 @@ class SocObserver:
         var0 = self.settings.soc0_sigma ** 2
         self.lowpass_slots, self.lowpass_state = lowpass_states(model)
         coef = [self.stepper.exo.coef[slot] for slot in self.lowpass_slots]
-        self._pick_lowpass = _picker(self.lowpass_slots)      # EKF's from the stepper's
-        self._spread_lowpass = _picker(self.lowpass_state)    # and back
+        self._pick_lowpass = picker(self.lowpass_slots)      # EKF's from the stepper's
+        self._spread_lowpass = picker(self.lowpass_state)    # and back
         cov = initial_covariance(self.settings, len(self.lowpass_slots),
                                  self.stepper.state.h if model.hysteresis_gamma is not None
                                  else None) if kind == "ekf" else np.zeros((0, 0))

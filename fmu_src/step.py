@@ -19,7 +19,7 @@ from __future__ import annotations
 import bisect
 import math
 import operator
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -287,6 +287,15 @@ def simulate(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray |
     return simulate_exo(model, ex, soc0, h0, t0)
 
 
+def picker(indices: list[int]) -> Callable[[Sequence[float]], Sequence[float]]:
+    """The entries of a sequence at indices, as a tuple (operator.itemgetter, which returns a
+    bare value for one index, made to return a tuple for any number of them)."""
+    if not indices:
+        return lambda values: ()
+    pick = operator.itemgetter(*indices)
+    return pick if len(indices) != 1 else (lambda values: (pick(values),))
+
+
 class _OneSample:
     """LmnModel.blend and ocv for one sample in plain Python (the FMU's per-step cost): the
     same validities and blend as the batch path up to floating-point rounding (the partition
@@ -297,8 +306,7 @@ class _OneSample:
     def __init__(self, model: LmnModel) -> None:
         weights = model.raw_node_weights()
         order, into, leaf_slots, self.n_slots = tree_plan(model.leaf_paths)
-        pick = operator.itemgetter(*leaf_slots)        # the leaves' validities from the slots
-        self.leaves = pick if len(leaf_slots) > 1 else (lambda v: (pick(v),))
+        self.leaves = picker(leaf_slots)        # the leaves' validities from the slots
         self.plan = [(into[node], 1 + 2 * node) for node in order]
         node_w = np.array([[weights[node][0], *weights[node][1]] for node in order]
                           ).reshape(len(order), 1 + len(model.partition_variables))
