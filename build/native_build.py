@@ -88,6 +88,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         "#ifndef LMNCELL_MODEL_H", "#define LMNCELL_MODEL_H",
         f'#define MODEL_GUID "{guid}"',
         f"#define TS {m.sample_time_s!r}", f"#define CAPACITY_AH {m.capacity_ah!r}",
+        f"#define DELAY_S {float(m.current_delay_s)!r}",
         f"#define ETA_CHARGE {m.efficiency_charge!r}",
         f"#define ETA_DISCHARGE {m.efficiency_discharge!r}",
         f"#define NA {na}", f"#define NB {nb}", f"#define NF {nf}", f"#define ND {nd}",

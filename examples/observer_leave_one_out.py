@@ -67,7 +67,8 @@ def main() -> None:
             model = load_model(out)
             rec = read_record(held)
             seg = observer_segment(record_to_segments(rec, model.sample_time_s,
-                                                      start_soc(rec, held_soc0), a.capacity_ah),
+                                                      start_soc(rec, held_soc0), a.capacity_ah,
+                                                      current_delay_s=model.current_delay_s),
                                    a.start_soc)
             k0 = start_index(seg, a.start_soc)
             for kind in KINDS:

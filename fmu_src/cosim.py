@@ -22,6 +22,24 @@ MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physica
 MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
 
 
+def held_delayed_currents(current_a: list[float], ts: float, delay_s: float) -> list[float]:
+    """The currents a model with current delay δ = delay_s takes, step by step, when it is
+    given current_a held over successive communication steps of exactly Ts (what
+    CellCosim.advance computes, in the same operations): (δ·i(k−1) + (Ts − δ)·i(k))/Ts, with
+    i(−1) = i(0)."""
+    if not delay_s or not current_a:
+        return list(current_a)
+    out = []
+    covered, charge = delay_s, current_a[0] * delay_s
+    for i in current_a:
+        take = ts - covered              # the delayed window closes first, δ before the step
+        charge += i * take
+        out.append(charge / ts)
+        covered = ts - take              # then the rest of the step opens the next one
+        charge = i * covered
+    return out
+
+
 class InputError(ValueError):
     """A non-finite or impossible input; the message names the variable."""
 
@@ -65,6 +83,9 @@ class CellCosim:
         self.temp_int = 0.0
         self.volt_int = 0.0
         self.volt_time = 0.0
+        self.delay_covered_s = self.model.current_delay_s   # the delayed window (s, A·s)
+        self.delay_charge_as = math.nan      # nan until the first input fills its start
+        self.delayed_current_a = 0.0         # the last closed delayed window's mean (A)
         self.out_of_range = False
         self.range_message = ""
         self.steps = 0
@@ -135,7 +156,10 @@ class CellCosim:
                 and math.isfinite(voltage_measured_v)):
             self._refuse(step_s, current_a, temperature_c, voltage_measured_v)
         ts = self.model.sample_time_s
-        if step_s == ts and self.covered_s == 0.0:      # the usual case: one whole model step
+        delay = self.model.current_delay_s
+        if delay and math.isnan(self.delay_charge_as):   # before the start: the first current
+            self.delay_charge_as = current_a * delay
+        if step_s == ts and self.covered_s == 0.0 and not delay:   # the usual case
             self.covered_s = ts
             self.charge_as += current_a * ts
             self.temp_int += temperature_c * ts
@@ -148,6 +172,10 @@ class CellCosim:
         taken = 0
         while remaining > 0.0:           # every positive step counts, however short
             take = min(ts - self.covered_s, remaining)
+            if delay:
+                take = min(take, ts - self.delay_covered_s)
+                self.delay_covered_s += take
+                self.delay_charge_as += current_a * take
             self.covered_s += take
             self.charge_as += current_a * take
             self.temp_int += temperature_c * take
@@ -155,6 +183,9 @@ class CellCosim:
                 self.volt_int += voltage_measured_v * take
                 self.volt_time += take
             remaining -= take
+            if delay and self.delay_covered_s >= ts * (1.0 - STEP_TOL):
+                self.delayed_current_a = self.delay_charge_as / ts
+                self.delay_covered_s = self.delay_charge_as = 0.0
             if self.covered_s >= ts * (1.0 - STEP_TOL):
                 self._model_step()
                 taken += 1
@@ -179,7 +210,7 @@ class CellCosim:
 
     def _model_step(self) -> None:
         ts = self.model.sample_time_s
-        i = self.charge_as / ts
+        i = self.delayed_current_a if self.model.current_delay_s else self.charge_as / ts
         temp_input = self.temp_int / ts
         temp = self.thermal.cell_temperature(temp_input)
         self.range_message = self.check_range(i, temp)
@@ -199,7 +230,8 @@ class CellCosim:
         return {"stepper": self.stepper.get_state(),
                 "observer": self.observer.get_state() if self.observer else None,
                 "acc": [self.covered_s, self.charge_as, self.temp_int, self.volt_int,
-                        self.volt_time],
+                        self.volt_time, self.delay_covered_s, self.delay_charge_as,
+                        self.delayed_current_a],
                 "flags": [self.out_of_range, self.range_message, self.steps],
                 "thermal": [self.thermal.temperature_c, self._start_temperature_c],
                 "params": [self.params.soc0, self.params.capacity_ah, self.params.observer,
@@ -216,7 +248,8 @@ class CellCosim:
             self.observer.set_state(state["observer"])
         else:
             self.stepper.set_state(list(state["stepper"]))
-        (self.covered_s, self.charge_as, self.temp_int, self.volt_int,
-         self.volt_time) = (float(x) for x in state["acc"])
+        (self.covered_s, self.charge_as, self.temp_int, self.volt_int, self.volt_time,
+         self.delay_covered_s, self.delay_charge_as, self.delayed_current_a) = (
+            float(x) for x in state["acc"])
         self.out_of_range, self.range_message, self.steps = (
             bool(state["flags"][0]), str(state["flags"][1]), int(state["flags"][2]))

@@ -1,10 +1,15 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 3 (versions 1 and 2, which have no ``thermal`` or no
-``regressors.depletion`` key, are read too).
+Format ``lmncell-model``, version 4 (versions 1 to 3, which have no ``thermal``, no
+``regressors.depletion`` or no ``current_delay_s`` key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
+- ``current_delay_s`` (version 4; absent: 0): δ, 0 ≤ δ < Ts. The model is driven by the current
+  δ seconds late: step k takes the mean current over [t_k − Ts − δ, t_k − δ] (before the first
+  input, the first input held). It is the lag of a tester's voltage channel behind its current
+  channel (Panasonic 18650PF drive cycles: 0.1 s), which the model reproduces so that its
+  voltage lines up with such measurements when the current is given finer than Ts.
 - ``cell``: ``capacity_ah``, ``efficiency_charge``, ``efficiency_discharge`` (coulombic, η(i)),
   ``voltage_min_v``, ``voltage_max_v``, ``name``.
 - ``output``: ``"relative_ocv"`` (local models describe u − OCV(SoC)) or ``"absolute"`` (the
@@ -67,8 +72,8 @@ import numpy as np
 from .thermal import ThermalModel
 
 FORMAT = "lmncell-model"
-VERSION = 3
-READABLE_VERSIONS = (1, 2, 3)
+VERSION = 4
+READABLE_VERSIONS = (1, 2, 3, 4)
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -167,6 +172,7 @@ class LmnModel:
     temperature_terms: int = 0
     depletion: Depletion | None = None
     thermal: ThermalModel | None = None
+    current_delay_s: float = 0.0
     limits: dict = field(default_factory=dict)
     cell: dict = field(default_factory=dict)
     noise: dict = field(default_factory=dict)
@@ -412,6 +418,11 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     ts = float(_get(doc, "sample_time_s", source, (int, float)))
     if not ts > 0:
         raise ModelFileError(f"{source}: 'sample_time_s' is {ts}, expected > 0")
+    delay = doc.get("current_delay_s", 0.0)
+    if (not isinstance(delay, (int, float)) or isinstance(delay, bool)
+            or not 0.0 <= delay < ts):
+        raise ModelFileError(f"{source}: 'current_delay_s' is {delay!r}, expected a number "
+                             f"0 ≤ δ < sample_time_s = {ts} s")
     cell = _get(doc, "cell", source, dict)
     cap = float(_get(cell, "capacity_ah", f"{source}: cell", (int, float)))
     if not cap > 0:
@@ -499,7 +510,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
         depletion=_depletion(reg.get("depletion"), filters, w),
-        thermal=_thermal(doc.get("thermal"), source),
+        thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
         limits=dict(doc.get("limits", {})), cell=dict(cell),
         noise=_noise(doc.get("noise", {}), source),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
@@ -522,6 +533,7 @@ def model_to_dict(model: LmnModel) -> dict:
         "format": FORMAT, "version": VERSION,
         "description": model.extra.get("description", "LMNCell local model network cell model"),
         "sample_time_s": model.sample_time_s,
+        "current_delay_s": model.current_delay_s,
         "cell": {**model.cell, "capacity_ah": model.capacity_ah,
                  "efficiency_charge": model.efficiency_charge,
                  "efficiency_discharge": model.efficiency_discharge},

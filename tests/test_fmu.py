@@ -15,6 +15,7 @@ from fmpy.validation import validate_fmu
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline, run_fmu_on_segment
+from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import load_model
 from lmncell.runtime.step import CellStepper
 
@@ -51,8 +52,8 @@ def test_sub_stepping(quick_model, quick_fmu) -> None:
     seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
     ref = CellStepper(model, 1.0, temperature_c=float(seg.temperature_c[0]))
     n = 300
-    expect = [ref.step(float(i), float(t)) for i, t in
-              zip(seg.current_a[:n], seg.temperature_c[:n], strict=True)]
+    taken = held_delayed_currents(seg.current_a[:n].tolist(), 1.0, model.current_delay_s)
+    expect = [ref.step(i, float(t)) for i, t in zip(taken, seg.temperature_c[:n], strict=True)]
     fine = run_fmu_on_segment(quick_fmu, seg, 1.0, step_s=0.1)
     assert np.max(np.abs(fine["voltage"][1:n + 1] - expect)) <= 1e-9
     # an uneven step (2.5 Ts) accumulates exactly: after 2 calls, 5 model steps
@@ -192,3 +193,32 @@ def test_fmu_manipulation_toolbox_check(quick_fmu) -> None:
     text = out.stdout + out.stderr
     assert out.returncode == 0, text
     assert "compliant with FMI-2.0" in text and "No semantic error" in text
+
+
+def test_current_delay_takes_the_window_delta_earlier(quick_model) -> None:
+    # the engine given a held current over uneven communication steps takes, at each model
+    # step, the current's mean over [t_k − Ts − δ, t_k − δ] (the first current held before 0)
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = load_model(quick_model)
+    delay = model.current_delay_s
+    assert 0.05 < delay < 0.15                   # estimated from the HWFET record's channels
+    rng = np.random.default_rng(11)
+    steps = rng.choice([0.05, 0.3, 0.37, 1.0, 2.5], size=60)
+    currents = rng.uniform(-4.0, 2.0, size=60)
+    starts = np.concatenate([[-np.inf], np.cumsum(steps)[:-1]])
+    ends = np.cumsum(steps)                  # piece 0 also covers t < 0
+
+    def charge(a: float, b: float) -> float:   # ∫ i dt over [a, b] of the held input (A·s)
+        return float(sum(i * max(0.0, min(b, e) - max(a, s))
+                         for s, e, i in zip(starts, ends, currents, strict=True)))
+
+    ref = CellStepper(model, 1.0)
+    ref_v = [ref.step(charge(k - delay, k + 1 - delay), 25.0)
+             for k in range(int(np.sum(steps)))]
+    cosim = CellCosim(model, Parameters(1.0, 2.85))
+    worst = 0.0
+    for h, i in zip(steps, currents, strict=True):
+        if cosim.advance(float(h), float(i)):
+            worst = max(worst, abs(cosim.voltage_v - ref_v[cosim.steps - 1]))
+    assert cosim.steps == len(ref_v) and worst <= 1e-9

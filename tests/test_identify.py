@@ -247,6 +247,9 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     ({"soc_reference_sigma": -0.01}, "'soc_reference_sigma'"),
     ({"model_error_sigma_v": 0.0}, "'model_error_sigma_v'"),
     ({"no_such_setting": 1}, "unknown setting"),
+    ({"current_delay_s": 1.0}, "'current_delay_s'"),
+    ({"current_delay_s": -0.1}, "'current_delay_s'"),
+    ({"current_delay_s": "on"}, "'current_delay_s'"),
     ({"partition": "soc"}, "'partition'"),
     ({"partition": ["soc", "pressure"]}, "'partition'"),
 ])

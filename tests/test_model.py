@@ -177,7 +177,9 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=4), r"version 4; this LMNCell reads versions \[1, 2, 3\]"),
+    (lambda d: d.update(version=5), r"version 5; this LMNCell reads versions \[1, 2, 3, 4\]"),
+    (lambda d: d.update(current_delay_s=1.0), r"'current_delay_s' is 1.0, expected a number 0 ≤ δ"),
+    (lambda d: d.update(current_delay_s="0.1"), r"'current_delay_s' is '0.1'"),
     (lambda d: d["regressors"].update(depletion={"tau_s": 150.0}), "'depletion' must be null"),
     (lambda d: d["regressors"]["depletion"].update(power=-1.0), "'depletion' must be null"),
     (lambda d: d["regressors"]["depletion"].update(tau_s=7.0),

@@ -16,6 +16,7 @@ from fmpy.validation import validate_fmu
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
+from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import load_model
 from lmncell.runtime.observers import SocObserver
 from lmncell.runtime.step import CellStepper
@@ -67,10 +68,12 @@ def _observer_gap(model, fmu, seg, observer: int, kind: str, start: int, n: int,
     over n steps of a record from sample start."""
     ob = SocObserver(model, kind, soc0, temperature_c=25.0)
     inst = Instance(fmu, start={"soc0": soc0}, observer=observer)
+    taken = held_delayed_currents(seg.current_a[start:start + n].tolist(), model.sample_time_s,
+                                  model.current_delay_s)      # what the FMU's model takes
     try:
         worst_v = worst_s = worst_sd = 0.0
         for k in range(start, start + n):
-            ob.step(float(seg.current_a[k]), float(seg.voltage_v[k]), 25.0)
+            ob.step(taken[k - start], float(seg.voltage_v[k]), 25.0)
             inst.slave.setReal([inst.vr["voltage_measured"]], [float(seg.voltage_v[k])])
             inst.step(float(seg.current_a[k]))
             v, s, sd = inst.get("voltage", "soc", "soc_std")
@@ -182,8 +185,8 @@ def test_c_host_runs_a_drive_cycle_without_python(host, native_fmu, us06, tmp_pa
     model, seg = us06
     res = _parse(_run_host(host, native_fmu, seg.current_a, tmp_path, 1.0).stdout)
     st = CellStepper(model, 1.0)
-    for i in seg.current_a:
-        st.step(float(i), 25.0)
+    for i in held_delayed_currents(seg.current_a.tolist(), 1.0, model.current_delay_s):
+        st.step(i, 25.0)
     assert res["steps"] == len(seg) and res["errors"] == 0
     assert res["voltage"] == pytest.approx(st.voltage_v, abs=1e-9)
     assert res["soc"] == pytest.approx(st.soc, abs=1e-12)
@@ -360,3 +363,27 @@ def test_native_ekf_with_the_filtered_current_in_the_partition_equals_the_runtim
     seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
     worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 1500, 0.6)
     assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
+
+
+def test_native_current_delay_over_uneven_steps_equals_the_runtime(quick_model,
+                                                                    native_fmu) -> None:
+    # the delayed current's window (δ before each model step) accumulates across uneven
+    # communication steps the same way in C as in the runtime's engine
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = load_model(quick_model)
+    assert model.current_delay_s > 0
+    rng = np.random.default_rng(7)
+    cosim = CellCosim(model, Parameters(0.9, 2.85))
+    inst = Instance(native_fmu, start={"soc0": 0.9})
+    try:
+        worst = 0.0
+        for h, i in zip(rng.choice([0.01, 0.05, 0.3, 0.37, 1.0, 2.5], size=400),
+                        rng.uniform(-6.0, 3.0, size=400), strict=True):
+            cosim.advance(float(h), float(i))
+            inst.step(float(i), h=float(h))
+            worst = max(worst, abs(inst.get("voltage")[0] - cosim.voltage_v))
+        assert inst.get("soc")[0] == pytest.approx(cosim.soc, abs=1e-12)
+    finally:
+        inst.free()
+    assert worst <= 1e-9

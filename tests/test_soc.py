@@ -5,7 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from lmncell.data.dataset import starts_rested_full
+from lmncell.data.lag import channel_lag_samples, estimate_current_delay
 from lmncell.data.readers import read_record
+from lmncell.data.records import Record, RecordMeta
 from lmncell.data.resample import resample, resample_segment
 from lmncell.data.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
 
@@ -70,3 +72,40 @@ def test_round_trip_ocv_removes_a_current_offset() -> None:
     assert np.max(np.abs(got.curve.mean_v[inner] - true_ocv)) < 2e-3
     # without the correction the charge branch would sit 0.18 Ah (6 % SoC) off
     assert np.max(np.abs(got.curve.charge_v[inner] - true_ocv - 0.01)) < 2e-3
+
+
+def _ramp_record(dt: float = 0.1, n: int = 200) -> Record:
+    t = dt * np.arange(n)
+    return Record(t, 0.5 - 0.02 * t, np.full(n, 3.6), RecordMeta("ramp.csv", "test"))
+
+
+def test_resampling_delays_the_current_by_delta() -> None:
+    rec = _ramp_record()                       # i(t) = 0.5 − 0.02·t A, exactly linear
+    plain, late = resample_segment(rec, 1.0), resample_segment(rec, 1.0, current_delay_s=0.3)
+    g = late.time_s
+    assert np.allclose(plain.current_a, 0.5 - 0.02 * (g - 0.5), atol=1e-12)
+    # the mean over [g − 1.3, g − 0.3]; before t = 0 the first current (0.5 A) is held
+    expect = 0.5 - 0.02 * (g - 0.8)
+    expect[0] = (0.3 * 0.5 + 0.7 * (0.5 - 0.02 * 0.35)) / 1.0
+    assert np.allclose(late.current_a, expect, atol=1e-12)
+    assert np.array_equal(late.voltage_v, plain.voltage_v)
+
+
+def _lagged_record(lag_samples: int, dt: float) -> Record:
+    """A cell whose voltage channel shows R·i lag_samples samples late (R = 20 mΩ)."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    i = np.repeat(rng.uniform(-5.0, 2.0, n // 7 + 1), 7)[:n]
+    late = np.concatenate([np.full(lag_samples, i[0]), i[:n - lag_samples]])
+    u = 3.6 + 0.02 * late + 1e-4 * rng.standard_normal(n)
+    return Record(dt * np.arange(n), i, u, RecordMeta("lag.csv", "test"))
+
+
+def test_channel_lag_is_found_and_coarse_records_give_none() -> None:
+    assert channel_lag_samples(_lagged_record(0, 0.1)) == 0.0
+    assert channel_lag_samples(_lagged_record(1, 0.1)) == pytest.approx(1.0, abs=0.2)
+    assert channel_lag_samples(_lagged_record(2, 0.1)) == pytest.approx(2.0, abs=0.2)
+    assert estimate_current_delay([_lagged_record(1, 0.1)], 1.0) == pytest.approx(0.1, abs=0.02)
+    # sampled once per Ts (or coarser) a lag below a sample cannot show: no delay
+    assert estimate_current_delay([_lagged_record(1, 1.0)], 1.0) == 0.0
+    assert estimate_current_delay([_lagged_record(2, 0.4)], 1.0) == 0.5   # at most Ts/2

@@ -24,6 +24,15 @@ class TrainConfig:
     """Settings of `lmncell train` (units in the names; see README for the meaning of each).
 
     sample_time_s: model sample time Ts; records are resampled to it (step means).
+    current_delay_s: δ (s, 0 ≤ δ < Ts), the model's input delay: the current enters δ late,
+    the lag of the tester's voltage channel behind its current channel, which the model then
+    reproduces (FMUs included) when given the current finer than Ts; "auto": estimated from the
+    records (lmncell.data.lag: 0.091 s on the Panasonic 0.1 s drive cycles, 0 for records
+    sampled at Ts or slower). Panasonic drive cycles, C/20 OCV test, leave-one-record-out,
+    20–80 % / whole record mV, δ 0 → "auto" (0.091 s), measured cell temperature (chamber
+    temperature only): 25 °C 6.93 / 10.89 → 5.61 / 9.66 (7.14 / 10.97 → 5.87 / 9.85), US06
+    9.84 / 14.67 → 5.87 / 10.86; 25 + 10 °C, 10 °C held out 11.12 / 18.58 → 9.35 / 14.09,
+    25 °C held out 7.21 / 10.91 → 5.66 / 9.25.
     output_lags / current_terms: na past outputs; i(k) … i(k−nb+1). The default na = 0 gives
     local models without output feedback (fixed-pole, OBF-like: their one-step error is their
     free-run error, and they cannot go unstable); na = 3, current_terms = 3 is the paper's ARX.
@@ -123,6 +132,7 @@ class TrainConfig:
     """
 
     sample_time_s: float = 1.0
+    current_delay_s: str | float = "auto"
     output_lags: int = 0
     current_terms: int = 2
     filters: list[list[float]] = field(
@@ -261,6 +271,12 @@ class TrainConfig:
             raise bad("robust_loss", "expected 'huber' or 'none'")
         if not 0.9 < self.max_pole < 1:
             raise bad("max_pole", "expected 0.9 < max_pole < 1")
+        if not (self.current_delay_s == "auto" or (
+                isinstance(self.current_delay_s, (int, float))
+                and not isinstance(self.current_delay_s, bool)
+                and 0.0 <= self.current_delay_s < self.sample_time_s)):
+            raise bad("current_delay_s", f"expected 'auto' or 0 ≤ δ < sample_time_s = "
+                                         f"{self.sample_time_s} s")
         if self.ocv_knots < 3:
             raise bad("ocv_knots", "expected ≥ 3")
         return self

@@ -29,7 +29,8 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define STEP_TOL 1e-9
 #define GATE_V 0.5
 #define NX (1 + NLX + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states (NLX), h */
-#define STATE_MAGIC 0x4C4D4E37u /* "LMN7" (LMN6 before one EKF state per distinct low-pass
+#define STATE_MAGIC 0x4C4D4E38u /* "LMN8" (LMN7 before the current delay's window, LMN6
+                                      before one EKF state per distinct low-pass
                                       time constant, LMN5 before ob_hist, LMN4 before
                                       dep_source, LMN3 before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
@@ -55,6 +56,10 @@ typedef struct {
     int d;
     /* co-simulation accumulators (cosim.CellCosim) */
     double covered, charge, temp_int, volt_int, volt_time;
+    /* the current delay's window, DELAY_S earlier than the model step's (cosim.CellCosim):
+       covered time, charge (NAN until the first input fills its start) and the last closed
+       window's mean current */
+    double d_covered, d_charge, d_current;
     int out_of_range, steps;
     /* observer (observers.SocObserver) */
     double q, r, ob_soc, ob_var, ob_floor;
@@ -975,7 +980,8 @@ static void thermal_update(State *s, double input, double i) {
 
 static void model_step(Instance *in) {
     State *s = &in->s;
-    double i = s->charge / TS, ta = s->temp_int / TS, t = cell_temperature(s, ta);
+    double i = DELAY_S > 0 ? s->d_current : s->charge / TS, ta = s->temp_int / TS;
+    double t = cell_temperature(s, ta);
     s->out_of_range = check_range(in, i, t, s->observer ? s->ob_soc : s->soc);
     if (s->observer) {
         double v = s->volt_time >= TS * (1 - STEP_TOL) ? s->volt_int / s->volt_time : 0.0;
@@ -1022,8 +1028,14 @@ static fmi2Status cosim_advance(Instance *in, double h) {
               MAX_TEMPERATURE_C);
         return fmi2Error;
     }
+    if (DELAY_S > 0 && isnan(s->d_charge)) s->d_charge = s->current * DELAY_S;
     while (remaining > 0.0) {          /* every positive step counts, however short */
         double take = TS - s->covered < remaining ? TS - s->covered : remaining;
+        if (DELAY_S > 0) {
+            if (TS - s->d_covered < take) take = TS - s->d_covered;
+            s->d_covered += take;
+            s->d_charge += s->current * take;
+        }
         s->covered += take;
         s->charge += s->current * take;
         s->temp_int += s->temperature * take;
@@ -1032,6 +1044,10 @@ static fmi2Status cosim_advance(Instance *in, double h) {
             s->volt_time += take;
         }
         remaining -= take;
+        if (DELAY_S > 0 && s->d_covered >= TS * (1.0 - STEP_TOL)) {
+            s->d_current = s->d_charge / TS;
+            s->d_covered = s->d_charge = 0.0;
+        }
         if (s->covered >= TS * (1.0 - STEP_TOL)) model_step(in);
     }
     s->time += h;
@@ -1053,6 +1069,9 @@ static void init_state(State *s) {
     stepper_init(s, soc0, s->t_last_input);
     observer_init(s, soc0);
     s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
+    s->d_covered = DELAY_S;
+    s->d_charge = NAN;
+    s->d_current = 0.0;
     s->out_of_range = 0;
     s->steps = 0;
     s->initialized = 1;

@@ -99,9 +99,11 @@ def estimate_capacity(records: list[Record]) -> float:
 
 def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_ah: float,
                        soc_window: tuple[float, float] = (0.0, 1.0),
-                       outside_weight: float = 1.0) -> list[Segment]:
+                       outside_weight: float = 1.0,
+                       current_delay_s: float = 0.0) -> list[Segment]:
     """Reference SoC by coulomb counting (tester counters where present), then each gap-free
-    segment resampled to the model rate."""
+    segment resampled to the model rate (the current δ = current_delay_s late: the input of a
+    model with that delay, LmnModel.current_delay_s)."""
     rec = rec.with_soc(coulomb_count(rec, soc0, capacity_ah))
     chamber = rec.meta.chamber_temp_c
     ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None
@@ -113,7 +115,7 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
     for k, seg in enumerate(rec.segments()):
         if seg.duration_s < 10 * sample_time_s:
             continue
-        rs = resample_segment(seg, sample_time_s)
+        rs = resample_segment(seg, sample_time_s, current_delay_s)
         lo, hi = soc_window
         w = np.where((rs.soc_ref >= lo) & (rs.soc_ref <= hi), 1.0, outside_weight)
         name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"

@@ -18,13 +18,23 @@ def _cumulative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * np.diff(t))])
 
 
-def _step_means(t: np.ndarray, x: np.ndarray, grid: np.ndarray, ts: float) -> np.ndarray:
+def _step_means(t: np.ndarray, x: np.ndarray, grid: np.ndarray, ts: float,
+                delay_s: float = 0.0) -> np.ndarray:
+    """Means of x over [g − Ts − δ, g − δ] for each grid time g (δ = delay_s; before the first
+    sample its value is held)."""
     F = _cumulative(t, x)
-    return (np.interp(grid, t, F) - np.interp(grid - ts, t, F)) / ts
+    if not delay_s:
+        return (np.interp(grid, t, F) - np.interp(grid - ts, t, F)) / ts
+
+    def integral(tau: np.ndarray) -> np.ndarray:
+        return np.interp(tau, t, F) + x[0] * np.minimum(tau - t[0], 0.0)
+
+    return (integral(grid - delay_s) - integral(grid - ts - delay_s)) / ts
 
 
-def resample_segment(rec: Record, sample_time_s: float) -> Record:
-    """One gap-free record on a fixed grid t0+Ts, t0+2Ts, … (means over each step)."""
+def resample_segment(rec: Record, sample_time_s: float, current_delay_s: float = 0.0) -> Record:
+    """One gap-free record on a fixed grid t0+Ts, t0+2Ts, … (means over each step; the current's
+    over the step δ = current_delay_s earlier, as a model with that delay takes it)."""
     ts = float(sample_time_s)
     if not ts > 0:
         raise DataError(f"{rec.meta.source}: sample_time_s={ts!r}; expected > 0 s")
@@ -43,14 +53,15 @@ def resample_segment(rec: Record, sample_time_s: float) -> Record:
 
     meta = dataclasses.replace(rec.meta, sample_time_s=ts, segment_starts=[0],
                                notes=[*rec.meta.notes, f"resampled to {ts} s (step means)"])
-    return Record(grid, mean(rec.current_a), mean(rec.voltage_v), meta,
+    current = _step_means(t, rec.current_a, grid, ts, current_delay_s)
+    return Record(grid, current, mean(rec.voltage_v), meta,
                   temperature_c=mean(rec.temperature_c), soc_ref=at(rec.soc_ref),
                   charge_ah=at(rec.charge_ah))
 
 
-def resample(rec: Record, sample_time_s: float) -> list[Record]:
+def resample(rec: Record, sample_time_s: float, current_delay_s: float = 0.0) -> list[Record]:
     """Each gap-free segment of a record resampled to sample_time_s (segments stay separate)."""
-    return [resample_segment(seg, sample_time_s) for seg in rec.segments()
+    return [resample_segment(seg, sample_time_s, current_delay_s) for seg in rec.segments()
             if seg.duration_s >= 2 * sample_time_s]
 
 

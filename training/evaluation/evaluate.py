@@ -74,7 +74,8 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
     cap = capacity_ah or model.capacity_ah
     for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
-        for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0), cap):
+        for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0), cap,
+                                      current_delay_s=model.current_delay_s):
             check_range(model, seg)
             cell = None
             if ambient:

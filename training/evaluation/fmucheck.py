@@ -4,12 +4,14 @@ pipeline's free-run voltage and SoC, driven by the measured cell temperature
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc
 from lmncell.data.readers import read_record
 from lmncell.evaluation.evaluate import ambient_of, simulate_segment
+from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import load_model
 from lmncell.runtime.step import initial_hysteresis, simulate_ambient
 
@@ -48,7 +50,9 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
                               soc0: float | None = None, max_steps: int | None = None,
                               ambient: bool = False) -> dict:
     """Largest voltage and SoC differences between the FMU (through fmpy) and the pipeline on
-    a record's first segment; ambient: both driven by the ambient temperature only."""
+    a record's first segment; ambient: both driven by the ambient temperature only. The FMU
+    gets the segment's step means held over steps of Ts; a model with a current delay delays
+    them itself, and the pipeline is given what it then takes (held_delayed_currents)."""
     model = load_model(model_path)
     rec = read_record(record)
     seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), model.capacity_ah)[0]
@@ -58,13 +62,16 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
                       None if seg.temperature_c is None else seg.temperature_c[:max_steps],
                       seg.soc0, seg.soc_ref[:max_steps], seg.weight[:max_steps],
                       ambient_c=seg.ambient_c)
+    fmu_seg = seg
+    seg = dataclasses.replace(seg, current_a=np.array(held_delayed_currents(
+        seg.current_a.tolist(), model.sample_time_s, model.current_delay_s)))
     if ambient:
         sim, cell = simulate_ambient(model, seg.current_a, ambient_of(seg), seg.soc0, None,
                                      initial_hysteresis(seg.soc0))
     else:
         sim = simulate_segment(model, seg)
         cell = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
-    res = run_fmu_on_segment(fmu, seg, model.sample_time_s, ambient=ambient)
+    res = run_fmu_on_segment(fmu, fmu_seg, model.sample_time_s, ambient=ambient)
     n = len(seg)
     v, s, t = res["voltage"][1:n + 1], res["soc"][1:n + 1], res["cell_temperature"][1:n + 1]
     return {"record": seg.name, "steps": n, "ambient": ambient,

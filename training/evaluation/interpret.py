@@ -132,7 +132,10 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
                  + ("off" if model.hysteresis_gamma is None
                     else f"γ = {model.hysteresis_gamma:g}")
                  + ("" if model.arrhenius_k is None
-                    else f"; resistances × exp(E·(1/T − 1/T_ref)), E = {model.arrhenius_k:g} K"))
+                    else f"; resistances × exp(E·(1/T − 1/T_ref)), E = {model.arrhenius_k:g} K")
+                 + ("" if not model.current_delay_s
+                    else f"; current delayed by {model.current_delay_s:g} s (the voltage "
+                         "channel's lag)"))
     lines.append("resistances in mΩ, voltages in mV; current > 0 charges")
     part = model.partition_variables
     if "rc_mohm_by_tau_s" in rows[0]:

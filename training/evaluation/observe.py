@@ -154,7 +154,8 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
     for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
         seg = observer_segment(record_to_segments(rec, model.sample_time_s,
-                                                  start_soc(rec, rec_soc0), model.capacity_ah),
+                                                  start_soc(rec, rec_soc0), model.capacity_ah,
+                                                  current_delay_s=model.current_delay_s),
                                start_at)
         runs = observer_runs(model, seg, [kind], soc0_est, start_at)
         row = {"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),

@@ -21,6 +21,7 @@ from lmncell.data.dataset import (
     start_soc,
     start_socs,
 )
+from lmncell.data.lag import estimate_current_delay
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
 from lmncell.evaluation.evaluate import simulate_segment
@@ -40,8 +41,9 @@ from lmncell.runtime.step import exo_series, initial_hysteresis
 def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float | None,
                   soc0: float | Sequence[float] | None, progress: Progress = _print,
                   read_options: Mapping[str, Any] | None = None
-                  ) -> tuple[list[Segment], list[Record], float]:
-    """Read files, fix capacity and start SoC, split and resample to the model rate."""
+                  ) -> tuple[list[Segment], list[Record], float, float]:
+    """Read files, fix capacity, start SoC and the current delay (s; cfg.current_delay_s),
+    split and resample to the model rate; returns segments, records, capacity and delay."""
     if not paths:
         raise DataError("no data files given")
     if cfg.record_weights and len(cfg.record_weights) != len(paths):
@@ -55,17 +57,23 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
         capacity_ah = estimate_capacity(records)
         progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
                  "(a lower bound; give --capacity for a measured value)")
+    delay = cfg.current_delay_s
+    if delay == "auto":
+        delay = estimate_current_delay(records, cfg.sample_time_s)
+        progress(f"current delay {delay:.3f} s: the lag of the voltage channel behind the "
+                 "current (lmncell.data.lag)")
     segs: list[Segment] = []
     weights = cfg.record_weights or [1.0] * len(records)
     for rec, weight, rec_soc0 in zip(records, weights, start_socs(soc0, len(records)),
                                      strict=True):
         for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, rec_soc0),
                                       capacity_ah,
-                                      tuple(cfg.soc_window), cfg.outside_weight):
+                                      tuple(cfg.soc_window), cfg.outside_weight,
+                                      float(delay)):
             seg.weight = seg.weight * float(weight)
             seg.record_weight = float(weight)
             segs.append(seg)
-    return segs, records, float(capacity_ah)
+    return segs, records, float(capacity_ah), float(delay)
 
 
 def _limits(segs: list[Segment], model: LmnModel) -> dict:
@@ -107,11 +115,13 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
-    segs, records, cap = load_segments(paths, cfg, capacity_ah, soc0, progress, read_options)
+    segs, records, cap, delay = load_segments(paths, cfg, capacity_ah, soc0, progress,
+                                              read_options)
     n = sum(len(s) for s in segs)
     progress(f"training on {len(segs)} segment(s), {n} samples at Ts = {cfg.sample_time_s} s")
     result = train_lmn(segs, cfg, cap, progress)
     model = result.model
+    model.current_delay_s = delay
     model.limits = _limits(segs, model)
     model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
                   "voltage_max_v": model.limits["voltage_v"][1]}

@@ -288,7 +288,8 @@ def _observer_section(rep: Report, model: LmnModel, record: Record, capacity: fl
     Returns the SoC RMSE after 10 minutes (%) of each, and the observers' share of samples
     whose truth lies outside their ±3σ band (%)."""
     _say("SoC observers (EKF, fuzzy, IMM) on the unseen 25 °C record from a wrong start …")
-    seg = record_to_segments(record, model.sample_time_s, 1.0, capacity)[0]
+    seg = record_to_segments(record, model.sample_time_s, 1.0, capacity,
+                             current_delay_s=model.current_delay_s)[0]
     runs = observer_runs(model, seg, ["ekf", "fuzzy", "imm"], OBSERVER_GUESS, OBSERVER_START)
     rows = [{"observer": r.name, **soc_metrics(r)} for r in runs]
     rep.section("SoC estimation")
