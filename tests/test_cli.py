@@ -121,3 +121,24 @@ def test_start_soc_per_file(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit):
         main(["train", str(PAN_US06), "--out", str(out), "--soc0", "1,x"])
     assert "'x': expected a SoC fraction within 0…1" in capsys.readouterr().err
+
+
+def test_output_into_a_closed_pipe_is_no_error(quick_model, tmp_path, monkeypatch) -> None:
+    # `lmncell explain MODEL | head -1`: the reader stops, the next write breaks the pipe
+    sink = open(tmp_path / "sink", "w")    # noqa: SIM115 (closed below)
+
+    class ClosedPipe:
+        def write(self, _text: str) -> int:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def flush(self) -> None:
+            raise BrokenPipeError(32, "Broken pipe")
+
+        def fileno(self) -> int:
+            return sink.fileno()
+
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    try:
+        assert main(["explain", str(quick_model)]) == 0
+    finally:
+        sink.close()
