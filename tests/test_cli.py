@@ -25,7 +25,11 @@ def test_inspect_reads_every_shared_file(capsys) -> None:
 def test_inspect_plot_and_bad_file(tmp_path, capsys) -> None:
     assert main(["inspect", str(A123_S1), "--plot", str(tmp_path / "r.png")]) == 0
     assert (tmp_path / "r.png").stat().st_size > 10_000
-    assert "SoC 12.9 … 100.0 %" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "SoC 12.9 … 100.0 %" in out and "lags the current" not in out    # 1 s, aligned
+    assert main(["inspect", str(PAN_US06)]) == 0
+    assert "the voltage channel lags the current by 0.90 sample(s), 0.091 s" in (
+        capsys.readouterr().out)
     bad = tmp_path / "bad.csv"
     bad.write_text("x,y\n1,2\n")
     assert main(["inspect", str(bad)]) == 2

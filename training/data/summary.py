@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 from lmncell.data.dataset import starts_rested_full
+from lmncell.data.lag import channel_lag_samples
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record
 from lmncell.data.soc import charge_throughput_ah
@@ -46,6 +47,9 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
     if rec.temperature_c is not None:
         out["temperature_c"] = [float(np.min(rec.temperature_c)),
                                 float(np.max(rec.temperature_c))]
+    lag = channel_lag_samples(rec)
+    if lag is not None:
+        out["voltage_lag_samples"] = lag
     return out
 
 
@@ -69,6 +73,11 @@ def format_summary(s: dict) -> str:
     if s["chamber_temp_c"] is not None and not (isinstance(s["chamber_temp_c"], float)
                                                 and math.isnan(s["chamber_temp_c"])):
         lines.append(f"  chamber {s['chamber_temp_c']:.0f} °C")
+    lag = s.get("voltage_lag_samples")
+    if lag:
+        lines.append(f"  the voltage channel lags the current by {lag:.2f} sample(s), "
+                     f"{lag * s['sample_time_s']:.3f} s (lmncell.data.lag: training's "
+                     "current_delay_s 'auto' uses it where records are finer than Ts/2)")
     lines += [f"  note: {n}" for n in s["notes"]]
     return "\n".join(lines)
 
