@@ -20,9 +20,10 @@ DELAY_RESOLUTION_S = 1e-3    # an estimated lag is rounded to this
 
 def channel_lag_samples(rec: Record) -> float | None:
     """The lag (raw samples, ≥ 0) of the voltage behind the current: the peak of the
-    correlation of Δi and Δu over lags 0…MAX_LAG_SAMPLES inside each gap-free segment,
-    refined by a parabola through the peak and its neighbours (0 where the peak is at lag 0:
-    a lag shorter than a sample is not resolved there); None where the current hardly moves."""
+    cross-products Σ Δi(k)·Δu(k + lag) over lags 0…MAX_LAG_SAMPLES inside each gap-free
+    segment, refined by a parabola through the peak and its neighbours (0 where the peak is at
+    lag 0: a lag shorter than a sample is not resolved there); None where the current or the
+    voltage never changes, or no lag shows the voltage rising with the current."""
     num = np.zeros(MAX_LAG_SAMPLES + 1)
     di2 = du2 = 0.0
     for seg in rec.segments():
@@ -37,6 +38,8 @@ def channel_lag_samples(rec: Record) -> float | None:
     if di2 <= 0.0 or du2 <= 0.0:
         return None
     peak = int(np.argmax(num))
+    if num[peak] <= 0.0:
+        return None
     if peak == 0:
         return 0.0
     left, mid = num[peak - 1], num[peak]
