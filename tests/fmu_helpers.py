@@ -28,7 +28,10 @@ class Instance:
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         for k, v in (start or {}).items():
-            self.slave.setReal([self.vr[k]], [float(v)])
+            if isinstance(v, bool):
+                self.slave.setBoolean([self.vr[k]], [v])
+            else:
+                self.slave.setReal([self.vr[k]], [float(v)])
         if observer:
             self.slave.setInteger([self.vr["observer"]], [observer])
         self.slave.exitInitializationMode()

@@ -63,19 +63,22 @@ def test_native_equals_pipeline_on_a_real_record(quick_model, native_fmu) -> Non
 
 
 def _observer_gap(model, fmu, seg, observer: int, kind: str, start: int, n: int,
-                  soc0: float) -> tuple[float, float, SocObserver]:
+                  soc0: float, temperature_c: float = 25.0) -> tuple[float, float, SocObserver]:
     """Largest |Δvoltage|, |ΔSoC| and |Δσ| between the native FMU's observer and the runtime's
-    over n steps of a record from sample start."""
-    ob = SocObserver(model, kind, soc0, temperature_c=25.0)
-    inst = Instance(fmu, start={"soc0": soc0}, observer=observer)
+    over n steps of a record from sample start, at one cell temperature."""
+    ob = SocObserver(model, kind, soc0, temperature_c=temperature_c)
+    # 25 °C as the cell temperature, as the runtime observer takes it (with the ambient, the
+    # FMU's thermal model would warm the cell, which only the extrapolation factor of σ_m sees
+    # in a model without temperature dependence)
+    inst = Instance(fmu, start={"soc0": soc0, "temperature_is_cell": True}, observer=observer)
     taken = held_delayed_currents(seg.current_a[start:start + n].tolist(), model.sample_time_s,
                                   model.current_delay_s)      # what the FMU's model takes
     try:
         worst_v = worst_s = worst_sd = 0.0
         for k in range(start, start + n):
-            ob.step(taken[k - start], float(seg.voltage_v[k]), 25.0)
+            ob.step(taken[k - start], float(seg.voltage_v[k]), temperature_c)
             inst.slave.setReal([inst.vr["voltage_measured"]], [float(seg.voltage_v[k])])
-            inst.step(float(seg.current_a[k]))
+            inst.step(float(seg.current_a[k]), temperature=temperature_c)
             v, s, sd = inst.get("voltage", "soc", "soc_std")
             worst_v = max(worst_v, abs(v - ob.stepper.voltage_v))
             worst_s = max(worst_s, abs(s - ob.state.soc))
@@ -95,6 +98,18 @@ def test_native_observers_equal_the_runtime(native_fmu, us06, observer, kind) ->
     # for the EKF (numpy 2.4), hence 1e-9 for σ as in the tests below
     assert worst_v <= 1e-9 and worst_s <= 1e-12 and worst_sd <= 1e-9
     assert abs(ob.state.soc - seg.soc_ref[n - 1]) < 0.05   # corrected from 0.4
+
+
+@pytest.mark.parametrize("observer, kind", [(1, "ekf"), (3, "imm")])
+def test_native_observers_beyond_the_trained_temperatures_equal_the_runtime(
+        native_fmu, us06, observer, kind) -> None:
+    # there σ_m grows with the distance (SocObserver._extrapolation), in C as in the runtime
+    model, seg = us06
+    assert model.limits["temperature_c"][1] < 40.0
+    worst_v, worst_s, worst_sd, ob = _observer_gap(model, native_fmu, seg, observer, kind, 0,
+                                                   300, 0.4, temperature_c=45.0)
+    assert ob._extrapolation > 2.0
+    assert worst_v <= 1e-9 and worst_s <= 1e-12 and worst_sd <= 1e-9
 
 
 def test_native_ekf_with_hysteresis_equals_the_runtime(a123_model, tmp_path) -> None:

@@ -390,3 +390,17 @@ def test_observer_state_of_another_size_is_refused(us06) -> None:
     longer = dict(fuzzy.get_state(), history=[0.1] * (len(fuzzy.lowpass_slots) + 1))
     with pytest.raises(ValueError, match="history has"):
         fuzzy.set_state(longer)
+
+
+def test_model_error_grows_beyond_the_trained_temperatures(a123_model) -> None:
+    from lmncell.runtime.observers import EXTRAPOLATION_K
+
+    model = load_model(a123_model)
+    lo, hi = model.limits["temperature_c"]
+    ob = SocObserver(model, "ekf", 0.5, temperature_c=hi)
+    inside = ob._model_error(0.5)
+    assert ob._extrapolation == 1.0 and inside > 0.0
+    for t in (hi + 20.0, lo - 5.0):
+        ob._step_inputs = (0.0, t, ob._step_inputs[2])
+        beyond = max(t - hi, lo - t)
+        assert ob._model_error(0.5) == pytest.approx(inside * (1.0 + beyond / EXTRAPOLATION_K))

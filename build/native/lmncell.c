@@ -27,6 +27,7 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define CHARGE 1
 #define DISCHARGE 2
 #define STEP_TOL 1e-9
+#define EXTRAPOLATION_K 10.0     /* observers.EXTRAPOLATION_K */
 #define GATE_V 0.5
 #define NX (1 + NLX + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states (NLX), h */
 #define STATE_MAGIC 0x4C4D4E38u /* "LMN8" (LMN7 before the current delay's window, LMN6
@@ -627,10 +628,13 @@ static double model_error_at(double soc) {
     return MERR_V[k] + (MERR_V[k + 1] - MERR_V[k]) * (soc - MERR_SOC[k]) / (MERR_SOC[k + 1] - MERR_SOC[k]);
 }
 
-/* SocObserver._model_error: the training error at a SoC, or the recent innovations' RMS; for
+/* SocObserver._model_error: the training error at a SoC (times SocObserver._extrapolation
+   beyond the trained temperatures), or the recent innovations' RMS; for
    the fuzzy observer and the IMM in quadrature with the voltage of the load history's spread */
 static double model_error(const State *s, double soc) {
-    double trained = model_error_at(soc), recent = sqrt(s->ob_innov_ms);
+    double beyond = T_MIN - s->ob_t > s->ob_t - T_MAX ? T_MIN - s->ob_t : s->ob_t - T_MAX;
+    double trained = model_error_at(soc) * (1.0 + (beyond > 0.0 ? beyond : 0.0) / EXTRAPOLATION_K);
+    double recent = sqrt(s->ob_innov_ms);
     double err = recent > trained ? recent : trained;
     if (s->ob_hist_on) {
         double hv[NX + 1], uh = 0.0;
