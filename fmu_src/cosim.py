@@ -20,6 +20,7 @@ from .step import CellStepper, CellThermal
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
 MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
+ACCUMULATORS = 8   # get_state's "acc": the step's five, the current delay's three
 
 
 def held_delayed_currents(current_a: list[float], ts: float, delay_s: float) -> list[float]:
@@ -238,6 +239,12 @@ class CellCosim:
                            self.params.temperature_is_cell]}
 
     def set_state(self, state: dict) -> None:
+        """Restore a get_state() dict; one of another shape (e.g. saved by another LMNCell
+        version) is refused with a ValueError before anything changes."""
+        acc = [float(x) for x in state["acc"]]
+        if len(acc) != ACCUMULATORS:
+            raise ValueError(f"FMU state: 'acc' holds {len(acc)} values, expected "
+                             f"{ACCUMULATORS} (a state saved by another LMNCell version?)")
         soc0, cap, obs, is_cell = state["params"]
         self.params = Parameters(float(soc0), float(cap), int(obs), bool(is_cell))
         self.reset()
@@ -249,7 +256,6 @@ class CellCosim:
         else:
             self.stepper.set_state(list(state["stepper"]))
         (self.covered_s, self.charge_as, self.temp_int, self.volt_int, self.volt_time,
-         self.delay_covered_s, self.delay_charge_as, self.delayed_current_a) = (
-            float(x) for x in state["acc"])
+         self.delay_covered_s, self.delay_charge_as, self.delayed_current_a) = acc
         self.out_of_range, self.range_message, self.steps = (
             bool(state["flags"][0]), str(state["flags"][1]), int(state["flags"][2]))

@@ -222,3 +222,20 @@ def test_current_delay_takes_the_window_delta_earlier(quick_model) -> None:
         if cosim.advance(float(h), float(i)):
             worst = max(worst, abs(cosim.voltage_v - ref_v[cosim.steps - 1]))
     assert cosim.steps == len(ref_v) and worst <= 1e-9
+
+
+def test_a_state_of_another_shape_is_refused_before_anything_changes(quick_model) -> None:
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    cosim = CellCosim(load_model(quick_model), Parameters(0.8, 2.85))
+    for _ in range(5):
+        cosim.advance(0.7, -2.0)
+    saved = cosim.get_state()
+    old = dict(saved, acc=saved["acc"][:5])          # the five accumulators before the delay
+    cosim.advance(1.0, -3.0)
+    before = (cosim.voltage_v, cosim.steps, cosim.get_state()["acc"])
+    with pytest.raises(ValueError, match="'acc' holds 5 values, expected 8"):
+        cosim.set_state(old)
+    assert (cosim.voltage_v, cosim.steps, cosim.get_state()["acc"]) == before
+    cosim.set_state(saved)
+    assert cosim.steps == 3
