@@ -308,6 +308,7 @@ class _OneSample:
         order, into, leaf_slots, self.n_slots = tree_plan(model.leaf_paths)
         self.leaves = picker(leaf_slots)        # the leaves' validities from the slots
         self.plan = [(into[node], 1 + 2 * node) for node in order]
+        self.plan3 = [(parent, out, out + 1) for parent, out in self.plan]   # (parent, sides)
         node_w = np.array([[weights[node][0], *weights[node][1]] for node in order]
                           ).reshape(len(order), 1 + len(model.partition_variables))
         na = model.output_lags
@@ -323,7 +324,7 @@ class _OneSample:
         # without a SoC partition input), and (0: soc(k), 1: ocv(k), 2: d(k), each local
         # model's coefficient) of the SoC regressors the model has
         pv = model.partition_variables
-        self.slope_plan = ([(into, out, weights[node][1][pv.index("soc")])
+        self.slope_plan = ([(into, out, out + 1, weights[node][1][pv.index("soc")])
                             for (into, out), node in zip(self.plan, order, strict=True)]
                            if "soc" in pv else [])
         exo = model.columns()[na:]
@@ -347,17 +348,7 @@ class _OneSample:
         part θ_exo,j·x, the tree's slots for soc_slope) of one sample from products = block·u,
         u = [1, raw partition inputs, exogenous regressors]: the nodes' activations, then each
         local model's θ_exo,j·x."""
-        v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
-        exp = math.exp
-        for (into, out), act in zip(self.plan, products, strict=False):
-            parent = v[into]                 # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
-            try:
-                side = parent / (1.0 + exp(-act))
-            except OverflowError:            # act < −709.78: φ = 0, as numpy's inf gives
-                side = parent / math.inf
-            v[out] = side
-            v[out + 1] = parent - side
-        validity = self.leaf_values(v, direction)
+        validity, v = self.walk(products, direction)
         local = products[self.n_nodes:]
         b = sum(map(operator.mul, validity, local))
         a = [0.0] * self.na
@@ -366,6 +357,28 @@ class _OneSample:
                 for l in range(self.na):
                     a[l] += vj * row[l]
         return a, b, validity, local, v
+
+    def walk(self, activations: Sequence[float], direction: int
+             ) -> tuple[Sequence[float], list[float]]:
+        """(validities, tree slots) from the nodes' activations (the first n_nodes entries of
+        activations; any further entries are ignored)."""
+        v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
+        exp = math.exp
+        try:
+            for (into, out, other), act in zip(self.plan3, activations, strict=False):
+                parent = v[into]             # φ = 1/(1 + e^−act); sides φ·v and v − φ·v
+                v[out] = side = parent / (1.0 + exp(-act))
+                v[other] = parent - side
+        except OverflowError:                # some act < −709.78: again, node by node
+            for (into, out, other), act in zip(self.plan3, activations, strict=False):
+                parent = v[into]
+                try:
+                    side = parent / (1.0 + exp(-act))
+                except OverflowError:        # φ = 0, as numpy's inf gives
+                    side = parent / math.inf
+                v[out] = side
+                v[other] = parent - side
+        return self.leaf_values(v, direction), v
 
     def leaf_values(self, slots: list[float], direction: int) -> Sequence[float]:
         """Each leaf's entry of slots (its validity, or a derivative of it), 0 where a
@@ -389,13 +402,12 @@ class _OneSample:
         slope = 0.0
         if self.slope_plan:
             dv = [0.0] * self.n_slots
-            for into, out, w in self.slope_plan:
+            for into, out, other, w in self.slope_plan:
                 parent = slots[into]
                 if parent != 0.0:      # φ·∂v + side·(1 − φ)·w, φ = side/v
                     side = slots[out]
-                    d = side * (dv[into] + (parent - side) * w) / parent
-                    dv[out] = d
-                    dv[out + 1] = dv[into] - d
+                    dv[out] = d = side * (dv[into] + (parent - side) * w) / parent
+                    dv[other] = dv[into] - d
             dphi = self.leaf_values(dv, direction)
             slope = sum(map(mul, dphi, products[self.n_nodes:]))
             if lag_part:
