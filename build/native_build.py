@@ -23,6 +23,7 @@ from lmncell.fmu.interface import dependency_indices
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE,
+    EKF_ERROR_SCALE_BY_SOC,
     FD_CURRENT_A,
     FD_HYSTERESIS,
     FD_SOC,
@@ -74,6 +75,7 @@ def model_header(model: LmnModel, guid: str) -> str:
     lp = [np.exp(-m.sample_time_s / tau) for f in m.filters for tau in f]
     settings = ObserverSettings.for_model(m)
     merr = settings.model_error_by_soc or ([0.5], [float(settings.model_error_v)])
+    vsig = settings.voltage_sigma_by_soc or ([0.5], [float(settings.voltage_sigma_v)])
     tau = settings.innovation_tau_s
     innovation_decay = math.exp(-m.sample_time_s / tau) if tau > 0 else 0.0
     lim = m.limits
@@ -142,6 +144,9 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define NMERR {len(merr[0])}",
         f"#define VOLTAGE_SIGMA_V {float(settings.voltage_sigma_v)!r}",
         f"#define EKF_ERROR_SCALE {EKF_ERROR_SCALE!r}",
+        f"#define EKF_ERROR_SCALE_BY_SOC {EKF_ERROR_SCALE_BY_SOC!r}",
+        f"#define HAS_VSIG {int(settings.voltage_sigma_by_soc is not None)}",
+        f"#define NVSIG {len(vsig[0])}",
         f"#define IMM_ERROR_SCALE {IMM_ERROR_SCALE!r}",
         f"#define SOC0_SIGMA {settings.soc0_sigma!r}", f"#define IMM_STAY {settings.imm_stay!r}",
         f"#define INNOVATION_ON {int(settings.innovation_tau_s > 0)}",
@@ -176,6 +181,9 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"static const double LOCAL_SLOPE[NM] = {_arr(local_ocv_slopes(m))};",
         f"static const double MERR_SOC[NMERR] = {_arr(merr[0])};",
         f"static const double MERR_V[NMERR] = {_arr(merr[1])};",
+        "/* the EKF's σ_u(SoC) (ObserverSettings.voltage_sigma_by_soc) */",
+        f"static const double VSIG_SOC[NVSIG] = {_arr(vsig[0])};",
+        f"static const double VSIG_V[NVSIG] = {_arr(vsig[1])};",
         *_state_column_tables(m),
         "#endif", ""]
     return "\n".join(lines)

@@ -47,7 +47,9 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   ``residual_std_by_soc`` {``soc``: bin centres, ``std_v``: that error's RMS per bin of the
   reference SoC, never below ``residual_std_v``, times the identification's validation / fit
   free-run RMSE ratio (≥ 1; the error to expect on new data); the observers' SoC-variance
-  floor} and
+  floor}, (optional) ``residual_rms_by_soc`` {``soc``: the same bin centres,
+  ``rms_v``: the free-run training error's RMS per bin, no floor; the EKF's measurement error
+  σ_u(SoC)} and
   ``recent_current_rms_a``, the RMS of the training current low-passed over 150 s (observer
   defaults).
 - ``observers`` (optional): ``fuzzy``, the fuzzy observer's offline design for the default
@@ -387,16 +389,18 @@ def _depletion(doc: object, filters: list[tuple[float, float]], where: str
 
 
 def _noise(doc: object, source: str) -> dict:
-    """The 'noise' object; its optional residual_std_by_soc checked (increasing SoC in 0…1,
-    one finite σ ≥ 0 per SoC)."""
+    """The 'noise' object; its optional residual_std_by_soc and residual_rms_by_soc checked
+    (increasing SoC in 0…1, one finite σ ≥ 0 per SoC)."""
     if not isinstance(doc, dict):
         raise ModelFileError(f"{source}: 'noise' must be an object, got {doc!r}")
-    by_soc = doc.get("residual_std_by_soc")
-    if by_soc is not None:
-        where = f"{source}: noise.residual_std_by_soc"
+    for key, values in (("residual_std_by_soc", "std_v"), ("residual_rms_by_soc", "rms_v")):
+        by_soc = doc.get(key)
+        if by_soc is None:
+            continue
+        where = f"{source}: noise.{key}"
         if not isinstance(by_soc, dict):
-            raise ModelFileError(f"{where} must be an object with 'soc' and 'std_v'")
-        soc, std = _array(by_soc, "soc", where, 1), _array(by_soc, "std_v", where, 1)
+            raise ModelFileError(f"{where} must be an object with 'soc' and '{values}'")
+        soc, std = _array(by_soc, "soc", where, 1), _array(by_soc, values, where, 1)
         if (soc.size == 0 or soc.size != std.size or np.any(np.diff(soc) <= 0)
                 or soc[0] < 0 or soc[-1] > 1 or np.any(std < 0)):
             raise ModelFileError(f"{where}: expected increasing SoC within 0…1 and one σ ≥ 0 "

@@ -40,7 +40,17 @@ of the time on a held-out Panasonic cycle; with 4·σ_u 97 %, SoC RMSE 0.47 → 
 mode filters take IMM_ERROR_SCALE·σ_u = √2·σ_u for the same reason: with σ_u its mixture
 variance collapsed on the flat A123 plateau at −5 °C, held out, and 5.3 % of the samples fell
 outside ±3σ; with √2·σ_u 1.7 %, SoC RMSE 5.9 → 6.2 %, measured before the depletion
-regressor; with it 6.2 % outside, and 5.5 % with 2·σ_u). σ_d defaults to
+regressor; with it 6.2 % outside, and 5.5 % with 2·σ_u). Where the model file has the training
+error by SoC (noise.residual_rms_by_soc), the EKF's σ_u is a function of its SoC estimate,
+σ_u(SoC) = 3·that RMS (at least 2 mV), scaled by EKF_ERROR_SCALE_BY_SOC = 10 ≈ √(2·τ_c/Ts) for
+an error correlated over τ_c ≈ 50 s (the held-out residuals' autocorrelation falls to 1/e after
+28–330 s): the whole-record RMSE is dominated by the voltage collapse near empty (A123: 15 mV
+overall, 2 mV per bin on the plateau), and as one σ_u it made the EKF distrust the voltage
+where the model is good. Leave-one-out, started under load at true 0.6 with 0.3, SoC RMSE
+after 10 min, scalar 4·σ_u → 10·σ_u(SoC): A123 (−15, −5, 5, 25, 45 °C held out)
+8.92 / 3.50 / 4.90 / 2.61 / 3.08 → 8.22 / 2.52 / 2.65 / 2.41 / 2.84 %; Panasonic 25 °C
+0.34 → 0.27 %; 25 + 10 °C, 10 °C held out 0.70 → 0.58 %; at most 0.1 % of the samples outside
+±3σ before and after. σ_d defaults to
 EKF_DRIFT_PER_SQRT_H for the EKF (it estimates the dynamic state, so the walk only stands for a
 capacity error of about 1.5 % at 1/3 C) and SOC_ONLY_DRIFT_PER_SQRT_H for the fuzzy observer and
 the IMM, whose SoC also absorbs the error of the hysteresis and filter states they do not
@@ -79,6 +89,8 @@ OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5
 MODEL_ERROR_FACTOR = 3.0
 EKF_ERROR_SCALE = 4.0
+EKF_ERROR_SCALE_BY_SOC = 10.0
+MIN_VOLTAGE_SIGMA_V = 0.002   # the smallest default σ_u (V)
 IMM_ERROR_SCALE = math.sqrt(2.0)
 ERROR_SCALE = {"ekf": EKF_ERROR_SCALE, "fuzzy": 1.0, "imm": IMM_ERROR_SCALE}
 FD_SOC = 1e-4
@@ -105,7 +117,9 @@ class ObserverSettings:
     persistent voltage error σ_m (V; its free-run training RMSE by default) and
     model_error_by_soc ([SoC…], [σ_m…]; the model file's noise.residual_std_by_soc by
     default), which set the floor of the reported SoC variance (soc_variance_floor), raised to
-    the RMS of the innovations over the last innovation_tau_s (s; 0: not raised)."""
+    the RMS of the innovations over the last innovation_tau_s (s; 0: not raised);
+    voltage_sigma_by_soc ([SoC…], [σ_u…] in V): the EKF's measurement error as a function of
+    SoC, used instead of voltage_sigma_v (with EKF_ERROR_SCALE_BY_SOC) where given."""
 
     current_sigma_a: float = 0.05
     soc_drift_per_sqrt_h: float | None = None
@@ -117,6 +131,7 @@ class ObserverSettings:
     innovation_tau_s: float = INNOVATION_TAU_S
     model_error_v: float = 0.0
     model_error_by_soc: tuple[list[float], list[float]] | None = None
+    voltage_sigma_by_soc: tuple[list[float], list[float]] | None = None
 
     def model_error_at(self, soc: float) -> float:
         """σ_m (V) at a SoC: model_error_by_soc interpolated (held beyond its ends), else
@@ -143,15 +158,27 @@ class ObserverSettings:
         model, 1.21 % against 1.63 % with the history taken as rest)."""
         s = cls()
         rmse = float(model.noise.get("residual_std_v", 0.01))
-        s.voltage_sigma_v = max(MODEL_ERROR_FACTOR * rmse, 0.002)
+        s.voltage_sigma_v = max(MODEL_ERROR_FACTOR * rmse, MIN_VOLTAGE_SIGMA_V)
         s.model_error_v = rmse
         by_soc = model.noise.get("residual_std_by_soc")
         if by_soc:
             s.model_error_by_soc = ([float(v) for v in by_soc["soc"]],
                                     [float(v) for v in by_soc["std_v"]])
+        rms = model.noise.get("residual_rms_by_soc")
+        if rms:
+            s.voltage_sigma_by_soc = ([float(v) for v in rms["soc"]],
+                                      [max(MODEL_ERROR_FACTOR * float(v), MIN_VOLTAGE_SIGMA_V)
+                                       for v in rms["rms_v"]])
         if not at_rest:
             s.history_current_sigma_a = float(model.noise.get("recent_current_rms_a", 0.0))
         return s
+
+    def ekf_measurement_variance(self, soc: float) -> float:
+        """The EKF's r (V²) at a SoC estimate: (EKF_ERROR_SCALE_BY_SOC·σ_u(SoC))² where
+        voltage_sigma_by_soc is given, else (EKF_ERROR_SCALE·voltage_sigma_v)²."""
+        if self.voltage_sigma_by_soc is None:
+            return (self.voltage_sigma_v * EKF_ERROR_SCALE) ** 2
+        return (EKF_ERROR_SCALE_BY_SOC * interp_one(soc, *self.voltage_sigma_by_soc)) ** 2
 
 
 def _clip01(x: float) -> float:
@@ -422,7 +449,7 @@ class SocObserver:
         p = s.covariance()
         u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(p[0, 0], 0.0)),
                                                           SPREAD_MAX))
-        r = self.r + curvature * curvature
+        r = self.settings.ekf_measurement_variance(soc_prior) + curvature * curvature
         ph = p @ h
         inv_s = 1.0 / (float(h @ ph) + r)        # 1/(hᵀPh + r)
         k = ph * inv_s

@@ -206,6 +206,9 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
      "residual_std_by_soc: expected increasing SoC"),
     (lambda d: d.update(noise={"residual_std_by_soc": {"soc": [0.5], "std_v": [-1.0]}}),
      "residual_std_by_soc: expected"),
+    (lambda d: d.update(noise={"residual_rms_by_soc": {"soc": [0.5], "rms_v": [0.1, 0.2]}}),
+     "residual_rms_by_soc: expected"),
+    (lambda d: d.update(noise={"residual_rms_by_soc": {"soc": [0.5]}}), "rms_v"),
     (lambda d: d.update(noise=[1]), "'noise' must be an object"),
 ])
 def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:

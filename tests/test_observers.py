@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -228,6 +229,62 @@ def test_model_error_by_soc_is_stored_and_larger_near_empty(a123_two_temperature
     ratio = (info["refined_validation_freerun_rmse_mv"]
              / info["refined_train_freerun_rmse_mv"])
     assert min(by_soc["std_v"]) == pytest.approx(max(ratio, 1.0) * overall, rel=1e-12)
+
+
+def test_ekf_measurement_error_follows_the_training_error_by_soc(a123_two_temperatures
+                                                                  ) -> None:
+    """The model file keeps the training error's RMS per SoC bin without a floor (small on the
+    plateau, large near empty); the EKF's r is (EKF_ERROR_SCALE_BY_SOC·3·that RMS)², at least
+    2 mV before scaling; a model without the table falls back to (EKF_ERROR_SCALE·σ_u)²."""
+    from lmncell.runtime.observers import (
+        EKF_ERROR_SCALE,
+        EKF_ERROR_SCALE_BY_SOC,
+        MODEL_ERROR_FACTOR,
+    )
+
+    model, _ = a123_two_temperatures
+    rms = model.noise["residual_rms_by_soc"]
+    std = model.noise["residual_std_by_soc"]
+    assert rms["soc"] == std["soc"]
+    assert all(a <= b for a, b in zip(rms["rms_v"], std["std_v"], strict=True))
+    assert min(rms["rms_v"]) < 0.5 * model.noise["residual_std_v"]   # the plateau
+    assert rms["rms_v"][0] > 2 * model.noise["residual_std_v"]       # the collapse
+    settings = ObserverSettings.for_model(model)
+    for soc, value in zip(rms["soc"], rms["rms_v"], strict=True):
+        sigma = max(MODEL_ERROR_FACTOR * value, 0.002)
+        assert settings.ekf_measurement_variance(soc) == pytest.approx(
+            (EKF_ERROR_SCALE_BY_SOC * sigma) ** 2, rel=1e-12)
+    middle = 0.5 * (rms["soc"][3] + rms["soc"][4])       # linear between the bin centres
+    assert math.sqrt(settings.ekf_measurement_variance(middle)) == pytest.approx(
+        EKF_ERROR_SCALE_BY_SOC * 0.5 * sum(max(MODEL_ERROR_FACTOR * v, 0.002)
+                                           for v in rms["rms_v"][3:5]), rel=1e-12)
+    old = copy.deepcopy(model)
+    del old.noise["residual_rms_by_soc"]
+    settings = ObserverSettings.for_model(old)
+    assert settings.ekf_measurement_variance(0.5) == pytest.approx(
+        (EKF_ERROR_SCALE * settings.voltage_sigma_v) ** 2, rel=1e-12)
+
+
+def test_training_rms_by_soc_bins() -> None:
+    """training_rms_by_soc: the RMS of each 0.1-SoC bin of the reference, the overall value
+    where a bin has too few samples; residual_std_by_soc floors it at the overall and scales."""
+    from types import SimpleNamespace
+
+    from lmncell.identification.train import (
+        MIN_BIN_SAMPLES,
+        residual_std_by_soc,
+        training_rms_by_soc,
+    )
+
+    soc = np.repeat([0.05, 0.55], MIN_BIN_SAMPLES)
+    err = np.where(soc < 0.1, 0.03, 0.002) * np.tile([1.0, -1.0], MIN_BIN_SAMPLES)
+    seg = SimpleNamespace(soc_ref=soc, voltage_v=np.full(soc.size, 3.3))
+    got = training_rms_by_soc([seg], [seg.voltage_v + err], 0.01)
+    assert got["soc"] == pytest.approx(np.arange(0.05, 1.0, 0.1))
+    assert got["rms_v"][0] == pytest.approx(0.03) and got["rms_v"][5] == pytest.approx(0.002)
+    assert got["rms_v"][1] == got["rms_v"][9] == 0.01         # empty bins: the overall
+    floored = residual_std_by_soc([seg], [seg.voltage_v + err], 0.01, factor=1.5)
+    assert floored["std_v"][0] == pytest.approx(0.045) and floored["std_v"][5] == 0.015
 
 
 def test_generalisation_factor() -> None:

@@ -628,6 +628,27 @@ static double model_error_at(double soc) {
     return MERR_V[k] + (MERR_V[k + 1] - MERR_V[k]) * (soc - MERR_SOC[k]) / (MERR_SOC[k + 1] - MERR_SOC[k]);
 }
 
+/* runtime.step.interp_one: numpy.interp for one value (xs increasing), held beyond the ends */
+static double interp_one(double x, const double *xs, const double *ys, int n) {
+    int k;
+    if (!(x > xs[0])) return x == x ? ys[0] : x;
+    if (x >= xs[n - 1]) return ys[n - 1];
+    for (k = 0; k < n - 2; k++)
+        if (x < xs[k + 1]) break;
+    return (ys[k + 1] - ys[k]) / (xs[k + 1] - xs[k]) * (x - xs[k]) + ys[k];
+}
+
+/* ObserverSettings.ekf_measurement_variance: the EKF's r (V²) at a SoC estimate */
+static double ekf_measurement_variance(const State *s, double soc) {
+#if HAS_VSIG
+    (void)s;
+    return pow(EKF_ERROR_SCALE_BY_SOC * interp_one(soc, VSIG_SOC, VSIG_V, NVSIG), 2);
+#else
+    (void)soc;
+    return s->r;
+#endif
+}
+
 /* SocObserver._model_error: the training error at a SoC (times SocObserver._extrapolation
    beyond the trained temperatures), or the recent innovations' RMS; for
    the fuzzy observer and the IMM in quadrature with the voltage of the load history's spread */
@@ -757,7 +778,7 @@ static double ekf_update(State *s, double v) {
         }
 #endif
     }
-    r = s->r + curvature * curvature;
+    r = ekf_measurement_variance(s, soc_prior) + curvature * curvature;
     for (a = 0; a < NX; a++) {
         ph[a] = 0.0;
         for (b = 0; b < NX; b++) ph[a] += s->ob_p[a][b] * hv[b];

@@ -141,7 +141,8 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     model.noise = {"residual_std_v": residual_v,
                    "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s),
                    "residual_std_by_soc": residual_std_by_soc(
-                       segs, sims, residual_v, generalisation_factor(result.info))}
+                       segs, sims, residual_v, generalisation_factor(result.info)),
+                   "residual_rms_by_soc": training_rms_by_soc(segs, sims, residual_v)}
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
@@ -190,22 +191,32 @@ def generalisation_factor(info: dict) -> float:
     return max(1.0, float(val) / float(fit))
 
 
-def residual_std_by_soc(segs: list[Segment], model_v: list[np.ndarray],
-                        overall_v: float, factor: float = 1.0) -> dict:
+def training_rms_by_soc(segs: list[Segment], model_v: list[np.ndarray],
+                        overall_v: float) -> dict:
     """The free-run training error's RMS (V) per SoC bin of the reference SoC, at the bin
-    centres, never below the overall RMS (a bin with fewer than MIN_BIN_SAMPLES samples gets
-    the overall): the observers' persistent model error σ_m(SoC), larger near empty where the
-    voltage collapses than in the middle."""
+    centres (a bin with fewer than MIN_BIN_SAMPLES samples gets overall_v): the EKF's
+    measurement error σ_u(SoC), small on the plateau where the model is good and large near
+    empty where the voltage collapses."""
     soc = np.concatenate([s.soc_ref for s in segs])
     err = np.concatenate([v - s.voltage_v for s, v in zip(segs, model_v, strict=True)])
     edges = np.linspace(0.0, 1.0, SOC_BINS + 1)
     idx = np.clip(np.searchsorted(edges, soc, side="right") - 1, 0, SOC_BINS - 1)
-    std = []
+    rms = []
     for b in range(SOC_BINS):
         e = err[idx == b]
-        rms = float(np.sqrt(np.mean(e * e))) if e.size >= MIN_BIN_SAMPLES else overall_v
-        std.append(factor * (max(rms, overall_v) if np.isfinite(rms) else overall_v))
-    return {"soc": (0.5 * (edges[:-1] + edges[1:])).tolist(), "std_v": std}
+        value = float(np.sqrt(np.mean(e * e))) if e.size >= MIN_BIN_SAMPLES else overall_v
+        rms.append(value if np.isfinite(value) else overall_v)
+    return {"soc": (0.5 * (edges[:-1] + edges[1:])).tolist(), "rms_v": rms}
+
+
+def residual_std_by_soc(segs: list[Segment], model_v: list[np.ndarray],
+                        overall_v: float, factor: float = 1.0) -> dict:
+    """training_rms_by_soc never below the overall RMS, times factor: the observers'
+    persistent model error σ_m(SoC), larger near empty where the voltage collapses than in the
+    middle (the floor of their reported SoC variance)."""
+    by_soc = training_rms_by_soc(segs, model_v, overall_v)
+    return {"soc": by_soc["soc"],
+            "std_v": [factor * max(rms, overall_v) for rms in by_soc["rms_v"]]}
 
 
 def _cell_name(records: list[Record]) -> str:
