@@ -76,9 +76,15 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     out = capsys.readouterr().out
     lines = out.splitlines()
     assert "RC ladder" in lines[0] and "R@800s" in lines[2] and "R ≥ 0" in lines[2]
-    rows = lines[3:]
-    assert len(rows) == json.loads(quick_model.read_text())["local_models"]["theta"].__len__()
+    doc = json.loads(quick_model.read_text())
+    rows = lines[3:3 + len(doc["local_models"]["theta"])]
     assert all(r.split()[-1] == "yes" for r in rows)
+    # then the training error by SoC that the EKF's measurement error follows
+    rms = doc["noise"]["residual_rms_by_soc"]
+    assert lines[3 + len(rows)].startswith("free-run training error RMS by SoC (mV) 0.05: "
+                                           f"{1e3 * rms['rms_v'][0]:.1f}, 0.15: ")
+    assert "σ_u(SoC) is 10 × 3 × that" in lines[4 + len(rows)]
+    assert len(lines) == 5 + len(rows)
     assert main(["explain", str(quick_model), "--temperature", "10", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert all(r["temperature_c"] == 10.0 and r["rc_positive"] for r in doc)

@@ -14,6 +14,11 @@ from lmncell.identification.ladder import (
     ladder_keys,
 )
 from lmncell.runtime.model import LmnModel, load_model
+from lmncell.runtime.observers import (
+    EKF_ERROR_SCALE_BY_SOC,
+    MIN_VOLTAGE_SIGMA_V,
+    MODEL_ERROR_FACTOR,
+)
 from lmncell.runtime.step import arrhenius_gain
 
 
@@ -167,7 +172,22 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
     widths = [max(len(h), *(len(b[k]) for b in body)) for k, h in enumerate(head)]
     lines.append("  ".join(h.rjust(w) for h, w in zip(head, widths, strict=True)))
     lines += ["  ".join(c.rjust(w) for c, w in zip(b, widths, strict=True)) for b in body]
+    lines += _training_error_lines(model)
     return "\n".join(lines)
+
+
+def _training_error_lines(model: LmnModel) -> list[str]:
+    """The free-run training error's RMS per SoC bin (the model file's
+    noise.residual_rms_by_soc) and what the EKF makes of it; none for a model without it."""
+    by_soc = model.noise.get("residual_rms_by_soc")
+    if not by_soc:
+        return []
+    bins = ", ".join(f"{soc:.2f}: {1e3 * rms:.1f}"
+                     for soc, rms in zip(by_soc["soc"], by_soc["rms_v"], strict=True))
+    return [f"free-run training error RMS by SoC (mV) {bins}",
+            f"(the EKF's measurement error σ_u(SoC) is {EKF_ERROR_SCALE_BY_SOC:g} × "
+            f"{MODEL_ERROR_FACTOR:g} × that, at least {EKF_ERROR_SCALE_BY_SOC:g} × "
+            f"{1e3 * MIN_VOLTAGE_SIGMA_V:g} mV)"]
 
 
 def explain(model_path: str | Path, temperature_c: float | None = None,
