@@ -42,7 +42,9 @@ variance collapsed on the flat A123 plateau at −5 °C, held out, and 5.3 % of 
 outside ±3σ; with √2·σ_u 1.7 %, SoC RMSE 5.9 → 6.2 %, measured before the depletion
 regressor; with it 6.2 % outside, and 5.5 % with 2·σ_u). Where the model file has the training
 error by SoC (noise.residual_rms_by_soc), the EKF's σ_u is a function of its SoC estimate,
-σ_u(SoC) = 3·that RMS (at least 2 mV), scaled by EKF_ERROR_SCALE_BY_SOC = 10 ≈ √(2·τ_c/Ts) for
+σ_u(SoC) = 3·that RMS (at least 2 mV; the IMM's mode filters take it at each mode's SoC, times
+IMM_ERROR_SCALE as before: A123 five folds 5.93 → 5.13 %, Panasonic 25 °C 0.72 → 0.75 %,
+10 °C held out 1.74 → 1.73 %), scaled by EKF_ERROR_SCALE_BY_SOC = 10 ≈ √(2·τ_c/Ts) for
 an error correlated over τ_c ≈ 50 s (the held-out residuals' autocorrelation falls to 1/e after
 28–330 s): the whole-record RMSE is dominated by the voltage collapse near empty (A123: 15 mV
 overall, 2 mV per bin on the plateau), and as one σ_u it made the EKF distrust the voltage
@@ -173,12 +175,15 @@ class ObserverSettings:
             s.history_current_sigma_a = float(model.noise.get("recent_current_rms_a", 0.0))
         return s
 
-    def ekf_measurement_variance(self, soc: float) -> float:
-        """The EKF's r (V²) at a SoC estimate: (EKF_ERROR_SCALE_BY_SOC·σ_u(SoC))² where
-        voltage_sigma_by_soc is given, else (EKF_ERROR_SCALE·voltage_sigma_v)²."""
+    def measurement_variance(self, kind: str, soc: float) -> float:
+        """r (V²) of the EKF ("ekf") or of an IMM mode filter ("imm") at a SoC estimate:
+        (scale·σ_u(SoC))² where voltage_sigma_by_soc is given (scale EKF_ERROR_SCALE_BY_SOC,
+        or IMM_ERROR_SCALE), else (scale·voltage_sigma_v)² (EKF_ERROR_SCALE or
+        IMM_ERROR_SCALE)."""
         if self.voltage_sigma_by_soc is None:
-            return (self.voltage_sigma_v * EKF_ERROR_SCALE) ** 2
-        return (EKF_ERROR_SCALE_BY_SOC * interp_one(soc, *self.voltage_sigma_by_soc)) ** 2
+            return (self.voltage_sigma_v * ERROR_SCALE[kind]) ** 2
+        scale = EKF_ERROR_SCALE_BY_SOC if kind == "ekf" else ERROR_SCALE[kind]
+        return (scale * interp_one(soc, *self.voltage_sigma_by_soc)) ** 2
 
 
 def _clip01(x: float) -> float:
@@ -449,7 +454,7 @@ class SocObserver:
         p = s.covariance()
         u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(p[0, 0], 0.0)),
                                                           SPREAD_MAX))
-        r = self.settings.ekf_measurement_variance(soc_prior) + curvature * curvature
+        r = self.settings.measurement_variance("ekf", soc_prior) + curvature * curvature
         ph = p @ h
         inv_s = 1.0 / (float(h @ ph) + r)        # 1/(hᵀPh + r)
         k = ph * inv_s
@@ -549,7 +554,8 @@ class SocObserver:
             u_net, _, local = at[j]
             u_j = local[j]
             h_j = (ends[j][j] - ends[xs.size + j][j]) / (his[j] - los[j])
-            sj = h_j * h_j * ps[j] + self.r + (u_net - u_j) ** 2
+            sj = (h_j * h_j * ps[j] + self.settings.measurement_variance("imm", socs[j])
+                  + (u_net - u_j) ** 2)
             k = ps[j] * h_j / sj
             innov = v_meas - u_j
             xs[j] = _clip01(xs[j] + k * innov)

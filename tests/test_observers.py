@@ -231,14 +231,16 @@ def test_model_error_by_soc_is_stored_and_larger_near_empty(a123_two_temperature
     assert min(by_soc["std_v"]) == pytest.approx(max(ratio, 1.0) * overall, rel=1e-12)
 
 
-def test_ekf_measurement_error_follows_the_training_error_by_soc(a123_two_temperatures
+def test_measurement_error_follows_the_training_error_by_soc(a123_two_temperatures
                                                                   ) -> None:
     """The model file keeps the training error's RMS per SoC bin without a floor (small on the
-    plateau, large near empty); the EKF's r is (EKF_ERROR_SCALE_BY_SOC·3·that RMS)², at least
-    2 mV before scaling; a model without the table falls back to (EKF_ERROR_SCALE·σ_u)²."""
+    plateau, large near empty); the EKF's r is (EKF_ERROR_SCALE_BY_SOC·3·that RMS)², an IMM
+    mode's (IMM_ERROR_SCALE·3·that RMS)², at least 2 mV before scaling; a model without the
+    table falls back to the scalar σ_u with EKF_ERROR_SCALE or IMM_ERROR_SCALE."""
     from lmncell.runtime.observers import (
         EKF_ERROR_SCALE,
         EKF_ERROR_SCALE_BY_SOC,
+        IMM_ERROR_SCALE,
         MODEL_ERROR_FACTOR,
     )
 
@@ -252,17 +254,21 @@ def test_ekf_measurement_error_follows_the_training_error_by_soc(a123_two_temper
     settings = ObserverSettings.for_model(model)
     for soc, value in zip(rms["soc"], rms["rms_v"], strict=True):
         sigma = max(MODEL_ERROR_FACTOR * value, 0.002)
-        assert settings.ekf_measurement_variance(soc) == pytest.approx(
+        assert settings.measurement_variance("ekf", soc) == pytest.approx(
             (EKF_ERROR_SCALE_BY_SOC * sigma) ** 2, rel=1e-12)
+        assert settings.measurement_variance("imm", soc) == pytest.approx(     # each mode
+            (IMM_ERROR_SCALE * sigma) ** 2, rel=1e-12)
     middle = 0.5 * (rms["soc"][3] + rms["soc"][4])       # linear between the bin centres
-    assert math.sqrt(settings.ekf_measurement_variance(middle)) == pytest.approx(
+    assert math.sqrt(settings.measurement_variance("ekf", middle)) == pytest.approx(
         EKF_ERROR_SCALE_BY_SOC * 0.5 * sum(max(MODEL_ERROR_FACTOR * v, 0.002)
                                            for v in rms["rms_v"][3:5]), rel=1e-12)
     old = copy.deepcopy(model)
     del old.noise["residual_rms_by_soc"]
     settings = ObserverSettings.for_model(old)
-    assert settings.ekf_measurement_variance(0.5) == pytest.approx(
+    assert settings.measurement_variance("ekf", 0.5) == pytest.approx(
         (EKF_ERROR_SCALE * settings.voltage_sigma_v) ** 2, rel=1e-12)
+    assert settings.measurement_variance("imm", 0.5) == pytest.approx(
+        (IMM_ERROR_SCALE * settings.voltage_sigma_v) ** 2, rel=1e-12)
 
 
 def test_training_rms_by_soc_bins() -> None:

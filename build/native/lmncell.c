@@ -638,11 +638,11 @@ static double interp_one(double x, const double *xs, const double *ys, int n) {
     return (ys[k + 1] - ys[k]) / (xs[k + 1] - xs[k]) * (x - xs[k]) + ys[k];
 }
 
-/* ObserverSettings.ekf_measurement_variance: the EKF's r (V²) at a SoC estimate */
-static double ekf_measurement_variance(const State *s, double soc) {
+/* ObserverSettings.measurement_variance: r (V²) of the EKF or of an IMM mode filter at a SoC */
+static double measurement_variance(const State *s, double soc) {
 #if HAS_VSIG
-    (void)s;
-    return pow(EKF_ERROR_SCALE_BY_SOC * interp_one(soc, VSIG_SOC, VSIG_V, NVSIG), 2);
+    double sig = interp_one(soc, VSIG_SOC, VSIG_V, NVSIG);
+    return pow((s->observer == 1 ? EKF_ERROR_SCALE_BY_SOC : IMM_ERROR_SCALE) * sig, 2);
 #else
     (void)soc;
     return s->r;
@@ -778,7 +778,7 @@ static double ekf_update(State *s, double v) {
         }
 #endif
     }
-    r = ekf_measurement_variance(s, soc_prior) + curvature * curvature;
+    r = measurement_variance(s, soc_prior) + curvature * curvature;
     for (a = 0; a < NX; a++) {
         ph[a] = 0.0;
         for (b = 0; b < NX; b++) ph[a] += s->ob_p[a][b] * hv[b];
@@ -885,7 +885,8 @@ static double imm_update(State *s, double v) {
         local_voltages_at(s, lo, ujl);
         hj = (ujh[j] - ujl[j]) / (hi - lo);
         /* the local model's disagreement with the network counts as its measurement error */
-        sj = hj * hj * s->mode_var[j] + s->r + (unet - uj[j]) * (unet - uj[j]);
+        sj = hj * hj * s->mode_var[j] + measurement_variance(s, xs)
+             + (unet - uj[j]) * (unet - uj[j]);
         k = s->mode_var[j] * hj / sj;
         innov = v - uj[j];
         s->mode_soc[j] = clip01(s->mode_soc[j] + k * innov);
