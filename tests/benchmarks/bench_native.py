@@ -74,11 +74,14 @@ def main() -> None:
     subprocess.run(["gcc", "-std=c99", "-O2", f"-I{fmi_headers()}",
                     str(ROOT / "tests/native/host.c"), "-o", str(host), "-ldl"], check=True)
     n = 200_000
-    for obs, name in ((0, "LMN"), (1, "LMN + EKF")):
+    alone = None
+    for obs, name in ((0, "LMN"), (1, "LMN + EKF"), (2, "LMN + fuzzy"), (3, "LMN + IMM")):
         (med, fast), (floor, _) = (host_us(host, native, n, obs, tmp),
                                    host_us(host, floor_fmu, n, obs, tmp))
-        print(f"C host, {name}: {med:.3f} µs/step, fastest run {fast:.3f} (floor {floor:.3f} "
-              f"µs/step; medians of 15 runs × {n} steps)")
+        alone = med if alone is None else alone
+        print(f"C host, {name}: {med:.3f} µs/step ({med / alone:.2f}× the LMN alone), fastest "
+              f"run {fast:.3f} (floor {floor:.3f} µs/step; medians of 15 runs × {n} steps, "
+              "a measurement at every step)")
     for h in (0.1, 1.0):
         (a, b), ratio = per_step_us([native, floor_fmu], h, 1000)
         (c, e), _ = per_step_us([py, py_floor], h, 1000)
