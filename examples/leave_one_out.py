@@ -3,7 +3,7 @@ held-out record free-run, and compare the LMN with its baselines fitted on the s
 
 Usage:
     python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 F[,F...]] [--set KEY=VALUE ...]
-        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN]
+        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN] [--plot FILE.png]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
     P=../shared/data/panasonic_18650pf/25degC
@@ -15,7 +15,8 @@ SoC window and over the whole record, for the LMN and each baseline, driven by t
 temperature and, where the record has one beside a chamber temperature, by the chamber
 temperature only (the LMN's thermal model computes the cell temperature); then the means over
 the folds. --hold-out PATTERN holds out only the records whose name contains PATTERN (e.g.
-10degC: train on all, test each 10 °C record left out in turn).
+10degC: train on all, test each 10 °C record left out in turn). --plot FILE.png draws the
+same figures as bars per held-out record, with a caption naming the split and the settings.
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import evaluate_model, leave_one_out_folds
 from lmncell.evaluation.metrics import pooled
 from lmncell.identification.train import train_files
+from lmncell.report.plots import folds_figure
 
 MODELS = ("lmn", "arx", "ecm2rc", "ecm2rc_hyst")
 
@@ -45,11 +47,14 @@ def main() -> None:
     ap.add_argument("--no-baselines", action="store_true")
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
                     help="hold out only records whose name contains PATTERN")
+    ap.add_argument("--plot", type=Path, metavar="FILE.png",
+                    help="also draw the results per held-out record")
     a = ap.parse_args()
     settings = dict(parse_setting(s) for s in a.set)
     if a.ocv_tests:
         settings["ocv_tests"] = a.ocv_tests
     means: dict[str, list[tuple[float, float]]] = {}
+    folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]]]] = []
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
     for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
                                                                    a.soc0):
@@ -57,6 +62,7 @@ def main() -> None:
                                capacity_ah=a.capacity_ah, soc0=train_soc0,
                                baselines=not a.no_baselines, progress=lambda _m: None,
                                **settings)
+        folds.append((Path(held).name, {}))
         for ambient in (False, True):
             _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient)
             if ambient and "cell_temperature_rmse_k" not in rows[0]:
@@ -68,6 +74,7 @@ def main() -> None:
                 per_segment = [r[m] for r in rows]
                 w, whole = pooled(per_segment, "window_"), pooled(per_segment)
                 means.setdefault(f"{m} ({mode} T)", []).append((w, whole))
+                folds[-1][1].setdefault(mode, {})[m] = (w, whole)
                 cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
             extra = (f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
                      if "cell_temperature_rmse_k" in rows[0] else "")
@@ -76,6 +83,16 @@ def main() -> None:
     print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(
         f"{m} {sum(w for w, _ in v) / len(v):.2f} / {sum(x for _, x in v) / len(v):.2f}"
         for m, v in means.items()))
+    if a.plot:
+        ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
+        which = f" whose name contains {a.hold_out!r}" if a.hold_out else ""
+        caption = (f"Leave-one-record-out, {len(folds)} fold(s): each record{which} held out "
+                   f"in turn, the models trained on the other {len(a.records) - 1} records "
+                   "with the same data and settings; free-run RMSE of the held-out record, "
+                   "driven by the measured cell temperature (cell) and, where the record has "
+                   "one beside it, by the chamber temperature only (ambient). Settings: "
+                   f"{', '.join(a.set) or 'defaults'}; OCV: {ocv}.")
+        print(f"figure: {folds_figure(folds, a.plot, caption)}")
 
 
 if __name__ == "__main__":

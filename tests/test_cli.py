@@ -152,3 +152,18 @@ def test_output_into_a_closed_pipe_is_no_error(quick_model, tmp_path, monkeypatc
         assert main(["explain", str(quick_model)]) == 0
     finally:
         sink.close()
+
+
+def test_folds_figure_draws_every_fold_and_refuses_none(tmp_path) -> None:
+    from lmncell.report.plots import folds_figure
+    from matplotlib import image
+
+    folds = [("03-20-17_01.43_25degC_US06_Pan18650PF.mat",
+              {"cell": {"lmn": (5.9, 10.9), "ecm2rc": (9.2, 21.8)},
+               "ambient": {"lmn": (7.3, 11.1), "ecm2rc": (24.9, 36.6)}}),
+             ("A123_DYN_50_P25_s1.csv", {"cell": {"lmn": (3.2, 23.6)}})]
+    path = folds_figure(folds, tmp_path / "folds.png", "Leave-one-record-out, 2 folds")
+    height, width, _ = image.imread(path).shape
+    assert height > 500 and width > 600          # two rows of panels: cell and ambient
+    with pytest.raises(ValueError, match="no folds"):
+        folds_figure([], tmp_path / "none.png", "")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+import textwrap
 from pathlib import Path
 
 import matplotlib
@@ -182,3 +184,46 @@ def evaluation_figures(model: LmnModel, traces: list, out: Path) -> list[Path]:
         files.append(curve_figure(training["curve"], out / "local_models_curve.png",
                                   model.n_local_models))
     return files
+
+
+
+def _short_record(name: str) -> str:
+    """A record's file name for an axis: no extension, no leading date stamp such as
+    '03-20-17_01.43_', at most 26 characters."""
+    stem = name.split(".mat")[0].split(".csv")[0]
+    return re.sub(r"^\d\d-\d\d-\d\d_\d\d\.\d\d_", "", stem)[:26]
+
+
+def folds_figure(folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]]]],
+                 path: Path, caption: str) -> Path:
+    """Leave-one-out results as bars. folds: per held-out record, {temperature input ("cell"
+    or "ambient"): {model: (20–80 % SoC RMSE, whole-record RMSE) in mV}}. One row of panels
+    per temperature input, the window left and the whole record right, the models side by side
+    per record; the caption (wrapped) says what was run. ValueError for no folds."""
+    if not folds:
+        raise ValueError("folds_figure: no folds to draw")
+    modes = list(dict.fromkeys(mode for _, row in folds for mode in row))
+    names = list(dict.fromkeys(m for _, row in folds for by in row.values() for m in by))
+    x = np.arange(len(folds))
+    width = 0.8 / len(names)
+    fig, axes = plt.subplots(len(modes), 2, squeeze=False, constrained_layout=True,
+                             figsize=(max(8.0, 2.4 * len(folds) + 2), 3.2 * len(modes) + 1.2))
+    for r, mode in enumerate(modes):
+        for panel, label in enumerate(("20–80 % SoC", "whole record")):
+            ax = axes[r, panel]
+            for k, name in enumerate(names):
+                values = [row.get(mode, {}).get(name, (np.nan, np.nan))[panel]
+                          for _, row in folds]
+                bars = ax.bar(x + (k - (len(names) - 1) / 2) * width, values, width,
+                              color=COLORS.get(name), label=name,
+                              alpha=1.0 if name == "lmn" else 0.6)
+                ax.bar_label(bars, fmt="%.1f", fontsize=7)
+            ax.set(ylabel="RMSE / mV", title=f"{label}, {mode} temperature", xticks=x)
+            ax.set_xticklabels([_short_record(record) for record, _ in folds], fontsize=7,
+                               rotation=15)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(names), fontsize=8)
+    fig.suptitle(textwrap.fill(caption, 130), fontsize=9, x=0.01, ha="left")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
