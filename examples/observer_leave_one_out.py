@@ -6,7 +6,7 @@ median 3σ after 10 minutes (how wide the band is while it holds the truth).
 Usage:
     python examples/observer_leave_one_out.py CAPACITY_AH RECORD... [--ocv-tests FILE ...]
         [--hold-out PATTERN] [--start-soc 0.6] [--soc0-est 0.3] [--soc0 F[,F...]]
-        [--set KEY=VALUE ...]
+        [--set KEY=VALUE ...] [--plot FILE.png]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
     P=../shared/data/panasonic_18650pf/25degC
@@ -15,7 +15,8 @@ Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV 
 
 The observer starts where the reference SoC first falls to --start-soc (under load, its load
 history unknown to it) with the estimate --soc0-est. --hold-out PATTERN holds out only the
-records whose name contains PATTERN (e.g. 10degC).
+records whose name contains PATTERN (e.g. 10degC). --plot FILE.png draws the RMSE and the
+share outside ±3σ per held-out record and observer, with a caption naming the run.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ from lmncell.evaluation.observe import (
     start_index,
 )
 from lmncell.identification.train import train_files
+from lmncell.report.plots import observer_folds_figure
 from lmncell.runtime.model import load_model
 
 KINDS = ("ekf", "fuzzy", "imm")
@@ -53,11 +55,14 @@ def main() -> None:
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
                     help="start SoC: one for every record or one per record, in order")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--plot", type=Path, metavar="FILE.png",
+                    help="also draw the results per held-out record")
     a = ap.parse_args()
     settings = dict(parse_setting(s) for s in a.set)
     if a.ocv_tests:
         settings["ocv_tests"] = a.ocv_tests
     results: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
+    folds: list[tuple[str, dict[str, tuple[float, float]]]] = []
     with tempfile.TemporaryDirectory() as tmp:
         for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
                                                                        a.soc0):
@@ -71,10 +76,12 @@ def main() -> None:
                                                       current_delay_s=model.current_delay_s),
                                    a.start_soc)
             k0 = start_index(seg, a.start_soc)
+            folds.append((Path(held).name, {}))
             for kind in KINDS:
                 m = soc_metrics(run_observer(model, seg, kind, a.soc0_est, k0))
                 results[kind].append((m["rmse_pct"], 100 * m["outside_3sigma_share"],
                                       m["median_3sigma_pct"]))
+                folds[-1][1][kind] = (m["rmse_pct"], 100 * m["outside_3sigma_share"])
                 print(f"{Path(held).name[:40]:40s} {kind:5s} SoC RMSE {m['rmse_pct']:5.2f} %"
                       f"  outside ±3σ {100 * m['outside_3sigma_share']:5.1f} %  median 3σ "
                       f"{m['median_3sigma_pct']:5.1f} %", flush=True)
@@ -84,6 +91,17 @@ def main() -> None:
             worst = max(r[1] for r in rows)
             print(f"mean over the folds, {kind:5s}: SoC RMSE {rmse:.2f} %, outside ±3σ "
                   f"{out3:.1f} % (worst fold {worst:.1f} %), median 3σ {width:.1f} %")
+    if a.plot:
+        ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
+        which = f" whose name contains {a.hold_out!r}" if a.hold_out else ""
+        caption = (f"Observer leave-one-record-out, {len(folds)} fold(s): each record{which} "
+                   f"held out in turn, the model trained on the other {len(a.records) - 1}; "
+                   f"each observer started where the reference SoC falls to {a.start_soc:g} "
+                   f"(under load) with the estimate {a.soc0_est:g}; SoC RMSE after the first "
+                   "10 minutes, and the share of all its samples whose reference SoC lies "
+                   f"outside the observer's ±3σ band. Settings: {', '.join(a.set) or 'defaults'};"
+                   f" OCV: {ocv}.")
+        print(f"figure: {observer_folds_figure(folds, a.plot, caption)}")
 
 
 if __name__ == "__main__":

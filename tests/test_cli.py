@@ -167,3 +167,17 @@ def test_folds_figure_draws_every_fold_and_refuses_none(tmp_path) -> None:
     assert height > 500 and width > 600          # two rows of panels: cell and ambient
     with pytest.raises(ValueError, match="no folds"):
         folds_figure([], tmp_path / "none.png", "")
+
+
+def test_observer_folds_figure_draws_the_folds_and_refuses_none(tmp_path) -> None:
+    from lmncell.report.plots import observer_folds_figure
+    from matplotlib import image
+
+    folds = [("03-20-17_01.43_25degC_US06_Pan18650PF.mat",
+              {"ekf": (0.27, 0.0), "fuzzy": (1.06, 0.0), "imm": (1.35, 0.0)}),
+             ("A123_DYN_50_P25_s1.csv", {"ekf": (2.41, 0.0), "imm": (3.6, 0.9)})]
+    path = observer_folds_figure(folds, tmp_path / "observers.png", "Observer leave-one-out")
+    height, width, _ = image.imread(path).shape
+    assert height > 300 and width > 600
+    with pytest.raises(ValueError, match="no folds"):
+        observer_folds_figure([], tmp_path / "none.png", "")

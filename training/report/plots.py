@@ -16,7 +16,8 @@ from lmncell.runtime.model import LmnModel
 from matplotlib.ticker import FuncFormatter
 
 COLORS = {"measured": "k", "lmn": "tab:red", "arx": "tab:gray", "ecm2rc": "tab:blue",
-          "ecm2rc_hyst": "tab:green"}
+          "ecm2rc_hyst": "tab:green", "ekf": "tab:red", "fuzzy": "tab:orange",
+          "imm": "tab:purple"}
 
 
 def _safe(name: str) -> str:
@@ -194,6 +195,29 @@ def _short_record(name: str) -> str:
     return re.sub(r"^\d\d-\d\d-\d\d_\d\d\.\d\d_", "", stem)[:26]
 
 
+def _grouped_bars(ax, records: list[str], series: dict[str, list[float]]) -> None:
+    """One group of bars per record, one bar per series (its value printed on it)."""
+    x = np.arange(len(records))
+    width = 0.8 / max(len(series), 1)
+    for k, (name, values) in enumerate(series.items()):
+        bars = ax.bar(x + (k - (len(series) - 1) / 2) * width, values, width,
+                      color=COLORS.get(name), label=name,
+                      alpha=1.0 if name in ("lmn", "ekf") else 0.6)
+        ax.bar_label(bars, fmt="%.1f", fontsize=7)
+    ax.set_xticks(x)
+    ax.set_xticklabels([_short_record(r) for r in records], fontsize=7, rotation=15)
+
+
+def _finish_folds_figure(fig, axes: np.ndarray, path: Path, caption: str, n: int) -> Path:
+    """One legend under the panels, the caption (wrapped) above them; saved and closed."""
+    handles, labels = axes.flat[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=n, fontsize=8)
+    fig.suptitle(textwrap.fill(caption, 130), fontsize=9, x=0.01, ha="left")
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
 def folds_figure(folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]]]],
                  path: Path, caption: str) -> Path:
     """Leave-one-out results as bars. folds: per held-out record, {temperature input ("cell"
@@ -204,26 +228,36 @@ def folds_figure(folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]
         raise ValueError("folds_figure: no folds to draw")
     modes = list(dict.fromkeys(mode for _, row in folds for mode in row))
     names = list(dict.fromkeys(m for _, row in folds for by in row.values() for m in by))
-    x = np.arange(len(folds))
-    width = 0.8 / len(names)
+    records = [record for record, _ in folds]
     fig, axes = plt.subplots(len(modes), 2, squeeze=False, constrained_layout=True,
                              figsize=(max(8.0, 2.4 * len(folds) + 2), 3.2 * len(modes) + 1.2))
     for r, mode in enumerate(modes):
         for panel, label in enumerate(("20–80 % SoC", "whole record")):
-            ax = axes[r, panel]
-            for k, name in enumerate(names):
-                values = [row.get(mode, {}).get(name, (np.nan, np.nan))[panel]
-                          for _, row in folds]
-                bars = ax.bar(x + (k - (len(names) - 1) / 2) * width, values, width,
-                              color=COLORS.get(name), label=name,
-                              alpha=1.0 if name == "lmn" else 0.6)
-                ax.bar_label(bars, fmt="%.1f", fontsize=7)
-            ax.set(ylabel="RMSE / mV", title=f"{label}, {mode} temperature", xticks=x)
-            ax.set_xticklabels([_short_record(record) for record, _ in folds], fontsize=7,
-                               rotation=15)
-    handles, labels = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labels, loc="outside lower center", ncol=len(names), fontsize=8)
-    fig.suptitle(textwrap.fill(caption, 130), fontsize=9, x=0.01, ha="left")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+            series = {name: [row.get(mode, {}).get(name, (np.nan, np.nan))[panel]
+                             for _, row in folds] for name in names}
+            _grouped_bars(axes[r, panel], records, series)
+            axes[r, panel].set(ylabel="RMSE / mV", title=f"{label}, {mode} temperature")
+    return _finish_folds_figure(fig, axes, path, caption, len(names))
+
+
+def observer_folds_figure(folds: list[tuple[str, dict[str, tuple[float, float]]]],
+                          path: Path, caption: str,
+                          consistency_target_pct: float = 5.0) -> Path:
+    """Observer leave-one-out results as bars. folds: per held-out record, {observer: (SoC
+    RMSE %, share of samples outside ±3σ %)}: the RMSE left, the share right with its target
+    line. ValueError for no folds."""
+    if not folds:
+        raise ValueError("observer_folds_figure: no folds to draw")
+    kinds = list(dict.fromkeys(k for _, row in folds for k in row))
+    records = [record for record, _ in folds]
+    fig, axes = plt.subplots(1, 2, squeeze=False, constrained_layout=True,
+                             figsize=(max(8.0, 2.2 * len(folds) + 2), 4.6))
+    for panel, label in enumerate(("SoC RMSE / %", "samples outside ±3σ / %")):
+        series = {k: [row.get(k, (np.nan, np.nan))[panel] for _, row in folds] for k in kinds}
+        _grouped_bars(axes[0, panel], records, series)
+        axes[0, panel].set(ylabel=label)
+    axes[0, 1].axhline(consistency_target_pct, color="k", lw=0.8, ls="--")
+    axes[0, 1].text(0.99, consistency_target_pct, f"target ≤ {consistency_target_pct:g} %",
+                    transform=axes[0, 1].get_yaxis_transform(), ha="right", va="bottom",
+                    fontsize=8)
+    return _finish_folds_figure(fig, axes, path, caption, len(kinds))
