@@ -187,7 +187,6 @@ def evaluation_figures(model: LmnModel, traces: list, out: Path) -> list[Path]:
     return files
 
 
-
 def _short_record(name: str) -> str:
     """A record's file name for an axis: no extension, no leading date stamp such as
     '03-20-17_01.43_', at most 26 characters."""
