@@ -231,8 +231,7 @@ def test_model_error_by_soc_is_stored_and_larger_near_empty(a123_two_temperature
     assert min(by_soc["std_v"]) == pytest.approx(max(ratio, 1.0) * overall, rel=1e-12)
 
 
-def test_measurement_error_follows_the_training_error_by_soc(a123_two_temperatures
-                                                                  ) -> None:
+def test_measurement_error_follows_the_training_error_by_soc(a123_two_temperatures) -> None:
     """The model file keeps the training error's RMS per SoC bin without a floor (small on the
     plateau, large near empty); the EKF's r is (EKF_ERROR_SCALE_BY_SOC·3·that RMS)², an IMM
     mode's (IMM_ERROR_SCALE·3·that RMS)², at least 2 mV before scaling; a model without the
