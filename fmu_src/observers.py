@@ -80,6 +80,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -262,12 +263,13 @@ class SocObserver:
         self._innovation_decay = math.exp(-ts / tau) if tau > 0 else None
 
     # ----- measurement model ---------------------------------------------------------------
-    def _state_vector(self) -> np.ndarray:
+    def _state_vector(self) -> list[float]:
         """ξ = [SoC, low-pass states…, h (with hysteresis)] of the stepper (one low-pass state
         per distinct time constant, lowpass_states)."""
         s = self.stepper.state
-        h = [s.h] if self.model.hysteresis_gamma is not None else []
-        return np.array([s.soc, *self._pick_lowpass(s.lp), *h])
+        if self.model.hysteresis_gamma is not None:
+            return [s.soc, *self._pick_lowpass(s.lp), s.h]
+        return [s.soc, *self._pick_lowpass(s.lp)]
 
     def _stepper_lowpass(self, states: list[float]) -> list[float]:
         """The stepper's low-pass states (one per filter side) from the EKF's (one per
@@ -309,13 +311,14 @@ class SocObserver:
         ocv = np.asarray(m.ocv(states[:, 0]), dtype=float) if m.relative_ocv else np.zeros(n)
         return ocv + np.sum(phi * local, axis=1), phi, ocv[:, None] + local
 
-    def _jacobian(self, xi: np.ndarray, soc_spread: float = FD_SOC
+    def _jacobian(self, xi: list[float], soc_spread: float = FD_SOC
                   ) -> tuple[float, np.ndarray, float, float]:
         """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
         δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (analytic,
         CellStepper.soc_slope; one-sided where the OCV or the depletion factor has a kink,
         towards SoC 0 only within FD_SOC of SoC 1): two network evaluations besides the
-        step's own.
+        step's own, at the step's own SoC one walk through the tree for all three
+        (CellStepper.beside).
 
         The SoC difference d of H is soc_spread (at least FD_SOC): with d = σ_SoC the SoC
         column is the secant over ±σ, a statistical linearisation that does not take the OCV
@@ -326,24 +329,26 @@ class SocObserver:
         The low-pass states and h enter u only through the regressors (unless the filtered
         current is a partition input, then by central differences): their columns are
         ∂x/∂state (state_columns) times the network's blended coefficients at ξ."""
-        n, st = xi.size, self.stepper
-        clipped = min(max(float(xi[0]), 0.0), 1.0)  # differences around the clipped SoC:
+        n, st = len(xi), self.stepper
+        clipped = min(max(xi[0], 0.0), 1.0)  # differences around the clipped SoC:
         spread = max(FD_SOC, soc_spread)              # beyond 0 or 1 both sides would clip
         socs = [clipped, min(clipped + spread, 1.0), max(clipped - spread, 0.0)]
-        h = np.empty(n)
+        upward = clipped + FD_SOC <= 1.0
         if not self._fd_states:
             if clipped == st.soc:          # the step's own SoC: its voltage and validities
-                u3 = [st.voltage_v, *st.voltages_at_socs(socs[1:])]
+                u_hi, u_lo, tangent = st.beside(socs[1], socs[2], upward)
+                u3 = [st.voltage_v, u_hi, u_lo]
                 validity = st.validity
             else:
                 u0, validity, _ = st.outputs_at_socs(socs[:1])[0]
                 u3 = [u0, *st.voltages_at_socs(socs[1:])]
-            h[1:] = self._regressor_gradient(validity, clipped)
+                tangent = st.soc_slope(clipped, upward)
+            rest = self._regressor_gradient(validity, clipped)
         else:
             steps = np.full(n - 1, FD_CURRENT_A)
             if self.model.hysteresis_gamma is not None:
                 steps[-1] = FD_HYSTERESIS
-            rows = np.tile(xi, (3 + 2 * (n - 1), 1))
+            rows = np.tile(np.asarray(xi), (3 + 2 * (n - 1), 1))
             rows[:3, 0] = socs
             rows[3:, 0] = clipped
             for k in range(1, n):
@@ -351,26 +356,26 @@ class SocObserver:
                 rows[2 + 2 * k, k] -= steps[k - 1]
             u_all = self._outputs_for(rows)[0]
             u3 = u_all[:3].tolist()
-            h[1:] = (u_all[3::2] - u_all[4::2]) / (2.0 * steps)
-        h[0] = (u3[1] - u3[2]) / (socs[1] - socs[2])
+            rest = ((u_all[3::2] - u_all[4::2]) / (2.0 * steps)).tolist()
+            tangent = st.soc_slope(clipped, upward)
+        h = np.array([(u3[1] - u3[2]) / (socs[1] - socs[2]), *rest])
         curvature = 0.5 * (u3[1] + u3[2]) - u3[0]
-        tangent = st.soc_slope(clipped, clipped + FD_SOC <= 1.0)
         return float(u3[0]), h, curvature, tangent
 
-    def _regressor_gradient(self, validity: np.ndarray, soc: float) -> np.ndarray:
+    def _regressor_gradient(self, validity: Sequence[float], soc: float) -> list[float]:
         """∂u/∂state for the states after SoC (low-pass states, h) through the regressors
         they enter, at the validities and SoC given and the step's temperature: state_gradient
         of the blended coefficients, plus the depletion regressor's g·factor(SoC) on its
         low-pass state."""
         _, temperature, _ = self._step_inputs
-        gain = self.stepper.exo.temperature_gain(temperature)
-        per_validity = np.dot(validity, self._gradient)
+        exo = self.stepper.exo
+        gain = exo.gain_at(temperature)
+        per_validity = np.dot(validity, self._gradient).tolist()
         out = state_gradient(per_validity, len(self.state_columns), self._gradient_powers, gain,
                              (temperature - self.model.reference_temperature_c)
                              / TEMPERATURE_STEP_K)
         if self._depletion is not None:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
-            out[self._depletion[1]] += (float(per_validity[-1]) * gain
-                                        * self.model.depletion.factor(soc))
+            out[self._depletion[1]] += per_validity[-1] * gain * exo.depletion_factor(soc)
         return out
 
     # ----- one step ------------------------------------------------------------------------
@@ -450,25 +455,26 @@ class SocObserver:
         the stepper and returns the unclipped SoC."""
         s, st = self.state, self.stepper
         xi = self._state_vector()
-        soc_prior = min(max(float(xi[0]), 0.0), 1.0)
+        soc_prior = min(max(xi[0], 0.0), 1.0)
         p = s.covariance()
-        u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(p[0, 0], 0.0)),
+        u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(s.var, 0.0)),
                                                           SPREAD_MAX))
         r = self.settings.measurement_variance("ekf", soc_prior) + curvature * curvature
-        ph = p @ h
-        inv_s = 1.0 / (float(h @ ph) + r)        # 1/(hᵀPh + r)
-        k = ph * inv_s
-        xi = xi + k * (v_meas - u)
+        ph = p.dot(h)                              # (.dot: less overhead than @ here)
+        inv_s = 1.0 / (float(h.dot(ph)) + r)       # 1/(hᵀPh + r)
+        innovation = v_meas - u            # ξ + K·(v − u), K = P·h/s
+        xi = [x + k * inv_s * innovation for x, k in zip(xi, ph.tolist(), strict=True)]
         # P − P·h·hᵀ·P/(hᵀPh + r): the Joseph form's value for this optimal gain, in O(n²);
         # (Ph_a·Ph_b)·(1/s) keeps the symmetric P of the prediction symmetric, bit for bit
-        p = p - ph[:, None] * ph * inv_s
+        outer = np.multiply.outer(ph, ph)
+        outer *= inv_s
+        p -= outer                  # in place: the prediction made this P, nothing shares it
         s.var_floor = self._variance_floor(soc_prior, tangent)
-        s.cov = p
         s.var = max(float(p[0, 0]), 1e-12)
-        st.state.lp = self._stepper_lowpass(xi[1:1 + len(self.lowpass_slots)].tolist())
+        st.state.lp = self._stepper_lowpass(xi[1:1 + len(self.lowpass_slots)])
         if self.model.hysteresis_gamma is not None:
-            st.state.h = min(1.0, max(-1.0, float(xi[-1])))
-        return float(xi[0])
+            st.state.h = min(1.0, max(-1.0, xi[-1]))
+        return xi[0]
 
     def _track_innovation(self, innovation_v: float) -> None:
         """Update the innovations' exponentially weighted mean square (weights decaying by
@@ -687,18 +693,19 @@ def local_gradients(matrices: list[tuple[np.ndarray, np.ndarray]], theta_exo: np
     return np.ascontiguousarray(np.hstack(blocks))
 
 
-def state_gradient(per_validity: np.ndarray, n: int, powers: int, gain: float,
-                   dt: float) -> np.ndarray:
+def state_gradient(per_validity: list[float], n: int, powers: int, gain: float,
+                   dt: float) -> list[float]:
     """∂u/∂state for the n states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x, p < powers,
     from per_validity = Φ·local_gradients (Φ: the validities; blocks of n: A_0·θᵀΦ, B_0·θᵀΦ, …;
     θᵀΦ the network's coefficients of the regressors at the operating point), g the
     temperature gain of the scaled columns."""
-    out = per_validity[:n] + gain * per_validity[n:2 * n]
+    out = [a + gain * b for a, b in zip(per_validity[:n], per_validity[n:2 * n], strict=True)]
     power = dt
     for p in range(1, powers):
         start = 2 * n * p
         unscaled, scaled = per_validity[start:start + n], per_validity[start + n:start + 2 * n]
-        out += power * (unscaled + gain * scaled)
+        out = [o + power * (a + gain * b) for o, a, b in zip(out, unscaled, scaled,
+                                                              strict=True)]
         power *= dt
     return out
 

@@ -81,6 +81,20 @@ class ExoStepper:
         self._temperature_source_cols = model.temperature_source_indices()
         dep = model.depletion
         self.depletion_state = None if dep is None else dep.state_index(model.filters)
+        # the last features' (temperature, g(T)) and (SoC, depletion factor), for the
+        # observers' derivatives of the same step
+        self.last_gain = (math.nan, 1.0)
+        self.last_depletion = (math.nan, 1.0)
+
+    def gain_at(self, temperature_c: float) -> float:
+        """temperature_gain, the last features' value where the temperature is theirs."""
+        last_t, g = self.last_gain
+        return g if temperature_c == last_t else self.temperature_gain(temperature_c)
+
+    def depletion_factor(self, soc: float) -> float:
+        """The depletion factor at a SoC, the last features' value where the SoC is theirs."""
+        last_soc, factor = self.last_depletion
+        return factor if soc == last_soc else self.model.depletion.factor(soc)
 
     def temperature_gain(self, temperature_c: float) -> float:
         """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
@@ -121,6 +135,7 @@ class ExoStepper:
         returns the depletion regressor's g(T)·LP_τ(i) (its SoC factor apart; 0 without one)."""
         m = self.model
         g = 1.0 if m.arrhenius_k is None else self.temperature_gain(temperature_c)
+        self.last_gain = (temperature_c, g)
         lp = s.lp
         x[0] = g * current_a
         col = 1
@@ -136,7 +151,9 @@ class ExoStepper:
         source = 0.0
         if m.depletion is not None:
             source = g * lp[self.depletion_state]
-            x[col] = source * m.depletion.factor(s.soc)
+            factor = m.depletion.factor(s.soc)
+            self.last_depletion = (s.soc, factor)
+            x[col] = source * factor
             col += 1
         if m.ocv_input:
             x[col] = float(m.ocv(s.soc))
@@ -380,6 +397,44 @@ class _OneSample:
                 v[other] = parent - side
         return self.leaf_values(v, direction), v
 
+    def walk_beside(self, activations: Sequence[float], slots: list[float], d_hi: float,
+                    d_lo: float, direction: int
+                    ) -> tuple[Sequence[float], Sequence[float], Sequence[float]]:
+        """In one pass over the nodes: the validities had the SoC been d_hi above and d_lo
+        below the one the activations and the tree slots (walk) were computed at (∂act/∂SoC
+        from slope_plan), and the validities' derivative ∂Φ/∂SoC at it (slot_derivatives);
+        raises OverflowError where a moved activation overflows exp."""
+        hi = [1.0] * self.n_slots
+        lo = [1.0] * self.n_slots
+        dv = [0.0] * self.n_slots
+        exp = math.exp
+        for (into, out, other, w), act in zip(self.slope_plan, activations, strict=False):
+            parent = hi[into]
+            hi[out] = side = parent / (1.0 + exp(-(act + w * d_hi)))
+            hi[other] = parent - side
+            parent = lo[into]
+            lo[out] = side = parent / (1.0 + exp(-(act - w * d_lo)))
+            lo[other] = parent - side
+            parent = slots[into]
+            if parent != 0.0:          # as slot_derivatives
+                side = slots[out]
+                dv[out] = d = side * (dv[into] + (parent - side) * w) / parent
+                dv[other] = dv[into] - d
+        return (self.leaf_values(hi, direction), self.leaf_values(lo, direction),
+                self.leaf_values(dv, direction))
+
+    def slot_derivatives(self, slots: list[float]) -> list[float]:
+        """∂/∂SoC of each tree slot (walk) forward through the tree: a node's side φ·v has
+        ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC, φ = side/v (0 below a slot of validity 0)."""
+        dv = [0.0] * self.n_slots
+        for into, out, other, w in self.slope_plan:
+            parent = slots[into]
+            if parent != 0.0:          # φ·∂v + side·(1 − φ)·w, φ = side/v
+                side = slots[out]
+                dv[out] = d = side * (dv[into] + (parent - side) * w) / parent
+                dv[other] = dv[into] - d
+        return dv
+
     def leaf_values(self, slots: list[float], direction: int) -> Sequence[float]:
         """Each leaf's entry of slots (its validity, or a derivative of it), 0 where a
         current-sign gate does not match the direction."""
@@ -394,22 +449,24 @@ class _OneSample:
                   ocv_slope: float, depletion_slope: float) -> float:
         """∂/∂SoC of the network output Σ_j Φ_j·y_j of one sample (V per unit SoC, without
         the OCV added to a relative output), y_j = θ_exo,j·x + lag_part_j, from its products,
-        tree slots and validities (combine): the validities' derivative forward through the
-        tree (a node's side φ·v has ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC, φ = side/v) times y_j,
-        plus Φ_j·∂y_j/∂SoC through the regressors soc(k), ocv(k) (ocv_slope, V per unit SoC)
-        and d(k) (depletion_slope: g·LP_τ·∂factor/∂SoC)."""
+        tree slots and validities (combine): slope_from with the validities' derivative
+        (slot_derivatives)."""
+        dphi = (self.leaf_values(self.slot_derivatives(slots), direction)
+                if self.slope_plan else None)
+        return self.slope_from(dphi, products[self.n_nodes:], validity, lag_part, ocv_slope,
+                               depletion_slope)
+
+    def slope_from(self, dphi: Sequence[float] | None, local: list[float],
+                   validity: Sequence[float], lag_part: list[float], ocv_slope: float,
+                   depletion_slope: float) -> float:
+        """soc_slope from the validities' derivative dphi (None: no SoC partition input) and
+        the local models' exogenous parts local = θ_exo,j·x: ∂Φ_j/∂SoC times y_j, plus
+        Φ_j·∂y_j/∂SoC through the regressors soc(k), ocv(k) (ocv_slope, V per unit SoC) and
+        d(k) (depletion_slope: g·LP_τ·∂factor/∂SoC)."""
         mul = operator.mul
         slope = 0.0
-        if self.slope_plan:
-            dv = [0.0] * self.n_slots
-            for into, out, other, w in self.slope_plan:
-                parent = slots[into]
-                if parent != 0.0:      # φ·∂v + side·(1 − φ)·w, φ = side/v
-                    side = slots[out]
-                    dv[out] = d = side * (dv[into] + (parent - side) * w) / parent
-                    dv[other] = dv[into] - d
-            dphi = self.leaf_values(dv, direction)
-            slope = sum(map(mul, dphi, products[self.n_nodes:]))
+        if dphi is not None:
+            slope = sum(map(mul, dphi, local))
             if lag_part:
                 slope += sum(map(mul, dphi, lag_part))
         factors = (1.0, ocv_slope, depletion_slope)
@@ -547,6 +604,60 @@ class CellStepper:
         rows, ocv = self._products_at_socs(socs)
         return [self._row_output(products, soc_ocv)[0]
                 for products, soc_ocv in zip(rows, ocv, strict=True)]
+
+    def beside(self, hi: float, lo: float, upward: bool) -> tuple[float, float, float]:
+        """(u(hi), u(lo), ∂u/∂SoC at the step's SoC) of the last step's terminal voltage (V,
+        V per unit SoC): voltages_at_socs([hi, lo]) up to rounding and soc_slope(SoC, upward),
+        from the step's own products in one walk: the nodes' activations move by
+        ∂act/∂SoC·ΔSoC, and each local model's exogenous part by its SoC regressors'
+        coefficients times their change (soc(k), ocv(k), d(k) = g·LP_τ·factor(SoC)). Falls
+        back to those two where a moved activation overflows exp, or before the first step."""
+        one, soc = self._one, self.state.soc
+        if not self._products:
+            return self._beside_slowly(hi, lo, upward)
+        m, validity = self.model, self.validity
+        phi_hi = phi_lo = validity
+        dphi = None
+        if one.slope_plan:
+            try:
+                phi_hi, phi_lo, dphi = one.walk_beside(self._products, self._slots, hi - soc,
+                                                       soc - lo, self.state.direction)
+            except OverflowError:
+                return self._beside_slowly(hi, lo, upward)
+        products = self._products
+        local = products[one.n_nodes:]
+        lag_part = ([sum(map(operator.mul, row, self.prev_lags)) for row in one.theta_lags]
+                    if m.output_lags else [])
+        if lag_part:
+            local = [x + y for x, y in zip(local, lag_part, strict=True)]
+        ocv0, ocv_hi, ocv_lo = self.ocv(soc), one.ocv(hi), one.ocv(lo)
+        u_hi = sum(map(operator.mul, phi_hi, local))
+        u_lo = sum(map(operator.mul, phi_lo, local))
+        slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
+        slope_dep = 0.0
+        for which, column in one.slope_columns:
+            if which == 0:
+                d_hi, d_lo = hi - soc, lo - soc
+            elif which == 1:
+                d_hi, d_lo = ocv_hi - ocv0, ocv_lo - ocv0
+            else:
+                source, dep = self._depletion_source, m.depletion
+                factor = self.exo.depletion_factor(soc)
+                at = source * factor
+                d_hi, d_lo = source * dep.factor(hi) - at, source * dep.factor(lo) - at
+                slope_dep = source * dep.slope(soc, upward, factor)
+            u_hi += d_hi * sum(map(operator.mul, phi_hi, column))
+            u_lo += d_lo * sum(map(operator.mul, phi_lo, column))
+        slope = one.slope_from(dphi, products[one.n_nodes:], validity, lag_part, slope_ocv,
+                               slope_dep)
+        if m.relative_ocv:
+            return u_hi + ocv_hi, u_lo + ocv_lo, slope + slope_ocv
+        return u_hi, u_lo, slope
+
+    def _beside_slowly(self, hi: float, lo: float, upward: bool) -> tuple[float, float, float]:
+        """beside from voltages_at_socs and soc_slope."""
+        u_hi, u_lo = self.voltages_at_socs([hi, lo])
+        return u_hi, u_lo, self.soc_slope(self.state.soc, upward)
 
     def soc_slope(self, soc: float, upward: bool) -> float:
         """∂u/∂SoC (V per unit SoC) of the last step's terminal voltage had its SoC been soc,

@@ -21,10 +21,13 @@ from lmncell.runtime.vector import VectorCells
 
 
 def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
-                      temperature_terms: int = 0):
-    """A model with a tree of n_splits random oblique splits and random stable local models."""
+                      temperature_terms: int = 0, output_lags: int = 0):
+    """A model with a tree of n_splits random oblique splits and random stable local models
+    (ARX with output_lags > 0)."""
     rng = np.random.default_rng(0)
-    cfg = load_config(partition=["soc", "current", "temperature"][:d], pre_partition=gating)
+    cfg = load_config(partition=["soc", "current", "temperature"][:d], pre_partition=gating,
+                      output_lags=output_lags,
+                      local_model_form="free" if output_lags else "auto")
     base = skeleton(cfg, 2.0, np.linspace(0, 1, 5), np.linspace(3.0, 3.4, 5), 50.0,
                     np.zeros(d), np.ones(d), temperature_terms)
     p = len(base.columns())
@@ -259,3 +262,28 @@ def test_version_1_files_without_thermal_model_still_load(tmp_path) -> None:
     p = tmp_path / "v1.json"
     p.write_text(json.dumps(doc))
     assert load_model(p).thermal is None
+
+
+@pytest.mark.parametrize("gating", ["none", "current_sign"])
+def test_beside_is_the_voltage_beside_the_step_and_its_slope(gating: str) -> None:
+    """CellStepper.beside (the EKF's secant and tangent from the step's own products in one
+    walk) equals voltages_at_socs at SoC ± d and soc_slope at the step's SoC, with output
+    lags, the depletion regressor and current-sign gates; with a wrong ∂act/∂SoC sign the
+    two secant voltages would swap their validities' moves."""
+    m = random_tree_model(gating, output_lags=2)
+    assert m.output_lags == 2 and m.depletion is not None
+    st = CellStepper(m, 0.7, temperature_c=18.0)
+    rng = np.random.default_rng(6)
+    checked = 0
+    for i in rng.normal(0, 2, 60):
+        st.step(float(i), 18.0)
+        for d in (1e-4, 0.02, 0.2):
+            hi, lo = min(st.soc + d, 1.0), max(st.soc - d, 0.0)
+            upward = st.soc + 1e-4 <= 1.0
+            u_hi, u_lo, slope = st.beside(hi, lo, upward)
+            expect_hi, expect_lo = st.voltages_at_socs([hi, lo])
+            assert u_hi == pytest.approx(expect_hi, abs=1e-12)
+            assert u_lo == pytest.approx(expect_lo, abs=1e-12)
+            assert slope == pytest.approx(st.soc_slope(st.soc, upward), rel=1e-12, abs=1e-12)
+            checked += 1
+    assert checked == 180
