@@ -332,16 +332,15 @@ class SocObserver:
         n, st = len(xi), self.stepper
         clipped = min(max(xi[0], 0.0), 1.0)  # differences around the clipped SoC:
         spread = max(FD_SOC, soc_spread)              # beyond 0 or 1 both sides would clip
-        socs = [clipped, min(clipped + spread, 1.0), max(clipped - spread, 0.0)]
+        hi, lo = min(clipped + spread, 1.0), max(clipped - spread, 0.0)
         upward = clipped + FD_SOC <= 1.0
         if not self._fd_states:
             if clipped == st.soc:          # the step's own SoC: its voltage and validities
-                u_hi, u_lo, tangent = st.beside(socs[1], socs[2], upward)
-                u3 = [st.voltage_v, u_hi, u_lo]
-                validity = st.validity
+                u0, validity = st.voltage_v, st.validity
+                u_hi, u_lo, tangent = st.beside(hi, lo, upward)
             else:
-                u0, validity, _ = st.outputs_at_socs(socs[:1])[0]
-                u3 = [u0, *st.voltages_at_socs(socs[1:])]
+                u0, validity, _ = st.outputs_at_socs([clipped])[0]
+                u_hi, u_lo = st.voltages_at_socs([hi, lo])
                 tangent = st.soc_slope(clipped, upward)
             rest = self._regressor_gradient(validity, clipped)
         else:
@@ -349,18 +348,17 @@ class SocObserver:
             if self.model.hysteresis_gamma is not None:
                 steps[-1] = FD_HYSTERESIS
             rows = np.tile(np.asarray(xi), (3 + 2 * (n - 1), 1))
-            rows[:3, 0] = socs
+            rows[:3, 0] = [clipped, hi, lo]
             rows[3:, 0] = clipped
             for k in range(1, n):
                 rows[1 + 2 * k, k] += steps[k - 1]
                 rows[2 + 2 * k, k] -= steps[k - 1]
             u_all = self._outputs_for(rows)[0]
-            u3 = u_all[:3].tolist()
+            u0, u_hi, u_lo = u_all[:3].tolist()
             rest = ((u_all[3::2] - u_all[4::2]) / (2.0 * steps)).tolist()
             tangent = st.soc_slope(clipped, upward)
-        h = np.array([(u3[1] - u3[2]) / (socs[1] - socs[2]), *rest])
-        curvature = 0.5 * (u3[1] + u3[2]) - u3[0]
-        return float(u3[0]), h, curvature, tangent
+        h = np.array([(u_hi - u_lo) / (hi - lo), *rest])
+        return u0, h, 0.5 * (u_hi + u_lo) - u0, tangent
 
     def _regressor_gradient(self, validity: Sequence[float], soc: float) -> list[float]:
         """∂u/∂state for the states after SoC (low-pass states, h) through the regressors

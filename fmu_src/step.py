@@ -630,7 +630,7 @@ class CellStepper:
                     if m.output_lags else [])
         if lag_part:
             local = [x + y for x, y in zip(local, lag_part, strict=True)]
-        ocv0, ocv_hi, ocv_lo = self.ocv(soc), one.ocv(hi), one.ocv(lo)
+        ocv_hi, ocv_lo = one.ocv(hi), one.ocv(lo)
         u_hi = sum(map(operator.mul, phi_hi, local))
         u_lo = sum(map(operator.mul, phi_lo, local))
         slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
@@ -639,6 +639,7 @@ class CellStepper:
             if which == 0:
                 d_hi, d_lo = hi - soc, lo - soc
             elif which == 1:
+                ocv0 = self.ocv(soc)
                 d_hi, d_lo = ocv_hi - ocv0, ocv_lo - ocv0
             else:
                 source, dep = self._depletion_source, m.depletion
