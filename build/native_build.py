@@ -36,7 +36,7 @@ from lmncell.runtime.observers import (
     lowpass_states,
     state_columns,
 )
-from lmncell.runtime.step import tree_plan
+from lmncell.runtime.step import filter_coefficients, tree_plan
 
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
@@ -72,7 +72,7 @@ def model_header(model: LmnModel, guid: str) -> str:
     na, nb, nf = m.output_lags, m.current_terms, len(m.filters)
     nd, nn, nm = len(m.partition_variables), m.node_weights.shape[0], m.n_local_models
     cols = m.columns()
-    lp = [np.exp(-m.sample_time_s / tau) for f in m.filters for tau in f]
+    lp = filter_coefficients(m)          # at T_ref, as the Python runtime's ExoStepper.coef
     settings = ObserverSettings.for_model(m)
     merr = settings.model_error_by_soc or ([0.5], [float(settings.model_error_v)])
     vsig = settings.voltage_sigma_by_soc or ([0.5], [float(settings.voltage_sigma_v)])
@@ -101,6 +101,8 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define HAS_ARRHENIUS {int(m.arrhenius_k is not None)}",
         f"#define ARRHENIUS_K {float(m.arrhenius_k or 0.0)!r}",
         f"#define REF_TEMPERATURE_C {m.reference_temperature_c!r}",
+        f"#define HAS_TAU_ACTIVATION {int(m.tau_activation_k is not None)}",
+        f"#define TAU_ACTIVATION_K {float(m.tau_activation_k or 0.0)!r}",
         f"#define TEMPERATURE_TERMS {m.temperature_terms}",
         f"#define HAS_THERMAL {int(m.thermal is not None)}",
         f"#define THERMAL_R_K_PER_W {(m.thermal.resistance_k_per_w if m.thermal else 1.0)!r}",
@@ -155,6 +157,8 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"static const double OCV_SOC[NOCV] = {_arr(m.ocv_soc)};",
         f"static const double OCV_V[NOCV] = {_arr(m.ocv_v)};",
         f"static const double LP_COEF[2 * NF + 1] = {_arr([*lp, 0.0])};",
+        f"static const double LP_TAU[2 * NF + 1] = "
+        f"{_arr([*(tau for f in m.filters for tau in f), 1.0])};",
         "/* the EKF's low-pass states, one per distinct time constant"
         " (observers.lowpass_states): the first filter slot of each, the state of each slot */",
         f"#define NLX {len(first)}",

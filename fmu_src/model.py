@@ -1,7 +1,8 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 4 (versions 1 to 3, which have no ``thermal``, no
-``regressors.depletion`` or no ``current_delay_s`` key, are read too).
+Format ``lmncell-model``, version 5 (versions 1 to 4, which have no ``thermal``, no
+``regressors.depletion``, no ``current_delay_s`` or no ``regressors.time_constant_activation_k``
+key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
@@ -21,6 +22,9 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   ``ocv_input``, ``soc_input`` (extra regressors), ``offset`` (constant 1),
   ``arrhenius_k`` (null, or E in K: the current and filter regressors are multiplied by
   g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``),
+  ``time_constant_activation_k`` (version 5; null or absent: none, or Eτ in K: every filter
+  time constant is τ·exp(Eτ·(1/(T+273.15) − 1/(T_ref+273.15))) at the step's temperature T, the
+  relaxation slower when cold; the file's time constants are those at T_ref),
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
   regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K),
   ``depletion`` (version 3; null or absent: none, or {``tau_s``, ``power``, ``soc_scale``,
@@ -74,8 +78,9 @@ import numpy as np
 from .thermal import ThermalModel
 
 FORMAT = "lmncell-model"
-VERSION = 4
-READABLE_VERSIONS = (1, 2, 3, 4)
+VERSION = 5
+MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
+READABLE_VERSIONS = (1, 2, 3, 4, 5)
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -171,6 +176,7 @@ class LmnModel:
     rest_current_a: float = 0.01
     initial_direction: str = "discharge"
     arrhenius_k: float | None = None
+    tau_activation_k: float | None = None       # Eτ (K) of the filter time constants
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
     depletion: Depletion | None = None
@@ -455,6 +461,13 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     if arrhenius is not None and not (isinstance(arrhenius, (int, float))
                                       and math.isfinite(arrhenius)):
         raise ModelFileError(f"{w}: 'arrhenius_k' is {arrhenius!r}, expected null or a number")
+    tau_activation = reg.get("time_constant_activation_k")
+    if tau_activation is not None and not (isinstance(tau_activation, (int, float))
+                                           and not isinstance(tau_activation, bool)
+                                           and math.isfinite(tau_activation)
+                                           and 0 <= tau_activation <= MAX_TAU_ACTIVATION_K):
+        raise ModelFileError(f"{w}: 'time_constant_activation_k' is {tau_activation!r}, "
+                             f"expected null or a number of K within 0…{MAX_TAU_ACTIVATION_K:g}")
     temperature_terms = reg.get("temperature_terms", 0)
     if (not isinstance(temperature_terms, int) or isinstance(temperature_terms, bool)
             or not 0 <= temperature_terms <= MAX_TEMPERATURE_TERMS):
@@ -512,6 +525,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         rest_current_a=float(gating.get("rest_current_a", 0.01)),
         initial_direction=str(gating.get("initial_direction", "discharge")),
         arrhenius_k=None if arrhenius is None else float(arrhenius),
+        tau_activation_k=None if tau_activation is None else float(tau_activation),
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
         depletion=_depletion(reg.get("depletion"), filters, w),
@@ -549,6 +563,7 @@ def model_to_dict(model: LmnModel) -> dict:
                        "hysteresis_gamma": model.hysteresis_gamma,
                        "ocv_input": model.ocv_input, "soc_input": model.soc_input,
                        "offset": model.offset, "arrhenius_k": model.arrhenius_k,
+                       "time_constant_activation_k": model.tau_activation_k,
                        "reference_temperature_c": model.reference_temperature_c,
                        "temperature_terms": model.temperature_terms,
                        "depletion": (None if model.depletion is None

@@ -39,6 +39,24 @@ def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
     return np.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
 
 
+def time_constant_factor(temperature_c: float, e_k: float | None, ref_c: float = 25.0) -> float:
+    """k(T) = exp(Eτ·(1/T − 1/T_ref)) that multiplies every filter time constant at T (°C)
+    (1 without Eτ): the relaxation slower when cold."""
+    if e_k is None:
+        return 1.0
+    return math.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
+
+
+def filter_coefficients(model: LmnModel, temperature_c: float | None = None) -> list[float]:
+    """exp(−Ts/(τ·k(T))) of every filter side, in the order of the low-pass states (k(T) of
+    time_constant_factor; the time constants of the file where T is None or without Eτ)."""
+    k = (1.0 if temperature_c is None
+         else time_constant_factor(temperature_c, model.tau_activation_k,
+                                   model.reference_temperature_c))
+    ts = model.sample_time_s
+    return [math.exp(-ts / (tau * k)) for f in model.filters for tau in f]
+
+
 def initial_hysteresis(soc0: float) -> float:
     """Default hysteresis state: +1 (just charged) at SoC0 ≥ 0.95, else 0 (unknown history)."""
     return 1.0 if soc0 >= 0.95 else 0.0
@@ -71,7 +89,8 @@ class ExoStepper:
         self.model = model
         ts = model.sample_time_s
         self.capacity_ah = float(capacity_ah if capacity_ah is not None else model.capacity_ah)
-        self.coef = [math.exp(-ts / tau) for f in model.filters for tau in f]
+        self.coef = filter_coefficients(model)      # at T_ref (the file's time constants)
+        self._coef_at = (math.nan, self.coef)       # (T, coefficients) of the last step
         self.soc_gain = ts / (3600.0 * self.capacity_ah)
         self.gamma = model.hysteresis_gamma
         pv = model.partition_variables     # where each partition input goes in z (or None)
@@ -114,11 +133,23 @@ class ExoStepper:
         m = self.model
         return m.efficiency_charge if current_a > 0 else m.efficiency_discharge
 
-    def update(self, s: ExoState, current_a: float) -> None:
-        """Advance the state by one step with the current held over it."""
+    def coefficients_at(self, temperature_c: float | None) -> list[float]:
+        """The filter coefficients of a step at the temperature (°C): coef, or with Eτ
+        filter_coefficients at T (kept while T stays the same)."""
+        if self.model.tau_activation_k is None or temperature_c is None:
+            return self.coef
+        last_t, coef = self._coef_at
+        if temperature_c != last_t:
+            coef = filter_coefficients(self.model, temperature_c)
+            self._coef_at = (temperature_c, coef)
+        return coef
+
+    def update(self, s: ExoState, current_a: float, temperature_c: float | None = None) -> None:
+        """Advance the state by one step with the current held over it, at the temperature
+        (°C; it sets the filters' time constants where the model has Eτ)."""
         i = current_a
         s.soc += self.soc_gain * self.eta(i) * i
-        for k, a in enumerate(self.coef):
+        for k, a in enumerate(self.coefficients_at(temperature_c)):
             s.lp[k] = a * s.lp[k] + (1.0 - a) * i
         if self.gamma is not None:
             e = math.exp(-self.gamma * abs(i) * self.soc_gain)
@@ -223,7 +254,7 @@ def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray
     cur = current_a.tolist()
     tl = temp.tolist()
     for k in range(n):
-        stepper.update(s, cur[k])
+        stepper.update(s, cur[k], tl[k])
         if soc is not None:
             s.soc = float(soc[k])
         stepper.features(s, cur[k], tl[k], X[k], Z[k])
@@ -563,7 +594,7 @@ class CellStepper:
     def step(self, current_a: float, temperature_c: float = 25.0) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
         m, s, exo = self.model, self.state, self.exo
-        exo.update(s, current_a)
+        exo.update(s, current_a, temperature_c)
         self._depletion_source = exo.features(s, current_a, temperature_c, self._x, self._z)
         exo.shift(s, current_a)
         one = self._one

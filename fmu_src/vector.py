@@ -12,7 +12,14 @@ from __future__ import annotations
 import numpy as np
 
 from .model import TEMPERATURE_STEP_K, LmnModel
-from .step import CHARGE, DISCHARGE, arrhenius_gain, fixed_point, initial_hysteresis
+from .step import (
+    CHARGE,
+    DISCHARGE,
+    arrhenius_gain,
+    filter_coefficients,
+    fixed_point,
+    initial_hysteresis,
+)
 from .thermal import heat_w, next_temperature, rested_temperature
 
 
@@ -36,7 +43,7 @@ class VectorCells:
             raise ValueError("capacity_ah: expected finite values > 0 Ah for every cell")
         self.r = np.broadcast_to(np.asarray(resistance_scale, dtype=float), (n,)).copy()
         self.soc_gain = ts / (3600.0 * cap)
-        self.coef = np.array([np.exp(-ts / tau) for f in m.filters for tau in f])
+        self.coef = np.array(filter_coefficients(m))
         self.soc = np.broadcast_to(soc0, (n,)).copy()
         self.lp = np.zeros((n, 2 * len(m.filters)))
         self.h = np.array([initial_hysteresis(s) for s in self.soc])
@@ -87,12 +94,24 @@ class VectorCells:
                 name, lp[:, 1] if lp.shape[1] else i)
         return x, z
 
+    def _coefficients(self, t: np.ndarray) -> np.ndarray:
+        """The filter coefficients per cell (N, 2F) at the cells' temperatures (°C), or those
+        of the file's time constants (2F,) without Eτ (step.filter_coefficients)."""
+        m = self.model
+        if m.tau_activation_k is None:
+            return self.coef
+        k = np.exp(m.tau_activation_k * (1.0 / (t + 273.15)
+                                         - 1.0 / (m.reference_temperature_c + 273.15)))
+        taus = np.array([tau for f in m.filters for tau in f])
+        return np.exp(-m.sample_time_s / (taus[None, :] * k[:, None]))
+
     def _advance(self, i: np.ndarray, t: np.ndarray):
         """The state after one step and the voltage, without storing anything."""
         m = self.model
         eta = np.where(i > 0, m.efficiency_charge, m.efficiency_discharge)
         soc = self.soc + self.soc_gain * eta * i
-        lp = self.coef * self.lp + (1.0 - self.coef) * i[:, None]
+        coef = self._coefficients(t)
+        lp = coef * self.lp + (1.0 - coef) * i[:, None]
         h = self.h
         if m.hysteresis_gamma is not None:
             e = np.exp(-m.hysteresis_gamma * np.abs(i) * self.soc_gain)

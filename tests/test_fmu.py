@@ -56,8 +56,9 @@ def test_sub_stepping(quick_model, quick_fmu) -> None:
     expect = [ref.step(i, float(t)) for i, t in zip(taken, seg.temperature_c[:n], strict=True)]
     fine = run_fmu_on_segment(quick_fmu, seg, 1.0, step_s=0.1)
     assert np.max(np.abs(fine["voltage"][1:n + 1] - expect)) <= 1e-9
-    # an uneven step (2.5 Ts) accumulates exactly: after 2 calls, 5 model steps
-    inst = Instance(quick_fmu, start={"soc0": 1.0})
+    # an uneven step (2.5 Ts) accumulates exactly: after 2 calls, 5 model steps (the input
+    # temperature, 25 °C, taken as the cell's: the model's filters depend on it)
+    inst = Instance(quick_fmu, start={"soc0": 1.0, "temperature_is_cell": True})
     try:
         for _ in range(2):
             inst.step(-2.0, h=2.5)
@@ -159,7 +160,8 @@ def test_two_models_in_one_process(quick_model, quick_fmu, tmp_path) -> None:
     other = tmp_path / "other.json"
     other.write_text(doc)
     fmu2 = build_fmu(other, tmp_path / "other.fmu")
-    a, b = Instance(quick_fmu, "a", {"soc0": 0.9}), Instance(fmu2, "b", {"soc0": 0.9})
+    cell = {"soc0": 0.9, "temperature_is_cell": True}     # stepped at 25 °C, as below
+    a, b = Instance(quick_fmu, "a", cell), Instance(fmu2, "b", cell)
     try:
         for _ in range(10):
             a.step(-2.0, h=2.0)
@@ -216,7 +218,7 @@ def test_current_delay_takes_the_window_delta_earlier(quick_model) -> None:
     ref = CellStepper(model, 1.0)
     ref_v = [ref.step(charge(k - delay, k + 1 - delay), 25.0)
              for k in range(int(np.sum(steps)))]
-    cosim = CellCosim(model, Parameters(1.0, 2.85))
+    cosim = CellCosim(model, Parameters(1.0, 2.85, temperature_is_cell=True))   # at 25 °C
     worst = 0.0
     for h, i in zip(steps, currents, strict=True):
         if cosim.advance(float(h), float(i)):

@@ -250,6 +250,9 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     ({"current_delay_s": 1.0}, "'current_delay_s'"),
     ({"current_delay_s": -0.1}, "'current_delay_s'"),
     ({"current_delay_s": "on"}, "'current_delay_s'"),
+    ({"time_constant_scaling": "on"}, "'time_constant_scaling' = 'on': expected 'auto', 'off'"),
+    ({"time_constant_scaling": -100.0}, "'time_constant_scaling' = -100.0"),
+    ({"time_constant_scaling": True}, "'time_constant_scaling' = True"),
     ({"partition": "soc"}, "'partition'"),
     ({"partition": ["soc", "pressure"]}, "'partition'"),
 ])
@@ -442,3 +445,28 @@ def test_charge_records_teach_the_charge_branch(tmp_path) -> None:
         window[name] = pooled([r["lmn"] for r in rows], "window_")
     assert window["both"] < 0.5 * window["discharges"], window
     assert window["both"] < 3.0, window
+
+
+def test_time_constant_scaling_auto_only_where_cells_warm_up_inside_records() -> None:
+    """'auto' takes Eτ where some record's measured temperature varies by more than 2 K (self-
+    heating: Panasonic), not for records at constant chamber temperatures (A123: there Eτ and
+    the Arrhenius gain cannot be told apart); a number is taken as it is, 'off' is off."""
+    from types import SimpleNamespace
+
+    from lmncell.identification.prefit import (
+        TIME_CONSTANT_ACTIVATION_K,
+        choose_time_constant_scaling,
+    )
+
+    def segs(*spans: float) -> list:
+        return [SimpleNamespace(temperature_c=np.linspace(25.0, 25.0 + d, 50)) for d in spans]
+
+    quiet = lambda _m: None  # noqa: E731
+    auto = load_config()
+    assert choose_time_constant_scaling(auto, segs(0.0, 6.5), quiet) == TIME_CONSTANT_ACTIVATION_K
+    assert choose_time_constant_scaling(auto, segs(0.0, 1.5, 2.0), quiet) is None
+    assert choose_time_constant_scaling(auto, [SimpleNamespace(temperature_c=None)], quiet) is None
+    assert choose_time_constant_scaling(load_config(time_constant_scaling="off"), segs(8.0),
+                                        quiet) is None
+    assert choose_time_constant_scaling(load_config(time_constant_scaling=800), segs(0.0),
+                                        quiet) == 800.0

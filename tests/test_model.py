@@ -180,7 +180,11 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=5), r"version 5; this LMNCell reads versions \[1, 2, 3, 4\]"),
+    (lambda d: d.update(version=6), r"version 6; this LMNCell reads versions \[1, 2, 3, 4, 5\]"),
+    (lambda d: d["regressors"].update(time_constant_activation_k=-5.0),
+     r"'time_constant_activation_k' is -5.0, expected null or a number of K within 0…10000"),
+    (lambda d: d["regressors"].update(time_constant_activation_k="1500"),
+     r"'time_constant_activation_k' is '1500'"),
     (lambda d: d.update(current_delay_s=1.0), r"'current_delay_s' is 1.0, expected a number 0 ≤ δ"),
     (lambda d: d.update(current_delay_s="0.1"), r"'current_delay_s' is '0.1'"),
     (lambda d: d["regressors"].update(depletion={"tau_s": 150.0}), "'depletion' must be null"),
@@ -287,3 +291,45 @@ def test_beside_is_the_voltage_beside_the_step_and_its_slope(gating: str) -> Non
             assert slope == pytest.approx(st.soc_slope(st.soc, upward), rel=1e-12, abs=1e-12)
             checked += 1
     assert checked == 180
+
+
+def test_filter_time_constants_follow_the_temperature() -> None:
+    """With Eτ the filters' time constants are τ·exp(Eτ(1/T − 1/T_ref)): the step and the batch
+    path (simulate) agree over a temperature that sweeps 0…45 °C, a cold cell relaxes slower
+    than a warm one after the same pulse (as without Eτ it does not), the runtime's many-cell
+    step agrees, and the model file keeps Eτ."""
+    from lmncell.runtime.step import filter_coefficients, time_constant_factor
+
+    m = random_tree_model()
+    m.tau_activation_k = 1500.0
+    assert time_constant_factor(25.0, 1500.0) == 1.0
+    assert time_constant_factor(0.0, 1500.0) == pytest.approx(
+        math.exp(1500.0 * (1 / 273.15 - 1 / 298.15)), rel=1e-15)
+    assert filter_coefficients(m, 25.0) == filter_coefficients(m)
+    rng = np.random.default_rng(7)
+    cur = np.repeat(rng.normal(0, 2, 120), 5)
+    temp = np.linspace(0.0, 45.0, cur.size)
+    st = CellStepper(m, 0.6, temperature_c=0.0)
+    stepped = [st.step(float(i), float(t)) for i, t in zip(cur, temp, strict=True)]
+    assert np.max(np.abs(simulate(m, cur, temp, 0.6).voltage_v - stepped)) <= 1e-12
+    cells = VectorCells(m, 0.6, n=2, temperature_c=0.0)
+    for i, t in zip(cur, temp, strict=True):
+        many = cells.step(np.full(2, i), t)
+    assert np.max(np.abs(many - stepped[-1])) <= 1e-12
+
+    def retained_after_rest(model, t_c: float) -> float:
+        """The share of the 800 s filter's low-pass state left after a 300 s rest."""
+        s = CellStepper(model, 0.6, temperature_c=t_c)
+        for _ in range(60):
+            s.step(-5.0, t_c)
+        loaded = s.state.lp[-3]
+        for _ in range(300):
+            s.step(0.0, t_c)
+        return s.state.lp[-3] / loaded
+
+    assert retained_after_rest(m, 0.0) > retained_after_rest(m, 40.0) > 0.0
+    assert retained_after_rest(m, 25.0) == pytest.approx(math.exp(-300.0 / 800.0), rel=1e-12)
+    m.tau_activation_k = None
+    assert retained_after_rest(m, 0.0) == retained_after_rest(m, 40.0)
+    m.tau_activation_k = 1500.0
+    assert model_from_dict(model_to_dict(m)).tau_activation_k == 1500.0

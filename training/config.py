@@ -9,7 +9,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from lmncell.identification.ladder import is_ladder
-from lmncell.runtime.model import MAX_TEMPERATURE_TERMS, PARTITION_VARIABLES, Depletion
+from lmncell.runtime.model import (
+    MAX_TAU_ACTIVATION_K,
+    MAX_TEMPERATURE_TERMS,
+    PARTITION_VARIABLES,
+    Depletion,
+)
 
 DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant for "auto" (s)
 OFFSET_BOUND_MV = 50.0     # offset_bound_mv 'auto' where slow OCV tests fix the OCV
@@ -42,6 +47,11 @@ class TrainConfig:
     temperature_scaling: "auto" (an Arrhenius gain on the current regressors once the training
     temperatures span more than 5 K; E chosen by the OCV pre-fit, or with temperature terms by
     the root model's free-run error with those terms), "off", or E in K.
+    time_constant_scaling: "auto" (filter time constants τ·exp(Eτ(1/T − 1/T_ref)) with
+    Eτ = TIME_CONSTANT_ACTIVATION_K where the records' measured temperature varies inside
+    records, i.e. the cells warm up under load, by more than 2 K; off for records at a constant
+    chamber temperature, where Eτ and the Arrhenius gain E cannot be told apart), "off", or Eτ
+    in K (0…10000).
     temperature_terms: the degree n of the temperature terms (current, filter, hysteresis and
     offset columns again times dT … dTⁿ, dT = (T − 25 °C)/10 K: resistances and OCV that change
     smoothly with temperature, which interpolate between training temperatures where sigmoid
@@ -140,6 +150,7 @@ class TrainConfig:
                                  [800.0, 3000.0]])
     hysteresis: str | float = "auto"
     temperature_scaling: str | float = "auto"
+    time_constant_scaling: str | float = "auto"
     local_model_form: str = "auto"
     output: str = "relative_ocv"
     ocv_input: bool = False
@@ -206,6 +217,12 @@ class TrainConfig:
         if not (self.temperature_scaling in ("auto", "off")
                 or isinstance(self.temperature_scaling, (int, float))):
             raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
+        if not (self.time_constant_scaling in ("auto", "off")
+                or (isinstance(self.time_constant_scaling, (int, float))
+                    and not isinstance(self.time_constant_scaling, bool)
+                    and 0 <= self.time_constant_scaling <= MAX_TAU_ACTIVATION_K)):
+            raise bad("time_constant_scaling",
+                      f"expected 'auto', 'off' or Eτ in K within 0…{MAX_TAU_ACTIVATION_K:g}")
         if not (self.temperature_terms == "auto" or (isinstance(self.temperature_terms, int)
                 and not isinstance(self.temperature_terms, bool)
                 and 0 <= self.temperature_terms <= MAX_TEMPERATURE_TERMS)):

@@ -52,6 +52,8 @@ typedef struct {
     /* exogenous state (runtime.ExoState) */
     double soc, lp[2 * NF + 1], h, past[NB + 1];
     int direction;
+    /* the filter coefficients at the last step's temperature (ExoStepper.coefficients_at) */
+    double coef_t, coef[2 * NF + 1];
     /* network state (runtime.CellStepper) */
     double lags[NA + 1], prev_lags[NA + 1], voltage;
     int d;
@@ -157,7 +159,11 @@ static double depletion_factor(double soc) {
 static void exo_init(State *s, double soc0, double h0) {
     int k;
     s->soc = soc0;
-    for (k = 0; k < 2 * NF + 1; k++) s->lp[k] = 0.0;
+    for (k = 0; k < 2 * NF + 1; k++) {
+        s->lp[k] = 0.0;
+        s->coef[k] = LP_COEF[k];
+    }
+    s->coef_t = NAN;
     s->h = h0;
     s->direction = INITIAL_DIRECTION;
     for (k = 0; k < NB + 1; k++) s->past[k] = 0.0;
@@ -165,11 +171,30 @@ static void exo_init(State *s, double soc0, double h0) {
 
 static double initial_hysteresis(double soc0) { return soc0 >= 0.95 ? 1.0 : 0.0; }
 
-static void exo_update(State *s, double i, double cap) {
+/* the filter coefficients at temperature t (step.filter_coefficients), kept while t stays */
+static const double *filter_coefficients(State *s, double t) {
+#if HAS_TAU_ACTIVATION
+    int k;
+    if (!(t == s->coef_t)) {
+        double kf = exp(TAU_ACTIVATION_K * (1.0 / (t + 273.15)
+                                            - 1.0 / (REF_TEMPERATURE_C + 273.15)));
+        for (k = 0; k < 2 * NF; k++) s->coef[k] = exp(-TS / (LP_TAU[k] * kf));
+        s->coef_t = t;
+    }
+    return s->coef;
+#else
+    (void)s;
+    (void)t;
+    return LP_COEF;
+#endif
+}
+
+static void exo_update(State *s, double i, double t, double cap) {
     int k;
     double gain = TS / (3600.0 * cap);
+    const double *coef = filter_coefficients(s, t);
     s->soc += gain * eta(i) * i;
-    for (k = 0; k < 2 * NF; k++) s->lp[k] = LP_COEF[k] * s->lp[k] + (1.0 - LP_COEF[k]) * i;
+    for (k = 0; k < 2 * NF; k++) s->lp[k] = coef[k] * s->lp[k] + (1.0 - coef[k]) * i;
 #if HAS_HYSTERESIS
     {
         double e = exp(-HYSTERESIS_GAMMA * fabs(i) * gain);
@@ -342,7 +367,7 @@ static void stepper_init(State *s, double soc0, double t) {
 static void stepper_step(State *s, double i, double t) {
     double y;
     int k;
-    exo_update(s, i, s->capacity);
+    exo_update(s, i, t, s->capacity);
     features(s, i, t, s->x, s->z, &s->dep_source);
     shift_past(s, i);
     s->d = s->direction;

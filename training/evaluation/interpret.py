@@ -138,6 +138,10 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
                     else f"γ = {model.hysteresis_gamma:g}")
                  + ("" if model.arrhenius_k is None
                     else f"; resistances × exp(E·(1/T − 1/T_ref)), E = {model.arrhenius_k:g} K")
+                 + ("" if model.tau_activation_k is None
+                    else "; time constants (at T_ref = "
+                         f"{model.reference_temperature_c:g} °C) × exp(Eτ·(1/T − 1/T_ref)), "
+                         f"Eτ = {model.tau_activation_k:g} K")
                  + ("" if not model.current_delay_s
                     else f"; current delayed by {model.current_delay_s:g} s (the voltage "
                          "channel's lag)"))

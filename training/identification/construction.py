@@ -33,6 +33,7 @@ from lmncell.identification.prefit import (
     _within_record_span,
     choose_arrhenius_with_temperature_terms,
     choose_prefit,
+    choose_time_constant_scaling,
     temperature_degree,
     temperature_levels,
     with_soc_reference_weights,
@@ -170,6 +171,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
     base.arrhenius_k = e_k
+    base.tau_activation_k = choose_time_constant_scaling(cfg, segs, progress)
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "
                  + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
@@ -246,6 +248,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     model = stages[chosen].apply(base)
     progress(f"  chosen M={model.n_local_models} by {key}")
     info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
+            "time_constant_activation_k": base.tau_activation_k,
             "arrhenius_root_freerun_rmse_mv": e_scores,
             "temperature_terms": n_temp,
             "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
