@@ -91,6 +91,7 @@ class ExoStepper:
         self.capacity_ah = float(capacity_ah if capacity_ah is not None else model.capacity_ah)
         self.coef = filter_coefficients(model)      # at T_ref (the file's time constants)
         self._coef_at = (math.nan, self.coef)       # (T, coefficients) of the last step
+        self._taus = [tau for f in model.filters for tau in f]
         self.soc_gain = ts / (3600.0 * self.capacity_ah)
         self.gamma = model.hysteresis_gamma
         pv = model.partition_variables     # where each partition input goes in z (or None)
@@ -139,8 +140,12 @@ class ExoStepper:
         if self.model.tau_activation_k is None or temperature_c is None:
             return self.coef
         last_t, coef = self._coef_at
-        if temperature_c != last_t:
-            coef = filter_coefficients(self.model, temperature_c)
+        if temperature_c != last_t:      # filter_coefficients, with its loop-invariant parts
+            m = self.model
+            k = time_constant_factor(temperature_c, m.tau_activation_k,
+                                     m.reference_temperature_c)
+            ts, exp = m.sample_time_s, math.exp
+            coef = [exp(-ts / (tau * k)) for tau in self._taus]
             self._coef_at = (temperature_c, coef)
         return coef
 
