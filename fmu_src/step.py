@@ -149,7 +149,7 @@ class ExoStepper:
             self._coef_at = (temperature_c, coef)
         return coef
 
-    def update(self, s: ExoState, current_a: float, temperature_c: float | None = None) -> None:
+    def update(self, s: ExoState, current_a: float, temperature_c: float) -> None:
         """Advance the state by one step with the current held over it, at the temperature
         (°C; it sets the filters' time constants where the model has Eτ)."""
         i = current_a
