@@ -158,7 +158,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"static const double OCV_V[NOCV] = {_arr(m.ocv_v)};",
         f"static const double LP_COEF[2 * NF + 1] = {_arr([*lp, 0.0])};",
         f"static const double LP_TAU[2 * NF + 1] = "
-        f"{_arr([*(tau for f in m.filters for tau in f), 1.0])};",
+        f"{_arr([*m.filter_taus(), 1.0])};",
         "/* the EKF's low-pass states, one per distinct time constant"
         " (observers.lowpass_states): the first filter slot of each, the state of each slot */",
         f"#define NLX {len(first)}",

@@ -238,6 +238,11 @@ class LmnModel:
     def n_local_models(self) -> int:
         return int(self.theta.shape[0])
 
+    def filter_taus(self) -> list[float]:
+        """Every filter side's time constant (s) at T_ref, in the order of the low-pass
+        states: [fast_1, slow_1, fast_2, …]."""
+        return [tau for f in self.filters for tau in f]
+
     @property
     def n_exo(self) -> int:
         return len(self.columns()) - self.output_lags

@@ -634,7 +634,7 @@ def lowpass_states(model: LmnModel) -> tuple[list[int], list[int]]:
     of the next: the same recursion of the same current, always equal, which the EKF would
     otherwise carry twice, with a singular covariance). Returns the first filter slot of each
     EKF low-pass state and the EKF low-pass state of each slot."""
-    taus = [tau for f in model.filters for tau in f]
+    taus = model.filter_taus()
     first: list[int] = []
     state_of: list[int] = []
     for slot, tau in enumerate(taus):

@@ -47,14 +47,16 @@ def time_constant_factor(temperature_c: float, e_k: float | None, ref_c: float =
     return math.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
 
 
-def filter_coefficients(model: LmnModel, temperature_c: float | None = None) -> list[float]:
+def filter_coefficients(model: LmnModel, temperature_c: float | None = None,
+                        taus: list[float] | None = None) -> list[float]:
     """exp(−Ts/(τ·k(T))) of every filter side, in the order of the low-pass states (k(T) of
-    time_constant_factor; the time constants of the file where T is None or without Eτ)."""
+    time_constant_factor; the time constants of the file where T is None or without Eτ);
+    taus: model.filter_taus() where the caller keeps it."""
     k = (1.0 if temperature_c is None
          else time_constant_factor(temperature_c, model.tau_activation_k,
                                    model.reference_temperature_c))
-    ts = model.sample_time_s
-    return [math.exp(-ts / (tau * k)) for f in model.filters for tau in f]
+    ts, exp = model.sample_time_s, math.exp
+    return [exp(-ts / (tau * k)) for tau in (model.filter_taus() if taus is None else taus)]
 
 
 def initial_hysteresis(soc0: float) -> float:
@@ -91,7 +93,7 @@ class ExoStepper:
         self.capacity_ah = float(capacity_ah if capacity_ah is not None else model.capacity_ah)
         self.coef = filter_coefficients(model)      # at T_ref (the file's time constants)
         self._coef_at = (math.nan, self.coef)       # (T, coefficients) of the last step
-        self._taus = [tau for f in model.filters for tau in f]
+        self._taus = model.filter_taus()
         self.soc_gain = ts / (3600.0 * self.capacity_ah)
         self.gamma = model.hysteresis_gamma
         pv = model.partition_variables     # where each partition input goes in z (or None)
@@ -140,12 +142,8 @@ class ExoStepper:
         if self.model.tau_activation_k is None or temperature_c is None:
             return self.coef
         last_t, coef = self._coef_at
-        if temperature_c != last_t:      # filter_coefficients, with its loop-invariant parts
-            m = self.model
-            k = time_constant_factor(temperature_c, m.tau_activation_k,
-                                     m.reference_temperature_c)
-            ts, exp = m.sample_time_s, math.exp
-            coef = [exp(-ts / (tau * k)) for tau in self._taus]
+        if temperature_c != last_t:
+            coef = filter_coefficients(self.model, temperature_c, self._taus)
             self._coef_at = (temperature_c, coef)
         return coef
 
@@ -660,12 +658,10 @@ class CellStepper:
                                                        soc - lo, self.state.direction)
             except OverflowError:
                 return self._beside_slowly(hi, lo, upward)
-        products = self._products
-        local = products[one.n_nodes:]
-        lag_part = ([sum(map(operator.mul, row, self.prev_lags)) for row in one.theta_lags]
-                    if m.output_lags else [])
-        if lag_part:
-            local = [x + y for x, y in zip(local, lag_part, strict=True)]
+        exo_part = self._products[one.n_nodes:]
+        lag_part = self._lag_parts()
+        local = ([x + y for x, y in zip(exo_part, lag_part, strict=True)] if lag_part
+                 else exo_part)
         ocv_hi, ocv_lo = one.ocv(hi), one.ocv(lo)
         u_hi = sum(map(operator.mul, phi_hi, local))
         u_lo = sum(map(operator.mul, phi_lo, local))
@@ -685,11 +681,17 @@ class CellStepper:
                 slope_dep = source * dep.slope(soc, upward, factor)
             u_hi += d_hi * sum(map(operator.mul, phi_hi, column))
             u_lo += d_lo * sum(map(operator.mul, phi_lo, column))
-        slope = one.slope_from(dphi, products[one.n_nodes:], validity, lag_part, slope_ocv,
-                               slope_dep)
+        slope = one.slope_from(dphi, exo_part, validity, lag_part, slope_ocv, slope_dep)
         if m.relative_ocv:
             return u_hi + ocv_hi, u_lo + ocv_lo, slope + slope_ocv
         return u_hi, u_lo, slope
+
+    def _lag_parts(self) -> list[float]:
+        """Each local model's output-lag part θ_lag,j·[ŷ(k−1), …] at the step's lags (empty
+        without output lags)."""
+        if not self.model.output_lags:
+            return []
+        return [sum(map(operator.mul, row, self.prev_lags)) for row in self._one.theta_lags]
 
     def _beside_slowly(self, hi: float, lo: float, upward: bool) -> tuple[float, float, float]:
         """beside from voltages_at_socs and soc_slope."""
@@ -708,8 +710,7 @@ class CellStepper:
         else:
             products = self._products_at_socs([soc])[0][0]
             _, _, validity, _, slots = one.combine(products, self.state.direction)
-        lag_part = ([sum(map(operator.mul, row, self.prev_lags)) for row in one.theta_lags]
-                    if m.output_lags else [])
+        lag_part = self._lag_parts()
         slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
         slope_dep = (self._depletion_source * m.depletion.slope(soc, upward)
                      if self._depletion_entry is not None else 0.0)

@@ -44,6 +44,7 @@ class VectorCells:
         self.r = np.broadcast_to(np.asarray(resistance_scale, dtype=float), (n,)).copy()
         self.soc_gain = ts / (3600.0 * cap)
         self.coef = np.array(filter_coefficients(m))
+        self._taus = np.array(m.filter_taus())
         self.soc = np.broadcast_to(soc0, (n,)).copy()
         self.lp = np.zeros((n, 2 * len(m.filters)))
         self.h = np.array([initial_hysteresis(s) for s in self.soc])
@@ -100,10 +101,8 @@ class VectorCells:
         m = self.model
         if m.tau_activation_k is None:
             return self.coef
-        k = np.exp(m.tau_activation_k * (1.0 / (t + 273.15)
-                                         - 1.0 / (m.reference_temperature_c + 273.15)))
-        taus = np.array([tau for f in m.filters for tau in f])
-        return np.exp(-m.sample_time_s / (taus[None, :] * k[:, None]))
+        k = arrhenius_gain(t, m.tau_activation_k, self.n, m.reference_temperature_c)
+        return np.exp(-m.sample_time_s / (self._taus[None, :] * k[:, None]))
 
     def _advance(self, i: np.ndarray, t: np.ndarray):
         """The state after one step and the voltage, without storing anything."""
