@@ -114,14 +114,6 @@ class Depletion:
             out *= q
         return out
 
-    def slope(self, soc: float, upward: bool, factor: float | None = None) -> float:
-        """d factor/d SoC at one SoC, one-sided (upward: towards SoC 1): −power·factor/SoC
-        where SoC is above soc_min on that side, 0 where the factor is held (factor: the
-        factor at soc where the caller has it)."""
-        if soc > self.soc_min or (upward and soc == self.soc_min):
-            return -self.power * (self.factor(soc) if factor is None else factor) / soc
-        return 0.0
-
     def factors(self, soc: np.ndarray) -> np.ndarray:
         """factor for an array of SoC (the same operations element by element)."""
         q = self.soc_scale / np.maximum(soc, self.soc_min)

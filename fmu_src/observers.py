@@ -312,12 +312,10 @@ class SocObserver:
         return ocv + np.sum(phi * local, axis=1), phi, ocv[:, None] + local
 
     def _jacobian(self, xi: list[float], soc_spread: float = FD_SOC
-                  ) -> tuple[float, np.ndarray, float, float]:
-        """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]), the curvature term
-        δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC) and the tangent ∂u/∂SoC (analytic,
-        CellStepper.soc_slope; one-sided where the OCV or the depletion factor has a kink,
-        towards SoC 0 only within FD_SOC of SoC 1): two network evaluations besides the
-        step's own, at the step's own SoC one walk through the tree for all three
+                  ) -> tuple[float, np.ndarray, float]:
+        """u(ξ), H = ∂u/∂ξ by central differences (SoC kept within [0, 1]) and the curvature
+        term δ = (u(SoC + d) + u(SoC − d))/2 − u(SoC): two network evaluations besides the
+        step's own, at the step's own SoC one walk through the tree for both
         (CellStepper.beside).
 
         The SoC difference d of H is soc_spread (at least FD_SOC): with d = σ_SoC the SoC
@@ -325,7 +323,8 @@ class SocObserver:
         slope at a wrong estimate for the slope over the whole uncertainty (an EKF started on
         the steep part of an LFP curve otherwise trusts it and collapses its variance before it
         reaches the plateau), and δ² is added to the measurement variance as the linearisation
-        error. The tangent sets the variance floor (it does not depend on the variance).
+        error. The same secant sets the variance floor (_variance_floor): the slope over
+        ±σ_SoC around the estimate, where the reported band says the truth is.
         The low-pass states and h enter u only through the regressors (unless the filtered
         current is a partition input, then by central differences): their columns are
         ∂x/∂state (state_columns) times the network's blended coefficients at ξ."""
@@ -333,15 +332,13 @@ class SocObserver:
         clipped = min(max(xi[0], 0.0), 1.0)  # differences around the clipped SoC:
         spread = max(FD_SOC, soc_spread)              # beyond 0 or 1 both sides would clip
         hi, lo = min(clipped + spread, 1.0), max(clipped - spread, 0.0)
-        upward = clipped + FD_SOC <= 1.0
         if not self._fd_states:
             if clipped == st.soc:          # the step's own SoC: its voltage and validities
                 u0, validity = st.voltage_v, st.validity
-                u_hi, u_lo, tangent = st.beside(hi, lo, upward)
+                u_hi, u_lo = st.beside(hi, lo)
             else:
                 u0, validity, _ = st.outputs_at_socs([clipped])[0]
                 u_hi, u_lo = st.voltages_at_socs([hi, lo])
-                tangent = st.soc_slope(clipped, upward)
             rest = self._regressor_gradient(validity, clipped)
         else:
             steps = np.full(n - 1, FD_CURRENT_A)
@@ -356,9 +353,8 @@ class SocObserver:
             u_all = self._outputs_for(rows)[0]
             u0, u_hi, u_lo = u_all[:3].tolist()
             rest = ((u_all[3::2] - u_all[4::2]) / (2.0 * steps)).tolist()
-            tangent = st.soc_slope(clipped, upward)
         h = np.array([(u_hi - u_lo) / (hi - lo), *rest])
-        return u0, h, 0.5 * (u_hi + u_lo) - u0, tangent
+        return u0, h, 0.5 * (u_hi + u_lo) - u0
 
     def _regressor_gradient(self, validity: Sequence[float], soc: float) -> list[float]:
         """∂u/∂state for the states after SoC (low-pass states, h) through the regressors
@@ -455,7 +451,7 @@ class SocObserver:
         xi = self._state_vector()
         soc_prior = min(max(xi[0], 0.0), 1.0)
         p = s.covariance()
-        u, h, curvature, tangent = self._jacobian(xi, min(math.sqrt(max(s.var, 0.0)),
+        u, h, curvature = self._jacobian(xi, min(math.sqrt(max(s.var, 0.0)),
                                                           SPREAD_MAX))
         r = self.settings.measurement_variance("ekf", soc_prior) + curvature * curvature
         ph = p.dot(h)                              # (.dot: less overhead than @ here)
@@ -467,7 +463,7 @@ class SocObserver:
         outer = np.multiply.outer(ph, ph)
         outer *= inv_s
         p -= outer                  # in place: the prediction made this P, nothing shares it
-        s.var_floor = self._variance_floor(soc_prior, tangent)
+        s.var_floor = self._variance_floor(soc_prior, float(h[0]))
         s.var = max(float(p[0, 0]), 1e-12)
         st.state.lp = self._stepper_lowpass(xi[1:1 + len(self.lowpass_slots)])
         if self.model.hysteresis_gamma is not None:
@@ -513,7 +509,8 @@ class SocObserver:
 
     def _variance_floor(self, soc: float, slope_v: float) -> float:
         """The reported variance's floor at a SoC estimate (SoC²): the model error σ_m over
-        the local slope (soc_variance_floor), and at least the square of ocv_interval_sigma,
+        slope_v (V per unit SoC: the EKF's secant over ±σ, the fuzzy observer's and the IMM's
+        local slopes; soc_variance_floor), and at least the square of ocv_interval_sigma,
         the spread σ_m means on the OCV curve around the estimate (the tangent at an estimate
         on the steep side of the knee is no measure of the flat side where the truth may be)."""
         error = self._model_error(soc)

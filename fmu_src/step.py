@@ -371,9 +371,9 @@ class _OneSample:
                                + theta_exo.shape[1]))
         self.block[:self.n_nodes, :node_w.shape[1]] = node_w
         self.block[self.n_nodes:, node_w.shape[1]:] = theta_exo
-        # soc_slope: (parent slot, first side's slot, ∂act/∂SoC) of each node in order (none
-        # without a SoC partition input), and (0: soc(k), 1: ocv(k), 2: d(k), each local
-        # model's coefficient) of the SoC regressors the model has
+        # beside: (parent slot, first side's slot, other side's slot, ∂act/∂SoC) of each node
+        # in order (none without a SoC partition input), and (0: soc(k), 1: ocv(k), 2: d(k);
+        # each local model's coefficient) of the SoC regressors the model has
         pv = model.partition_variables
         self.slope_plan = ([(into, out, out + 1, weights[node][1][pv.index("soc")])
                             for (into, out), node in zip(self.plan, order, strict=True)]
@@ -394,12 +394,12 @@ class _OneSample:
         return interp_one(soc, self.ocv_soc, self.ocv_v)
 
     def combine(self, products: list[float], direction: int
-                ) -> tuple[list[float], float, Sequence[float], list[float], list[float]]:
+                ) -> tuple[list[float], float, Sequence[float], list[float]]:
         """(blended lag coefficients, exogenous part, validities, each local model's exogenous
-        part θ_exo,j·x, the tree's slots for soc_slope) of one sample from products = block·u,
+        part θ_exo,j·x) of one sample from products = block·u,
         u = [1, raw partition inputs, exogenous regressors]: the nodes' activations, then each
         local model's θ_exo,j·x."""
-        validity, v = self.walk(products, direction)
+        validity = self.walk(products, direction)
         local = products[self.n_nodes:]
         b = sum(map(operator.mul, validity, local))
         a = [0.0] * self.na
@@ -407,11 +407,11 @@ class _OneSample:
             for vj, row in zip(validity, self.theta_lags, strict=True):
                 for l in range(self.na):
                     a[l] += vj * row[l]
-        return a, b, validity, local, v
+        return a, b, validity, local
 
     def walk(self, activations: Sequence[float], direction: int
-             ) -> tuple[Sequence[float], list[float]]:
-        """(validities, tree slots) from the nodes' activations (the first n_nodes entries of
+             ) -> Sequence[float]:
+        """The validities from the nodes' activations (the first n_nodes entries of
         activations; any further entries are ignored)."""
         v = [1.0] * self.n_slots             # v[0]: a root's validity; then each node's sides
         exp = math.exp
@@ -429,18 +429,15 @@ class _OneSample:
                     side = parent / math.inf
                 v[out] = side
                 v[other] = parent - side
-        return self.leaf_values(v, direction), v
+        return self.leaf_values(v, direction)
 
-    def walk_beside(self, activations: Sequence[float], slots: list[float], d_hi: float,
-                    d_lo: float, direction: int
-                    ) -> tuple[Sequence[float], Sequence[float], Sequence[float]]:
+    def walk_beside(self, activations: Sequence[float], d_hi: float, d_lo: float,
+                    direction: int) -> tuple[Sequence[float], Sequence[float]]:
         """In one pass over the nodes: the validities had the SoC been d_hi above and d_lo
-        below the one the activations and the tree slots (walk) were computed at (∂act/∂SoC
-        from slope_plan), and the validities' derivative ∂Φ/∂SoC at it (slot_derivatives);
-        raises OverflowError where a moved activation overflows exp."""
+        below the one the activations were computed at (∂act/∂SoC from slope_plan); raises
+        OverflowError where a moved activation overflows exp."""
         hi = [1.0] * self.n_slots
         lo = [1.0] * self.n_slots
-        dv = [0.0] * self.n_slots
         exp = math.exp
         for (into, out, other, w), act in zip(self.slope_plan, activations, strict=False):
             parent = hi[into]
@@ -449,25 +446,7 @@ class _OneSample:
             parent = lo[into]
             lo[out] = side = parent / (1.0 + exp(-(act - w * d_lo)))
             lo[other] = parent - side
-            parent = slots[into]
-            if parent != 0.0:          # as slot_derivatives
-                side = slots[out]
-                dv[out] = d = side * (dv[into] + (parent - side) * w) / parent
-                dv[other] = dv[into] - d
-        return (self.leaf_values(hi, direction), self.leaf_values(lo, direction),
-                self.leaf_values(dv, direction))
-
-    def slot_derivatives(self, slots: list[float]) -> list[float]:
-        """∂/∂SoC of each tree slot (walk) forward through the tree: a node's side φ·v has
-        ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC, φ = side/v (0 below a slot of validity 0)."""
-        dv = [0.0] * self.n_slots
-        for into, out, other, w in self.slope_plan:
-            parent = slots[into]
-            if parent != 0.0:          # φ·∂v + side·(1 − φ)·w, φ = side/v
-                side = slots[out]
-                dv[out] = d = side * (dv[into] + (parent - side) * w) / parent
-                dv[other] = dv[into] - d
-        return dv
+        return self.leaf_values(hi, direction), self.leaf_values(lo, direction)
 
     def leaf_values(self, slots: list[float], direction: int) -> Sequence[float]:
         """Each leaf's entry of slots (its validity, or a derivative of it), 0 where a
@@ -477,47 +456,6 @@ class _OneSample:
             return values
         return [0.0 if gate and gate != direction else value
                 for value, gate in zip(values, self.gates, strict=True)]
-
-    def soc_slope(self, products: list[float], slots: list[float],
-                  validity: Sequence[float], direction: int, lag_part: list[float],
-                  ocv_slope: float, depletion_slope: float) -> float:
-        """∂/∂SoC of the network output Σ_j Φ_j·y_j of one sample (V per unit SoC, without
-        the OCV added to a relative output), y_j = θ_exo,j·x + lag_part_j, from its products,
-        tree slots and validities (combine): slope_from with the validities' derivative
-        (slot_derivatives)."""
-        dphi = (self.leaf_values(self.slot_derivatives(slots), direction)
-                if self.slope_plan else None)
-        return self.slope_from(dphi, products[self.n_nodes:], validity, lag_part, ocv_slope,
-                               depletion_slope)
-
-    def slope_from(self, dphi: Sequence[float] | None, local: list[float],
-                   validity: Sequence[float], lag_part: list[float], ocv_slope: float,
-                   depletion_slope: float) -> float:
-        """soc_slope from the validities' derivative dphi (None: no SoC partition input) and
-        the local models' exogenous parts local = θ_exo,j·x: ∂Φ_j/∂SoC times y_j, plus
-        Φ_j·∂y_j/∂SoC through the regressors soc(k), ocv(k) (ocv_slope, V per unit SoC) and
-        d(k) (depletion_slope: g·LP_τ·∂factor/∂SoC)."""
-        mul = operator.mul
-        slope = 0.0
-        if dphi is not None:
-            slope = sum(map(mul, dphi, local))
-            if lag_part:
-                slope += sum(map(mul, dphi, lag_part))
-        factors = (1.0, ocv_slope, depletion_slope)
-        for which, column in self.slope_columns:
-            if factors[which] != 0.0:
-                slope += factors[which] * sum(map(mul, validity, column))
-        return slope
-
-
-def ocv_slope(x: float, xs: list[float], ys: list[float], upward: bool) -> float:
-    """The one-sided slope (towards SoC 1 if upward, else towards 0) of np.interp(x, xs, ys)
-    at x: the knot interval's slope on that side, 0 beyond the ends (held)."""
-    j = (bisect.bisect_right(xs, x) if upward else bisect.bisect_left(xs, x)) - 1
-    if 0 <= j < len(xs) - 1:
-        return (ys[j + 1] - ys[j]) / (xs[j + 1] - xs[j])
-    return 0.0
-
 
 def interp_one(x: float, xs: list[float], ys: list[float]) -> float:
     """np.interp(x, xs, ys) for one value (xs increasing): linear, held beyond the ends, NaN
@@ -582,7 +520,6 @@ class CellStepper:
         self._last_ocv = (math.nan, math.nan)      # (SoC, OCV) of the last step
         self._one = _OneSample(model)
         self._products: list[float] = []     # block·u of the last step (_OneSample)
-        self._slots: list[float] = []        # and its tree slots (_OneSample.combine)
 
     @property
     def soc(self) -> float:
@@ -602,7 +539,7 @@ class CellStepper:
         exo.shift(s, current_a)
         one = self._one
         self._products = (one.block @ self._u).tolist()
-        a, acc, Phi, _, self._slots = one.combine(self._products, s.direction)
+        a, acc, Phi, _ = one.combine(self._products, s.direction)
         if m.output_lags:
             lags = self.lags
             self.prev_lags = list(lags)
@@ -639,34 +576,32 @@ class CellStepper:
         return [self._row_output(products, soc_ocv)[0]
                 for products, soc_ocv in zip(rows, ocv, strict=True)]
 
-    def beside(self, hi: float, lo: float, upward: bool) -> tuple[float, float, float]:
-        """(u(hi), u(lo), ∂u/∂SoC at the step's SoC) of the last step's terminal voltage (V,
-        V per unit SoC): voltages_at_socs([hi, lo]) up to rounding and soc_slope(SoC, upward),
-        from the step's own products in one walk: the nodes' activations move by
-        ∂act/∂SoC·ΔSoC, and each local model's exogenous part by its SoC regressors'
-        coefficients times their change (soc(k), ocv(k), d(k) = g·LP_τ·factor(SoC)). Falls
-        back to those two where a moved activation overflows exp, or before the first step."""
+    def beside(self, hi: float, lo: float) -> tuple[float, float]:
+        """(u(hi), u(lo)): the last step's terminal voltage (V) had its SoC been hi and lo,
+        voltages_at_socs([hi, lo]) up to rounding, from the step's own products in one walk:
+        the nodes' activations move by ∂act/∂SoC·ΔSoC, and each local model's exogenous part
+        by its SoC regressors' coefficients times their change (soc(k), ocv(k),
+        d(k) = g·LP_τ·factor(SoC)). Falls back to voltages_at_socs where a moved activation
+        overflows exp, or before the first step."""
         one, soc = self._one, self.state.soc
         if not self._products:
-            return self._beside_slowly(hi, lo, upward)
+            return self._beside_slowly(hi, lo)
         m, validity = self.model, self.validity
         phi_hi = phi_lo = validity
-        dphi = None
         if one.slope_plan:
             try:
-                phi_hi, phi_lo, dphi = one.walk_beside(self._products, self._slots, hi - soc,
-                                                       soc - lo, self.state.direction)
+                phi_hi, phi_lo = one.walk_beside(self._products, hi - soc, soc - lo,
+                                                 self.state.direction)
             except OverflowError:
-                return self._beside_slowly(hi, lo, upward)
-        exo_part = self._products[one.n_nodes:]
+                return self._beside_slowly(hi, lo)
+        local = self._products[one.n_nodes:]
         lag_part = self._lag_parts()
-        local = ([x + y for x, y in zip(exo_part, lag_part, strict=True)] if lag_part
-                 else exo_part)
+        if lag_part:
+            local = [x + y for x, y in zip(local, lag_part, strict=True)]
         ocv_hi, ocv_lo = one.ocv(hi), one.ocv(lo)
-        u_hi = sum(map(operator.mul, phi_hi, local))
-        u_lo = sum(map(operator.mul, phi_lo, local))
-        slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
-        slope_dep = 0.0
+        mul = operator.mul
+        u_hi = sum(map(mul, phi_hi, local))
+        u_lo = sum(map(mul, phi_lo, local))
         for which, column in one.slope_columns:
             if which == 0:
                 d_hi, d_lo = hi - soc, lo - soc
@@ -674,17 +609,14 @@ class CellStepper:
                 ocv0 = self.ocv(soc)
                 d_hi, d_lo = ocv_hi - ocv0, ocv_lo - ocv0
             else:
-                source, dep = self._depletion_source, m.depletion
-                factor = self.exo.depletion_factor(soc)
-                at = source * factor
-                d_hi, d_lo = source * dep.factor(hi) - at, source * dep.factor(lo) - at
-                slope_dep = source * dep.slope(soc, upward, factor)
-            u_hi += d_hi * sum(map(operator.mul, phi_hi, column))
-            u_lo += d_lo * sum(map(operator.mul, phi_lo, column))
-        slope = one.slope_from(dphi, exo_part, validity, lag_part, slope_ocv, slope_dep)
+                source, factor = self._depletion_source, m.depletion.factor
+                at = source * self.exo.depletion_factor(soc)
+                d_hi, d_lo = source * factor(hi) - at, source * factor(lo) - at
+            u_hi += d_hi * sum(map(mul, phi_hi, column))
+            u_lo += d_lo * sum(map(mul, phi_lo, column))
         if m.relative_ocv:
-            return u_hi + ocv_hi, u_lo + ocv_lo, slope + slope_ocv
-        return u_hi, u_lo, slope
+            return u_hi + ocv_hi, u_lo + ocv_lo
+        return u_hi, u_lo
 
     def _lag_parts(self) -> list[float]:
         """Each local model's output-lag part θ_lag,j·[ŷ(k−1), …] at the step's lags (empty
@@ -693,30 +625,10 @@ class CellStepper:
             return []
         return [sum(map(operator.mul, row, self.prev_lags)) for row in self._one.theta_lags]
 
-    def _beside_slowly(self, hi: float, lo: float, upward: bool) -> tuple[float, float, float]:
-        """beside from voltages_at_socs and soc_slope."""
+    def _beside_slowly(self, hi: float, lo: float) -> tuple[float, float]:
+        """beside from voltages_at_socs."""
         u_hi, u_lo = self.voltages_at_socs([hi, lo])
-        return u_hi, u_lo, self.soc_slope(self.state.soc, upward)
-
-    def soc_slope(self, soc: float, upward: bool) -> float:
-        """∂u/∂SoC (V per unit SoC) of the last step's terminal voltage had its SoC been soc,
-        every other regressor and partition input as the step had them (the derivative of
-        outputs_at_socs' voltage), one-sided where the OCV or the depletion factor has a kink
-        (upward: towards SoC 1): OCV slope, validities and the SoC regressors. At the step's
-        own SoC from its products and validities; elsewhere one more walk through the tree."""
-        m, one = self.model, self._one
-        if soc == self.state.soc and self._products:
-            products, slots, validity = self._products, self._slots, self.validity
-        else:
-            products = self._products_at_socs([soc])[0][0]
-            _, _, validity, _, slots = one.combine(products, self.state.direction)
-        lag_part = self._lag_parts()
-        slope_ocv = ocv_slope(soc, one.ocv_soc, one.ocv_v, upward)
-        slope_dep = (self._depletion_source * m.depletion.slope(soc, upward)
-                     if self._depletion_entry is not None else 0.0)
-        slope = one.soc_slope(products, slots, validity, self.state.direction, lag_part,
-                              slope_ocv, slope_dep)
-        return slope + slope_ocv if m.relative_ocv else slope
+        return u_hi, u_lo
 
     def outputs_at_socs(self, socs: list[float]
                         ) -> list[tuple[float, Sequence[float], list[float]]]:
@@ -737,7 +649,7 @@ class CellStepper:
         _products_at_socs; base is the OCV added to the network output (0 for an absolute
         output)."""
         m = self.model
-        a, b, validity, local, _ = self._one.combine(products, self.state.direction)
+        a, b, validity, local = self._one.combine(products, self.state.direction)
         for l in range(m.output_lags):
             b += a[l] * self.prev_lags[l]
         base = soc_ocv if m.relative_ocv else 0.0

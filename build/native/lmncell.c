@@ -468,72 +468,6 @@ static void local_voltages_at(const State *s, double soc, double *uj) {
 }
 
 /* EKF (observers.SocObserver._ekf_predict / _ekf_update) */
-/* the one-sided slope (towards SoC 1 if upward, else towards 0) of ocv() at soc: the knot
-   interval's slope on that side, 0 beyond the ends (runtime.step.ocv_slope) */
-static double ocv_slope(double soc, int upward) {
-    int k;
-    if (upward ? (!(soc >= OCV_SOC[0]) || soc >= OCV_SOC[NOCV - 1])
-               : (!(soc > OCV_SOC[0]) || soc > OCV_SOC[NOCV - 1]))
-        return 0.0;
-    k = ocv_interval(soc);
-    if (!upward && k > 0 && soc == OCV_SOC[k]) k--;
-    return (OCV_V[k + 1] - OCV_V[k]) / (OCV_SOC[k + 1] - OCV_SOC[k]);
-}
-
-/* ∂(depletion factor)/∂SoC, one-sided (model.Depletion.slope) */
-static double depletion_slope(double soc, int upward) {
-    if (soc > DEP_SOC_MIN || (upward && soc == DEP_SOC_MIN))
-        return -DEP_POWER * depletion_factor(soc) / soc;
-    return 0.0;
-}
-
-/* ∂u/∂SoC at soc of the step's voltage with only its SoC entries changed (runtime
-   CellStepper.soc_slope), from the validities phi, tree slots v, node sigmoids q and local
-   outputs (with their lag parts) there: the validities' derivative forward through the tree
-   (a side φ·v has ∂ = φ·∂v + v·φ·(1 − φ)·∂act/∂SoC) times local_j, plus Φ_j·∂local_j/∂SoC
-   through soc(k), ocv(k) and d(k), plus the OCV slope of a relative output */
-static double soc_slope(const State *s, double soc, int upward, const double *phi,
-                        const double *v, const double *q, const double *local) {
-    double dv[NSLOTS], dphi[NM], slope = 0.0, ocv_s = ocv_slope(soc, upward), dep_s = 0.0;
-    int j, k;
-#if HAS_DEPLETION
-    dep_s = s->dep_source * depletion_slope(soc, upward);
-#else
-    (void)s;
-#endif
-    dv[0] = 0.0;                              /* every node writes both its slots */
-    for (k = 0; k < NNODES; k++) {
-        int n = TREE_NODE[k], into = TREE_INTO[k];
-        double d = q[n] * dv[into] + v[1 + 2 * n] * (1.0 - q[n]) * NODE_SOC_W[n];
-        dv[1 + 2 * n] = d;
-        dv[2 + 2 * n] = dv[into] - d;
-    }
-    leaf_validities(dv, s->d, dphi);
-    for (j = 0; j < NM; j++) {
-        double dy = 0.0;
-#if SOC_INPUT
-        dy += THETA[j][NA + SOC_COL];
-#endif
-#if OCV_INPUT
-        dy += THETA[j][NA + OCV_COL] * ocv_s;
-#endif
-#if HAS_DEPLETION
-        dy += THETA[j][NA + DEP_COL] * dep_s;
-#endif
-        slope += dphi[j] * local[j] + phi[j] * dy;
-    }
-    (void)dep_s;
-    return RELATIVE_OCV ? slope + ocv_s : slope;
-}
-
-/* the same at a SoC other than the step's own (one more walk through the tree) */
-static double soc_slope_at(const State *s, double soc, int upward) {
-    double buf[NM], phi[NM], v[NSLOTS], q[NNODES + 1];
-    const double *local = locals_at(s, soc, buf);
-    validities_at(s, soc, phi, v, q);
-    return soc_slope(s, soc, upward, phi, v, q, local);
-}
-
 /* the step's voltage at SoC hi = SoC + dh and lo = SoC − dl (its own SoC ± the EKF's spread,
    dh, dl ≥ 0, as computed by the caller) as outputs_at gives them, the validities from the
    step's own nodes: e^−act moved by e^∓∂act/∂SoC·d, one exp per node for both sides when
@@ -750,7 +684,7 @@ static double variance_floor(const State *s, double soc, double slope) {
 
 static double ekf_update(State *s, double v) {
     double xi[NX], hv[NX], ph[NX], k[NX];
-    double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, tangent, soc_prior;
+    double phi[NM], uj[NM], u, hph = 0.0, innov, spread, curvature = 0.0, r, soc_prior;
     double inv_s;
     int a, b;
     xi[0] = s->soc;
@@ -763,15 +697,10 @@ static double ekf_update(State *s, double v) {
     if (soc_prior == s->soc) {
         u = s->voltage;
         memcpy(phi, s->phi, sizeof phi);
-        tangent = soc_slope(s, soc_prior, soc_prior + FD_SOC <= 1.0, s->phi, s->slots,
-                            s->q_node, s->local);
     } else {
         u = outputs_at(s, soc_prior, phi, uj);
-        tangent = soc_slope_at(s, soc_prior, soc_prior + FD_SOC <= 1.0);
     }
-    /* SoC column: the secant over ±σ, δ² added to r; the tangent (analytic, one-sided where
-       the OCV or the depletion factor has a kink, towards SoC 0 only within FD_SOC of SoC 1)
-       sets the variance floor */
+    /* SoC column: the secant over ±σ, δ² added to r; it also sets the variance floor */
     spread = sqrt(s->ob_p[0][0] > 0.0 ? s->ob_p[0][0] : 0.0);
     if (spread > SPREAD_MAX) spread = SPREAD_MAX;
     if (spread < FD_SOC) spread = FD_SOC;
@@ -823,7 +752,7 @@ static double ekf_update(State *s, double v) {
             s->ob_p[a][b] = sym;
             s->ob_p[b][a] = sym;
         }
-    s->ob_floor = variance_floor(s, soc_prior, tangent);
+    s->ob_floor = variance_floor(s, soc_prior, hv[0]);
     s->ob_var = s->ob_p[0][0] > 1e-12 ? s->ob_p[0][0] : 1e-12;
     for (a = 0; a < 2 * NF; a++) s->lp[a] = xi[1 + SLOT_LX[a]];
 #if HAS_HYSTERESIS
