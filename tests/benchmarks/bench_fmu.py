@@ -1,6 +1,8 @@
 """Benchmark: microseconds per step of the LMNCell pythonfmu FMU through fmpy at 0.1 s and 1 s
 communication steps, beside a trivial pythonfmu FMU built the same way (the floor), instantiate
-time, and the runtime step alone without FMI.
+time, the runtime step alone without FMI, and the observers' runtime cost per step (EKF,
+fuzzy, IMM on a synthetic load; EKF and fuzzy also on the shipped US06 record's current,
+voltage and cell temperature).
 
     python tests/benchmarks/bench_fmu.py [MODEL.json]
 
@@ -138,6 +140,8 @@ def main() -> None:
     print(f"instantiate + initialise + free: LMNCell {instantiate_ms(lmn):.2f} ms, trivial "
           f"{instantiate_ms(trivial):.2f} ms (median of 50)")
     observers_main(model_path, lmn)
+    observers_on_record(model_path, ROOT / "data/panasonic_18650pf/25degC/drive_cycles/"
+                        "03-20-17_01.43_25degC_US06_Pan18650PF.mat")
     shutil.rmtree(out, ignore_errors=True)
 
 
@@ -176,6 +180,37 @@ def observers_main(model_path: Path, fmu: Path, blocks: int = 21, n: int = 500) 
     print(f"runtime EKF / fuzzy: {ratio:.2f} (median of the blocks' ratios), {fastest:.2f} "
           f"(fastest block over fastest block: {min(runtime['ekf']):.1f} / "
           f"{min(runtime['fuzzy']):.1f} µs/step, less touched by the machine's slow spells)")
+
+
+def observers_on_record(model_path: Path, record: Path, block: int = 500) -> None:
+    """EKF and fuzzy observer per step in the runtime on a measured record's current, voltage
+    and cell temperature (a temperature that changes from step to step, as a cell's does),
+    taking turns in blocks of `block` steps; the ratio is the median of the blocks' ratios."""
+    from lmncell.data.dataset import record_to_segments, start_soc
+    from lmncell.data.readers import read_record
+    from lmncell.runtime.observers import SocObserver
+
+    model = load_model(model_path)
+    rec = read_record(record)
+    seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, 1.0),
+                             model.capacity_ah)[0]
+    temperature = (seg.temperature_c.tolist() if seg.temperature_c is not None
+                   else [25.0] * len(seg.current_a))
+    inputs = list(zip(seg.current_a.tolist(), seg.voltage_v.tolist(), temperature,
+                      strict=True))
+    observers = {kind: SocObserver(model, kind, 0.9) for kind in ("ekf", "fuzzy")}
+    runs: dict[str, list[float]] = {kind: [] for kind in observers}
+    for start in range(0, len(inputs) - block + 1, block):
+        for kind, ob in observers.items():
+            t0 = time.perf_counter()
+            for i, v, t in inputs[start:start + block]:
+                ob.step(i, v, t)
+            runs[kind].append(1e6 * (time.perf_counter() - t0) / block)
+    ratio = statistics.median(e / f for e, f in zip(runs["ekf"], runs["fuzzy"], strict=True))
+    print(f"on {record.name} ({len(runs['ekf'])} blocks of {block} steps, its cell "
+          f"temperature): runtime EKF {statistics.median(runs['ekf']):.1f} µs/step, fuzzy "
+          f"{statistics.median(runs['fuzzy']):.1f} µs/step, EKF / fuzzy {ratio:.2f} (median "
+          "of the blocks' ratios)")
 
 
 if __name__ == "__main__":
