@@ -32,16 +32,17 @@ CHARGE, DISCHARGE = 1, 2
 
 def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
                    ref_c: float = 25.0) -> np.ndarray:
-    """g(T) of ExoStepper.temperature_gain for n samples at once (ones without E or T); the
-    step itself keeps a scalar math.exp version, which costs less per call."""
+    """arrhenius_factor for n samples at once (ones without E or T); the step itself takes the
+    scalar math.exp version, which costs less per call."""
     if e_k is None or temperature_c is None:
         return np.ones(n)
     return np.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
 
 
-def time_constant_factor(temperature_c: float, e_k: float | None, ref_c: float = 25.0) -> float:
-    """k(T) = exp(Eτ·(1/T − 1/T_ref)) that multiplies every filter time constant at T (°C)
-    (1 without Eτ): the relaxation slower when cold."""
+def arrhenius_factor(temperature_c: float, e_k: float | None, ref_c: float = 25.0) -> float:
+    """exp(E·(1/T − 1/T_ref)) at one temperature (°C; 1 without E), arrhenius_gain's value for
+    one sample: the Arrhenius gain g(T) of the current and filter regressors with E, the factor
+    k(T) of every filter time constant with Eτ (the relaxation slower when cold)."""
     if e_k is None:
         return 1.0
     return math.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
@@ -49,12 +50,12 @@ def time_constant_factor(temperature_c: float, e_k: float | None, ref_c: float =
 
 def filter_coefficients(model: LmnModel, temperature_c: float | None = None,
                         taus: list[float] | None = None) -> list[float]:
-    """exp(−Ts/(τ·k(T))) of every filter side, in the order of the low-pass states (k(T) of
-    time_constant_factor; the time constants of the file where T is None or without Eτ);
+    """exp(−Ts/(τ·k(T))) of every filter side, in the order of the low-pass states (k(T):
+    arrhenius_factor with Eτ; the time constants of the file where T is None or without Eτ);
     taus: model.filter_taus() where the caller keeps it."""
     k = (1.0 if temperature_c is None
-         else time_constant_factor(temperature_c, model.tau_activation_k,
-                                   model.reference_temperature_c))
+         else arrhenius_factor(temperature_c, model.tau_activation_k,
+                               model.reference_temperature_c))
     ts, exp = model.sample_time_s, math.exp
     return [exp(-ts / (tau * k)) for tau in (model.filter_taus() if taus is None else taus)]
 
@@ -99,7 +100,6 @@ class ExoStepper:
         pv = model.partition_variables     # where each partition input goes in z (or None)
         self._z_index = tuple(pv.index(name) if name in pv else None for name in
                               ("soc", "current", "filtered_current", "temperature"))
-        self._inv_tref = 1.0 / (model.reference_temperature_c + 273.15)
         self._temperature_source_cols = model.temperature_source_indices()
         dep = model.depletion
         self.depletion_state = None if dep is None else dep.state_index(model.filters)
@@ -120,10 +120,8 @@ class ExoStepper:
 
     def temperature_gain(self, temperature_c: float) -> float:
         """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
-        e = self.model.arrhenius_k
-        if e is None:
-            return 1.0
-        return math.exp(e * (1.0 / (temperature_c + 273.15) - self._inv_tref))
+        m = self.model
+        return arrhenius_factor(temperature_c, m.arrhenius_k, m.reference_temperature_c)
 
     def initial_state(self, soc0: float, h0: float | None = None) -> ExoState:
         m = self.model
@@ -449,8 +447,8 @@ class _OneSample:
         return self.leaf_values(hi, direction), self.leaf_values(lo, direction)
 
     def leaf_values(self, slots: list[float], direction: int) -> Sequence[float]:
-        """Each leaf's entry of slots (its validity, or a derivative of it), 0 where a
-        current-sign gate does not match the direction."""
+        """Each leaf's validity from the tree slots, 0 where a current-sign gate does not match
+        the direction."""
         values = self.leaves(slots)
         if not self.gated:
             return values

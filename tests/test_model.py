@@ -274,12 +274,12 @@ def test_filter_time_constants_follow_the_temperature() -> None:
     path (simulate) agree over a temperature that sweeps 0…45 °C, a cold cell relaxes slower
     than a warm one after the same pulse (as without Eτ it does not), the runtime's many-cell
     step agrees, and the model file keeps Eτ."""
-    from lmncell.runtime.step import filter_coefficients, time_constant_factor
+    from lmncell.runtime.step import arrhenius_factor, filter_coefficients
 
     m = random_tree_model()
     m.tau_activation_k = 1500.0
-    assert time_constant_factor(25.0, 1500.0) == 1.0
-    assert time_constant_factor(0.0, 1500.0) == pytest.approx(
+    assert arrhenius_factor(25.0, 1500.0) == 1.0
+    assert arrhenius_factor(0.0, 1500.0) == pytest.approx(
         math.exp(1500.0 * (1 / 273.15 - 1 / 298.15)), rel=1e-15)
     assert filter_coefficients(m, 25.0) == filter_coefficients(m)
     rng = np.random.default_rng(7)

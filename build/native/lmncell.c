@@ -80,7 +80,6 @@ typedef struct {
     double fuzzy_gain[NM];
     double x[NEXO + 1], z[ND + 1];
     double phi[NM], local[NM];                 /* the step's validities and local outputs */
-    double slots[NSLOTS], q_node[NNODES + 1];  /* the step's tree slots and sigmoids */
     double act[NNODES + 1], ex[NNODES + 1];    /* the step's node activations and e^−act */
     double dep_source;                         /* the step's g(T)·LP_τ(i) of d(k) */
 } State;
@@ -132,9 +131,15 @@ static double ocv(double soc) { /* numpy.interp: linear, held beyond the ends */
     return OCV_V[k] + (OCV_V[k + 1] - OCV_V[k]) * (soc - OCV_SOC[k]) / (OCV_SOC[k + 1] - OCV_SOC[k]);
 }
 
+/* exp(E·(1/T − 1/T_ref)) at t (°C): the Arrhenius gain with E, the time constants' factor with
+   Eτ (step.arrhenius_factor) */
+static double arrhenius_factor(double t, double e_k) {
+    return exp(e_k * (1.0 / (t + 273.15) - 1.0 / (REF_TEMPERATURE_C + 273.15)));
+}
+
 static double temperature_gain(double t) {
 #if HAS_ARRHENIUS
-    return exp(ARRHENIUS_K * (1.0 / (t + 273.15) - 1.0 / (REF_TEMPERATURE_C + 273.15)));
+    return arrhenius_factor(t, ARRHENIUS_K);
 #else
     (void)t;
     return 1.0;
@@ -176,8 +181,7 @@ static const double *filter_coefficients(State *s, double t) {
 #if HAS_TAU_ACTIVATION
     int k;
     if (!(t == s->coef_t)) {
-        double kf = exp(TAU_ACTIVATION_K * (1.0 / (t + 273.15)
-                                            - 1.0 / (REF_TEMPERATURE_C + 273.15)));
+        double kf = arrhenius_factor(t, TAU_ACTIVATION_K);
         for (k = 0; k < 2 * NF; k++) s->coef[k] = exp(-TS / (LP_TAU[k] * kf));
         s->coef_t = t;
     }
@@ -302,15 +306,12 @@ static void leaf_validities(const double *v, int d, double *phi) {
     }
 }
 
-/* validities Φ (runtime: LmnModel.validities) for raw partition inputs z and direction d;
-   slots and q (unless NULL) receive the tree's slots and the nodes' sigmoids */
-static void validities(const double *z_raw, int d, double *phi, double *slots, double *q) {
-    double act[NNODES + 1], ex[NNODES + 1], v[NSLOTS], qq[NNODES + 1];
-    node_activations(z_raw, act, ex, qq);
-    tree_slots(qq, v);
+/* validities Φ (runtime: LmnModel.validities) for raw partition inputs z and direction d */
+static void validities(const double *z_raw, int d, double *phi) {
+    double act[NNODES + 1], ex[NNODES + 1], v[NSLOTS], q[NNODES + 1];
+    node_activations(z_raw, act, ex, q);
+    tree_slots(q, v);
     leaf_validities(v, d, phi);
-    if (slots) memcpy(slots, v, sizeof v);
-    if (q) memcpy(q, qq, sizeof qq);
 }
 
 /* per-local-model outputs (exogenous and lag parts) for given features and lags */
@@ -329,7 +330,7 @@ static double network(const double *x, const double *z, int d, const double *lag
                       double *phi, double *local) {
     double out = 0.0;
     int j;
-    validities(z, d, phi, NULL, NULL);
+    validities(z, d, phi);
     local_outputs(x, lags, local);
     for (j = 0; j < NM; j++) out += phi[j] * local[j];
     return out;
@@ -341,7 +342,7 @@ static double fixed_point(double soc0, double t, double h0) {
     int j, c;
     exo_init(&tmp, soc0, h0);
     features(&tmp, 0.0, t, tmp.x, tmp.z, NULL);
-    validities(tmp.z, tmp.direction, phi, NULL, NULL);
+    validities(tmp.z, tmp.direction, phi);
     b = 0.0;
     for (j = 0; j < NM; j++) {
         double acc = 0.0;
@@ -365,16 +366,16 @@ static void stepper_init(State *s, double soc0, double t) {
 }
 
 static void stepper_step(State *s, double i, double t) {
-    double y;
+    double y, slots[NSLOTS], q[NNODES + 1];    /* the tree's slots and the nodes' sigmoids */
     int k;
     exo_update(s, i, t, s->capacity);
     features(s, i, t, s->x, s->z, &s->dep_source);
     shift_past(s, i);
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
-    node_activations(s->z, s->act, s->ex, s->q_node);
-    tree_slots(s->q_node, s->slots);
-    leaf_validities(s->slots, s->d, s->phi);
+    node_activations(s->z, s->act, s->ex, q);
+    tree_slots(q, slots);
+    leaf_validities(slots, s->d, s->phi);
     local_outputs(s->x, s->prev_lags, s->local);
     for (y = 0.0, k = 0; k < NM; k++) y += s->phi[k] * s->local[k];
     for (k = NA - 1; k > 0; k--) s->lags[k] = s->lags[k - 1];
@@ -434,15 +435,14 @@ static const double *locals_at(const State *s, double soc, double *local) {
 #endif
 }
 
-/* the validities (and, unless NULL, tree slots and node sigmoids) of the step's partition
-   inputs with the SoC replaced */
-static void validities_at(const State *s, double soc, double *phi, double *slots, double *q) {
+/* the validities of the step's partition inputs with the SoC replaced */
+static void validities_at(const State *s, double soc, double *phi) {
     double z[ND + 1];
     int k;
     memcpy(z, s->z, sizeof z);
     for (k = 0; k < ND; k++)
         if (PART_VAR[k] == 0) z[k] = soc;
-    validities(z, s->d, phi, slots, q);
+    validities(z, s->d, phi);
 }
 
 /* the same at another SoC alone, from the step's own regressors and partition inputs with only
@@ -451,7 +451,7 @@ static double outputs_at(const State *s, double soc, double *phi, double *uj) {
     double buf[NM], base = RELATIVE_OCV ? ocv(soc) : 0.0, u = 0.0;
     const double *local = locals_at(s, soc, buf);
     int k;
-    validities_at(s, soc, phi, NULL, NULL);
+    validities_at(s, soc, phi);
     for (k = 0; k < NM; k++) {
         u += phi[k] * local[k];
         uj[k] = base + local[k];
