@@ -15,7 +15,8 @@ SoC window and over the whole record, for the LMN and each baseline, driven by t
 temperature and, where the record has one beside a chamber temperature, by the chamber
 temperature only (the LMN's thermal model computes the cell temperature); then the means over
 the folds. --hold-out PATTERN holds out only the records whose name contains PATTERN (e.g.
-10degC: train on all, test each 10 °C record left out in turn). --plot FILE.png draws the
+10degC: train on all, test each 10 °C record left out in turn), or one of a comma list
+(N05,P05,P25: the A123 folds between training temperatures). --plot FILE.png draws the
 same figures as bars per held-out record, with a caption naming the split and the settings.
 """
 
@@ -27,7 +28,7 @@ from pathlib import Path
 
 from lmncell.cli import run_script, soc_list_argument
 from lmncell.config import parse_setting
-from lmncell.evaluation.evaluate import evaluate_model, leave_one_out_folds
+from lmncell.evaluation.evaluate import evaluate_model, hold_out_clause, leave_one_out_folds
 from lmncell.evaluation.metrics import pooled
 from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
@@ -46,7 +47,8 @@ def main() -> None:
     ap.add_argument("--ocv-tests", nargs="*", default=[])
     ap.add_argument("--no-baselines", action="store_true")
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
-                    help="hold out only records whose name contains PATTERN")
+                    help="hold out only records whose name contains PATTERN, or one of a "
+                    "comma list")
     ap.add_argument("--plot", type=Path, metavar="FILE.png",
                     help="also draw the results per held-out record")
     a = ap.parse_args()
@@ -85,7 +87,7 @@ def main() -> None:
         for m, v in means.items()))
     if a.plot:
         ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
-        which = f" whose name contains {a.hold_out!r}" if a.hold_out else ""
+        which = hold_out_clause(a.hold_out)
         caption = (f"Leave-one-record-out, {len(folds)} fold(s): each record{which} held out "
                    f"in turn, the models trained on the other {len(a.records) - 1} records "
                    "with the same data and settings; free-run RMSE of the held-out record, "

@@ -15,8 +15,9 @@ Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV 
 
 The observer starts where the reference SoC first falls to --start-soc (under load, its load
 history unknown to it) with the estimate --soc0-est. --hold-out PATTERN holds out only the
-records whose name contains PATTERN (e.g. 10degC). --plot FILE.png draws the RMSE and the
-share outside ±3σ per held-out record and observer, with a caption naming the run.
+records whose name contains PATTERN (e.g. 10degC), or one of a comma list (N05,P05,P25).
+--plot FILE.png draws the RMSE and the share outside ±3σ per held-out record and observer, with
+a caption naming the run.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from lmncell.cli import run_script, soc_list_argument
 from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments, start_soc
 from lmncell.data.readers import read_record
-from lmncell.evaluation.evaluate import leave_one_out_folds
+from lmncell.evaluation.evaluate import hold_out_clause, leave_one_out_folds
 from lmncell.evaluation.observe import (
     observer_segment,
     run_observer,
@@ -93,7 +94,7 @@ def main() -> None:
                   f"{out3:.1f} % (worst fold {worst:.1f} %), median 3σ {width:.1f} %")
     if a.plot:
         ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
-        which = f" whose name contains {a.hold_out!r}" if a.hold_out else ""
+        which = hold_out_clause(a.hold_out)
         caption = (f"Observer leave-one-record-out, {len(folds)} fold(s): each record{which} "
                    f"held out in turn, the model trained on the other {len(a.records) - 1}; "
                    f"each observer started where the reference SoC falls to {a.start_soc:g} "

@@ -95,8 +95,8 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
 
 def test_leave_one_out_folds_name_what_is_wrong() -> None:
     """The leave-one-out examples' folds: each held-out record beside all the others, with
-    their start SoCs; a pattern that matches nothing, or a single record, is a clear
-    DataError."""
+    their start SoCs, for one pattern or a comma list; a pattern that matches nothing, or a
+    single record, is a clear DataError."""
     from lmncell.data.records import DataError
     from lmncell.evaluation.evaluate import leave_one_out_folds
 
@@ -105,8 +105,12 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
         ("d/a_10degC.mat", 1.0, ["d/b_25degC.mat", "d/c_10degC.mat"], [0.0, 0.5]),
         ("d/c_10degC.mat", 0.5, ["d/a_10degC.mat", "d/b_25degC.mat"], [1.0, 0.0])]
     assert [f[1] for f in leave_one_out_folds(recs)] == [None, None, None]
+    assert [f[0] for f in leave_one_out_folds(recs, "a_, c_")] == ["d/a_10degC.mat",
+                                                                    "d/c_10degC.mat"]
     with pytest.raises(DataError, match="'P25' is in none of the 3"):
         leave_one_out_folds(recs, "P25")
+    with pytest.raises(DataError, match="'P25' is in none of the 3"):
+        leave_one_out_folds(recs, "10degC,P25")
     with pytest.raises(DataError, match="at least two different records, got 1"):
         leave_one_out_folds(["d/a.csv"])
 

@@ -103,24 +103,37 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
                         soc0: float | Sequence[float] | None = None
                         ) -> list[tuple[str, float | None, list[str], list[float | None]]]:
     """(held-out record, its start SoC, training records, their start SoCs) for each record
-    whose file name contains hold_out (every record for ""); soc0 as in start_socs (one for
-    all, one per record in order, or None). DataError where a fold would have nothing to
-    train or test on."""
+    whose file name contains hold_out, or one of its comma-separated patterns ("N05,P05,P25":
+    the folds between the training temperatures; every record for ""); soc0 as in start_socs
+    (one for all, one per record in order, or None). DataError where a pattern matches no
+    record or a fold would have nothing to train or test on."""
     from lmncell.data.records import DataError
 
     if len(set(records)) < 2:
         raise DataError(f"leave-one-out needs at least two different records, got "
                         f"{len(set(records))}: {', '.join(records) or '(none)'}")
     start = dict(zip(records, start_socs(soc0, len(records)), strict=True))
-    held = [p for p in records if hold_out in Path(p).name]
-    if not held:
-        raise DataError(f"hold-out pattern {hold_out!r} is in none of the {len(records)} record "
-                        "names: expected part of a file name, e.g. 10degC")
+    patterns = [p.strip() for p in hold_out.split(",")] if hold_out else [""]
+    for pat in patterns:
+        if not any(pat in Path(p).name for p in records):
+            raise DataError(f"hold-out pattern {pat!r} is in none of the {len(records)} record "
+                            "names: expected part of a file name, e.g. 10degC")
+    held = [p for p in records if any(pat in Path(p).name for pat in patterns)]
     folds = []
     for h in held:
         train = [p for p in records if p != h]
         folds.append((h, start[h], train, [start[p] for p in train]))
     return folds
+
+
+def hold_out_clause(hold_out: str) -> str:
+    """The words a caption puts after "each record" for leave_one_out_folds' hold_out."""
+    patterns = [p.strip() for p in hold_out.split(",")] if hold_out else []
+    if not patterns:
+        return ""
+    if len(patterns) == 1:
+        return f" whose name contains {patterns[0]!r}"
+    return " whose name contains one of " + ", ".join(repr(p) for p in patterns)
 
 
 def check_range(model: LmnModel, seg: Segment) -> list[str]:
