@@ -113,7 +113,7 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
         raise DataError(f"leave-one-out needs at least two different records, got "
                         f"{len(set(records))}: {', '.join(records) or '(none)'}")
     start = dict(zip(records, start_socs(soc0, len(records)), strict=True))
-    patterns = [p.strip() for p in hold_out.split(",")] if hold_out else [""]
+    patterns = hold_out_patterns(hold_out) or [""]
     for pat in patterns:
         if not any(pat in Path(p).name for p in records):
             raise DataError(f"hold-out pattern {pat!r} is in none of the {len(records)} record "
@@ -126,9 +126,14 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
     return folds
 
 
+def hold_out_patterns(hold_out: str) -> list[str]:
+    """The name patterns of a hold_out setting: its comma-separated parts, blanks dropped."""
+    return [p.strip() for p in hold_out.split(",") if p.strip()]
+
+
 def hold_out_clause(hold_out: str) -> str:
     """The words a caption puts after "each record" for leave_one_out_folds' hold_out."""
-    patterns = [p.strip() for p in hold_out.split(",")] if hold_out else []
+    patterns = hold_out_patterns(hold_out)
     if not patterns:
         return ""
     if len(patterns) == 1:
