@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import re
 
 import pytest
 from lmncell.cli import main
@@ -27,6 +28,9 @@ def test_inspect_plot_and_bad_file(tmp_path, capsys) -> None:
     assert (tmp_path / "r.png").stat().st_size > 10_000
     out = capsys.readouterr().out
     assert "SoC 12.9 … 100.0 %" in out and "lags the current" not in out    # 1 s, aligned
+    # Plett's files carry the tester's Ah counters: the logged current's own integral beside them
+    assert re.search(r"the logged current integrates to -\d\.\d{4} Ah\n    \([+-]0\.\d{4} Ah, "
+                     r"[+-]\d\.\d\d % of 2\.3 Ah: the SoC drift", out)
     assert main(["inspect", str(PAN_US06)]) == 0
     assert "the voltage channel lags the current by 0.90 sample(s), 0.091 s" in (
         capsys.readouterr().out)

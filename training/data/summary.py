@@ -38,6 +38,8 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
         "starts_full": starts_rested_full(rec),
         "chamber_temp_c": rec.meta.chamber_temp_c, "notes": rec.meta.notes,
     }
+    if rec.charge_ah is not None:      # q came from the tester's counters
+        out["current_integral_ah"] = float(charge_throughput_ah(rec, use_counters=False)[-1])
     if cap:
         out["capacity_ah_assumed"] = cap
         out["c_rate"] = [out["current_a"][0] / cap, out["current_a"][1] / cap]
@@ -65,6 +67,8 @@ def format_summary(s: dict) -> str:
                 if "c_rate" in s else ""),
              f"  voltage {rng(s['voltage_v'], '.4f')} V; net charge {s['net_charge_ah']:+.4f} Ah",
              ]
+    if "current_integral_ah" in s:
+        lines.append(current_integral_line(s))
     if "soc_range" in s:
         lines.append(f"  SoC {rng([100 * x for x in s['soc_range']], '.1f')} % (starts full)")
     temp = s.get("temperature_c")
@@ -80,6 +84,17 @@ def format_summary(s: dict) -> str:
                      "current_delay_s 'auto' uses it where records are finer than Ts/2)")
     lines += [f"  note: {n}" for n in s["notes"]]
     return "\n".join(lines)
+
+
+def current_integral_line(s: dict) -> str:
+    """The net charge of the logged current beside the tester's counters: a model driven by
+    the current, as an FMU is, integrates it and drifts from the counters' SoC by the gap."""
+    gap = s["current_integral_ah"] - s["net_charge_ah"]
+    share = (f", {100 * gap / s['capacity_ah_assumed']:+.2f} % of {s['capacity_ah_assumed']} Ah"
+             if "capacity_ah_assumed" in s else "")
+    return (f"  the net charge is the tester's counters'; the logged current integrates to "
+            f"{s['current_integral_ah']:+.4f} Ah\n    ({gap:+.4f} Ah{share}: the SoC drift "
+            "of a model driven by the current, as an FMU is)")
 
 
 def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
