@@ -470,3 +470,56 @@ def test_time_constant_scaling_auto_only_where_cells_warm_up_inside_records() ->
                                         quiet) is None
     assert choose_time_constant_scaling(load_config(time_constant_scaling=800), segs(0.0),
                                         quiet) == 800.0
+
+
+def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
+    """A steady discharge with a ripple: an OCV offset and the slowest RC element explain the
+    voltage nearly alike. Without the ridge the refinement finds the true offset (20 mV, the
+    data are exact); with it the offset shrinks towards 0 and the RC element takes the rest,
+    at a small cost in fit. 'auto' turns it on only where OCV tests fix the OCV."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import validation_masks
+    from lmncell.identification.refinement import _offset_ridge, refine_output_error
+    from lmncell.runtime.step import simulate
+
+    settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
+                    depletion_power=0, robust_loss="none", ocv_tests=["ocv.mat"])
+    cfg0 = load_config(offset_ridge=0.0, **settings)
+    base = skeleton(cfg0, 3.0, np.array([0.0, 1.0]), np.array([3.4, 4.1]), None,
+                    np.array([0.5]), np.array([0.5]))
+    cols = base.columns()
+    truth = np.zeros(len(cols))
+    truth[cols.index("i(k)")] = 0.03                  # R0 = 30 mΩ (current > 0 charges)
+    truth[cols.index("v5(k)")] = 0.01                 # the 800…3000 s filter
+    truth[cols.index("1")] = -0.02                    # U_off = −20 mV
+    base.theta = truth[None, :].copy()
+    n = 6000
+    t = np.arange(1, n + 1, dtype=float)
+    current = -1.5 + 0.5 * np.sin(2 * np.pi * t / 60.0)
+    sim = simulate(base, current, None, 1.0)
+    seg = Segment("synthetic", t, current, sim.voltage_v, None, 1.0, sim.soc, np.ones(n))
+    start = skeleton(cfg0, 3.0, base.ocv_soc, base.ocv_v, None, np.array([0.5]),
+                     np.array([0.5]))
+    start.theta = truth[None, :].copy()
+    start.theta[0, cols.index("1")] = 0.0             # start from no offset
+    fits = {}
+    for rho in (0.0, 0.05):
+        cfg = load_config(offset_ridge=rho, **settings)
+        design = build_design(start, [seg], validation_masks([seg], cfg))
+        fits[rho] = refine_output_error(start, [seg], design, cfg, lambda _m: None)
+    off = cols.index("1")
+    plain, ridged = fits[0.0], fits[0.05]
+    assert plain[1]["accepted"] and ridged[1]["accepted"]
+    assert plain[0].theta[0, off] == pytest.approx(-0.02, abs=1e-4)
+    assert ridged[1]["offset_ridge"] == 0.05 and plain[1]["offset_ridge"] == 0.0
+    assert abs(ridged[0].theta[0, off]) < 0.5 * 0.02
+    assert ridged[1]["train_rmse_after_mv"] < 2.0             # the RC element took the rest
+    # one row per local model, √(ρ·n_j) with n_j its weighted sample count
+    col, lam = _offset_ridge(start, [np.ones((n, 1))], [np.ones(n)], 0.05)
+    assert col == off and lam == pytest.approx([np.sqrt(0.05 * n)])
+    assert _offset_ridge(start, [np.ones((n, 1))], [np.ones(n)], 0.0)[0] is None
+    assert load_config().offset_ridge_weight() == 0.0
+    assert load_config(ocv_tests=["ocv.mat"]).offset_ridge_weight() == pytest.approx(0.003)
+    for bad in (-0.1, 2.0, "yes", True):
+        with pytest.raises(ConfigError, match="offset_ridge"):
+            load_config(offset_ridge=bad)

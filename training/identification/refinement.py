@@ -1,6 +1,8 @@
 """Final output-error refinement: every local model (and the OCV knots) by Levenberg–Marquardt
 on the free-run simulation error, sensitivities propagated through the output feedback, with
-a Huber loss (iteratively reweighted least squares where there is no output feedback)."""
+a Huber loss (iteratively reweighted least squares where there is no output feedback), and
+where slow OCV tests fix the OCV a ridge that pulls each local OCV offset towards 0
+(TrainConfig.offset_ridge)."""
 
 from __future__ import annotations
 
@@ -62,6 +64,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
     D2 = second_difference(K) if K >= 3 else np.zeros((0, K))
     ridge = 1e-3
+    off_col, off_lam = _offset_ridge(model, Phis, w_all, cfg.offset_ridge_weight())
     cache: dict = {}
 
     ocv0 = model.ocv_v.copy()
@@ -106,6 +109,11 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
         jr = np.zeros((M * p, M * p + K))
         jr[:, : M * p] = np.sqrt(ridge) * np.eye(M * p)
         j_extra.append(jr)
+        if off_col is not None:
+            x_extra.append(off_lam * theta[:, off_col])
+            jo = np.zeros((M, M * p + K))
+            jo[np.arange(M), np.arange(M) * p + off_col] = off_lam
+            j_extra.append(jo)
         if with_ocv and D2.shape[0]:
             x_extra.append(lam_ocv * D2 @ ocv_v)
             jo = np.zeros((D2.shape[0], M * p + K))
@@ -160,11 +168,25 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     info = {"initial_cost": float(0.5 * r0 @ r0), "final_cost": float(sol.cost),
             "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
             "status": int(sol.status), "train_rmse_before_mv": 1e3 * before,
-            "train_rmse_after_mv": 1e3 * after, "accepted": accepted}
+            "train_rmse_after_mv": 1e3 * after, "accepted": accepted,
+            "offset_ridge": cfg.offset_ridge_weight() if off_col is not None else 0.0}
     progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
+
+
+def _offset_ridge(model: LmnModel, Phis: list[np.ndarray], sqrt_weights: list[np.ndarray],
+                  rho: float) -> tuple[int | None, np.ndarray]:
+    """The offset ridge (TrainConfig.offset_ridge): the θ column of the OCV offset U_off and,
+    per local model j, √(ρ·n_j) with n_j = Σ_k w_k·Φ_kj its weighted sample count; the
+    residual rows √(ρ·n_j)·U_off,j pull each offset towards 0. (None, []) where ρ = 0 or the
+    model has no offset."""
+    cols = model.columns()
+    if rho <= 0.0 or "1" not in cols:
+        return None, np.zeros(0)
+    mass = sum(Phi.T @ (sw * sw) for Phi, sw in zip(Phis, sqrt_weights, strict=True))
+    return cols.index("1"), np.sqrt(rho * np.asarray(mass, dtype=float))
 
 
 def _ladder_constraints(ladder: Ladder | None, M: int, p: int, lower: np.ndarray
