@@ -172,6 +172,8 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             "offset_ridge": cfg.offset_ridge_weight() if off_col is not None else 0.0}
     progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
+             + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
+                if info["offset_ridge"] else "")
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
 
