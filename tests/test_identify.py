@@ -518,6 +518,9 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     col, lam = _offset_ridge(start, [np.ones((n, 1))], [np.ones(n)], 0.05)
     assert col == off and lam == pytest.approx([np.sqrt(0.05 * n)])
     assert _offset_ridge(start, [np.ones((n, 1))], [np.ones(n)], 0.0)[0] is None
+    absolute = skeleton(load_config(output="absolute", **settings), 3.0, base.ocv_soc,
+                        base.ocv_v, None, np.array([0.5]), np.array([0.5]))
+    assert _offset_ridge(absolute, [np.ones((n, 1))], [np.ones(n)], 0.05)[0] is None
     assert load_config().offset_ridge_weight() == 0.0
     assert load_config(ocv_tests=["ocv.mat"]).offset_ridge_weight() == pytest.approx(0.003)
     for bad in (-0.1, 2.0, "yes", True):

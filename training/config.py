@@ -94,7 +94,8 @@ class TrainConfig:
     pulled towards 0 by ρ·n_j·U_off² (n_j the local model's weighted sample count: an offset U
     costs as much as a share ρ of its samples being U off), "auto": OFFSET_RIDGE = 0.003 where
     ocv_tests fix the OCV, else 0 (an OCV estimated from dynamic records leans on the offsets);
-    0 switches it off. Under load an offset and a slow RC element explain the same voltage
+    0 switches it off (and it is off for output "absolute" or ocv_input, where the offset is
+    not one from the OCV). Under load an offset and a slow RC element explain the same voltage
     nearly alike, and the refinement of all local models at once traded them between
     neighbours; the ridge decides such near-ties for the RC element. With temperature terms
     only the offset at T_ref is pulled (its dT terms stay free). Leave-one-record-out, C/20

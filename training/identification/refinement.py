@@ -183,9 +183,10 @@ def _offset_ridge(model: LmnModel, Phis: list[np.ndarray], sqrt_weights: list[np
     """The offset ridge (TrainConfig.offset_ridge): the θ column of the OCV offset U_off and,
     per local model j, √(ρ·n_j) with n_j = Σ_k w_k·Φ_kj its weighted sample count; the
     residual rows √(ρ·n_j)·U_off,j pull each offset towards 0. (None, []) where ρ = 0 or the
-    model has no offset."""
+    offset is not one from the OCV (an absolute-output model's offset is the voltage level; with
+    the OCV as an input the OCV's own coefficient shifts it)."""
     cols = model.columns()
-    if rho <= 0.0 or "1" not in cols:
+    if rho <= 0.0 or "1" not in cols or not model.relative_ocv or model.ocv_input:
         return None, np.zeros(0)
     mass = sum(Phi.T @ (sw * sw) for Phi, sw in zip(Phis, sqrt_weights, strict=True))
     return cols.index("1"), np.sqrt(rho * np.asarray(mass, dtype=float))
