@@ -521,6 +521,14 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     absolute = skeleton(load_config(output="absolute", **settings), 3.0, base.ocv_soc,
                         base.ocv_v, None, np.array([0.5]), np.array([0.5]))
     assert _offset_ridge(absolute, [np.ones((n, 1))], [np.ones(n)], 0.05)[0] is None
+    from lmncell.identification.refinement import offset_ridge_of
+
+    warm = skeleton(cfg0, 3.0, base.ocv_soc, base.ocv_v, None, np.array([0.5]),
+                    np.array([0.5]), temperature_terms=2)
+    auto = load_config(**{**settings, "ocv_tests": ["ocv.mat"]})
+    assert offset_ridge_of(auto, start) == pytest.approx(0.003)
+    assert offset_ridge_of(auto, warm) == 0.0                # auto: not with temperature terms
+    assert offset_ridge_of(load_config(offset_ridge=0.01, **settings), warm) == 0.01
     assert load_config().offset_ridge_weight() == 0.0
     assert load_config(ocv_tests=["ocv.mat"]).offset_ridge_weight() == pytest.approx(0.003)
     for bad in (-0.1, 2.0, "yes", True):

@@ -90,25 +90,27 @@ class TrainConfig:
     observer's worst share outside ±3σ 8.9 → 0.1 %; A123 without an OCV test, five folds,
     5.59 / 18.76 → 5.17 / 17.22 with 50 mV (100 mV: 5.57 / 19.41; 25 mV broke the −15 °C
     fold, 48 mV whole record), not the default there.
-    offset_ridge: in the output-error refinement, every local model's OCV offset U_off is
-    pulled towards 0 by ρ·n_j·U_off² (n_j the local model's weighted sample count: an offset U
-    costs as much as a share ρ of its samples being U off), "auto": OFFSET_RIDGE = 0.003 where
-    ocv_tests fix the OCV, else 0 (an OCV estimated from dynamic records leans on the offsets);
-    0 switches it off (and it is off for output "absolute" or ocv_input, where the offset is
-    not one from the OCV). Under load an offset and a slow RC element explain the same voltage
-    nearly alike, and the refinement of all local models at once traded them between
-    neighbours; the ridge decides such near-ties for the RC element. With temperature terms
-    only the offset at T_ref is pulled (its dT terms stay free). Leave-one-record-out, C/20
-    OCV test, 20–80 % / whole record mV, ρ = 0 → 0.001 → 0.003 → 0.01 → 0.03: Panasonic 25 °C
-    5.31 / 8.57 → 5.23 / 8.48 → 5.12 / 8.46 → 5.11 / 8.53 → 5.54 / 8.89 (chamber temperature
-    only 5.61 / 8.88 → 5.53 / 8.80 → 5.41 / 8.78 → 5.31 / 8.83 → 5.50 / 9.09); 25 + 10 °C,
-    10 °C held out 9.38 / 13.09 → 9.09 / 12.84 → 8.94 / 12.75 → 8.76 / 12.49, 25 °C held out
-    5.69 / 9.38 → 5.64 / 9.34 → 5.55 / 9.25 → 5.48 / 9.27; EKF SoC RMSE (observer
+    offset_ridge: in the output-error refinement, every local model's OCV offset U_off is pulled
+    towards 0 by ρ·n_j·U_off² (n_j the local model's weighted sample count: an offset U costs as
+    much as a share ρ of its samples being U off), "auto": OFFSET_RIDGE = 0.003 where ocv_tests
+    fix the OCV and the model has no temperature terms, else 0 (an OCV estimated from dynamic
+    records leans on the offsets); 0 switches it off (and it is off for output "absolute" or
+    ocv_input, where the offset is not one from the OCV). Under load an offset and a slow RC
+    element explain the same voltage nearly alike, and the refinement of all local models at
+    once traded them between neighbours; the ridge decides such near-ties for the RC element.
+    With temperature terms (a set ρ) only the offset at T_ref is pulled, its dT terms stay free;
+    "auto" leaves such models alone, where it was neutral to worse (A123 below).
+    Leave-one-record-out, C/20 OCV test, 20–80 % / whole record mV, ρ = 0 → 0.001 → 0.003 → 0.01
+    → 0.03: Panasonic 25 °C 5.31 / 8.57 → 5.23 / 8.48 → 5.12 / 8.46 → 5.11 / 8.53 → 5.54 / 8.89
+    (chamber temperature only 5.61 / 8.88 → 5.53 / 8.80 → 5.41 / 8.78 → 5.31 / 8.83 → 5.50 /
+    9.09); 25 + 10 °C, 10 °C held out 9.38 / 13.09 → 9.09 / 12.84 → 8.94 / 12.75 → 8.76 / 12.49,
+    25 °C held out 5.69 / 9.38 → 5.64 / 9.34 → 5.55 / 9.25 → 5.48 / 9.27; EKF SoC RMSE (observer
     leave-one-out) 25 °C 0.27 → 0.25 %, 10 °C 0.56 → 0.46 % at 0.003. A123 folds between the
-    training temperatures with the 25 °C C/30 test: 3.22 / 11.86 → 3.17 / 11.91 → 3.21 / 12.14
-    → 3.58 / 12.13. Without an OCV test it hurts (Panasonic 25 °C, ρ 0.01: 6.76 / 12.12 →
-    9.28 / 14.37), hence "auto". Applied to the tree's local fits as well (0.01) it cost the
-    whole record (5.25 / 9.07).
+    training temperatures with the 25 °C C/30 test (temperature terms of degree 2): 3.22 / 11.86
+    → 3.17 / 11.91 → 3.21 / 12.14 → 3.58 / 12.13; pulling the offset at every temperature (its
+    dT terms too), 0.01: 3.69 / 12.15. Without an OCV test it hurts (Panasonic 25 °C, ρ 0.01:
+    6.76 / 12.12 → 9.28 / 14.37), hence "auto". Applied to the tree's local fits as well (0.01)
+    it cost the whole record (5.25 / 9.07).
     output: "relative_ocv" (u − OCV(SoC) modelled) or "absolute" (the paper's pure form).
     ocv_input / soc_input: OCV(SoC) or SoC as extra local-model regressors.
     depletion_power / depletion_tau_s: the depletion regressor d = g(T)·LP_τ(i)·(0.1/SoC)^p

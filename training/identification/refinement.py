@@ -64,7 +64,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
     D2 = second_difference(K) if K >= 3 else np.zeros((0, K))
     ridge = 1e-3
-    off_col, off_lam = _offset_ridge(model, Phis, w_all, cfg.offset_ridge_weight())
+    off_col, off_lam = _offset_ridge(model, Phis, w_all, offset_ridge_of(cfg, model))
     cache: dict = {}
 
     ocv0 = model.ocv_v.copy()
@@ -169,13 +169,22 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
             "status": int(sol.status), "train_rmse_before_mv": 1e3 * before,
             "train_rmse_after_mv": 1e3 * after, "accepted": accepted,
-            "offset_ridge": cfg.offset_ridge_weight() if off_col is not None else 0.0}
+            "offset_ridge": offset_ridge_of(cfg, model) if off_col is not None else 0.0}
     progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
                 if info["offset_ridge"] else "")
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
+
+
+def offset_ridge_of(cfg: TrainConfig, model: LmnModel) -> float:
+    """ρ of the offset ridge for this model: the setting, where it is "auto" only for models
+    without temperature terms (with them the offset is a polynomial in dT, of which the ridge
+    would pull the value at T_ref alone)."""
+    if cfg.offset_ridge == "auto" and model.temperature_terms:
+        return 0.0
+    return cfg.offset_ridge_weight()
 
 
 def _offset_ridge(model: LmnModel, Phis: list[np.ndarray], sqrt_weights: list[np.ndarray],
