@@ -11,7 +11,12 @@ from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
 from lmncell.identification.construction import validation_masks
 from lmncell.identification.prefit import with_soc_reference_weights
-from lmncell.identification.refinement import _robust_linear_solve
+from lmncell.identification.refinement import (
+    _offset_ridge,
+    _robust_linear_solve,
+    offset_ridge_of,
+    refine_output_error,
+)
 from lmncell.identification.splitting import optimise_split
 from lmncell.identification.train import train_files
 from lmncell.identification.tree import build_design, poles, skeleton, stabilise, wls
@@ -478,8 +483,6 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     data are exact); with it the offset shrinks towards 0 and the RC element takes the rest,
     at a small cost in fit. 'auto' turns it on only where OCV tests fix the OCV."""
     from lmncell.data.dataset import Segment
-    from lmncell.identification.construction import validation_masks
-    from lmncell.identification.refinement import _offset_ridge, refine_output_error
     from lmncell.runtime.step import simulate
 
     settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
@@ -521,8 +524,6 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     absolute = skeleton(load_config(output="absolute", **settings), 3.0, base.ocv_soc,
                         base.ocv_v, None, np.array([0.5]), np.array([0.5]))
     assert _offset_ridge(absolute, [np.ones((n, 1))], [np.ones(n)], 0.05)[0] is None
-    from lmncell.identification.refinement import offset_ridge_of
-
     warm = skeleton(cfg0, 3.0, base.ocv_soc, base.ocv_v, None, np.array([0.5]),
                     np.array([0.5]), temperature_terms=2)
     auto = load_config(**{**settings, "ocv_tests": ["ocv.mat"]})

@@ -64,7 +64,11 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
     D2 = second_difference(K) if K >= 3 else np.zeros((0, K))
     ridge = 1e-3
-    off_col, off_lam = _offset_ridge(model, Phis, w_all, offset_ridge_of(cfg, model))
+    rho = offset_ridge_of(cfg, model)
+    off_col, off_lam = _offset_ridge(model, Phis, w_all, rho)
+    if off_col is not None:               # the ridge's rows of the Jacobian do not change
+        j_off = np.zeros((M, M * p + K))
+        j_off[np.arange(M), np.arange(M) * p + off_col] = off_lam
     cache: dict = {}
 
     ocv0 = model.ocv_v.copy()
@@ -111,9 +115,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
         j_extra.append(jr)
         if off_col is not None:
             x_extra.append(off_lam * theta[:, off_col])
-            jo = np.zeros((M, M * p + K))
-            jo[np.arange(M), np.arange(M) * p + off_col] = off_lam
-            j_extra.append(jo)
+            j_extra.append(j_off)
         if with_ocv and D2.shape[0]:
             x_extra.append(lam_ocv * D2 @ ocv_v)
             jo = np.zeros((D2.shape[0], M * p + K))
@@ -169,7 +171,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
             "status": int(sol.status), "train_rmse_before_mv": 1e3 * before,
             "train_rmse_after_mv": 1e3 * after, "accepted": accepted,
-            "offset_ridge": offset_ridge_of(cfg, model) if off_col is not None else 0.0}
+            "offset_ridge": rho if off_col is not None else 0.0}
     progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
