@@ -3,7 +3,8 @@ held-out record free-run, and compare the LMN with its baselines fitted on the s
 
 Usage:
     python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 F[,F...]] [--set KEY=VALUE ...]
-        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN] [--plot FILE.png]
+        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN] [--through-hidden-pauses]
+        [--plot FILE.png]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
     P=../shared/data/panasonic_18650pf/25degC
@@ -16,7 +17,10 @@ temperature and, where the record has one beside a chamber temperature, by the c
 temperature only (the LMN's thermal model computes the cell temperature); then the means over
 the folds. --hold-out PATTERN holds out only the records whose name contains PATTERN (e.g.
 10degC: train on all, test each 10 °C record left out in turn), or one of a comma list
-(N05,P05,P25: the A123 folds between training temperatures). --plot FILE.png draws the
+(N05,P05,P25: the A123 folds between training temperatures). --through-hidden-pauses
+evaluates the held-out record as a host that drives the FMU through its time column: pauses
+that only the wall clock shows (Panasonic 25 °C Cycle 1: 16 h and 3 h) do not split it, and the
+model's state runs on through them (training still splits there). --plot FILE.png draws the
 same figures as bars per held-out record, with a caption naming the split and the settings.
 """
 
@@ -26,7 +30,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from lmncell.cli import run_script, soc_list_argument
+from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import evaluate_model, hold_out_clause, leave_one_out_folds
 from lmncell.evaluation.metrics import pooled
@@ -49,6 +53,8 @@ def main() -> None:
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
                     help="hold out only records whose name contains PATTERN, or one of a "
                     "comma list")
+    ap.add_argument("--through-hidden-pauses", action="store_true",
+                    help=THROUGH_PAUSES_HELP)
     ap.add_argument("--plot", type=Path, metavar="FILE.png",
                     help="also draw the results per held-out record")
     a = ap.parse_args()
@@ -66,7 +72,8 @@ def main() -> None:
                                **settings)
         folds.append((Path(held).name, {}))
         for ambient in (False, True):
-            _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient)
+            _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient,
+                                     through_hidden_pauses=a.through_hidden_pauses)
             if ambient and "cell_temperature_rmse_k" not in rows[0]:
                 continue                  # no measured cell temperature: one run says it all
             names = [m for m in MODELS if m in rows[0]]
@@ -92,7 +99,10 @@ def main() -> None:
                    f"in turn, the models trained on the other {len(a.records) - 1} records "
                    "with the same data and settings; free-run RMSE of the held-out record, "
                    "driven by the measured cell temperature (cell) and, where the record has "
-                   "one beside it, by the chamber temperature only (ambient). Settings: "
+                   "one beside it, by the chamber temperature only (ambient)"
+                   + ("; pauses that only the wall clock shows not split (the model runs on "
+                      "through them, as an FMU driven through the time column)"
+                      if a.through_hidden_pauses else "") + ". Settings: "
                    f"{', '.join(a.set) or 'defaults'}; OCV: {ocv}.")
         print(f"figure: {folds_figure(folds, a.plot, caption)}")
 

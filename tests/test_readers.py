@@ -3,12 +3,18 @@
 from __future__ import annotations
 
 import gzip
+import json
 import warnings
+from datetime import datetime, timedelta
 
 import numpy as np
 import pytest
+import scipy.io
+from lmncell.cli import main
 from lmncell.data.readers import DataWarning, detect_format, read_record, write_bdf
 from lmncell.data.records import DataError
+from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.runtime.model import load_model
 
 from tests.conftest import A123_S1, DATA, PAN_US06, shared_or_skip
 
@@ -167,3 +173,62 @@ def test_milliamp_and_sign_warnings(tmp_path) -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         read_record(A123_S1)  # real data: no warning
+
+
+def _record_with_hidden_pause(tmp_path, row: int, pause_s: float, n: int = 4000):
+    """The shipped US06 record's first n samples, saved again with a wall clock (TimeStamp)
+    that jumps by pause_s at `row` while its Time column runs on, as in the Panasonic 25 °C
+    Cycle 1 file."""
+    meas = scipy.io.loadmat(str(PAN_US06))["meas"][0, 0]
+    fields = {k: np.asarray(meas[k])[:n] for k in meas.dtype.names if k != "TimeStamp"}
+    t = fields["Time"].ravel()
+    start = datetime(2017, 3, 20, 1, 43, 49)
+    stamps = np.empty((n, 1), dtype=object)
+    for k in range(n):
+        wall = start + timedelta(seconds=float(t[k] - t[0]) + (pause_s if k >= row else 0.0))
+        stamps[k, 0] = np.array([wall.strftime("%m/%d/%Y %I:%M:%S %p")])
+    fields["TimeStamp"] = stamps
+    path = tmp_path / "paused_Pan18650PF.mat"
+    scipy.io.savemat(str(path), {"meas": fields})
+    return path
+
+
+def test_hidden_pause_splits_unless_driven_through_the_time_column(tmp_path) -> None:
+    path = _record_with_hidden_pause(tmp_path, 2500, 3 * 3600.0)
+    rec = read_record(path)
+    assert len(rec.meta.pause_starts) == 1
+    (k,) = rec.meta.pause_starts
+    assert 2480 <= k <= 2500 and k in rec.meta.segment_starts           # a few duplicates dropped
+    assert len(rec.segments()) == 2
+    assert rec.slice(100, len(rec)).meta.pause_starts == [k - 100]
+    through = rec.through_hidden_pauses()
+    assert through.meta.segment_starts == [0] and through.meta.pause_starts == []
+    assert len(through.segments()) == 1 and len(through) == len(rec)
+    assert any("not split" in note for note in through.meta.notes)
+    assert read_record(PAN_US06).through_hidden_pauses().meta == read_record(PAN_US06).meta
+
+
+def test_evaluation_through_hidden_pauses_runs_the_model_state_on(tmp_path, quick_model,
+                                                                  capsys) -> None:
+    model = load_model(quick_model)
+    path = _record_with_hidden_pause(tmp_path, 2500, 3 * 3600.0)
+    split, rows = evaluate_model(model, [path], soc0=1.0)
+    run_on, rows_on = evaluate_model(model, [path], soc0=1.0, through_hidden_pauses=True)
+    assert len(split) == len(rows) == 2 and len(run_on) == len(rows_on) == 1
+    whole, after = run_on[0], split[1]
+    first = len(split[0].segment)
+    assert np.array_equal(whole.voltage["lmn"][:first], split[0].voltage["lmn"])
+    # after the "pause" (only the stamps jump: the cell ran on) the split model restarts rested
+    # at the counted SoC, the run-on one stays polarised and follows the cell
+    k = np.searchsorted(whole.segment.time_s, after.segment.time_s - 0.5)[:60]
+    assert np.max(np.abs(whole.segment.time_s[k] - after.segment.time_s[:60])) < 0.05
+    measured = after.segment.voltage_v[:60]
+    run_on_error = np.mean(whole.voltage["lmn"][k] - measured)
+    restarted_error = np.mean(after.voltage["lmn"][:60] - measured)
+    assert abs(restarted_error) > 5e-3 and abs(run_on_error) < 0.5 * abs(restarted_error)
+    assert abs(whole.soc_model[k[0]] - after.soc_model[0]) < 2e-3
+    for flag, segments in (([], 2), (["--through-hidden-pauses"], 1)):
+        capsys.readouterr()
+        assert main(["evaluate", str(quick_model), str(path), "--soc0", "1", "--json",
+                     *flag]) == 0
+        assert len(json.loads(capsys.readouterr().out)) == segments          # SoC counts on across it

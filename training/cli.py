@@ -112,6 +112,12 @@ def cmd_train(a: argparse.Namespace) -> int:
     return 0
 
 
+THROUGH_PAUSES_HELP = ("do not split records at pauses that only the wall clock shows (the "
+                       "Panasonic TimeStamp): drive the model through them as a host does that "
+                       "feeds the FMU the record's time column (default: split, the next "
+                       "segment starts rested)")
+
+
 def cmd_evaluate(a: argparse.Namespace) -> int:
     if a.observer:
         from lmncell.evaluation.observe import evaluate_observer_files
@@ -119,12 +125,14 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
         if a.soc0_est is None:
             raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
         evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
-                                a.plot, a.json, read_options=read_options(a))
+                                a.plot, a.json, read_options=read_options(a),
+                                through_hidden_pauses=a.through_hidden_pauses)
         return 0
     from lmncell.evaluation.evaluate import evaluate_files
 
     evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
-                   read_options=read_options(a), ambient=a.ambient)
+                   read_options=read_options(a), ambient=a.ambient,
+                   through_hidden_pauses=a.through_hidden_pauses)
     return 0
 
 
@@ -265,6 +273,7 @@ def build_parser() -> argparse.ArgumentParser:
                    "(chamber) temperature only, as a vehicle simulation does: the model's "
                    "thermal model computes the cell temperature (default: the measured cell "
                    "temperature)")
+    s.add_argument("--through-hidden-pauses", action="store_true", help=THROUGH_PAUSES_HELP)
     s.add_argument("--observer", choices=["ekf", "fuzzy", "imm"],
                    help="judge a SoC observer instead of the voltage")
     s.add_argument("--soc0-est", type=_float01, help="the observer's start SoC guess")

@@ -228,7 +228,8 @@ def read_panasonic(path: Path) -> Record:
     """Kollmeyer Panasonic 18650PF ``.mat`` (struct ``meas``); discharge < 0 already.
 
     Duplicate time stamps are dropped (counted in meta.notes). Gaps in ``Time`` and pauses that only
-    ``TimeStamp`` shows start new segments (meta.segment_starts); ``Ah`` carries charge across.
+    ``TimeStamp`` shows start new segments (meta.segment_starts; the pauses also in
+    meta.pause_starts); ``Ah`` carries charge across.
     """
     import scipy.io
 
@@ -265,19 +266,20 @@ def read_panasonic(path: Path) -> Record:
         return np.asarray(meas[name], dtype=float).ravel()[keep]
 
     t = t[keep]
-    starts = set(_segment_starts_from_gaps(t, field_("Current"), field_("Ah")))
+    gaps = set(_segment_starts_from_gaps(t, field_("Current"), field_("Ah")))
+    pauses: set[int] = set()
     if "TimeStamp" in fields:
         wall = _parse_timestamps(np.ravel(meas["TimeStamp"])[keep])
         hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
         for k in hidden:
             notes.append(f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at row {k}")
-        starts |= set(hidden.tolist())
+        pauses = set(hidden.tolist()) - gaps
     temp = field_("Battery_Temp_degC") if "Battery_Temp_degC" in fields else None
     if temp is not None and not np.isfinite(temp).all():
         notes.append("Battery_Temp_degC has non-finite samples: temperature not used")
         temp = None
     meta = _meta(path, "panasonic", "none (file: charge > 0)", t,
-                 segment_starts=sorted(starts), notes=notes)
+                 segment_starts=sorted(gaps | pauses), notes=notes, pause_starts=sorted(pauses))
     if "Chamber_Temp_degC" in fields:
         chamber = field_("Chamber_Temp_degC")
         if np.isfinite(chamber).any():

@@ -29,6 +29,8 @@ class RecordMeta:
     chamber_temp_c: float | None = None
     segment_starts: list[int] = field(default_factory=lambda: [0])
     notes: list[str] = field(default_factory=list)
+    pause_starts: list[int] = field(default_factory=list)   # those of segment_starts that
+    # begin after a pause which only the wall clock shows (the time column runs on through it)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -42,7 +44,8 @@ class Record:
     temperature_c: measured cell temperature in °C, or None. soc_ref: SoC reference (0…1) or None.
     charge_ah: net charge into the cell since the record start from the tester's counters (Ah,
     > 0 charged), or None. meta.segment_starts: indices where a new segment begins after a gap or
-    a pause hidden in the time column (the cell state carries over, the lag buffers do not).
+    a pause hidden in the time column (the cell state carries over, the lag buffers do not);
+    meta.pause_starts: those that begin after a hidden pause.
     """
 
     time_s: np.ndarray
@@ -84,9 +87,10 @@ class Record:
         starts = [s - start for s in self.meta.segment_starts if start <= s < stop]
         if 0 not in starts:
             starts = [0, *starts]
+        pauses = [s - start for s in self.meta.pause_starts if start < s < stop]
         meta = dataclasses.replace(
-            self.meta, segment_starts=starts, notes=[*self.meta.notes, note] if note else
-            list(self.meta.notes))
+            self.meta, segment_starts=starts, pause_starts=pauses,
+            notes=[*self.meta.notes, note] if note else list(self.meta.notes))
         return Record(self.time_s[start:stop].copy(), self.current_a[start:stop].copy(),
                       self.voltage_v[start:stop].copy(), meta, cut(self.temperature_c),
                       cut(self.soc_ref), cut(self.charge_ah))
@@ -96,6 +100,19 @@ class Record:
         bounds = [*sorted(set(self.meta.segment_starts) | {0}), len(self)]
         return [self.slice(a, b, f"segment {k} of {self.name}")
                 for k, (a, b) in enumerate(itertools.pairwise(bounds)) if b - a > 1]
+
+    def through_hidden_pauses(self) -> Record:
+        """A copy that is not split at pauses which only the wall clock shows: the record as
+        a host sees it that drives a model (an FMU) through the time column, where the cell's
+        state runs on through such a pause instead of relaxing."""
+        if not self.meta.pause_starts:
+            return self
+        pauses = set(self.meta.pause_starts)
+        meta = dataclasses.replace(
+            self.meta, segment_starts=[s for s in self.meta.segment_starts if s not in pauses],
+            pause_starts=[], notes=[*self.meta.notes, f"{len(pauses)} hidden pause(s) not "
+                                   "split: the time column runs on through them"])
+        return dataclasses.replace(self, meta=meta)
 
     def with_soc(self, soc: np.ndarray) -> Record:
         """A copy with soc_ref replaced."""

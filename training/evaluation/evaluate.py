@@ -61,7 +61,8 @@ def ambient_of(seg: Segment) -> np.ndarray:
 def evaluate_model(model: LmnModel, paths: list[str | Path],
                    soc0: float | Sequence[float] | None = None,
                    capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None,
-                   ambient: bool = False) -> tuple[list[Trace], list[dict]]:
+                   ambient: bool = False, through_hidden_pauses: bool = False
+                   ) -> tuple[list[Trace], list[dict]]:
     """Free-run simulation of each record's segments with the LMN and its baselines
     (soc0: one start SoC for all records, one per file in order, or None for records that
     start rested at full charge; read_options go to read_record).
@@ -69,11 +70,16 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
     ambient False: the measured cell temperature drives the models (the FMU with
     temperature_is_cell = true); True: only the ambient (chamber) temperature, the LMN's thermal
     model computes the cell temperature (the FMU's default) and the baselines, which have none,
-    take the ambient as the cell temperature."""
+    take the ambient as the cell temperature. through_hidden_pauses False: a pause that only
+    the wall clock shows splits the record, and the next segment starts rested at its counted
+    SoC (what the cell did); True: no split there, as a host that drives the FMU through the
+    record's time column sees it (the model's state runs on through the pause)."""
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
     for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
+        if through_hidden_pauses:
+            rec = rec.through_hidden_pauses()
         for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0), cap,
                                       current_delay_s=model.current_delay_s):
             check_range(model, seg)
@@ -180,11 +186,12 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
                    soc0: float | Sequence[float] | None = None,
                    plot_dir: str | Path | None = None, trace: str | Path | None = None,
                    as_json: bool = False, progress: Progress = _print, ambient: bool = False,
-                   read_options: Mapping[str, Any] | None = None) -> list[dict]:
+                   read_options: Mapping[str, Any] | None = None,
+                   through_hidden_pauses: bool = False) -> list[dict]:
     """`lmncell evaluate`: figures per record for the LMN and its baselines."""
     model = load_model(model_path)
     traces, rows = evaluate_model(model, paths, soc0, read_options=read_options,
-                                  ambient=ambient)
+                                  ambient=ambient, through_hidden_pauses=through_hidden_pauses)
     if trace is not None:
         if len(traces) == 1:
             write_trace(traces[0], trace)

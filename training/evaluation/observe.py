@@ -146,13 +146,16 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
                             soc0: float | Sequence[float] | None, soc0_est: float,
                             start_at: float | None,
                             plot_dir: str | Path | None = None, as_json: bool = False,
-                            read_options: Mapping[str, Any] | None = None) -> list:
+                            read_options: Mapping[str, Any] | None = None,
+                            through_hidden_pauses: bool = False) -> list:
     """`lmncell evaluate --observer`: SoC error of an observer on records (read_options go to
-    read_record)."""
+    read_record; through_hidden_pauses as in lmncell.evaluation.evaluate.evaluate_model)."""
     model = load_model(model_path)
     results = []
     for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
+        if through_hidden_pauses:
+            rec = rec.through_hidden_pauses()
         seg = observer_segment(record_to_segments(rec, model.sample_time_s,
                                                   start_soc(rec, rec_soc0), model.capacity_ah,
                                                   current_delay_s=model.current_delay_s),
