@@ -227,8 +227,12 @@ def test_evaluation_through_hidden_pauses_runs_the_model_state_on(tmp_path, quic
     restarted_error = np.mean(after.voltage["lmn"][:60] - measured)
     assert abs(restarted_error) > 5e-3 and abs(run_on_error) < 0.5 * abs(restarted_error)
     assert abs(whole.soc_model[k[0]] - after.soc_model[0]) < 2e-3
+    assert [r.get("hidden_pauses_split") for r in rows] == [1, 1]
+    assert "hidden_pauses_split" not in rows_on[0]
     for flag, segments in (([], 2), (["--through-hidden-pauses"], 1)):
         capsys.readouterr()
         assert main(["evaluate", str(quick_model), str(path), "--soc0", "1", "--json",
                      *flag]) == 0
-        assert len(json.loads(capsys.readouterr().out)) == segments          # SoC counts on across it
+        assert len(json.loads(capsys.readouterr().out)) == segments
+    assert main(["evaluate", str(quick_model), str(path), "--soc0", "1"]) == 0
+    assert "split at 1 pause(s) that only its wall clock shows" in capsys.readouterr().out          # SoC counts on across it

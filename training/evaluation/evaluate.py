@@ -101,6 +101,8 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
             if cell is not None and seg.ambient_c is not None and seg.temperature_c is not None:
                 row["cell_temperature_rmse_k"] = float(np.sqrt(np.mean(
                     (cell - seg.temperature_c) ** 2)))
+            if rec.meta.pause_starts:
+                row["hidden_pauses_split"] = len(rec.meta.pause_starts)
             rows.append(row)
     return traces, rows
 
@@ -223,4 +225,13 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
             if "cell_temperature_rmse_k" in r:
                 progress(f"{r['record'][:48]:48s} driven by the ambient temperature: cell "
                          f"temperature RMSE {r['cell_temperature_rmse_k']:.2f} K")
+        told = set()
+        for r in rows:
+            name = r["record"].split("#")[0]
+            if r.get("hidden_pauses_split") and name not in told:
+                told.add(name)
+                progress(f"{name}: split at {r['hidden_pauses_split']} pause(s) that only its "
+                         "wall clock shows, each segment after one started rested; an FMU "
+                         "driven through its time column runs on through them "
+                         "(--through-hidden-pauses scores it that way)")
     return rows
