@@ -66,14 +66,23 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     ridge = 1e-3
     rho = offset_ridge_of(cfg, model)
     off_col, off_lam = _offset_ridge(model, Phis, w_all, rho)
-    if off_col is not None:               # the ridge's rows of the Jacobian do not change
-        j_off = np.zeros((M, M * p + K))
-        j_off[np.arange(M), np.arange(M) * p + off_col] = off_lam
     cache: dict = {}
 
     ocv0 = model.ocv_v.copy()
     lam_anchor = np.sqrt(n_total) * 0.1    # 10 mV away from the pre-fit OCV costs like 0.1 % of
     #                                        the samples being 10 mV off: a weak anchor
+    tri = np.tril(np.ones((K, K)))
+    # the penalty rows below the residuals are linear in x: their Jacobian is built once
+    j_pen = [np.hstack([np.sqrt(ridge) * np.eye(M * p), np.zeros((M * p, K))])]
+    if off_col is not None:
+        j_off = np.zeros((M, M * p + K))
+        j_off[np.arange(M), np.arange(M) * p + off_col] = off_lam
+        j_pen.append(j_off)
+    if with_ocv and D2.shape[0]:
+        j_pen.append(np.hstack([np.zeros((D2.shape[0], M * p)), lam_ocv * D2 @ tri]))
+    if with_ocv:
+        j_pen.append(np.hstack([np.zeros((K, M * p)), lam_anchor * tri]))
+    j_penalty = np.vstack(j_pen)
 
     def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         # OCV knots as a start value plus non-negative increments (OCV rises with SoC)
@@ -106,32 +115,18 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             if with_ocv:
                 J = np.hstack([J, -sw[:, None] * (Bs[k] @ tri)])
             jac.append(J)
-        x_extra = []
-        j_extra = []
-        reg = np.sqrt(ridge) * (theta - theta0).ravel()
-        x_extra.append(reg)
-        jr = np.zeros((M * p, M * p + K))
-        jr[:, : M * p] = np.sqrt(ridge) * np.eye(M * p)
-        j_extra.append(jr)
+        x_extra = [np.sqrt(ridge) * (theta - theta0).ravel()]    # rows in j_penalty's order
         if off_col is not None:
             x_extra.append(off_lam * theta[:, off_col])
-            j_extra.append(j_off)
         if with_ocv and D2.shape[0]:
             x_extra.append(lam_ocv * D2 @ ocv_v)
-            jo = np.zeros((D2.shape[0], M * p + K))
-            jo[:, M * p:] = lam_ocv * D2 @ tri
-            j_extra.append(jo)
         if with_ocv:
             x_extra.append(lam_anchor * (ocv_v - ocv0))
-            ja = np.zeros((K, M * p + K))
-            ja[:, M * p:] = lam_anchor * tri
-            j_extra.append(ja)
-        out = (np.concatenate(res + x_extra), np.vstack(jac + j_extra))
+        out = (np.concatenate(res + x_extra), np.vstack([*jac, j_penalty]))
         cache.clear()
         cache[key] = out
         return out
 
-    tri = np.tril(np.ones((K, K)))
     incr0 = np.concatenate([[ocv0[0]], np.maximum(np.diff(ocv0), 0.0)]) if with_ocv else []
     x0 = np.concatenate([model.theta.ravel(), incr0])
     lower = np.full(x0.size, -np.inf)
