@@ -32,7 +32,12 @@ from pathlib import Path
 
 from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
 from lmncell.config import parse_setting
-from lmncell.evaluation.evaluate import evaluate_model, hold_out_clause, leave_one_out_folds
+from lmncell.evaluation.evaluate import (
+    evaluate_model,
+    hold_out_clause,
+    leave_one_out_folds,
+    through_pauses_clause,
+)
 from lmncell.evaluation.metrics import pooled
 from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
@@ -100,9 +105,7 @@ def main() -> None:
                    "with the same data and settings; free-run RMSE of the held-out record, "
                    "driven by the measured cell temperature (cell) and, where the record has "
                    "one beside it, by the chamber temperature only (ambient)"
-                   + ("; pauses that only the wall clock shows not split (the model runs on "
-                      "through them, as an FMU driven through the time column)"
-                      if a.through_hidden_pauses else "") + ". Settings: "
+                   + through_pauses_clause(a.through_hidden_pauses) + ". Settings: "
                    f"{', '.join(a.set) or 'defaults'}; OCV: {ocv}.")
         print(f"figure: {folds_figure(folds, a.plot, caption)}")
 

@@ -33,7 +33,11 @@ from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
 from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments, start_soc
 from lmncell.data.readers import read_record
-from lmncell.evaluation.evaluate import hold_out_clause, leave_one_out_folds
+from lmncell.evaluation.evaluate import (
+    hold_out_clause,
+    leave_one_out_folds,
+    through_pauses_clause,
+)
 from lmncell.evaluation.observe import (
     observer_segment,
     run_observer,
@@ -107,9 +111,7 @@ def main() -> None:
                    f"(under load) with the estimate {a.soc0_est:g}; SoC RMSE after the first "
                    "10 minutes, and the share of all its samples whose reference SoC lies "
                    "outside the observer's ±3σ band"
-                   + ("; pauses that only the wall clock shows not split (the observer runs on "
-                      "through them, as in an FMU driven through the time column)"
-                      if a.through_hidden_pauses else "")
+                   + through_pauses_clause(a.through_hidden_pauses, "observer")
                    + f". Settings: {', '.join(a.set) or 'defaults'};"
                    f" OCV: {ocv}.")
         print(f"figure: {observer_folds_figure(folds, a.plot, caption)}")

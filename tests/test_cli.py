@@ -102,7 +102,11 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
     their start SoCs, for one pattern or a comma list; a pattern that matches nothing, or a
     single record, is a clear DataError."""
     from lmncell.data.records import DataError
-    from lmncell.evaluation.evaluate import hold_out_clause, leave_one_out_folds
+    from lmncell.evaluation.evaluate import (
+        hold_out_clause,
+        leave_one_out_folds,
+        through_pauses_clause,
+    )
 
     recs = ["d/a_10degC.mat", "d/b_25degC.mat", "d/c_10degC.mat"]
     assert leave_one_out_folds(recs, "10degC", [1.0, 0.0, 0.5]) == [
@@ -114,6 +118,8 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
     assert hold_out_clause("a_, c_,") == " whose name contains one of 'a_', 'c_'"
     assert hold_out_clause("10degC") == " whose name contains '10degC'"
     assert hold_out_clause("") == ""
+    assert through_pauses_clause(False) == ""
+    assert "(the observer runs on through them" in through_pauses_clause(True, "observer")
     with pytest.raises(DataError, match="'P25' is in none of the 3"):
         leave_one_out_folds(recs, "P25")
     with pytest.raises(DataError, match="'P25' is in none of the 3"):

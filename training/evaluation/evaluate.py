@@ -149,6 +149,15 @@ def hold_out_clause(hold_out: str) -> str:
     return " whose name contains one of " + ", ".join(repr(p) for p in patterns)
 
 
+def through_pauses_clause(through_hidden_pauses: bool, what: str = "model") -> str:
+    """The words a caption adds where records were run through their hidden pauses (what:
+    the thing that runs on)."""
+    if not through_hidden_pauses:
+        return ""
+    return (f"; pauses that only the wall clock shows not split (the {what} runs on through "
+            "them, as in an FMU driven through the time column)")
+
+
 def check_range(model: LmnModel, seg: Segment) -> list[str]:
     """Warnings for inputs outside what the model was trained on (they are not clamped)."""
     import warnings
