@@ -102,6 +102,31 @@ def _unpack(x: np.ndarray, k: int, with_h: bool, gamma: float | None, cap: float
                   gamma if with_h else None, cap, ts)
 
 
+LOG_R_SMOOTHNESS = 1e-4   # a factor e between neighbouring resistance knots costs like this
+#                           share of the samples being 1 mV off: negligible where the data
+#                           determine the knots, and it ties a knot that no sample reaches (a SoC
+#                           below every training record) to its neighbour instead of letting it
+#                           drift to exp(700) Ω
+R_BOUNDS_OHM = (1e-6, 10.0)
+TAU_BOUNDS_S = (0.1, 1e5)
+BETA_BOUNDS = (-3.0, 3.0)      # exp(β·(25 − T)/10): at most a factor e³ per 10 K
+HYSTERESIS_BOUND_V = 0.5
+
+
+def parameter_bounds(k: int, with_h: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Lower and upper bounds of the fit's x = [OCV knots (V, free), log R0, log R1, log R2
+    (Ω, N_R knots each), log τ1, log τ2 (s), β, hysteresis M (V)]: physical ranges that keep
+    every simulation finite at any temperature and SoC."""
+    lo = [np.full(k, -np.inf), np.full(3 * N_R, np.log(R_BOUNDS_OHM[0])),
+          np.full(2, np.log(TAU_BOUNDS_S[0])), [BETA_BOUNDS[0]]]
+    hi = [np.full(k, np.inf), np.full(3 * N_R, np.log(R_BOUNDS_OHM[1])),
+          np.full(2, np.log(TAU_BOUNDS_S[1])), [BETA_BOUNDS[1]]]
+    if with_h:
+        lo.append([-HYSTERESIS_BOUND_V])
+        hi.append([HYSTERESIS_BOUND_V])
+    return np.concatenate(lo), np.concatenate(hi)
+
+
 PROGRESS_EVERY_S = 3.0   # seconds between progress lines of a fit
 
 
@@ -116,10 +141,13 @@ def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
     with_h = gamma is not None
     x0 = np.concatenate([ocv_v, np.log(np.full(3 * N_R, 0.01)),
                          [np.log(10.0), np.log(200.0), 0.0], [0.01] if with_h else []])
+    lower, upper = parameter_bounds(k, with_h)
     D2 = second_difference(k)
+    D1 = np.kron(np.eye(3), np.diff(np.eye(N_R), axis=0))    # neighbouring knots of R0, R1, R2
     w = [np.sqrt(s.weight) for s in segs]
     n = sum(len(s) for s in segs)
     lam = np.sqrt(3e-3 * n) * 1e-3
+    lam_r = np.sqrt(LOG_R_SMOOTHNESS * n) * 1e-3
     hs = [hysteresis(s.current_a, gamma, ts, capacity_ah, h0) if with_h else None
           for s, h0 in zip(segs, h0s, strict=True)]
 
@@ -135,12 +163,13 @@ def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
         m = _unpack(x, k, with_h, gamma, capacity_ah, ts, ocv_soc)
         parts = [sw * (m.simulate(s.current_a, s.temperature_c, soc, h0, h) - s.voltage_v)
                  for s, soc, sw, h0, h in zip(segs, socs, w, h0s, hs, strict=True)]
-        r = np.concatenate([*parts, lam * D2 @ m.ocv_v])
+        r = np.concatenate([*parts, lam * D2 @ m.ocv_v, lam_r * D1 @ x[k:k + 3 * N_R]])
         return np.where(np.isfinite(r), r, 1e3)
 
     t0 = time.perf_counter()
     with np.errstate(over="ignore", invalid="ignore"):
-        sol = least_squares(residuals, x0, method="trf", x_scale="jac", max_nfev=max_nfev)
+        sol = least_squares(residuals, x0, bounds=(lower, upper), method="trf", x_scale="jac",
+                            max_nfev=max_nfev)
     model = _unpack(sol.x, k, with_h, gamma, capacity_ah, ts, ocv_soc)
     return model, {"seconds": time.perf_counter() - t0, "evaluations": int(sol.nfev),
                    "cost": float(sol.cost)}
