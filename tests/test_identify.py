@@ -535,3 +535,35 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     for bad in (-0.1, 2.0, "yes", True):
         with pytest.raises(ConfigError, match="offset_ridge"):
             load_config(offset_ridge=bad)
+
+
+def test_depletion_factor_is_held_below_the_training_socs() -> None:
+    """Records that end at SoC 0.11 (a cold cell): the SoC factor (0.1/SoC)^4 is held below
+    0.7 × 0.11, so a model run on to SoC 0.02 does not raise its R_d term 600-fold beyond the
+    data; records that reach SoC 0.01 keep the default hold at 0.02."""
+    from lmncell.identification.construction import (
+        DEPLETION_HOLD_FRACTION,
+        hold_depletion_below_the_data,
+    )
+
+    cfg = load_config(partition=["soc"])
+    messages: list[str] = []
+    for lowest, expected in ((0.11, DEPLETION_HOLD_FRACTION * 0.11), (0.01, 0.02)):
+        base = skeleton(cfg, 2.85, np.array([0.0, 1.0]), np.array([3.0, 4.2]), None,
+                        np.array([0.5]), np.array([0.5]))
+        assert base.depletion is not None and base.depletion.soc_min == 0.02
+        hold_depletion_below_the_data(base, [np.linspace(1.0, 0.4, 50),
+                                             np.linspace(0.9, lowest, 50)], messages.append)
+        assert base.depletion.soc_min == pytest.approx(expected)
+        held = base.depletion.factor(expected)
+        assert base.depletion.factor(0.001) == held
+        assert base.depletion.factor(1.5 * expected) < held
+    assert len(messages) == 1 and "0.077" in messages[0]
+    # the hold is written to and read back from the model file, where every runtime reads it
+    from lmncell.runtime.model import model_from_dict, model_to_dict
+
+    cold = skeleton(cfg, 2.85, np.array([0.0, 1.0]), np.array([3.0, 4.2]), None,
+                    np.array([0.5]), np.array([0.5]))
+    hold_depletion_below_the_data(cold, [np.linspace(1.0, 0.11, 50)])
+    again = model_from_dict(json.loads(json.dumps(model_to_dict(cold))), "test")
+    assert again.depletion.soc_min == pytest.approx(0.077)

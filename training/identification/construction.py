@@ -170,6 +170,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
+    hold_depletion_below_the_data(base, socs, progress)
     base.arrhenius_k = e_k
     base.tau_activation_k = choose_time_constant_scaling(cfg, segs, progress)
     if n_temp:
@@ -260,6 +261,30 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             1e3 * freerun_rmse(model, segs, design, "fit"))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
+
+
+DEPLETION_HOLD_FRACTION = 0.7   # the depletion factor is held below this share of the lowest
+# training SoC: its power law, (0.1/SoC)^4, is extrapolated that far and no further
+
+
+def hold_depletion_below_the_data(base: LmnModel, socs: list[np.ndarray],
+                                  progress: Progress = _quiet) -> None:
+    """Set the depletion regressor's soc_min (below it the SoC factor is held) to
+    DEPLETION_HOLD_FRACTION of the lowest SoC the training records reach, where that is above
+    the default: a model trained on records that end at SoC 0.11 (Panasonic 10 °C drive
+    cycles) otherwise raised the factor 16-fold beyond its data on a record that ran on to
+    SoC 0.05 (at 25 °C) and its R_d of hundreds of mΩ, which had carried the earlier collapse of
+    the cold cell, took the terminal voltage to −2 V. Records that reach deeper leave the
+    default (Panasonic 25 °C: 0.049, A123: 0.014 … 0.037)."""
+    dep = base.depletion
+    if dep is None or not socs:
+        return
+    lowest = min(float(np.min(s)) for s in socs)
+    hold = DEPLETION_HOLD_FRACTION * lowest
+    if hold > dep.soc_min:
+        base.depletion = dataclasses.replace(dep, soc_min=hold)
+        progress(f"  depletion factor held below SoC {hold:.3f} ({DEPLETION_HOLD_FRACTION:g} of "
+                 f"the lowest training SoC, {lowest:.3f})")
 
 
 def local_ladder(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
