@@ -274,8 +274,9 @@ def hold_depletion_below_the_data(base: LmnModel, socs: list[np.ndarray],
     the default: a model trained on records that end at SoC 0.11 (Panasonic 10 °C drive
     cycles) otherwise raised the factor 16-fold beyond its data on a record that ran on to
     SoC 0.05 (at 25 °C) and its R_d of hundreds of mΩ, which had carried the earlier collapse of
-    the cold cell, took the terminal voltage to −2 V. Records that reach deeper leave the
-    default (Panasonic 25 °C: 0.049, A123: 0.014 … 0.037)."""
+    the cold cell, took the terminal voltage to −2 V. Records that reach deeper hold it below
+    all of their samples (Panasonic 25 °C, lowest 0.049: 0.034) or keep the default (A123,
+    0.014 … 0.037)."""
     dep = base.depletion
     if dep is None or not socs:
         return
