@@ -11,6 +11,7 @@ from lmncell.identification.baselines import (
     Ecm2rc,
     fit_ecm2rc,
     parameter_bounds,
+    start_point,
 )
 
 CAPACITY_AH = 2.0
@@ -56,8 +57,7 @@ def test_knots_without_data_follow_their_neighbours_and_stay_finite() -> None:
 def test_bounds_hold_the_start_point_and_keep_beta_physical() -> None:
     for with_h in (False, True):
         lo, hi = parameter_bounds(11, with_h)
-        x0 = np.concatenate([np.full(11, 3.7), np.log(np.full(3 * N_R, 0.01)),
-                             [np.log(10.0), np.log(200.0), 0.0], [0.01] if with_h else []])
+        x0 = start_point(np.full(11, 3.7), with_h)
         assert lo.size == hi.size == x0.size
         assert np.all(lo < x0) and np.all(x0 < hi)
         beta = 11 + 3 * N_R + 2

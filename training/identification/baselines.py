@@ -127,6 +127,13 @@ def parameter_bounds(k: int, with_h: bool) -> tuple[np.ndarray, np.ndarray]:
     return np.concatenate(lo), np.concatenate(hi)
 
 
+def start_point(ocv_v: np.ndarray, with_h: bool) -> np.ndarray:
+    """The fit's start x in parameter_bounds' layout: the OCV knots given, every resistance
+    10 mΩ, τ1 10 s, τ2 200 s, β 0 and a hysteresis M of 10 mV."""
+    return np.concatenate([ocv_v, np.log(np.full(3 * N_R, 0.01)),
+                           [np.log(10.0), np.log(200.0), 0.0], [0.01] if with_h else []])
+
+
 PROGRESS_EVERY_S = 3.0   # seconds between progress lines of a fit
 
 
@@ -139,8 +146,7 @@ def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
     progress, if given, gets a line every PROGRESS_EVERY_S seconds."""
     k = ocv_soc.size
     with_h = gamma is not None
-    x0 = np.concatenate([ocv_v, np.log(np.full(3 * N_R, 0.01)),
-                         [np.log(10.0), np.log(200.0), 0.0], [0.01] if with_h else []])
+    x0 = start_point(ocv_v, with_h)
     lower, upper = parameter_bounds(k, with_h)
     D2 = second_difference(k)
     D1 = np.kron(np.eye(3), np.diff(np.eye(N_R), axis=0))    # neighbouring knots of R0, R1, R2
