@@ -14,8 +14,10 @@ from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.refinement import (
     _offset_ridge,
     _robust_linear_solve,
+    _solve_in_knot_values,
     offset_ridge_of,
     refine_output_error,
+    refines_ocv,
 )
 from lmncell.identification.splitting import optimise_split
 from lmncell.identification.train import train_files
@@ -535,6 +537,97 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     for bad in (-0.1, 2.0, "yes", True):
         with pytest.raises(ConfigError, match="offset_ridge"):
             load_config(offset_ridge=bad)
+
+
+def _bumped_ocv_records(chambers: tuple[float, ...]) -> tuple:
+    """A synthetic RC cell whose true OCV is a straight line plus a 4 mV wave at SoC 0.3…0.7
+    that its 'OCV test' (the straight line, 21 knots) lacks; one full discharge with a ripple
+    per chamber temperature. Returns (start model with the test's OCV and the true θ, segments,
+    the wave at the start's knots, settings)."""
+    from lmncell.data.dataset import Segment
+    from lmncell.runtime.step import simulate
+
+    def wave(soc: np.ndarray) -> np.ndarray:
+        inside = (soc > 0.3) & (soc < 0.7)
+        return np.where(inside, 0.004 * np.sin(2 * np.pi * (soc - 0.3) / 0.4), 0.0)
+
+    settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
+                    depletion_power=0, robust_loss="none", offset_ridge=0.0,
+                    ocv_tests=["ocv.mat"])
+    cfg = load_config(**settings)
+    fine = np.linspace(0.0, 1.0, 401)
+    truth = skeleton(cfg, 3.0, fine, 3.4 + 0.7 * fine + wave(fine), None, np.array([0.5]),
+                     np.array([0.5]))
+    cols = truth.columns()
+    truth.theta[0, cols.index("i(k)")] = 0.03
+    truth.theta[0, cols.index("v3(k)")] = 0.01
+    n = 7000
+    t = np.arange(1, n + 1, dtype=float)
+    current = -1.5 + 1.0 * np.sin(2 * np.pi * t / 90.0)
+    sim = simulate(truth, current, None, 1.0)
+    segs = [Segment(f"chamber{c:g}", t, current, sim.voltage_v, np.full(n, c), 1.0, sim.soc,
+                    np.ones(n)) for c in chambers]
+    knots = np.linspace(0.0, 1.0, 21)
+    start = skeleton(cfg, 3.0, knots, 3.4 + 0.7 * knots, None, np.array([0.5]),
+                     np.array([0.5]))
+    start.theta = truth.theta.copy()
+    return start, segs, wave(knots), settings
+
+
+def test_ocv_from_a_test_is_refined_for_records_at_several_temperatures() -> None:
+    """Records at 10 and 25 °C of a cell whose OCV has a wave that the slow test lacks: with
+    ocv_refinement 'auto' the refinement moves the test's knots towards the true OCV (within
+    1 mV) and keeps those below SoC 0.1 as measured; 'off', or records at one temperature,
+    keep the test's OCV exactly."""
+    start, segs, wave, settings = _bumped_ocv_records((10.0, 25.0))
+    fits = {}
+    for mode in ("auto", "off"):
+        cfg = load_config(ocv_refinement=mode, **settings)
+        design = build_design(start, segs, validation_masks(segs, cfg))
+        fits[mode] = refine_output_error(start, segs, design, cfg, lambda _m: None)
+    refined, info = fits["auto"]
+    assert info["accepted"] and info["train_rmse_after_mv"] < 0.5 * info["train_rmse_before_mv"]
+    moved = refined.ocv_v - start.ocv_v
+    mid = (start.ocv_soc >= 0.2) & (start.ocv_soc <= 0.8)
+    assert np.max(np.abs(moved[mid] - wave[mid])) < 1e-3 and np.max(np.abs(moved)) > 2e-3
+    assert np.all(np.abs(moved[start.ocv_soc < 0.1]) < 1e-4)
+    assert np.all(np.diff(refined.ocv_v) >= 0.0)
+    assert np.array_equal(fits["off"][0].ocv_v, start.ocv_v)
+    one_level = _bumped_ocv_records((25.0, 25.0))[1]
+    auto = load_config(**settings)
+    assert refines_ocv(start, segs, auto) and not refines_ocv(start, one_level, auto)
+    assert refines_ocv(start, one_level, load_config(**{**settings, "ocv_refinement": "on"}))
+    assert refines_ocv(start, one_level, load_config())          # no test: always estimated
+    with pytest.raises(ConfigError, match="ocv_refinement"):
+        load_config(ocv_refinement="yes")
+
+
+def test_refinement_in_knot_values_matches_least_squares_and_keeps_the_ocv_rising() -> None:
+    """The linear refinement with OCV knots as values: where the best fit has a rising OCV it
+    is the least-squares solution of the increments' problem; where it has not, the solution
+    rises and is as good as bounded least squares on the increments."""
+    from scipy.optimize import lsq_linear
+
+    rng = np.random.default_rng(5)
+    n, n_theta, K = 400, 3, 11
+    soc = rng.uniform(0.0, 1.0, n)
+    from lmncell.identification.ocvfit import hat_basis
+    tri = np.tril(np.ones((K, K)))
+    J = np.hstack([rng.normal(size=(n, n_theta)), hat_basis(soc, np.linspace(0, 1, K)) @ tri])
+    ocv0 = 3.4 + 0.7 * np.linspace(0, 1, K)
+    lower = np.full(n_theta + K, -np.inf)
+    lower[n_theta + 1:] = 0.0
+    cfg = load_config(robust_loss="none")
+    for bump in (0.0, 0.2):                         # the second: a falling stretch in the data
+        x_true = np.concatenate([[0.1, -0.2, 0.05], np.r_[ocv0[0], np.diff(ocv0)]])
+        x_true[n_theta + 5] -= bump
+        b = J @ x_true + 1e-4 * rng.normal(size=n)
+        got = _solve_in_knot_values(J, b, n, cfg, None, n_theta, ocv0, lower).x
+        assert np.all(got[n_theta + 1:] >= -1e-9)
+        ref = lsq_linear(J, b, bounds=(lower, np.full(lower.size, np.inf)), method="bvls").x
+        assert np.sum((J @ got - b) ** 2) <= np.sum((J @ ref - b) ** 2) * (1 + 1e-6) + 1e-12
+        if not bump:
+            assert got == pytest.approx(np.linalg.lstsq(J, b, rcond=None)[0], abs=1e-6)
 
 
 def test_depletion_factor_is_held_below_the_training_socs() -> None:

@@ -2,7 +2,8 @@
 on the free-run simulation error, sensitivities propagated through the output feedback, with
 a Huber loss (iteratively reweighted least squares where there is no output feedback), and
 where slow OCV tests fix the OCV a ridge that pulls each local OCV offset towards 0
-(TrainConfig.offset_ridge)."""
+(TrainConfig.offset_ridge) and, for records at several temperatures, OCV knots anchored to the
+test's (TrainConfig.ocv_refinement)."""
 
 from __future__ import annotations
 
@@ -12,10 +13,11 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.config import TrainConfig
+from lmncell.config import OCV_REFINE_SOC_MIN, OCV_TEST_ANCHOR, TrainConfig
 from lmncell.data.dataset import Segment
 from lmncell.identification.ladder import Ladder, lsi
 from lmncell.identification.ocvfit import SMOOTHNESS, hat_basis, second_difference
+from lmncell.identification.prefit import temperature_levels
 from lmncell.identification.tree import Design, _lags, freerun_rmse, stabilise
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.step import fixed_point, initial_hysteresis, recursion
@@ -48,10 +50,10 @@ def _sensitivity(A: np.ndarray, G: np.ndarray) -> np.ndarray:
 def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
                         cfg: TrainConfig, progress: Progress) -> tuple[LmnModel, dict]:
     """Levenberg–Marquardt on the free-run error of all segments (θ of every local model and,
-    for a relative-OCV model without OCV input, the OCV knots)."""
+    where refines_ocv says so, the OCV knots)."""
     M, p = model.theta.shape
     na = model.output_lags
-    with_ocv = model.relative_ocv and not model.ocv_input and not cfg.ocv_tests
+    with_ocv = refines_ocv(model, segs, cfg)
     knots = model.ocv_soc
     K = knots.size if with_ocv else 0
     w_all = [np.sqrt(design.w_fit[a:b] + design.w_val[a:b]) for a, b in design.bounds]
@@ -69,8 +71,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     cache: dict = {}
 
     ocv0 = model.ocv_v.copy()
-    lam_anchor = np.sqrt(n_total) * 0.1    # 10 mV away from the pre-fit OCV costs like 0.1 % of
-    #                                        the samples being 10 mV off: a weak anchor
+    lam_anchor = ocv_anchor(knots, n_total, bool(cfg.ocv_tests))
     tri = np.tril(np.ones((K, K)))
     # the penalty rows below the residuals are linear in x: their Jacobian is built once
     j_pen = [np.hstack([np.sqrt(ridge) * np.eye(M * p), np.zeros((M * p, K))])]
@@ -81,7 +82,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     if with_ocv and D2.shape[0]:
         j_pen.append(np.hstack([np.zeros((D2.shape[0], M * p)), lam_ocv * D2 @ tri]))
     if with_ocv:
-        j_pen.append(np.hstack([np.zeros((K, M * p)), lam_anchor * tri]))
+        j_pen.append(np.hstack([np.zeros((K, M * p)), lam_anchor[:, None] * tri]))
     j_penalty = np.vstack(j_pen)
 
     def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -142,8 +143,12 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
         # reweighted) bounded linear least squares gives the exact optimum (under the RC-ladder
         # constraints where the local models are ladders)
         r_0, J_0 = evaluate(x0)
-        sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
-                                   constraints)
+        if with_ocv:
+            sol = _solve_in_knot_values(J_0, J_0 @ x0 - r_0, n_res, cfg, constraints,
+                                        M * p, ocv0, lower)
+        else:
+            sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
+                                       constraints)
         sol.cost = float(0.5 * np.sum(evaluate(sol.x)[0] ** 2))
     else:
         robust = {}
@@ -166,13 +171,40 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
             "status": int(sol.status), "train_rmse_before_mv": 1e3 * before,
             "train_rmse_after_mv": 1e3 * after, "accepted": accepted,
-            "offset_ridge": rho if off_col is not None else 0.0}
+            "offset_ridge": rho if off_col is not None else 0.0, "ocv_refined": with_ocv}
     progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
                 if info["offset_ridge"] else "")
+             + (", the test's OCV refined above SoC " + f"{OCV_REFINE_SOC_MIN:g}"
+                if with_ocv and cfg.ocv_tests else "")
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
+
+
+def refines_ocv(model: LmnModel, segs: list[Segment], cfg: TrainConfig) -> bool:
+    """Whether the refinement moves the OCV knots too: for a relative-OCV model without OCV
+    input, always where the OCV was estimated from the records, and where slow tests fixed it
+    as TrainConfig.ocv_refinement says ("auto": records at two or more temperature levels)."""
+    if not model.relative_ocv or model.ocv_input:
+        return False
+    if not cfg.ocv_tests or cfg.ocv_refinement == "on":
+        return True
+    return cfg.ocv_refinement == "auto" and len(temperature_levels(segs)) >= 2
+
+
+def ocv_anchor(knots: np.ndarray, n_total: float, from_tests: bool) -> np.ndarray:
+    """√ of the weight (per knot) that pulls each refined OCV knot back to its start value.
+
+    Estimated OCV: 10 mV away from the pre-fit costs like 0.1 % of the samples being 10 mV off,
+    a weak anchor. OCV from slow tests: 1 mV away costs like OCV_TEST_ANCHOR of the samples
+    being 1 mV off, and the knots below OCV_REFINE_SOC_MIN are held (10⁴ times that weight):
+    there the free-run error is the collapse before cut-off, a dynamic error that a static OCV
+    correction would only displace onto the rests."""
+    if not from_tests:
+        return np.full(knots.size, np.sqrt(n_total) * 0.1)
+    held = np.where(knots < OCV_REFINE_SOC_MIN - 1e-9, 100.0, 1.0)
+    return np.sqrt(OCV_TEST_ANCHOR * n_total) * held
 
 
 def offset_ridge_of(cfg: TrainConfig, model: LmnModel) -> float:
@@ -212,6 +244,40 @@ def _ladder_constraints(ladder: Ladder | None, M: int, p: int, lower: np.ndarray
     bounded = np.flatnonzero(np.isfinite(lower))
     return (np.vstack([blocks, np.eye(n)[bounded]]),
             np.concatenate([np.tile(ladder.h, M), lower[bounded]]))
+
+
+def _solve_in_knot_values(J: np.ndarray, b: np.ndarray, n_res: int, cfg: TrainConfig,
+                          constraints: tuple[np.ndarray, np.ndarray] | None, n_theta: int,
+                          ocv0: np.ndarray, lower: np.ndarray) -> _Solution:
+    """The linear refinement with the OCV as knot values (ocv0 + Δ) instead of increments.
+
+    x = [θ, increments] keeps the OCV monotone by bounds alone, but its OCV columns are
+    cumulative sums of the hat functions: nearly collinear, so the normal equations that the
+    RC-ladder solver (lsi) works on lost the solution (A123, anchor 0.002: training RMSE 3.1 →
+    8.3 mV). In z = [θ, Δ] they are the local hat functions, and monotonicity becomes the rows
+    Δ_k − Δ_(k−1) ≥ −(ocv0_k − ocv0_(k−1)). Returns the solution in x."""
+    K = ocv0.size
+    n = n_theta + K
+    to_x = np.eye(n)                                 # x = to_x·z + shift
+    to_x[n_theta:, n_theta:] = np.eye(K) - np.eye(K, k=-1)
+    shift = np.concatenate([np.zeros(n_theta), to_x[n_theta:, n_theta:] @ ocv0])
+    Jz = J @ to_x
+    bz = b - J @ shift
+    rows, bounds = [], []
+    if constraints is not None:                      # the ladder's rows on θ (the rest: below)
+        G, h = constraints
+        keep = np.abs(G[:, n_theta:]).sum(axis=1) == 0.0
+        rows.append(G[keep])
+        bounds.append(h[keep])
+    mono = np.zeros((K - 1, n))
+    mono[:, n_theta + 1:] += np.eye(K - 1)
+    mono[:, n_theta:-1] -= np.eye(K - 1)
+    rows.append(mono)
+    bounds.append(lower[n_theta + 1:] - np.diff(ocv0))
+    sol = _robust_linear_solve(Jz, bz, n_res, (np.full(n, -np.inf), np.full(n, np.inf)), cfg,
+                               (np.vstack(rows), np.concatenate(bounds)))
+    sol.x = to_x @ sol.x + shift
+    return sol
 
 
 HUBER_K = 1.345      # Huber threshold in robust standard deviations (95 % efficiency)
