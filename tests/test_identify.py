@@ -575,11 +575,11 @@ def _bumped_ocv_records(chambers: tuple[float, ...]) -> tuple:
 
 
 def test_ocv_from_a_test_is_refined_for_records_at_several_temperatures() -> None:
-    """Records at 10 and 25 °C of a cell whose OCV has a wave that the slow test lacks: with
-    ocv_refinement 'auto' the refinement moves the test's knots towards the true OCV (within
-    1 mV) and keeps those below SoC 0.1 as measured; 'off', or records at one temperature,
-    keep the test's OCV exactly."""
-    start, segs, wave, settings = _bumped_ocv_records((10.0, 25.0))
+    """Records at −5, 10 and 25 °C of a cell whose OCV has a wave that the slow test lacks:
+    with ocv_refinement 'auto' the refinement moves the test's knots towards the true OCV
+    (within 1 mV) and keeps those below SoC 0.1 as measured; 'off', or records at one or two
+    temperatures, keep the test's OCV exactly."""
+    start, segs, wave, settings = _bumped_ocv_records((-5.0, 10.0, 25.0))
     fits = {}
     for mode in ("auto", "off"):
         cfg = load_config(ocv_refinement=mode, **settings)
@@ -594,8 +594,10 @@ def test_ocv_from_a_test_is_refined_for_records_at_several_temperatures() -> Non
     assert np.all(np.diff(refined.ocv_v) >= 0.0)
     assert np.array_equal(fits["off"][0].ocv_v, start.ocv_v)
     one_level = _bumped_ocv_records((25.0, 25.0))[1]
+    two_levels = _bumped_ocv_records((10.0, 25.0))[1]
     auto = load_config(**settings)
     assert refines_ocv(start, segs, auto) and not refines_ocv(start, one_level, auto)
+    assert not refines_ocv(start, two_levels, auto)
     assert refines_ocv(start, one_level, load_config(**{**settings, "ocv_refinement": "on"}))
     assert refines_ocv(start, one_level, load_config())          # no test: always estimated
     with pytest.raises(ConfigError, match="ocv_refinement"):

@@ -2,8 +2,8 @@
 on the free-run simulation error, sensitivities propagated through the output feedback, with
 a Huber loss (iteratively reweighted least squares where there is no output feedback), and
 where slow OCV tests fix the OCV a ridge that pulls each local OCV offset towards 0
-(TrainConfig.offset_ridge) and, for records at several temperatures, OCV knots anchored to the
-test's (TrainConfig.ocv_refinement)."""
+(TrainConfig.offset_ridge) and, for records at three or more temperatures, OCV knots anchored
+to the test's (TrainConfig.ocv_refinement)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.config import OCV_REFINE_SOC_MIN, OCV_TEST_ANCHOR, TrainConfig
+from lmncell.config import OCV_REFINE_LEVELS, OCV_REFINE_SOC_MIN, OCV_TEST_ANCHOR, TrainConfig
 from lmncell.data.dataset import Segment
 from lmncell.identification.ladder import Ladder, lsi
 from lmncell.identification.ocvfit import SMOOTHNESS, hat_basis, second_difference
@@ -185,12 +185,14 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
 def refines_ocv(model: LmnModel, segs: list[Segment], cfg: TrainConfig) -> bool:
     """Whether the refinement moves the OCV knots too: for a relative-OCV model without OCV
     input, always where the OCV was estimated from the records, and where slow tests fixed it
-    as TrainConfig.ocv_refinement says ("auto": records at two or more temperature levels)."""
+    as TrainConfig.ocv_refinement says ("auto": records at OCV_REFINE_LEVELS or more
+    temperature levels)."""
     if not model.relative_ocv or model.ocv_input:
         return False
     if not cfg.ocv_tests or cfg.ocv_refinement == "on":
         return True
-    return cfg.ocv_refinement == "auto" and len(temperature_levels(segs)) >= 2
+    return (cfg.ocv_refinement == "auto"
+            and len(temperature_levels(segs)) >= OCV_REFINE_LEVELS)
 
 
 def ocv_anchor(knots: np.ndarray, n_total: float, from_tests: bool) -> np.ndarray:
