@@ -624,7 +624,7 @@ def test_refinement_in_knot_values_matches_least_squares_and_keeps_the_ocv_risin
         x_true = np.concatenate([[0.1, -0.2, 0.05], np.r_[ocv0[0], np.diff(ocv0)]])
         x_true[n_theta + 5] -= bump
         b = J @ x_true + 1e-4 * rng.normal(size=n)
-        got = _solve_in_knot_values(J, b, n, cfg, None, n_theta, ocv0, lower).x
+        got = _solve_in_knot_values(J, b, n, cfg, None, n_theta, ocv0).x
         assert np.all(got[n_theta + 1:] >= -1e-9)
         ref = lsq_linear(J, b, bounds=(lower, np.full(lower.size, np.inf)), method="bvls").x
         assert np.sum((J @ got - b) ** 2) <= np.sum((J @ ref - b) ** 2) * (1 + 1e-6) + 1e-12

@@ -133,7 +133,6 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     lower = np.full(x0.size, -np.inf)
     if with_ocv:
         lower[M * p + 1:] = 0.0
-    constraints = _ladder_constraints(design.ladder if na == 0 else None, M, p, lower)
     r0 = evaluate(x0)[0]
     n_res = int(sum(w.size for w in w_all))
     t_start = time.perf_counter()
@@ -144,11 +143,11 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
         # constraints where the local models are ladders)
         r_0, J_0 = evaluate(x0)
         if with_ocv:
-            sol = _solve_in_knot_values(J_0, J_0 @ x0 - r_0, n_res, cfg, constraints,
-                                        M * p, ocv0, lower)
+            on_theta = _ladder_constraints(design.ladder, M, p, np.full(x0.size, -np.inf))
+            sol = _solve_in_knot_values(J_0, J_0 @ x0 - r_0, n_res, cfg, on_theta, M * p, ocv0)
         else:
             sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
-                                       constraints)
+                                       _ladder_constraints(design.ladder, M, p, lower))
         sol.cost = float(0.5 * np.sum(evaluate(sol.x)[0] ** 2))
     else:
         robust = {}
@@ -176,7 +175,7 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
                 if info["offset_ridge"] else "")
-             + (", the test's OCV refined above SoC " + f"{OCV_REFINE_SOC_MIN:g}"
+             + (f", the test's OCV refined above SoC {OCV_REFINE_SOC_MIN:g}"
                 if with_ocv and cfg.ocv_tests else "")
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
@@ -250,14 +249,16 @@ def _ladder_constraints(ladder: Ladder | None, M: int, p: int, lower: np.ndarray
 
 def _solve_in_knot_values(J: np.ndarray, b: np.ndarray, n_res: int, cfg: TrainConfig,
                           constraints: tuple[np.ndarray, np.ndarray] | None, n_theta: int,
-                          ocv0: np.ndarray, lower: np.ndarray) -> _Solution:
+                          ocv0: np.ndarray) -> _Solution:
     """The linear refinement with the OCV as knot values (ocv0 + Δ) instead of increments.
 
     x = [θ, increments] keeps the OCV monotone by bounds alone, but its OCV columns are
     cumulative sums of the hat functions: nearly collinear, so the normal equations that the
     RC-ladder solver (lsi) works on lost the solution (A123, anchor 0.002: training RMSE 3.1 →
     8.3 mV). In z = [θ, Δ] they are the local hat functions, and monotonicity becomes the rows
-    Δ_k − Δ_(k−1) ≥ −(ocv0_k − ocv0_(k−1)). Returns the solution in x."""
+    Δ_k − Δ_(k−1) ≥ −(ocv0_k − ocv0_(k−1)). constraints: (G, h) of G·x ≥ h on θ alone (the
+    RC ladder's rows, _ladder_constraints without bounded entries), or None. Returns the
+    solution in x."""
     K = ocv0.size
     n = n_theta + K
     to_x = np.eye(n)                                 # x = to_x·z + shift
@@ -265,17 +266,13 @@ def _solve_in_knot_values(J: np.ndarray, b: np.ndarray, n_res: int, cfg: TrainCo
     shift = np.concatenate([np.zeros(n_theta), to_x[n_theta:, n_theta:] @ ocv0])
     Jz = J @ to_x
     bz = b - J @ shift
-    rows, bounds = [], []
-    if constraints is not None:                      # the ladder's rows on θ (the rest: below)
-        G, h = constraints
-        keep = np.abs(G[:, n_theta:]).sum(axis=1) == 0.0
-        rows.append(G[keep])
-        bounds.append(h[keep])
-    mono = np.zeros((K - 1, n))
+    mono = np.zeros((K - 1, n))                      # the OCV rises: increments ≥ 0
     mono[:, n_theta + 1:] += np.eye(K - 1)
     mono[:, n_theta:-1] -= np.eye(K - 1)
-    rows.append(mono)
-    bounds.append(lower[n_theta + 1:] - np.diff(ocv0))
+    rows, bounds = [mono], [-np.diff(ocv0)]
+    if constraints is not None:
+        rows.append(constraints[0])
+        bounds.append(constraints[1])
     sol = _robust_linear_solve(Jz, bz, n_res, (np.full(n, -np.inf), np.full(n, np.inf)), cfg,
                                (np.vstack(rows), np.concatenate(bounds)))
     sol.x = to_x @ sol.x + shift
