@@ -12,12 +12,13 @@ Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV 
         --set 'partition=["soc","current"]' --ocv-tests $P/ocv_and_capacity/*C20_OCV*.mat
 
 Per held-out record (all its segments pooled) it prints the free-run RMSE in mV over the 20–80 %
-SoC window and over the whole record, for the LMN and each baseline, driven by the measured cell
-temperature and, where the record has one beside a chamber temperature, by the chamber
-temperature only (the LMN's thermal model computes the cell temperature); then the means over
-the folds. --hold-out PATTERN holds out only the records whose name contains PATTERN (e.g.
-10degC: train on all, test each 10 °C record left out in turn), or one of a comma list
-(N05,P05,P25: the A123 folds between training temperatures). --through-hidden-pauses
+SoC window and over the whole record, for the LMN and each baseline (and the LMN's below 10 %
+SoC, where the record goes there), driven by the measured cell temperature and, where the
+record has one beside a chamber temperature, by the chamber temperature only (the LMN's thermal
+model computes the cell temperature); then the means over the folds. --hold-out PATTERN holds
+out only the records whose name contains PATTERN (e.g. 10degC: train on all, test each 10 °C
+record left out in turn), or one of a comma list (N05,P05,P25: the A123 folds between training
+temperatures). --through-hidden-pauses
 evaluates the held-out record as a host that drives the FMU through its time column: pauses
 that only the wall clock shows (Panasonic 25 °C Cycle 1: 16 h and 3 h) do not split it, and the
 model's state runs on through them (training still splits there). --plot FILE.png draws the
@@ -38,7 +39,7 @@ from lmncell.evaluation.evaluate import (
     leave_one_out_folds,
     through_pauses_clause,
 )
-from lmncell.evaluation.metrics import pooled
+from lmncell.evaluation.metrics import ENDS, pooled
 from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
 
@@ -90,8 +91,11 @@ def main() -> None:
                 means.setdefault(f"{m} ({mode} T)", []).append((w, whole))
                 folds[-1][1].setdefault(mode, {})[m] = (w, whole)
                 cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
-            extra = (f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
-                     if "cell_temperature_rmse_k" in rows[0] else "")
+            low = pooled([r["lmn"] for r in rows], "low_soc_")
+            extra = (f"  | lmn below {100 * ENDS[0]:.0f} % SoC {low:6.1f}" if low == low
+                     else "") + (
+                f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
+                if "cell_temperature_rmse_k" in rows[0] else "")
             print(f"{Path(held).name[:40]:40s} {mode:7s} M={model.n_local_models:2d} "
                   f"E={model.arrhenius_k}  " + "  ".join(cells) + extra, flush=True)
     print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(

@@ -6,8 +6,10 @@ import csv
 import json
 import re
 
+import numpy as np
 import pytest
 from lmncell.cli import main
+from lmncell.evaluation.metrics import pooled, record_metrics
 
 from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
 
@@ -51,6 +53,11 @@ def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
     out = capsys.readouterr().out
     rows = json.loads(out[out.index("["):])
     assert rows[0]["lmn"]["rmse_mv"] < 30 and "window_rmse_mv" in rows[0]["lmn"]
+    # the 25 °C US06 record runs from full to about 9 % SoC: both ends are scored apart
+    assert rows[0]["lmn"]["low_soc_samples"] > 0 and rows[0]["lmn"]["high_soc_samples"] > 0
+    assert main(["evaluate", str(model), str(PAN_US06)]) == 0
+    assert re.search(r"RMSE at SoC 20–80 % \d+\.\d\d mV, below 10 % \d+\.\d\d mV, above "
+                     r"90 % \d+\.\d\d mV", capsys.readouterr().out)
     with open(trace) as fh:
         head = next(csv.reader(fh))
     assert head == ["time_s", "current_a", "voltage_measured_v", "voltage_model_v", "soc"]
@@ -65,6 +72,23 @@ def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
         assert figures["cycle"] == cycle and figures["distance_km"] > 5
         assert (tmp_path / f"{cycle}.png").exists()
     assert main(["train", str(PAN_US06), "--out", str(model), "--partition", "volts"]) == 2
+
+
+def test_record_metrics_score_each_end_of_the_soc_range_apart() -> None:
+    """Whole record, 20–80 % window, below 10 % and above 90 % SoC, each over its own samples;
+    an end the record does not reach has no figure (None), and pooling skips it."""
+    soc = np.arange(100, 4, -1) / 100                     # full to 5 %, 0.01 apart
+    err = np.where(soc < 0.1, 0.030, np.where(soc > 0.9, -0.010, 0.002))
+    m = record_metrics(np.zeros_like(soc), err, soc)
+    assert m["low_soc_samples"] == int(np.sum(soc < 0.1)) == 5
+    assert m["low_soc_rmse_mv"] == pytest.approx(30.0) and m["high_soc_max_mv"] == (
+        pytest.approx(10.0))
+    assert m["window_rmse_mv"] == pytest.approx(2.0) and m["ends"] == [0.1, 0.9]
+    assert m["rmse_mv"] == pytest.approx(1e3 * np.sqrt(np.mean(err**2)))
+    middle = record_metrics(np.zeros(3), np.full(3, 0.001), np.array([0.3, 0.5, 0.7]))
+    assert middle["low_soc_rmse_mv"] is None and middle["low_soc_samples"] == 0
+    assert pooled([m, middle], "low_soc_") == pytest.approx(30.0)
+    assert np.isnan(pooled([middle], "high_soc_"))
 
 
 def test_missing_soc0_is_explained(tmp_path, capsys) -> None:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
-from lmncell.evaluation.metrics import WINDOW, record_metrics
+from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
@@ -193,6 +193,11 @@ def write_trace(trace: Trace, path: str | Path) -> Path:
     return path
 
 
+def _mv(value: float | None) -> str:
+    """An RMSE for the evaluate table: mV with two decimals, or "(none)" without samples."""
+    return "(none)" if value is None else f"{value:.2f} mV"
+
+
 def evaluate_files(model_path: str | Path, paths: list[str | Path],
                    soc0: float | Sequence[float] | None = None,
                    plot_dir: str | Path | None = None, trace: str | Path | None = None,
@@ -226,11 +231,12 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
             for name, m in r.items():
                 if not isinstance(m, dict):
                     continue
-                win = m["window_rmse_mv"]
-                win_txt = "  (none)" if win is None else f"{win:6.2f} mV"
                 progress(f"{r['record'][:48]:48s} {name:12s} RMSE {m['rmse_mv']:7.2f} mV  MAE "
-                         f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | {WINDOW[0]:.0%}–"
-                         f"{WINDOW[1]:.0%} SoC RMSE {win_txt}")
+                         f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | RMSE at SoC "
+                         f"{100 * WINDOW[0]:.0f}–{100 * WINDOW[1]:.0f} % "
+                         f"{_mv(m['window_rmse_mv'])}, below {100 * ENDS[0]:.0f} % "
+                         f"{_mv(m['low_soc_rmse_mv'])}, above {100 * ENDS[1]:.0f} % "
+                         f"{_mv(m['high_soc_rmse_mv'])}")
             if "cell_temperature_rmse_k" in r:
                 progress(f"{r['record'][:48]:48s} driven by the ambient temperature: cell "
                          f"temperature RMSE {r['cell_temperature_rmse_k']:.2f} K")

@@ -25,7 +25,7 @@ from lmncell.data.lag import estimate_current_delay
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
 from lmncell.evaluation.evaluate import simulate_segment
-from lmncell.evaluation.metrics import pooled, record_metrics
+from lmncell.evaluation.metrics import ENDS, pooled, record_metrics
 from lmncell.identification.baselines import fit_ecm2rc
 from lmncell.identification.construction import train_lmn
 from lmncell.identification.ocvfit import lowpass
@@ -166,14 +166,25 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     summary = {"local_models": model.n_local_models,
                "train_rmse_mv": pooled(train_metrics),
                "train_window_rmse_mv": pooled(train_metrics, "window_"),
+               "train_low_soc_rmse_mv": pooled(train_metrics, "low_soc_"),
+               "train_high_soc_rmse_mv": pooled(train_metrics, "high_soc_"),
                "validation_rmse_mv": result.info.get("refined_validation_freerun_rmse_mv"),
                "seconds_lmn": result.info["seconds"], "seconds_total": seconds,
                "baselines": {k: v.get("fit", {}) for k, v in baseline_docs.items()}}
     progress(f"wrote {out}: {model.n_local_models} local models, free-run training RMSE "
              f"{summary['train_rmse_mv']:.2f} mV (20–80 % SoC: "
-             f"{summary['train_window_rmse_mv']:.2f} mV), LMN training "
+             f"{summary['train_window_rmse_mv']:.2f} mV{_ends_text(summary)}), LMN training "
              f"{result.info['seconds']:.1f} s, total {seconds:.1f} s")
     return model, summary
+
+
+def _ends_text(summary: dict) -> str:
+    """", below 10 %: … mV, above 90 %: … mV" for the ends the training records reach."""
+    parts = [f", {side} {100 * edge:.0f} %: {summary[key]:.2f} mV"
+             for side, edge, key in (("below", ENDS[0], "train_low_soc_rmse_mv"),
+                                     ("above", ENDS[1], "train_high_soc_rmse_mv"))
+             if np.isfinite(summary[key])]
+    return "".join(parts)
 
 
 SOC_BINS = 10            # residual_std_by_soc: bins of 0.1 SoC

@@ -183,17 +183,21 @@ def run_demo(out: Path) -> Path:
         temp = t.segment.temperature_c
         for name, m in r.items():
             if isinstance(m, dict):
+                figures = {k: "–" if v is None else v for k, v in m.items()}
                 flat.append({"record": r["record"], "data": role,
                              "temperature": "–" if temp is None else float(np.median(temp)),
-                             "model": name, **m})
+                             "model": name, **figures})
     rep.table(flat, [("record", "record", ""), ("data", "data", ""),
                      ("temperature", "T / °C", ".0f"), ("model", "model", ""),
                      ("rmse_mv", "RMSE whole record", ".2f"),
-                     ("window_rmse_mv", "RMSE 20–80 % SoC", ".2f"), ("mae_mv", "MAE", ".2f"),
+                     ("window_rmse_mv", "RMSE 20–80 % SoC", ".2f"),
+                     ("low_soc_rmse_mv", "RMSE below 10 % SoC", ".2f"),
+                     ("high_soc_rmse_mv", "RMSE above 90 % SoC", ".2f"), ("mae_mv", "MAE", ".2f"),
                      ("max_mv", "max", ".1f")],
               "Free-run voltage error (mV) of the LMN and the baselines fitted on the same "
-              "data, over the whole record (down to the end of discharge) and inside the "
-              "20–80 % SoC window.")
+              "data, over the whole record (down to the end of discharge), inside the 20–80 % "
+              "SoC window and at each end of the SoC range alone (– where a record does not "
+              "reach it).")
 
     _charge_section(rep, model, dyn / CHARGE_25C, out)
     soc_figures, outside_figures = _observer_section(rep, model, val_rec, capacity, out)
