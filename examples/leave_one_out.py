@@ -18,16 +18,17 @@ record has one beside a chamber temperature, by the chamber temperature only (th
 model computes the cell temperature); then the means over the folds. --hold-out PATTERN holds
 out only the records whose name contains PATTERN (e.g. 10degC: train on all, test each 10 °C
 record left out in turn), or one of a comma list (N05,P05,P25: the A123 folds between training
-temperatures). --through-hidden-pauses
-evaluates the held-out record as a host that drives the FMU through its time column: pauses
-that only the wall clock shows (Panasonic 25 °C Cycle 1: 16 h and 3 h) do not split it, and the
-model's state runs on through them (training still splits there). --plot FILE.png draws the
-same figures as bars per held-out record, with a caption naming the split and the settings.
+temperatures). --through-hidden-pauses evaluates the held-out record as a host that drives the
+FMU through its time column: pauses that only the wall clock shows (Panasonic 25 °C Cycle 1:
+16 h and 3 h) do not split it, and the model's state runs on through them (training still
+splits there). --plot FILE.png draws the same figures as bars per held-out record, with a
+caption naming the split and the settings.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import tempfile
 from pathlib import Path
 
@@ -91,11 +92,12 @@ def main() -> None:
                 means.setdefault(f"{m} ({mode} T)", []).append((w, whole))
                 folds[-1][1].setdefault(mode, {})[m] = (w, whole)
                 cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
-            low = pooled([r["lmn"] for r in rows], "low_soc_")
-            extra = (f"  | lmn below {100 * ENDS[0]:.0f} % SoC {low:6.1f}" if low == low
-                     else "") + (
-                f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
-                if "cell_temperature_rmse_k" in rows[0] else "")
+            extra = ""
+            low = pooled([r["lmn"] for r in rows], "low_soc_")    # NaN: no sample below
+            if math.isfinite(low):
+                extra += f"  | lmn below {100 * ENDS[0]:.0f} % SoC {low:6.1f}"
+            if "cell_temperature_rmse_k" in rows[0]:
+                extra += f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
             print(f"{Path(held).name[:40]:40s} {mode:7s} M={model.n_local_models:2d} "
                   f"E={model.arrhenius_k}  " + "  ".join(cells) + extra, flush=True)
     print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(
