@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from lmncell.fmu.interface import dependency_indices
+from lmncell.runtime.cosim import OUT_OF_RANGE_DESCRIPTION, VOLTAGE_MARGIN_V
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE,
@@ -130,6 +131,7 @@ def model_header(model: LmnModel, guid: str) -> str:
         f"#define I_MIN {lim['current_a'][0]!r}", f"#define I_MAX {lim['current_a'][1]!r}",
         f"#define SOC_MIN {lim['soc'][0]!r}", f"#define SOC_MAX {lim['soc'][1]!r}",
         f"#define V_MIN {lim['voltage_v'][0]!r}", f"#define V_MAX {lim['voltage_v'][1]!r}",
+        f"#define V_MARGIN {VOLTAGE_MARGIN_V!r}",
         f"#define T_MIN {float(t_lim[0])!r}", f"#define T_MAX {float(t_lim[1])!r}",
         f"#define HAS_TEMPERATURE_PARTITION {int('temperature' in m.partition_variables)}",
         f"#define LINEAR_STATES {int('filtered_current' not in m.partition_variables)}",
@@ -230,8 +232,7 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
      "state of charge: coulomb counting, or the observer's estimate [1]"),
     ("soc_std", 5, "output", "continuous", "Real", "1", None,
      "observer's SoC standard deviation (0 without observer) [1]"),
-    ("out_of_range", 6, "output", "discrete", "Boolean", None, None,
-     "true while current, SoC or temperature leave the trained region (the model extrapolates)"),
+    ("out_of_range", 6, "output", "discrete", "Boolean", None, None, OUT_OF_RANGE_DESCRIPTION),
     ("soc0", 7, "parameter", "fixed", "Real", "1", "1", "initial state of charge [1]"),
     ("capacity", 8, "parameter", "fixed", "Real", "Ah", None,
      "capacity for coulomb counting [Ah]"),

@@ -31,6 +31,7 @@ from xml.etree import ElementTree as ET
 
 import lmncell.runtime as runtime_package
 from lmncell.fmu.interface import dependency_indices
+from lmncell.runtime.cosim import VOLTAGE_MARGIN_V
 from lmncell.runtime.model import LmnModel, load_model
 
 RUNTIME_DIR = Path(runtime_package.__file__).resolve().parent
@@ -148,7 +149,8 @@ sample time Ts = {model.sample_time_s} s, {model.n_local_models} local models ov
 <li><b>voltage</b> (output, V): model terminal voltage of the last completed model step.</li>
 <li><b>soc</b> (output): state of charge, coulomb-counted or the observer's estimate;
 <b>soc_std</b> (output): the observer's standard deviation; <b>out_of_range</b> (output): true
-while the inputs leave the trained region (the model extrapolates, nothing is clamped).</li>
+while the inputs leave the trained region or the model's voltage its trained range by more than
+{VOLTAGE_MARGIN_V:g} V (the model extrapolates, nothing is clamped).</li>
 <li><b>soc0</b>, <b>capacity</b> (Ah), <b>observer</b> (0 none, 1 EKF, 2 fuzzy, 3 IMM):
 parameters. The observers compare the model with <b>voltage_measured</b> (0 = no update).</li>
 </ul>

@@ -19,6 +19,12 @@ from .step import CellStepper, CellThermal
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
+VOLTAGE_MARGIN_V = 0.1   # out_of_range also when the model's voltage leaves the trained
+# voltage range by more than this (a free run beyond its data: a cold knee extrapolated below
+# the SoC its records reached went to −1.1 V with current, SoC and temperature in range)
+OUT_OF_RANGE_DESCRIPTION = (
+    "true while current, SoC or temperature leave the trained region or the model's voltage "
+    f"its trained range by more than {VOLTAGE_MARGIN_V:g} V (the model extrapolates)")
 MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
 ACCUMULATORS = 8   # get_state's "acc": the step's five, the current delay's three
 
@@ -144,6 +150,15 @@ class CellCosim:
                         f"{lo:.1f}…{hi:.1f} °C")
         return "; ".join(msgs)
 
+    def check_voltage(self) -> str:
+        """'' while the model's voltage lies within the trained voltage range (± VOLTAGE_MARGIN_V),
+        else a message."""
+        lim = self.model.limits.get("voltage_v")
+        v = self.stepper.voltage_v
+        if lim is None or lim[0] - VOLTAGE_MARGIN_V <= v <= lim[1] + VOLTAGE_MARGIN_V:
+            return ""
+        return f"model voltage {v:.3f} V outside the trained {lim[0]:.3f}…{lim[1]:.3f} V"
+
     def advance(self, step_s: float, current_a: float, temperature_c: float = 25.0,
                 voltage_measured_v: float = 0.0) -> int:
         """Advance by one communication step with held inputs; returns model steps taken.
@@ -214,13 +229,14 @@ class CellCosim:
         i = self.delayed_current_a if self.model.current_delay_s else self.charge_as / ts
         temp_input = self.temp_int / ts
         temp = self.thermal.cell_temperature(temp_input)
-        self.range_message = self.check_range(i, temp)
-        self.out_of_range = bool(self.range_message)
+        inputs = self.check_range(i, temp)
         if self.observer:
             v = self.volt_int / self.volt_time if self.volt_time >= ts * (1 - STEP_TOL) else 0.0
             self.observer.step(i, v if v > 0 else math.nan, temp)
         else:
             self.stepper.step(i, temp)
+        self.range_message = "; ".join(m for m in (inputs, self.check_voltage()) if m)
+        self.out_of_range = bool(self.range_message)
         self.thermal.update(temp_input, i, self.stepper)
         self.steps += 1
         self.covered_s = self.charge_as = self.temp_int = 0.0

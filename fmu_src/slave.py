@@ -15,7 +15,7 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from .cosim import CellCosim, InputError, Parameters
+from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
 from .model import ModelFileError, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import TEMPERATURE_DESCRIPTION
@@ -89,8 +89,7 @@ class LmnCellSlave(Fmi2Slave):
         reg(Boolean("out_of_range", causality=Fmi2Causality.output,
                     variability=Fmi2Variability.discrete,
                     getter=lambda: bool(self._cosim and self._cosim.out_of_range),
-                    description="true while current, SoC or temperature leave the trained "
-                                "region (the model extrapolates)"))
+                    description=OUT_OF_RANGE_DESCRIPTION))
         reg(Real("soc0", causality=Fmi2Causality.parameter, variability=Fmi2Variability.fixed,
                  description="initial state of charge [1]"))
         reg(Real("capacity", causality=Fmi2Causality.parameter,

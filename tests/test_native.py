@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 import re
 import shutil
@@ -405,3 +406,33 @@ def test_native_current_delay_over_uneven_steps_equals_the_runtime(quick_model,
     finally:
         inst.free()
     assert worst <= 1e-9
+
+
+def test_out_of_range_when_the_model_voltage_leaves_its_trained_range(quick_model, tmp_path,
+                                                                     capfd) -> None:
+    """Current, SoC and temperature inside their trained ranges, the model's voltage beyond
+    its own by more than 0.1 V: both FMUs raise out_of_range, log one warning naming the
+    voltage, and drop the flag when the voltage is back."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.fmu.pythonfmu_build import build_fmu
+
+    doc = json.loads(quick_model.read_text())
+    doc["limits"]["voltage_v"] = [3.95, 4.2]       # −10 A takes the model to about 3.76 V
+    narrow = tmp_path / "narrow.json"
+    narrow.write_text(json.dumps(doc))
+    for fmu in (build_fmu(narrow, tmp_path / "py.fmu"),
+                build_native_fmu(narrow, tmp_path / "c.fmu")):
+        inst = Instance(fmu, start={"soc0": 0.9})
+        try:
+            flags = []
+            capfd.readouterr()
+            for current in (-1.0, -10.0, -10.0, -1.0, -1.0):
+                inst.step(current)             # fmpy raises on any status but OK/warning
+                flags.append(inst.slave.getBoolean([inst.vr["out_of_range"]])[0])
+            assert flags == [False, True, True, False, False], fmu.name
+            log = capfd.readouterr().out
+            assert log.count("model voltage") == 1 and "3.95" in log, (fmu.name, log)
+        finally:
+            inst.free()

@@ -914,8 +914,9 @@ static void observer_step(State *s, double i, double v, double t) {
 }
 
 /* ----- co-simulation engine (cosim.CellCosim) --------------------------------------------------- */
-static int check_range(Instance *in, double i, double t, double soc) {
-    State *s = &in->s;
+/* CellCosim.check_range: 1 when the step's current, SoC or temperature lies outside the trained
+   region (with its margins) */
+static int inputs_out_of_range(double i, double t, double soc) {
     int out = 0;
     if (i < I_MIN - 0.05 * fabs(I_MIN) - 1e-3 || i > I_MAX + 0.05 * fabs(I_MAX) + 1e-3) out = 1;
     if (soc < SOC_MIN - 0.02 || soc > SOC_MAX + 0.02) out = 1;
@@ -924,12 +925,26 @@ static int check_range(Instance *in, double i, double t, double soc) {
 #else
     (void)t;
 #endif
+    return out;
+}
+
+/* CellCosim.check_voltage: 1 when the model's voltage leaves the trained voltage range by more than
+   V_MARGIN (not within it: NaN too) */
+static int voltage_out_of_range(double v) {
+    return !(v >= V_MIN - V_MARGIN && v <= V_MAX + V_MARGIN);
+}
+
+/* out_of_range after a model step, with one FMI warning at the start of each excursion */
+static void check_range(Instance *in, int inputs_out, double i, double t, double soc) {
+    State *s = &in->s;
+    int volt_out = voltage_out_of_range(s->voltage), out = inputs_out || volt_out;
     if (out && !s->out_of_range)
         logf_(in, fmi2Warning, "logStatusWarning",
-              "current %.3f A, SoC %.3f or temperature %.1f degC outside the trained region "
-              "(current %.3f..%.3f A, SoC %.3f..%.3f); the model extrapolates", i, soc, t, I_MIN,
-              I_MAX, SOC_MIN, SOC_MAX);
-    return out;
+              "current %.3f A, SoC %.3f, temperature %.1f degC or model voltage %.3f V outside "
+              "the trained region (current %.3f..%.3f A, SoC %.3f..%.3f, voltage %.3f..%.3f V "
+              "within %.1f V); the model extrapolates", i, soc, t, s->voltage, I_MIN, I_MAX,
+              SOC_MIN, SOC_MAX, V_MIN, V_MAX, V_MARGIN);
+    s->out_of_range = out;
 }
 
 /* ----- cell temperature (step.CellThermal, thermal.py) ---------------------------------------- */
@@ -961,14 +976,15 @@ static void thermal_update(State *s, double input, double i) {
 static void model_step(Instance *in) {
     State *s = &in->s;
     double i = DELAY_S > 0 ? s->d_current : s->charge / TS, ta = s->temp_int / TS;
-    double t = cell_temperature(s, ta);
-    s->out_of_range = check_range(in, i, t, s->observer ? s->ob_soc : s->soc);
+    double t = cell_temperature(s, ta), soc = s->observer ? s->ob_soc : s->soc;
+    int inputs_out = inputs_out_of_range(i, t, soc);
     if (s->observer) {
         double v = s->volt_time >= TS * (1 - STEP_TOL) ? s->volt_int / s->volt_time : 0.0;
         observer_step(s, i, v > 0 ? v : NAN, t);
     } else {
         stepper_step(s, i, t);
     }
+    check_range(in, inputs_out, i, t, soc);
     thermal_update(s, ta, i);
     s->steps++;
     s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
