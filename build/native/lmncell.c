@@ -914,8 +914,8 @@ static void observer_step(State *s, double i, double v, double t) {
 }
 
 /* ----- co-simulation engine (cosim.CellCosim) --------------------------------------------------- */
-/* CellCosim.check_range: 1 when the step's current, SoC or temperature lies outside the trained
-   region (with its margins) */
+/* CellCosim.check_range: 1 when the step's current, SoC or temperature lies outside the
+   trained region (with its margins) */
 static int inputs_out_of_range(double i, double t, double soc) {
     int out = 0;
     if (i < I_MIN - 0.05 * fabs(I_MIN) - 1e-3 || i > I_MAX + 0.05 * fabs(I_MAX) + 1e-3) out = 1;
@@ -928,8 +928,8 @@ static int inputs_out_of_range(double i, double t, double soc) {
     return out;
 }
 
-/* CellCosim.check_voltage: 1 when the model's voltage leaves the trained voltage range by more than
-   V_MARGIN (not within it: NaN too) */
+/* CellCosim.check_voltage: 1 when the model's voltage leaves the trained voltage range by
+   more than V_MARGIN (not within it: NaN too) */
 static int voltage_out_of_range(double v) {
     return !(v >= V_MIN - V_MARGIN && v <= V_MAX + V_MARGIN);
 }
