@@ -120,20 +120,22 @@ class CellCosim:
         """Observer's SoC standard deviation; 0 without an observer (coulomb counting)."""
         return self.observer.soc_std if self.observer else 0.0
 
-    def _range_bounds(self) -> tuple[float, float, float, float, float, float]:
-        """Accepted current (A), SoC and temperature (°C) bounds: the trained region with the
-        margins check_range allows (±∞ where the model is not limited)."""
+    def _range_bounds(self) -> tuple[float, ...]:
+        """Accepted current (A), SoC, temperature (°C) and model voltage (V) bounds: the
+        trained region with the margins check_range and check_voltage allow (±∞ where the
+        model is not limited)."""
         lim, inf = self.model.limits, math.inf
         lo, hi = lim.get("current_a", (-inf, inf))
         slo, shi = lim.get("soc", (-inf, inf))
         tlo, thi = (lim.get("temperature_c", (-inf, inf))
                     if "temperature" in self.model.partition_variables else (-inf, inf))
+        vlo, vhi = lim.get("voltage_v", (-inf, inf))
         return (lo - 0.05 * abs(lo) - 1e-3, hi + 0.05 * abs(hi) + 1e-3, slo - 0.02, shi + 0.02,
-                tlo - 2.0, thi + 2.0)
+                tlo - 2.0, thi + 2.0, vlo - VOLTAGE_MARGIN_V, vhi + VOLTAGE_MARGIN_V)
 
     def check_range(self, current_a: float, temperature_c: float) -> str:
         """'' when inside the trained region, else a message (the model still extrapolates)."""
-        ilo, ihi, slo, shi, tlo, thi = self._bounds
+        ilo, ihi, slo, shi, tlo, thi = self._bounds[:6]
         soc = self.stepper.state.soc
         if ilo <= current_a <= ihi and slo <= soc <= shi and tlo <= temperature_c <= thi:
             return ""
@@ -153,9 +155,11 @@ class CellCosim:
     def check_voltage(self) -> str:
         """'' while the model's voltage lies within the trained voltage range (± VOLTAGE_MARGIN_V),
         else a message."""
-        lim = self.model.limits.get("voltage_v")
         v = self.stepper.voltage_v
-        if lim is None or lim[0] - VOLTAGE_MARGIN_V <= v <= lim[1] + VOLTAGE_MARGIN_V:
+        if self._bounds[6] <= v <= self._bounds[7]:
+            return ""
+        lim = self.model.limits.get("voltage_v")
+        if lim is None:                  # a model without a voltage range: never flagged
             return ""
         return f"model voltage {v:.3f} V outside the trained {lim[0]:.3f}…{lim[1]:.3f} V"
 
@@ -235,7 +239,8 @@ class CellCosim:
             self.observer.step(i, v if v > 0 else math.nan, temp)
         else:
             self.stepper.step(i, temp)
-        self.range_message = "; ".join(m for m in (inputs, self.check_voltage()) if m)
+        volt = self.check_voltage()
+        self.range_message = f"{inputs}; {volt}" if inputs and volt else inputs or volt
         self.out_of_range = bool(self.range_message)
         self.thermal.update(temp_input, i, self.stepper)
         self.steps += 1
