@@ -4,7 +4,7 @@ held-out record free-run, and compare the LMN with its baselines fitted on the s
 Usage:
     python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 F[,F...]] [--set KEY=VALUE ...]
         [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN] [--through-hidden-pauses]
-        [--plot FILE.png]
+        [--fmu native|pythonfmu [--at-model-steps]] [--plot FILE.png]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
     P=../shared/data/panasonic_18650pf/25degC
@@ -21,8 +21,11 @@ record left out in turn), or one of a comma list (N05,P05,P25: the A123 folds be
 temperatures). --through-hidden-pauses evaluates the held-out record as a host that drives the
 FMU through its time column: pauses that only the wall clock shows (Panasonic 25 °C Cycle 1:
 16 h and 3 h) do not split it, and the model's state runs on through them (training still
-splits there). --plot FILE.png draws the same figures as bars per held-out record, with a
-caption naming the split and the settings.
+splits there). --fmu native|pythonfmu also builds each fold's model into that FMU and scores
+the held-out record through it, driven by fmpy as `lmncell evaluate CELL.fmu` drives it (through
+the record's own samples; with --at-model-steps in steps of Ts with the mean current over each):
+the "fmu" figures, which equal the lmn ones unless --at-model-steps. --plot FILE.png draws the
+same figures as bars per held-out record, with a caption naming the split and the settings.
 """
 
 from __future__ import annotations
@@ -40,11 +43,23 @@ from lmncell.evaluation.evaluate import (
     leave_one_out_folds,
     through_pauses_clause,
 )
+from lmncell.evaluation.fmueval import evaluate_fmu
 from lmncell.evaluation.metrics import ENDS, pooled
 from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
 
-MODELS = ("lmn", "arx", "ecm2rc", "ecm2rc_hyst")
+MODELS = ("lmn", "fmu", "arx", "ecm2rc", "ecm2rc_hyst")
+
+
+def build_fold_fmu(kind: str, model_path: Path) -> Path:
+    """The fold's model built into an FMU of that kind (native or pythonfmu), beside it."""
+    if kind == "native":
+        from lmncell.fmu.native_build import build_native_fmu
+
+        return build_native_fmu(model_path, model_path.with_suffix(".fmu"))
+    from lmncell.fmu.pythonfmu_build import build_fmu
+
+    return build_fmu(model_path, model_path.with_suffix(".fmu"))
 
 
 def main() -> None:
@@ -62,9 +77,16 @@ def main() -> None:
                     "comma list")
     ap.add_argument("--through-hidden-pauses", action="store_true",
                     help=THROUGH_PAUSES_HELP)
+    ap.add_argument("--fmu", choices=("native", "pythonfmu"),
+                    help="also score each held-out record through the fold's model built into "
+                    "this FMU, driven by fmpy")
+    ap.add_argument("--at-model-steps", action="store_true",
+                    help="with --fmu: step the FMU at Ts with the mean current over each step")
     ap.add_argument("--plot", type=Path, metavar="FILE.png",
                     help="also draw the results per held-out record")
     a = ap.parse_args()
+    if a.at_model_steps and not a.fmu:
+        ap.error("--at-model-steps needs --fmu")
     settings = dict(parse_setting(s) for s in a.set)
     if a.ocv_tests:
         settings["ocv_tests"] = a.ocv_tests
@@ -77,12 +99,20 @@ def main() -> None:
                                capacity_ah=a.capacity_ah, soc0=train_soc0,
                                baselines=not a.no_baselines, progress=lambda _m: None,
                                **settings)
+        fmu = build_fold_fmu(a.fmu, Path(tmp) / "model.json") if a.fmu else None
         folds.append((Path(held).name, {}))
         for ambient in (False, True):
             _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient,
                                      through_hidden_pauses=a.through_hidden_pauses)
             if ambient and "cell_temperature_rmse_k" not in rows[0]:
                 continue                  # no measured cell temperature: one run says it all
+            if fmu is not None:
+                _, fmu_rows = evaluate_fmu(fmu, [held], held_soc0, ambient,
+                                           through_hidden_pauses=a.through_hidden_pauses,
+                                           at_model_steps=a.at_model_steps,
+                                           progress=lambda _m: None)
+                for row, fmu_row in zip(rows, fmu_rows, strict=True):
+                    row["fmu"] = fmu_row["fmu"]
             names = [m for m in MODELS if m in rows[0]]
             cells = []
             mode = "ambient" if ambient else "cell"
@@ -111,9 +141,19 @@ def main() -> None:
                    "with the same data and settings; free-run RMSE of the held-out record, "
                    "driven by the measured cell temperature (cell) and, where the record has "
                    "one beside it, by the chamber temperature only (ambient)"
-                   + through_pauses_clause(a.through_hidden_pauses) + ". Settings: "
+                   + through_pauses_clause(a.through_hidden_pauses) + fmu_clause(a)
+                   + ". Settings: "
                    f"{', '.join(a.set) or 'defaults'}; OCV: {ocv}.")
         print(f"figure: {folds_figure(folds, a.plot, caption)}")
+
+
+def fmu_clause(a: argparse.Namespace) -> str:
+    """The caption's words for the fmu bars (none without --fmu)."""
+    if not a.fmu:
+        return ""
+    how = ("in steps of Ts with the mean current over each" if a.at_model_steps
+           else "through the record's own samples")
+    return f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy {how}"
 
 
 if __name__ == "__main__":

@@ -84,9 +84,10 @@ def test_resampling_delays_the_current_by_delta() -> None:
     plain, late = resample_segment(rec, 1.0), resample_segment(rec, 1.0, current_delay_s=0.3)
     g = late.time_s
     assert np.allclose(plain.current_a, 0.5 - 0.02 * (g - 0.5), atol=1e-12)
-    # the mean over [g − 1.3, g − 0.3]; before t = 0 the first current (0.5 A) is held
+    # the mean over [g − 1.3, g − 0.3]; before t = 0 the first interval's mean (0.499 A) is
+    # held, as an FMU holds its first input
     expect = 0.5 - 0.02 * (g - 0.8)
-    expect[0] = (0.3 * 0.5 + 0.7 * (0.5 - 0.02 * 0.35)) / 1.0
+    expect[0] = (0.3 * 0.499 + 0.7 * (0.5 - 0.02 * 0.35)) / 1.0
     assert np.allclose(late.current_a, expect, atol=1e-12)
     assert np.array_equal(late.voltage_v, plain.voltage_v)
 

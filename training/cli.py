@@ -124,10 +124,25 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
 
         if a.soc0_est is None:
             raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
+        if a.model.lower().endswith(".fmu"):
+            raise ConfigError(f"--observer evaluates a model file, not an FMU ({a.model}): "
+                              "give the model JSON the FMU was built from")
         evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
                                 a.plot, a.json, read_options=read_options(a),
                                 through_hidden_pauses=a.through_hidden_pauses)
         return 0
+    if a.model.lower().endswith(".fmu"):
+        from lmncell.evaluation.fmueval import evaluate_fmu_files
+
+        evaluate_fmu_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
+                           ambient=a.ambient, read_options=read_options(a),
+                           through_hidden_pauses=a.through_hidden_pauses,
+                           at_model_steps=a.at_model_steps)
+        return 0
+    if a.at_model_steps:
+        raise ConfigError(f"--at-model-steps steps an FMU (.fmu) at Ts with mean inputs, as a "
+                          f"host may; {a.model} is a model file, which is evaluated on the "
+                          "record's exact means over each model step")
     from lmncell.evaluation.evaluate import evaluate_files
 
     evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
@@ -259,14 +274,17 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reader_options(s)
     s.set_defaults(func=cmd_train)
 
-    s = sub.add_parser("evaluate", help="free-run error of a model on records", **fmt)
-    s.add_argument("model", help="model file (JSON)")
+    s = sub.add_parser("evaluate", help="free-run error of a model or an FMU on records",
+                       **fmt)
+    s.add_argument("model", help="model file (JSON), or an LMNCell FMU (.fmu, pythonfmu or "
+                   "native), which fmpy then drives through the records")
     s.add_argument("data", nargs="+", help="data files")
     s.add_argument("--soc0", type=soc_list_argument, help="start SoC: one value for every "
                    "record, or a comma list with one per data file in order (default: 1.0 for "
                    "records that start rested at full charge)")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
-    s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table")
+    s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table "
+                   "(an FMU: one fit figure per record)")
     s.add_argument("--trace", metavar="OUT.csv", help="write time, current, measured and "
                    "model voltage and SoC per model step")
     s.add_argument("--ambient", action="store_true", help="drive the model with the ambient "
@@ -274,6 +292,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "thermal model computes the cell temperature (default: the measured cell "
                    "temperature)")
     s.add_argument("--through-hidden-pauses", action="store_true", help=THROUGH_PAUSES_HELP)
+    s.add_argument("--at-model-steps", action="store_true", help="with an FMU: step it at its "
+                   "sample time Ts with the mean current over each step, as a host that steps "
+                   "at Ts does (default: through the record's own samples, so that a model "
+                   "with a current delay sees what the current did within each step)")
     s.add_argument("--observer", choices=["ekf", "fuzzy", "imm"],
                    help="judge a SoC observer instead of the voltage")
     s.add_argument("--soc0-est", type=_float01, help="the observer's start SoC guess")

@@ -104,6 +104,15 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
     """Reference SoC by coulomb counting (tester counters where present), then each gap-free
     segment resampled to the model rate (the current δ = current_delay_s late: the input of a
     model with that delay, LmnModel.current_delay_s)."""
+    return [seg for _, seg in record_parts(rec, sample_time_s, soc0, capacity_ah, soc_window,
+                                           outside_weight, current_delay_s)]
+
+
+def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: float,
+                 soc_window: tuple[float, float] = (0.0, 1.0), outside_weight: float = 1.0,
+                 current_delay_s: float = 0.0) -> list[tuple[Record, Segment]]:
+    """record_to_segments with each segment's gap-free part of the record as measured (its own
+    samples, reference SoC and temperature, the chamber set point where none was measured)."""
     rec = rec.with_soc(coulomb_count(rec, soc0, capacity_ah))
     chamber = rec.meta.chamber_temp_c
     ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None
@@ -112,15 +121,15 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
     if temp is not None and rec.temperature_c is None:
         rec.temperature_c = temp
     out = []
-    for k, seg in enumerate(rec.segments()):
-        if seg.duration_s < 10 * sample_time_s:
+    for k, part in enumerate(rec.segments()):
+        if part.duration_s < 10 * sample_time_s:
             continue
-        rs = resample_segment(seg, sample_time_s, current_delay_s)
+        rs = resample_segment(part, sample_time_s, current_delay_s)
         lo, hi = soc_window
         w = np.where((rs.soc_ref >= lo) & (rs.soc_ref <= hi), 1.0, outside_weight)
         name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"
-        out.append(Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
-                           float(seg.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient))
+        out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
+                                  float(part.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient)))
     if not out:
         raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "
                         f"time {sample_time_s} s")

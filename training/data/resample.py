@@ -2,7 +2,8 @@
 
 Convention (the same as the FMU's): sample k of a resampled record sits at the end of the step
 [t_k − Ts, t_k]; current, voltage and temperature are the means over that step of the measured
-signal (linear between samples), so the model sees the current held over the step and is compared
+signal, taken as the mean of its two end samples over each sample interval (the trapezoid rule's
+integral, interpolated linearly), so the model sees the current held over the step and is compared
 with the mean measured voltage over it. SoC and charge counters are taken at t_k.
 """
 
@@ -21,13 +22,14 @@ def _cumulative(t: np.ndarray, x: np.ndarray) -> np.ndarray:
 def _step_means(t: np.ndarray, x: np.ndarray, grid: np.ndarray, ts: float,
                 delay_s: float = 0.0) -> np.ndarray:
     """Means of x over [g − Ts − δ, g − δ] for each grid time g (δ = delay_s; before the first
-    sample its value is held)."""
+    sample the first interval's mean is held, as an FMU holds its first input there)."""
     F = _cumulative(t, x)
     if not delay_s:
         return (np.interp(grid, t, F) - np.interp(grid - ts, t, F)) / ts
+    first = 0.5 * (x[0] + x[1]) if len(x) > 1 else x[0]
 
     def integral(tau: np.ndarray) -> np.ndarray:
-        return np.interp(tau, t, F) + x[0] * np.minimum(tau - t[0], 0.0)
+        return np.interp(tau, t, F) + first * np.minimum(tau - t[0], 0.0)
 
     return (integral(grid - delay_s) - integral(grid - ts - delay_s)) / ts
 

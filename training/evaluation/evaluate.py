@@ -180,14 +180,15 @@ def check_range(model: LmnModel, seg: Segment) -> list[str]:
     return msgs
 
 
-def write_trace(trace: Trace, path: str | Path) -> Path:
-    """One row per model step: time_s (end of step), current_a, voltages, soc."""
+def write_trace(trace: Trace, path: str | Path, name: str = "lmn") -> Path:
+    """One row per model step: time_s (end of step), current_a, the measured voltage, the
+    voltage of the trace's model called name, and its SoC."""
     path = Path(path)
     seg = trace.segment
     with open(path, "w", newline="") as fh:
         wr = csv.writer(fh)
         wr.writerow(["time_s", "current_a", "voltage_measured_v", "voltage_model_v", "soc"])
-        for row in zip(seg.time_s, seg.current_a, seg.voltage_v, trace.voltage["lmn"],
+        for row in zip(seg.time_s, seg.current_a, seg.voltage_v, trace.voltage[name],
                        trace.soc_model, strict=True):
             wr.writerow([repr(float(x)) for x in row])
     return path
@@ -227,26 +228,33 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
     if as_json:
         print(json.dumps(rows, indent=1))
     else:
-        for r in rows:
-            for name, m in r.items():
-                if not isinstance(m, dict):
-                    continue
-                progress(f"{r['record'][:48]:48s} {name:12s} RMSE {m['rmse_mv']:7.2f} mV  MAE "
-                         f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | RMSE at SoC "
-                         f"{100 * WINDOW[0]:.0f}–{100 * WINDOW[1]:.0f} % "
-                         f"{_mv(m['window_rmse_mv'])}, below {100 * ENDS[0]:.0f} % "
-                         f"{_mv(m['low_soc_rmse_mv'])}, above {100 * ENDS[1]:.0f} % "
-                         f"{_mv(m['high_soc_rmse_mv'])}")
-            if "cell_temperature_rmse_k" in r:
-                progress(f"{r['record'][:48]:48s} driven by the ambient temperature: cell "
-                         f"temperature RMSE {r['cell_temperature_rmse_k']:.2f} K")
-        told = set()
-        for r in rows:
-            name = r["record"].split("#")[0]
-            if r.get("hidden_pauses_split") and name not in told:
-                told.add(name)
-                progress(f"{name}: split at {r['hidden_pauses_split']} pause(s) that only its "
-                         "wall clock shows, each segment after one started rested; an FMU "
-                         "driven through its time column runs on through them "
-                         "(--through-hidden-pauses scores it that way)")
+        print_rows(rows, progress)
     return rows
+
+
+def print_rows(rows: list[dict], progress: Progress = _print) -> None:
+    """The evaluate table: one line per record and model (RMSE whole, MAE, max, window and
+    ends), the cell temperature's RMSE of ambient runs, and which records were split at hidden
+    pauses."""
+    for r in rows:
+        for name, m in r.items():
+            if not isinstance(m, dict):
+                continue
+            progress(f"{r['record'][:48]:48s} {name:12s} RMSE {m['rmse_mv']:7.2f} mV  MAE "
+                     f"{m['mae_mv']:6.2f}  max {m['max_mv']:7.1f}  | RMSE at SoC "
+                     f"{100 * WINDOW[0]:.0f}–{100 * WINDOW[1]:.0f} % "
+                     f"{_mv(m['window_rmse_mv'])}, below {100 * ENDS[0]:.0f} % "
+                     f"{_mv(m['low_soc_rmse_mv'])}, above {100 * ENDS[1]:.0f} % "
+                     f"{_mv(m['high_soc_rmse_mv'])}")
+        if "cell_temperature_rmse_k" in r:
+            progress(f"{r['record'][:48]:48s} driven by the ambient temperature: cell "
+                     f"temperature RMSE {r['cell_temperature_rmse_k']:.2f} K")
+    told = set()
+    for r in rows:
+        name = r["record"].split("#")[0]
+        if r.get("hidden_pauses_split") and name not in told:
+            told.add(name)
+            progress(f"{name}: split at {r['hidden_pauses_split']} pause(s) that only its "
+                     "wall clock shows, each segment after one started rested; an FMU "
+                     "driven through its time column runs on through them "
+                     "(--through-hidden-pauses scores it that way)")

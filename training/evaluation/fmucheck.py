@@ -34,8 +34,9 @@ def fmu_input(seg: Segment, ts: float, temperature_c: np.ndarray | None = None) 
 
 def run_fmu_on_segment(fmu: str | Path, seg: Segment, ts: float, step_s: float | None = None,
                        ambient: bool = False) -> np.ndarray:
-    """fmpy result (time, voltage, soc, cell_temperature) of the FMU driven with the segment's
-    current and its measured temperature as the cell temperature or (ambient) its ambient."""
+    """fmpy result (time, voltage, soc, cell_temperature, out_of_range) of the FMU driven with
+    the segment's current and its measured temperature as the cell temperature or (ambient) its
+    ambient."""
     from fmpy import simulate_fmu
 
     n = len(seg)
@@ -43,7 +44,7 @@ def run_fmu_on_segment(fmu: str | Path, seg: Segment, ts: float, step_s: float |
     return simulate_fmu(str(fmu), start_time=0.0, stop_time=n * ts, step_size=step_s or ts,
                         output_interval=ts, input=signal,
                         start_values={"soc0": seg.soc0, "temperature_is_cell": not ambient},
-                        output=["voltage", "soc", "cell_temperature"])
+                        output=["voltage", "soc", "cell_temperature", "out_of_range"])
 
 
 def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: str | Path,

@@ -15,23 +15,27 @@ from lmncell.data.records import Record
 from lmncell.runtime.model import LmnModel
 from matplotlib.ticker import FuncFormatter
 
-COLORS = {"measured": "k", "lmn": "tab:red", "arx": "tab:gray", "ecm2rc": "tab:blue",
-          "ecm2rc_hyst": "tab:green", "ekf": "tab:red", "fuzzy": "tab:orange",
+COLORS = {"measured": "k", "lmn": "tab:red", "fmu": "darkred", "arx": "tab:gray",
+          "ecm2rc": "tab:blue", "ecm2rc_hyst": "tab:green", "ekf": "tab:red", "fuzzy": "tab:orange",
           "imm": "tab:purple"}
 
 
-def _safe(name: str) -> str:
+def safe_name(name: str) -> str:
+    """A record name as part of a file name: only letters, digits and -_. kept."""
     return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
 
 
 def _baselines_first(voltages: dict[str, np.ndarray]) -> list[tuple[str, np.ndarray]]:
-    """The LMN last, so that it is drawn on top of the baselines."""
-    return sorted(voltages.items(), key=lambda kv: kv[0] == "lmn")
+    """The LMN (or its FMU) last, so that it is drawn on top of the baselines."""
+    return sorted(voltages.items(), key=lambda kv: kv[0] in MAIN)
+
+
+MAIN = ("lmn", "fmu")      # the model a figure is about (lmn; fmu: an FMU of it)
 
 
 def _style(name: str) -> dict:
     """Baselines thin and faint behind; the LMN (and the measurement) in front."""
-    if name == "lmn":
+    if name in MAIN:
         return {"lw": 0.9, "zorder": 4}
     return {"lw": 0.6, "alpha": 0.55, "zorder": 2}
 
@@ -50,7 +54,8 @@ def fit_figure(trace, path: Path, title: str = "", zoom_s: float = 600.0) -> Pat
     fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), constrained_layout=True)
     ax = axes[0]
     _voltage_lines(ax, t, seg.voltage_v, trace.voltage)
-    ax.set(ylabel="voltage / V", title=title or seg.name)
+    ax.set(ylabel="voltage / V")
+    ax.set_title(textwrap.fill(title or seg.name, 110), fontsize=10)
     ax.legend(loc="lower left", ncol=5, fontsize=8)
     k0 = int(np.argmax(np.abs(seg.current_a)))
     lo = max(0, k0 - int(zoom_s / 2 / max(np.median(np.diff(seg.time_s)), 1e-9)))
@@ -177,7 +182,7 @@ def write_local_model_table(model: LmnModel, path: Path) -> Path:
 
 
 def evaluation_figures(model: LmnModel, traces: list, out: Path) -> list[Path]:
-    files = [fit_figure(t, out / f"fit_{_safe(t.segment.name)}.png") for t in traces]
+    files = [fit_figure(t, out / f"fit_{safe_name(t.segment.name)}.png") for t in traces]
     files.append(write_local_model_table(model, out / "local_models.csv"))
     files.append(validity_figure(model, out / "validity.png"))
     training = model.extra.get("training", {})

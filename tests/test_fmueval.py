@@ -1,0 +1,87 @@
+"""`lmncell evaluate CELL.fmu`: an FMU driven by fmpy through measured records, scored like the
+model file it was built from."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from lmncell.cli import main
+from lmncell.data.dataset import record_to_segments
+from lmncell.data.readers import read_record
+from lmncell.evaluation.evaluate import evaluate_model, simulate_segment
+from lmncell.evaluation.fmueval import communication_points, evaluate_fmu
+from lmncell.runtime.cosim import held_delayed_currents
+from lmncell.runtime.model import load_model
+
+from tests.conftest import PAN_US06
+
+
+def quiet(_message: str) -> None:
+    """A progress callback that prints nothing."""
+
+
+@pytest.mark.parametrize("ambient", [False, True])
+@pytest.mark.parametrize("which", ["quick_fmu", "native_fmu"])
+def test_fmu_through_the_samples_scores_as_its_model_file(quick_model, which, ambient,
+                                                          request) -> None:
+    """The 10 Hz US06 record through the FMU's own stepping (current delay, thermal model with
+    ambient) gives the pipeline's voltages and figures."""
+    fmu = request.getfixturevalue(which)
+    model = load_model(quick_model)
+    assert model.current_delay_s > 0 and (not ambient or model.thermal is not None)
+    traces, rows = evaluate_fmu(fmu, [PAN_US06], 1.0, ambient=ambient, progress=quiet)
+    ref_traces, ref_rows = evaluate_model(model, [PAN_US06], 1.0, ambient=ambient)
+    assert len(traces) == len(ref_traces) == 1
+    dv = np.abs(traces[0].voltage["fmu"] - ref_traces[0].voltage["lmn"])
+    assert dv.max() < 1e-9
+    assert np.abs(traces[0].soc_model - ref_traces[0].soc_model).max() < 1e-12
+    for key in ("rmse_mv", "window_rmse_mv", "low_soc_rmse_mv", "high_soc_rmse_mv"):
+        assert rows[0]["fmu"][key] == pytest.approx(ref_rows[0]["lmn"][key], abs=1e-6)
+    assert rows[0]["temperature_input"] == ("ambient" if ambient else "cell")
+    assert rows[0]["steps"] == len(ref_traces[0].segment)
+
+
+def test_fmu_at_model_steps_gets_the_held_delayed_current(quick_model, native_fmu) -> None:
+    """Stepped at Ts with the mean current over each step, the FMU computes what a delayed
+    model takes from such steps, and that differs from what the current did within them."""
+    model = load_model(quick_model)
+    seg = record_to_segments(read_record(PAN_US06), 1.0, 1.0, 2.85)[0]
+    held = seg.current_a.copy()
+    held[:] = held_delayed_currents(seg.current_a.tolist(), 1.0, model.current_delay_s)
+    seg.current_a = held
+    expected = simulate_segment(model, seg).voltage_v
+    traces, rows = evaluate_fmu(native_fmu, [PAN_US06], 1.0, at_model_steps=True,
+                                progress=quiet)
+    assert np.abs(traces[0].voltage["fmu"] - expected).max() < 1e-9
+    through, _ = evaluate_fmu(native_fmu, [PAN_US06], 1.0, progress=quiet)
+    assert np.abs(through[0].voltage["fmu"] - expected).max() > 1e-3
+    assert rows[0]["driven"] == "model_steps"
+
+
+def test_communication_points_hold_every_sample_and_every_model_step_end() -> None:
+    t = np.array([0.0, 0.35, 0.7, 1.0 - 1e-12, 1.4, 2.05, 2.6])
+    points = communication_points(t, 1.0, 2)
+    assert points.tolist() == [0.35, 0.7, 1.0, 1.4, 2.0]
+
+
+def test_cli_evaluates_an_fmu_and_refuses_what_it_cannot(quick_fmu, quick_model, tmp_path,
+                                                          capsys) -> None:
+    trace = tmp_path / "t.csv"
+    assert main(["evaluate", str(quick_fmu), str(PAN_US06), "--json", "--trace", str(trace),
+                 "--plot", str(tmp_path / "plots")]) == 0
+    out = capsys.readouterr().out
+    rows = json.loads(out[out.index("["):])
+    assert rows[0]["fmu"]["window_rmse_mv"] < 30 and rows[0]["driven"] == "samples"
+    assert trace.read_text().startswith("time_s,current_a,voltage_measured_v,voltage_model_v")
+    assert len(list((tmp_path / "plots").glob("fmu_*.png"))) == 1
+    fake = tmp_path / "fake.fmu"
+    fake.write_text("not a zip archive")
+    assert main(["evaluate", str(fake), str(PAN_US06)]) == 2
+    assert "fake.fmu: not a readable FMU" in capsys.readouterr().err
+    assert main(["evaluate", str(quick_fmu), str(PAN_US06), "--observer", "ekf",
+                 "--soc0-est", "0.5"]) == 2
+    assert "not an FMU" in capsys.readouterr().err
+    assert main(["evaluate", str(quick_model), str(PAN_US06), "--at-model-steps"]) == 2
+    assert "--at-model-steps steps an FMU" in capsys.readouterr().err

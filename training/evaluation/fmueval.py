@@ -1,0 +1,294 @@
+"""`lmncell evaluate CELL.fmu`: an LMNCell FMU (pythonfmu or native) driven by fmpy through
+measured records and scored like a model file: free run from each segment's start SoC, RMSE
+over the whole record, the 20–80 % SoC window and each end. This is how a user who was handed
+only the FMU (a supplier's, say) checks it against their own cycler data."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import zipfile
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from lmncell.config import ConfigError
+from lmncell.data.dataset import Segment, record_parts, start_soc, start_socs
+from lmncell.data.readers import read_record
+from lmncell.data.records import Record
+from lmncell.evaluation.evaluate import Trace, ambient_of, print_rows, write_trace
+from lmncell.evaluation.fmucheck import run_fmu_on_segment
+from lmncell.evaluation.metrics import record_metrics
+from lmncell.progress import Progress
+from lmncell.progress import print_progress as _print
+
+# the variables evaluate needs; every LMNCell FMU has them
+REQUIRED_VARIABLES = ("current", "temperature", "voltage", "soc", "out_of_range", "soc0",
+                      "capacity", "temperature_is_cell")
+
+
+@dataclass(frozen=True)
+class FmuInfo:
+    """What evaluate reads from an FMU's modelDescription.xml."""
+
+    path: Path
+    description: Any       # fmpy's ModelDescription
+    step_s: float          # DefaultExperiment stepSize: the model's sample time (s)
+    capacity_ah: float     # start value of the parameter capacity (Ah)
+    current_delay_s: float  # the shipped model file's current delay δ (s; 0 without one)
+
+
+def read_fmu_info(fmu: str | Path) -> FmuInfo:
+    """The FMU's sample time and capacity; ConfigError naming the file where it cannot be read
+    or is not an LMNCell FMU."""
+    from fmpy import read_model_description
+
+    path = Path(fmu)
+    if not path.is_file():
+        raise ConfigError(f"{path}: no such FMU file")
+    try:
+        md = read_model_description(str(path))
+    except Exception as exc:          # fmpy raises several kinds for a broken archive
+        raise ConfigError(f"{path}: not a readable FMU ({type(exc).__name__}: {exc})") from None
+    names = {v.name: v for v in md.modelVariables}
+    missing = [n for n in REQUIRED_VARIABLES if n not in names]
+    if missing:
+        raise ConfigError(f"{path}: not an LMNCell FMU: it has no variable(s) "
+                          f"{', '.join(missing)}")
+    step = md.defaultExperiment.stepSize if md.defaultExperiment is not None else None
+    if step is None or not float(step) > 0:
+        raise ConfigError(f"{path}: its modelDescription.xml has no DefaultExperiment "
+                          "stepSize > 0 (an LMNCell FMU gives its model's sample time there)")
+    capacity = float(names["capacity"].start)
+    return FmuInfo(path, md, float(step), capacity, shipped_current_delay(path, float(step)))
+
+
+def shipped_current_delay(path: Path, step_s: float) -> float:
+    """current_delay_s of the model file an LMNCell FMU ships (resources/model.json), 0 where
+    there is none or it is not a delay 0 ≤ δ < Ts: the points at which evaluate splits the
+    communication steps, not the model itself, which the FMU runs."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            doc = json.loads(z.read("resources/model.json"))
+        delay = float(doc.get("current_delay_s", 0.0))
+    except (KeyError, ValueError, TypeError, AttributeError, OSError, zipfile.BadZipFile):
+        return 0.0
+    return delay if 0.0 <= delay < step_s else 0.0
+
+
+def communication_points(sample_times_s: np.ndarray, ts: float, n: int,
+                         delay_s: float = 0.0) -> np.ndarray:
+    """The times (s from the part's first sample) at which evaluate_fmu ends a communication
+    step: every sample of the record, every model step end k·Ts (k = 1…n) and, with a current
+    delay δ, every k·Ts − δ where the FMU's delayed current window closes; once each."""
+    grid = ts * np.arange(1, n + 1)
+    t = sample_times_s[(sample_times_s > 0.0) & (sample_times_s < grid[-1])]
+    extra = grid - delay_s if delay_s else np.empty(0)
+    points = np.union1d(np.union1d(t, extra[extra > 0.0]), grid)
+    # points within rounding of a model step end are that step end
+    ends = np.abs(points - ts * np.round(points / ts)) < 1e-9 * ts
+    points = np.union1d(points[~ends], grid)
+    keep = np.concatenate([[True], np.diff(points) > 1e-9 * ts])
+    return points[keep]
+
+
+def held_inputs(part: Record, temperature_c: np.ndarray, points: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """Current (A) and temperature (°C) to hold over each communication step ending at points
+    (from the part's first sample): the mean of the two samples around it, which resampling
+    holds over each sample interval (lmncell.data.resample), so that the FMU's means over its
+    model steps are the pipeline's."""
+    t = part.time_s - part.time_s[0]
+    mids = 0.5 * (np.concatenate([[0.0], points[:-1]]) + points)
+    j = np.clip(np.searchsorted(t, mids) - 1, 0, len(t) - 2)
+
+    def interval_mean(x: np.ndarray) -> np.ndarray:
+        return 0.5 * (x[j] + x[j + 1])
+
+    return interval_mean(part.current_a), interval_mean(np.asarray(temperature_c, dtype=float))
+
+
+class _Slave:
+    """One instance of the FMU in fmpy's FMU2Slave, initialised at a start SoC."""
+
+    def __init__(self, info: FmuInfo, unzipped: str, soc0: float, cell: bool,
+                 current_a: float, temperature_c: float) -> None:
+        from fmpy.fmi2 import FMU2Slave
+
+        md = info.description
+        self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                               modelIdentifier=md.coSimulation.modelIdentifier,
+                               instanceName="lmncell-evaluate")
+        self.slave.instantiate(loggingOn=False)
+        self.slave.setupExperiment(startTime=0.0)
+        self.slave.enterInitializationMode()
+        self.slave.setReal([self.vr["soc0"]], [float(soc0)])
+        self.slave.setBoolean([self.vr["temperature_is_cell"]], [cell])
+        self.set_inputs(current_a, temperature_c)
+        self.slave.exitInitializationMode()
+        self.out = [self.vr["voltage"], self.vr["soc"]]
+
+    def set_inputs(self, current_a: float, temperature_c: float) -> None:
+        self.slave.setReal([self.vr["current"], self.vr["temperature"]],
+                           [float(current_a), float(temperature_c)])
+
+    def outputs(self) -> tuple[float, float, bool]:
+        voltage, soc = self.slave.getReal(self.out)
+        return voltage, soc, bool(self.slave.getBoolean([self.vr["out_of_range"]])[0])
+
+    def free(self) -> None:
+        self.slave.terminate()
+        self.slave.freeInstance()
+
+
+def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
+                     ambient: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(voltage V, SoC, out_of_range) at the end of each model step of the segment: the FMU
+    stepped from the segment's start SoC through the record's own samples (and every model step
+    end), each step holding the record's mean current and temperature over it. With ambient the
+    temperature is the segment's ambient and temperature_is_cell false (the FMU's thermal
+    model), else the measured cell temperature and temperature_is_cell true. The FMU applies its
+    model's current delay itself, so its voltage is the pipeline's (evaluate MODEL.json)."""
+    n = len(seg)
+    temperature = (np.full(len(part), float(ambient_of(seg)[0])) if ambient
+                   else part.temperature_or_chamber())
+    if temperature is None:
+        temperature = np.full(len(part), 25.0)
+    points = communication_points(part.time_s - part.time_s[0], info.step_s, n,
+                                  info.current_delay_s)
+    current, temp = held_inputs(part, temperature, points)
+    ends = np.flatnonzero(np.abs(points - info.step_s * np.round(points / info.step_s))
+                          < 1e-9 * info.step_s)
+    volts, socs, flags = np.empty(n), np.empty(n), np.zeros(n, dtype=bool)
+    slave = _Slave(info, unzipped, seg.soc0, not ambient, current[0], temp[0])
+    try:
+        t, k = 0.0, 0
+        end_iter = iter(ends.tolist())
+        next_end = next(end_iter, -1)
+        for j, (point, i, temp_j) in enumerate(zip(points.tolist(), current.tolist(),
+                                                   temp.tolist(), strict=True)):
+            slave.set_inputs(i, temp_j)
+            slave.slave.doStep(currentCommunicationPoint=t, communicationStepSize=point - t)
+            t = point
+            if j == next_end:
+                volts[k], socs[k], flags[k] = slave.outputs()
+                k += 1
+                next_end = next(end_iter, -1)
+    except Exception as exc:          # fmpy raises where a call returns an error status
+        raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
+                          f"{exc}") from None
+    finally:
+        slave.free()
+    return volts, socs, flags
+
+
+def drive_at_model_steps(info: FmuInfo, seg: Segment, ambient: bool
+                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """drive_at_samples' results with the FMU run by fmpy.simulate_fmu in steps of Ts, given the
+    record's mean current over each step (fmucheck.run_fmu_on_segment): what a host that
+    steps at Ts with averaged inputs gives; with a current delay the FMU then has only
+    (δ·i(k−1) + (Ts − δ)·i(k))/Ts, not what the current did within the step."""
+    n = len(seg)
+    try:
+        res = run_fmu_on_segment(info.path, seg, info.step_s, ambient=ambient)
+    except Exception as exc:          # fmpy raises Exception where a call returns an error
+        raise ConfigError(f"{info.path}: the FMU failed on {seg.name}: {exc}") from None
+    if len(res) < n + 1:
+        raise ConfigError(f"{info.path}: the FMU stopped after {len(res) - 1} of {n} steps on "
+                          f"{seg.name} (its log says why)")
+    return (np.asarray(res["voltage"][1:n + 1], dtype=float),
+            np.asarray(res["soc"][1:n + 1], dtype=float),
+            np.asarray(res["out_of_range"][1:n + 1], dtype=bool))
+
+
+def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
+                 soc0: float | Sequence[float] | None = None, ambient: bool = False,
+                 read_options: Mapping[str, Any] | None = None,
+                 through_hidden_pauses: bool = False, at_model_steps: bool = False,
+                 progress: Progress = _print) -> tuple[list[Trace], list[dict]]:
+    """Each record's segments through the FMU: traces and one row of metrics per segment (as
+    evaluate_model's, the FMU under the name "fmu", plus how many model steps it flagged
+    out_of_range). The FMU is stepped through the record's own samples (drive_at_samples), or
+    with at_model_steps in steps of Ts with the mean inputs (drive_at_model_steps). The
+    reference SoC counts the record's current with the FMU's capacity. soc0, ambient and
+    through_hidden_pauses as in evaluate_model."""
+    from fmpy import extract
+
+    info = read_fmu_info(fmu)
+    unzipped = None if at_model_steps else extract(str(info.path))
+    traces, rows = [], []
+    how = "in steps of Ts with mean inputs" if at_model_steps else "through the samples"
+    try:
+        for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
+            rec = read_record(p, **(read_options or {}))
+            if through_hidden_pauses:
+                rec = rec.through_hidden_pauses()
+            for part, seg in record_parts(rec, info.step_s, start_soc(rec, rec_soc0),
+                                          info.capacity_ah):
+                progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
+                         f"steps of {info.step_s:g} s")
+                volts, soc, flagged = (drive_at_model_steps(info, seg, ambient) if at_model_steps
+                                       else drive_at_samples(info, unzipped, part, seg, ambient))
+                traces.append(Trace(seg, {"fmu": volts}, soc, np.zeros((len(seg), 0))))
+                rows.append({"record": seg.name,
+                             "temperature_input": "ambient" if ambient else "cell",
+                             "fmu": record_metrics(seg.voltage_v, volts, seg.soc_ref),
+                             "out_of_range_steps": int(flagged.sum()), "steps": len(seg),
+                             "driven": "model_steps" if at_model_steps else "samples"})
+                if rec.meta.pause_starts:
+                    rows[-1]["hidden_pauses_split"] = len(rec.meta.pause_starts)
+    finally:
+        if unzipped is not None:
+            shutil.rmtree(unzipped, ignore_errors=True)
+    return traces, rows
+
+
+def evaluate_fmu_files(fmu: str | Path, paths: Sequence[str | Path],
+                       soc0: float | Sequence[float] | None = None,
+                       plot_dir: str | Path | None = None, trace: str | Path | None = None,
+                       as_json: bool = False, progress: Progress = _print,
+                       ambient: bool = False, read_options: Mapping[str, Any] | None = None,
+                       through_hidden_pauses: bool = False,
+                       at_model_steps: bool = False) -> list[dict]:
+    """`lmncell evaluate CELL.fmu`: figures per record for the FMU."""
+    traces, rows = evaluate_fmu(fmu, paths, soc0, ambient, read_options, through_hidden_pauses,
+                                at_model_steps, progress)
+    if trace is not None:
+        base = Path(trace)
+        for k, t in enumerate(traces):
+            write_trace(t, base if len(traces) == 1
+                        else base.with_name(f"{base.stem}_{k}{base.suffix}"), "fmu")
+    if plot_dir is not None:
+        _plot(Path(fmu), traces, Path(plot_dir), ambient, at_model_steps, progress)
+    if as_json:
+        print(json.dumps(rows, indent=1))
+        return rows
+    print_rows(rows, progress)
+    for r in rows:
+        if r["out_of_range_steps"]:
+            progress(f"{r['record'][:48]:48s} the FMU flagged out_of_range in "
+                     f"{r['out_of_range_steps']} of {r['steps']} steps (outside its training "
+                     "data: current, SoC, temperature or its own voltage)")
+    return rows
+
+
+def _plot(fmu: Path, traces: list[Trace], out: Path, ambient: bool, at_model_steps: bool,
+          progress: Progress) -> None:
+    """One fit figure per segment, captioned with the FMU, how it was stepped and the
+    temperature it was given."""
+    from lmncell.report import plots
+
+    out.mkdir(parents=True, exist_ok=True)
+    given = ("the ambient (chamber) temperature, its thermal model computing the cell's"
+             if ambient else "the measured cell temperature")
+    how = ("in steps of Ts with the mean current over each" if at_model_steps
+           else "through the record's own samples")
+    files = [plots.fit_figure(t, out / f"fmu_{plots.safe_name(t.segment.name)}.png",
+                              title=f"{t.segment.name}: {fmu.name} driven by fmpy {how}, "
+                              f"with {given}; free run from SoC {t.segment.soc0:.3g}, "
+                              "voltage compared with the measured mean over each model step")
+             for t in traces]
+    progress(f"wrote {len(files)} figure(s) to {out}: " + ", ".join(f.name for f in files))
