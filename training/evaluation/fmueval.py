@@ -61,7 +61,11 @@ def read_fmu_info(fmu: str | Path) -> FmuInfo:
     if step is None or not float(step) > 0:
         raise ConfigError(f"{path}: its modelDescription.xml has no DefaultExperiment "
                           "stepSize > 0 (an LMNCell FMU gives its model's sample time there)")
-    capacity = float(names["capacity"].start)
+    try:
+        capacity = float(names["capacity"].start)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{path}: its parameter 'capacity' has no numeric start value "
+                          f"({names['capacity'].start!r})") from None
     return FmuInfo(path, md, float(step), capacity, shipped_current_delay(path, float(step)))
 
 
@@ -163,9 +167,9 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     ends = np.flatnonzero(np.abs(points - info.step_s * np.round(points / info.step_s))
                           < 1e-9 * info.step_s)
     volts, socs, flags = np.empty(n), np.empty(n), np.zeros(n, dtype=bool)
-    slave = _Slave(info, unzipped, seg.soc0, not ambient, current[0], temp[0])
+    slave, t, k = None, 0.0, 0
     try:
-        t, k = 0.0, 0
+        slave = _Slave(info, unzipped, seg.soc0, not ambient, current[0], temp[0])
         end_iter = iter(ends.tolist())
         next_end = next(end_iter, -1)
         for j, (point, i, temp_j) in enumerate(zip(points.tolist(), current.tolist(),
@@ -181,7 +185,8 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
         raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
                           f"{exc}") from None
     finally:
-        slave.free()
+        if slave is not None:
+            slave.free()
     return volts, socs, flags
 
 
