@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 
+import lmncell
 import numpy as np
 import pytest
 from lmncell.cli import main
@@ -85,3 +86,11 @@ def test_cli_evaluates_an_fmu_and_refuses_what_it_cannot(quick_fmu, quick_model,
     assert "not an FMU" in capsys.readouterr().err
     assert main(["evaluate", str(quick_model), str(PAN_US06), "--at-model-steps"]) == 2
     assert "--at-model-steps steps an FMU" in capsys.readouterr().err
+
+
+def test_api_evaluates_an_fmu_like_its_model_file(quick_model, native_fmu) -> None:
+    fmu_rows = lmncell.evaluate(native_fmu, [PAN_US06], 1.0, ambient=True)
+    model_rows = lmncell.evaluate(quick_model, [PAN_US06], 1.0, ambient=True)
+    assert fmu_rows[0]["fmu"]["rmse_mv"] == pytest.approx(model_rows[0]["lmn"]["rmse_mv"],
+                                                         abs=1e-6)
+    assert fmu_rows[0]["temperature_input"] == model_rows[0]["temperature_input"] == "ambient"

@@ -79,15 +79,27 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
 
 def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
              soc0: float | Sequence[float] | None = None,
-             read_options: Mapping[str, Any] | None = None) -> list[dict]:
+             read_options: Mapping[str, Any] | None = None, *, ambient: bool = False,
+             through_hidden_pauses: bool = False) -> list[dict]:
     """Free-run error of a model (and its baselines) on records: one row per segment with,
     per model, RMSE, MAE and maximum error in mV over the whole record and RMSE over the
-    20–80 % SoC window (`rmse_mv`, `window_rmse_mv`, …). soc0 as in train."""
+    20–80 % SoC window and each end (`rmse_mv`, `window_rmse_mv`, …). soc0 as in train;
+    ambient: driven by the chamber temperature (the thermal model computes the cell's);
+    through_hidden_pauses: as `lmncell evaluate --through-hidden-pauses`. model may also be an
+    LMNCell FMU (a path ending in .fmu): fmpy then drives it through the records' samples and
+    the row has its figures under "fmu" (as `lmncell evaluate CELL.fmu`)."""
+    if not isinstance(model, LmnModel) and str(model).lower().endswith(".fmu"):
+        from lmncell.evaluation.fmueval import evaluate_fmu
+
+        _, rows = evaluate_fmu(model, list(paths), soc0, ambient, read_options,
+                               through_hidden_pauses, progress=lambda _m: None)
+        return rows
     if not isinstance(model, LmnModel):
         model = load_model(model)
     from lmncell.evaluation.evaluate import evaluate_model
 
-    _, rows = evaluate_model(model, list(paths), soc0, read_options=read_options)
+    _, rows = evaluate_model(model, list(paths), soc0, read_options=read_options,
+                             ambient=ambient, through_hidden_pauses=through_hidden_pauses)
     return rows
 
 
