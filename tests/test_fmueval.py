@@ -4,6 +4,7 @@ model file it was built from."""
 from __future__ import annotations
 
 import json
+import re
 
 import lmncell
 import numpy as np
@@ -67,8 +68,8 @@ def test_communication_points_hold_every_sample_and_every_model_step_end() -> No
     assert points.tolist() == [0.35, 0.7, 1.0, 1.4, 2.0]
 
 
-def test_cli_evaluates_an_fmu_and_refuses_what_it_cannot(quick_fmu, quick_model, tmp_path,
-                                                          capsys) -> None:
+def test_cli_evaluates_an_fmu_and_its_observer_and_refuses_what_it_cannot(
+        quick_fmu, quick_model, tmp_path, capsys) -> None:
     trace = tmp_path / "t.csv"
     assert main(["evaluate", str(quick_fmu), str(PAN_US06), "--json", "--trace", str(trace),
                  "--plot", str(tmp_path / "plots")]) == 0
@@ -82,8 +83,9 @@ def test_cli_evaluates_an_fmu_and_refuses_what_it_cannot(quick_fmu, quick_model,
     assert main(["evaluate", str(fake), str(PAN_US06)]) == 2
     assert "fake.fmu: not a readable FMU" in capsys.readouterr().err
     assert main(["evaluate", str(quick_fmu), str(PAN_US06), "--observer", "ekf",
-                 "--soc0-est", "0.5"]) == 2
-    assert "not an FMU" in capsys.readouterr().err
+                 "--soc0-est", "0.5", "--plot", str(tmp_path / "soc")]) == 0
+    assert re.search(r"ekf +SoC RMSE +\d+\.\d\d %", capsys.readouterr().out)
+    assert len(list((tmp_path / "soc").glob("fmu_soc_ekf_*.png"))) == 1
     assert main(["evaluate", str(quick_model), str(PAN_US06), "--at-model-steps"]) == 2
     assert "--at-model-steps steps an FMU" in capsys.readouterr().err
 
@@ -94,3 +96,22 @@ def test_api_evaluates_an_fmu_like_its_model_file(quick_model, native_fmu) -> No
     assert fmu_rows[0]["fmu"]["rmse_mv"] == pytest.approx(model_rows[0]["lmn"]["rmse_mv"],
                                                          abs=1e-6)
     assert fmu_rows[0]["temperature_input"] == model_rows[0]["temperature_input"] == "ambient"
+
+
+@pytest.mark.parametrize("kind", ["ekf", "fuzzy", "imm"])
+def test_fmu_observer_scores_as_the_model_files_observer(quick_model, native_fmu, kind,
+                                                         capsys) -> None:
+    """The FMU's own observer, given the measured voltage through the record's samples and
+    started wrong under load, estimates the SoC as `evaluate MODEL --observer` does."""
+    from lmncell.evaluation.fmueval import evaluate_fmu_observer_files
+    from lmncell.evaluation.observe import evaluate_observer_files
+
+    fmu_rows = evaluate_fmu_observer_files(native_fmu, [PAN_US06], kind, 1.0, 0.4, 0.7,
+                                           progress=quiet)
+    ref_rows = evaluate_observer_files(quick_model, [PAN_US06], kind, 1.0, 0.4, 0.7)
+    capsys.readouterr()
+    assert fmu_rows[0]["start_soc_true"] == ref_rows[0]["start_soc_true"]
+    for name in (kind, "coulomb"):
+        for key in ("rmse_pct", "max_pct", "median_3sigma_pct", "outside_3sigma_share"):
+            assert fmu_rows[0][name][key] == pytest.approx(ref_rows[0][name][key], abs=1e-3)
+    assert fmu_rows[0][kind]["rmse_pct"] < fmu_rows[0]["coulomb"]["rmse_pct"]

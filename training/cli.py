@@ -125,8 +125,13 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
         if a.soc0_est is None:
             raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
         if a.model.lower().endswith(".fmu"):
-            raise ConfigError(f"--observer evaluates a model file, not an FMU ({a.model}): "
-                              "give the model JSON the FMU was built from")
+            from lmncell.evaluation.fmueval import evaluate_fmu_observer_files
+
+            evaluate_fmu_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est,
+                                        a.start_soc, a.plot, a.json,
+                                        read_options=read_options(a),
+                                        through_hidden_pauses=a.through_hidden_pauses)
+            return 0
         evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
                                 a.plot, a.json, read_options=read_options(a),
                                 through_hidden_pauses=a.through_hidden_pauses)

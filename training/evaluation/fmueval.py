@@ -98,27 +98,35 @@ def communication_points(sample_times_s: np.ndarray, ts: float, n: int,
     return points[keep]
 
 
-def held_inputs(part: Record, temperature_c: np.ndarray, points: np.ndarray
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Current (A) and temperature (°C) to hold over each communication step ending at points
-    (from the part's first sample): the mean of the two samples around it, which resampling
-    holds over each sample interval (lmncell.data.resample), so that the FMU's means over its
-    model steps are the pipeline's."""
+def held_inputs(part: Record, signals: Sequence[np.ndarray], points: np.ndarray,
+                start_s: float = 0.0) -> list[np.ndarray]:
+    """Each signal's value to hold over the communication steps that start at start_s and end
+    at points (s from the part's first sample): the mean of the two samples around the step,
+    which resampling holds over each sample interval (lmncell.data.resample), so that the FMU's
+    means over its model steps are the pipeline's."""
     t = part.time_s - part.time_s[0]
-    mids = 0.5 * (np.concatenate([[0.0], points[:-1]]) + points)
+    mids = 0.5 * (np.concatenate([[start_s], points[:-1]]) + points)
     j = np.clip(np.searchsorted(t, mids) - 1, 0, len(t) - 2)
+    return [0.5 * (np.asarray(x, dtype=float)[j] + np.asarray(x, dtype=float)[j + 1])
+            for x in signals]
 
-    def interval_mean(x: np.ndarray) -> np.ndarray:
-        return 0.5 * (x[j] + x[j + 1])
 
-    return interval_mean(part.current_a), interval_mean(np.asarray(temperature_c, dtype=float))
+@dataclass
+class FmuRun:
+    """The FMU's outputs at the end of each model step it was driven through."""
+
+    voltage_v: np.ndarray
+    soc: np.ndarray
+    soc_std: np.ndarray
+    out_of_range: np.ndarray
 
 
 class _Slave:
-    """One instance of the FMU in fmpy's FMU2Slave, initialised at a start SoC."""
+    """One instance of the FMU in fmpy's FMU2Slave, initialised at a start SoC (with an
+    observer: its start estimate)."""
 
     def __init__(self, info: FmuInfo, unzipped: str, soc0: float, cell: bool,
-                 current_a: float, temperature_c: float) -> None:
+                 inputs: Sequence[float], observer: int = 0) -> None:
         from fmpy.fmi2 import FMU2Slave
 
         md = info.description
@@ -126,22 +134,26 @@ class _Slave:
         self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                                modelIdentifier=md.coSimulation.modelIdentifier,
                                instanceName="lmncell-evaluate")
+        self.inputs = [self.vr[n] for n in ("current", "temperature", "voltage_measured")
+                       ][:len(inputs)]
         self.slave.instantiate(loggingOn=False)
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         self.slave.setReal([self.vr["soc0"]], [float(soc0)])
         self.slave.setBoolean([self.vr["temperature_is_cell"]], [cell])
-        self.set_inputs(current_a, temperature_c)
+        if observer:
+            self.slave.setInteger([self.vr["observer"]], [int(observer)])
+        self.set_inputs(inputs)
         self.slave.exitInitializationMode()
-        self.out = [self.vr["voltage"], self.vr["soc"]]
+        self.out = [self.vr["voltage"], self.vr["soc"], self.vr["soc_std"]]
 
-    def set_inputs(self, current_a: float, temperature_c: float) -> None:
-        self.slave.setReal([self.vr["current"], self.vr["temperature"]],
-                           [float(current_a), float(temperature_c)])
+    def set_inputs(self, values: Sequence[float]) -> None:
+        """current (A), temperature (°C) and, for an observer, voltage_measured (V)."""
+        self.slave.setReal(self.inputs, [float(v) for v in values])
 
-    def outputs(self) -> tuple[float, float, bool]:
-        voltage, soc = self.slave.getReal(self.out)
-        return voltage, soc, bool(self.slave.getBoolean([self.vr["out_of_range"]])[0])
+    def outputs(self) -> tuple[float, float, float, bool]:
+        voltage, soc, std = self.slave.getReal(self.out)
+        return voltage, soc, std, bool(self.slave.getBoolean([self.vr["out_of_range"]])[0])
 
     def free(self) -> None:
         self.slave.terminate()
@@ -149,49 +161,51 @@ class _Slave:
 
 
 def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
-                     ambient: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(voltage V, SoC, out_of_range) at the end of each model step of the segment: the FMU
-    stepped from the segment's start SoC through the record's own samples (and every model step
-    end), each step holding the record's mean current and temperature over it. With ambient the
-    temperature is the segment's ambient and temperature_is_cell false (the FMU's thermal
-    model), else the measured cell temperature and temperature_is_cell true. The FMU applies its
-    model's current delay itself, so its voltage is the pipeline's (evaluate MODEL.json)."""
-    n = len(seg)
+                     ambient: bool, observer: int = 0, start_step: int = 0,
+                     soc0: float | None = None) -> FmuRun:
+    """The FMU's outputs at the end of each model step of the segment from start_step on: the
+    FMU stepped through the record's own samples (and every model step end), each step holding
+    the record's mean current and temperature over it, from soc0 (default the segment's start
+    SoC). With ambient the temperature is the segment's ambient and temperature_is_cell false
+    (the FMU's thermal model), else the measured cell temperature and temperature_is_cell true.
+    With an observer (1 EKF, 2 fuzzy, 3 IMM) the FMU also gets the measured voltage and soc0 is
+    its start estimate. The FMU applies its model's current delay itself, so its voltage is the
+    pipeline's (evaluate MODEL.json)."""
+    n, ts = len(seg), info.step_s
     temperature = (np.full(len(part), float(ambient_of(seg)[0])) if ambient
                    else part.temperature_or_chamber())
     if temperature is None:
         temperature = np.full(len(part), 25.0)
-    points = communication_points(part.time_s - part.time_s[0], info.step_s, n,
-                                  info.current_delay_s)
-    current, temp = held_inputs(part, temperature, points)
-    ends = np.flatnonzero(np.abs(points - info.step_s * np.round(points / info.step_s))
-                          < 1e-9 * info.step_s)
-    volts, socs, flags = np.empty(n), np.empty(n), np.zeros(n, dtype=bool)
-    slave, t, k = None, 0.0, 0
+    start_s = start_step * ts
+    points = communication_points(part.time_s - part.time_s[0], ts, n, info.current_delay_s)
+    points = points[points > start_s * (1.0 + 1e-12)]
+    signals = [part.current_a, temperature] + ([part.voltage_v] if observer else [])
+    inputs = np.column_stack(held_inputs(part, signals, points, start_s))
+    ends = np.abs(points - ts * np.round(points / ts)) < 1e-9 * ts
+    out = np.empty((n - start_step, 4))
+    slave, t, k = None, start_s, 0
     try:
-        slave = _Slave(info, unzipped, seg.soc0, not ambient, current[0], temp[0])
-        end_iter = iter(ends.tolist())
-        next_end = next(end_iter, -1)
-        for j, (point, i, temp_j) in enumerate(zip(points.tolist(), current.tolist(),
-                                                   temp.tolist(), strict=True)):
-            slave.set_inputs(i, temp_j)
-            slave.slave.doStep(currentCommunicationPoint=t, communicationStepSize=point - t)
+        slave = _Slave(info, unzipped, seg.soc0 if soc0 is None else soc0, not ambient,
+                       inputs[0], observer)
+        for point, values, end in zip(points.tolist(), inputs.tolist(), ends.tolist(),
+                                      strict=True):
+            slave.set_inputs(values)
+            slave.slave.doStep(currentCommunicationPoint=t - start_s,
+                               communicationStepSize=point - t)
             t = point
-            if j == next_end:
-                volts[k], socs[k], flags[k] = slave.outputs()
+            if end:
+                out[k] = slave.outputs()
                 k += 1
-                next_end = next(end_iter, -1)
     except Exception as exc:          # fmpy raises where a call returns an error status
         raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
                           f"{exc}") from None
     finally:
         if slave is not None:
             slave.free()
-    return volts, socs, flags
+    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool))
 
 
-def drive_at_model_steps(info: FmuInfo, seg: Segment, ambient: bool
-                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def drive_at_model_steps(info: FmuInfo, seg: Segment, ambient: bool) -> FmuRun:
     """drive_at_samples' results with the FMU run by fmpy.simulate_fmu in steps of Ts, given the
     record's mean current over each step (fmucheck.run_fmu_on_segment): what a host that
     steps at Ts with averaged inputs gives; with a current delay the FMU then has only
@@ -204,9 +218,9 @@ def drive_at_model_steps(info: FmuInfo, seg: Segment, ambient: bool
     if len(res) < n + 1:
         raise ConfigError(f"{info.path}: the FMU stopped after {len(res) - 1} of {n} steps on "
                           f"{seg.name} (its log says why)")
-    return (np.asarray(res["voltage"][1:n + 1], dtype=float),
-            np.asarray(res["soc"][1:n + 1], dtype=float),
-            np.asarray(res["out_of_range"][1:n + 1], dtype=bool))
+    return FmuRun(np.asarray(res["voltage"][1:n + 1], dtype=float),
+                  np.asarray(res["soc"][1:n + 1], dtype=float), np.zeros(n),
+                  np.asarray(res["out_of_range"][1:n + 1], dtype=bool))
 
 
 def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
@@ -235,13 +249,15 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                                           info.capacity_ah):
                 progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
                          f"steps of {info.step_s:g} s")
-                volts, soc, flagged = (drive_at_model_steps(info, seg, ambient) if at_model_steps
-                                       else drive_at_samples(info, unzipped, part, seg, ambient))
-                traces.append(Trace(seg, {"fmu": volts}, soc, np.zeros((len(seg), 0))))
+                run = (drive_at_model_steps(info, seg, ambient) if at_model_steps
+                       else drive_at_samples(info, unzipped, part, seg, ambient))
+                traces.append(Trace(seg, {"fmu": run.voltage_v}, run.soc,
+                                    np.zeros((len(seg), 0))))
                 rows.append({"record": seg.name,
                              "temperature_input": "ambient" if ambient else "cell",
-                             "fmu": record_metrics(seg.voltage_v, volts, seg.soc_ref),
-                             "out_of_range_steps": int(flagged.sum()), "steps": len(seg),
+                             "fmu": record_metrics(seg.voltage_v, run.voltage_v, seg.soc_ref),
+                             "out_of_range_steps": int(run.out_of_range.sum()),
+                             "steps": len(seg),
                              "driven": "model_steps" if at_model_steps else "samples"})
                 if rec.meta.pause_starts:
                     rows[-1]["hidden_pauses_split"] = len(rec.meta.pause_starts)
@@ -297,3 +313,58 @@ def _plot(fmu: Path, traces: list[Trace], out: Path, ambient: bool, at_model_ste
                               "voltage compared with the measured mean over each model step")
              for t in traces]
     progress(f"wrote {len(files)} figure(s) to {out}: " + ", ".join(f.name for f in files))
+
+
+OBSERVER_CODES = {"ekf": 1, "fuzzy": 2, "imm": 3}   # the FMUs' parameter `observer`
+
+
+def evaluate_fmu_observer_files(fmu: str | Path, paths: Sequence[str | Path], kind: str,
+                                soc0: float | Sequence[float] | None, soc0_est: float,
+                                start_at: float | None, plot_dir: str | Path | None = None,
+                                as_json: bool = False,
+                                read_options: Mapping[str, Any] | None = None,
+                                through_hidden_pauses: bool = False,
+                                progress: Progress = _print) -> list[dict]:
+    """`lmncell evaluate CELL.fmu --observer KIND`: the FMU's own observer (its parameter
+    `observer`, given the measured voltage) and its coulomb counting, each started at soc0_est
+    where the reference SoC first reaches start_at (or at the record's start), driven through
+    the record's samples with the measured cell temperature; the figures of
+    `lmncell evaluate MODEL --observer` (lmncell.evaluation.observe)."""
+    from fmpy import extract
+    from lmncell.evaluation.observe import (
+        ObserverRun,
+        observer_figure,
+        observer_segment,
+        print_observer_results,
+        soc_metrics,
+        start_index,
+    )
+
+    info = read_fmu_info(fmu)
+    unzipped = extract(str(info.path))
+    results = []
+    try:
+        for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
+            rec = read_record(p, **(read_options or {}))
+            if through_hidden_pauses:
+                rec = rec.through_hidden_pauses()
+            parts = record_parts(rec, info.step_s, start_soc(rec, rec_soc0), info.capacity_ah)
+            seg = observer_segment([s for _, s in parts], start_at)
+            part = next(pt for pt, s in parts if s is seg)
+            k0 = start_index(seg, start_at) if start_at is not None else 0
+            runs = []
+            for name, code in ((kind, OBSERVER_CODES[kind]), ("coulomb", 0)):
+                progress(f"driving {info.path.name} through the samples of {seg.name} with "
+                         f"observer {code} ({name}) from SoC {soc0_est:g}")
+                run = drive_at_samples(info, unzipped, part, seg, False, code, k0, soc0_est)
+                runs.append(ObserverRun(name, seg.time_s[k0:], seg.soc_ref[k0:], run.soc,
+                                        run.soc_std, None))
+            results.append({"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),
+                            "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}})
+            if plot_dir is not None:
+                Path(plot_dir).mkdir(parents=True, exist_ok=True)
+                observer_figure(runs, Path(plot_dir) / f"fmu_soc_{kind}_{Path(p).stem}.png")
+    finally:
+        shutil.rmtree(unzipped, ignore_errors=True)
+    print_observer_results(results, kind, as_json)
+    return results

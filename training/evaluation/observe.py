@@ -27,7 +27,7 @@ class ObserverRun:
     soc_ref: np.ndarray
     estimate: np.ndarray
     std: np.ndarray
-    skipped: int
+    skipped: int | None      # measurements the observer skipped (None: not known, an FMU's)
 
 
 def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
@@ -167,15 +167,21 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
         if plot_dir is not None:
             Path(plot_dir).mkdir(parents=True, exist_ok=True)
             observer_figure(runs, Path(plot_dir) / f"soc_{kind}_{Path(p).stem}.png")
+    print_observer_results(results, kind, as_json)
+    return results
+
+
+def print_observer_results(results: list[dict], kind: str, as_json: bool = False) -> None:
+    """The observer table of `lmncell evaluate --observer` (or its JSON): per record the
+    observer and coulomb counting from the same wrong start."""
     if as_json:
         print(json.dumps(results, indent=1))
-    else:
-        for r in results:
-            for name in (kind, "coulomb"):
-                m = r[name]
-                print(f"{r['record'][:44]:44s} {name:8s} SoC RMSE {m['rmse_pct']:5.2f} %  MAE "
-                      f"{m['mae_pct']:5.2f} %  max {m['max_pct']:5.2f} %  within 2 % after "
-                      f"{m['time_to_2pct_s']:.0f} s  outside 3σ "
-                      f"{100 * m['outside_3sigma_share']:.0f} % (median ±3σ "
-                      f"{m['median_3sigma_pct']:.1f} %)")
-    return results
+        return
+    for r in results:
+        for name in (kind, "coulomb"):
+            m = r[name]
+            print(f"{r['record'][:44]:44s} {name:8s} SoC RMSE {m['rmse_pct']:5.2f} %  MAE "
+                  f"{m['mae_pct']:5.2f} %  max {m['max_pct']:5.2f} %  within 2 % after "
+                  f"{m['time_to_2pct_s']:.0f} s  outside 3σ "
+                  f"{100 * m['outside_3sigma_share']:.0f} % (median ±3σ "
+                  f"{m['median_3sigma_pct']:.1f} %)")
