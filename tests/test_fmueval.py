@@ -86,6 +86,9 @@ def test_cli_evaluates_an_fmu_and_its_observer_and_refuses_what_it_cannot(
                  "--soc0-est", "0.5", "--plot", str(tmp_path / "soc")]) == 0
     assert re.search(r"ekf +SoC RMSE +\d+\.\d\d %", capsys.readouterr().out)
     assert len(list((tmp_path / "soc").glob("fmu_soc_ekf_*.png"))) == 1
+    assert main(["evaluate", str(quick_fmu), str(PAN_US06), "--observer", "ekf",
+                 "--soc0-est", "0.5", "--at-model-steps"]) == 2
+    assert "--at-model-steps with --observer" in capsys.readouterr().err
     assert main(["evaluate", str(quick_model), str(PAN_US06), "--at-model-steps"]) == 2
     assert "--at-model-steps steps an FMU" in capsys.readouterr().err
 

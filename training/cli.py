@@ -124,6 +124,12 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
 
         if a.soc0_est is None:
             raise ConfigError("--observer needs --soc0-est (the estimator's start guess)")
+        unused = [flag for flag, given in (("--ambient", a.ambient), ("--trace", a.trace),
+                                           ("--at-model-steps", a.at_model_steps)) if given]
+        if unused:
+            raise ConfigError(f"{', '.join(unused)} with --observer: the observer runs on the "
+                              "measured cell temperature and voltage, and reports SoC figures "
+                              "(--json, --plot); leave out " + ", ".join(unused))
         if a.model.lower().endswith(".fmu"):
             from lmncell.evaluation.fmueval import evaluate_fmu_observer_files
 
