@@ -12,6 +12,7 @@ from lmncell import __version__
 from lmncell.config import ConfigError, parse_setting
 from lmncell.data.records import DataError
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
+from lmncell.progress import Progress
 from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C, InputError
 from lmncell.runtime.model import ModelFileError
 
@@ -136,7 +137,8 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
             evaluate_fmu_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est,
                                         a.start_soc, a.plot, a.json,
                                         read_options=read_options(a),
-                                        through_hidden_pauses=a.through_hidden_pauses)
+                                        through_hidden_pauses=a.through_hidden_pauses,
+                                        progress=_progress(a))
             return 0
         evaluate_observer_files(a.model, a.data, a.observer, a.soc0, a.soc0_est, a.start_soc,
                                 a.plot, a.json, read_options=read_options(a),
@@ -146,7 +148,8 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
         from lmncell.evaluation.fmueval import evaluate_fmu_files
 
         evaluate_fmu_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
-                           ambient=a.ambient, read_options=read_options(a),
+                           progress=_progress(a), ambient=a.ambient,
+                           read_options=read_options(a),
                            through_hidden_pauses=a.through_hidden_pauses,
                            at_model_steps=a.at_model_steps)
         return 0
@@ -156,10 +159,18 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
                           "record's exact means over each model step")
     from lmncell.evaluation.evaluate import evaluate_files
 
-    evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json,
+    evaluate_files(a.model, a.data, a.soc0, a.plot, a.trace, a.json, progress=_progress(a),
                    read_options=read_options(a), ambient=a.ambient,
                    through_hidden_pauses=a.through_hidden_pauses)
     return 0
+
+
+def _progress(a: argparse.Namespace) -> Progress:
+    """Where evaluate's progress lines go: stderr with --json (stdout is the JSON), else
+    stdout with the table."""
+    from lmncell.progress import print_progress, print_progress_stderr
+
+    return print_progress_stderr if a.json else print_progress
 
 
 def cmd_explain(a: argparse.Namespace) -> int:

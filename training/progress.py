@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Callable
 
 Progress = Callable[[str], None]
@@ -10,6 +11,11 @@ Progress = Callable[[str], None]
 def print_progress(msg: str) -> None:
     """Print a progress line at once (flushed), for the command line."""
     print(msg, flush=True)
+
+
+def print_progress_stderr(msg: str) -> None:
+    """Print a progress line to stderr at once, where stdout carries JSON for a reader."""
+    print(msg, file=sys.stderr, flush=True)
 
 
 def quiet(_msg: str) -> None:
