@@ -35,6 +35,7 @@ import math
 import tempfile
 from pathlib import Path
 
+from lmncell.api import build_fmu
 from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import (
@@ -49,17 +50,6 @@ from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
 
 MODELS = ("lmn", "fmu", "arx", "ecm2rc", "ecm2rc_hyst")
-
-
-def build_fold_fmu(kind: str, model_path: Path) -> Path:
-    """The fold's model built into an FMU of that kind (native or pythonfmu), beside it."""
-    if kind == "native":
-        from lmncell.fmu.native_build import build_native_fmu
-
-        return build_native_fmu(model_path, model_path.with_suffix(".fmu"))
-    from lmncell.fmu.pythonfmu_build import build_fmu
-
-    return build_fmu(model_path, model_path.with_suffix(".fmu"))
 
 
 def main() -> None:
@@ -99,7 +89,8 @@ def main() -> None:
                                capacity_ah=a.capacity_ah, soc0=train_soc0,
                                baselines=not a.no_baselines, progress=lambda _m: None,
                                **settings)
-        fmu = build_fold_fmu(a.fmu, Path(tmp) / "model.json") if a.fmu else None
+        fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
+                         native=a.fmu == "native") if a.fmu else None)
         folds.append((Path(held).name, {}))
         for ambient in (False, True):
             _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient,

@@ -12,7 +12,7 @@ from lmncell import __version__
 from lmncell.config import ConfigError, parse_setting
 from lmncell.data.records import DataError
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
-from lmncell.progress import Progress
+from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C, InputError
 from lmncell.runtime.model import ModelFileError
 
@@ -168,8 +168,6 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
 def _progress(a: argparse.Namespace) -> Progress:
     """Where evaluate's progress lines go: stderr with --json (stdout is the JSON), else
     stdout with the table."""
-    from lmncell.progress import print_progress, print_progress_stderr
-
     return print_progress_stderr if a.json else print_progress
 
 

@@ -7,7 +7,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
+from lmncell.data.records import Record
 from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
 from lmncell.progress import Progress
@@ -58,6 +59,20 @@ def ambient_of(seg: Segment) -> np.ndarray:
     return np.full(len(seg), 25.0)
 
 
+def read_records(paths: Sequence[str | Path], soc0: float | Sequence[float] | None = None,
+                 read_options: Mapping[str, Any] | None = None,
+                 through_hidden_pauses: bool = False
+                 ) -> Iterator[tuple[Path, Record, float]]:
+    """Each record to evaluate with its start SoC: read (read_options go to read_record), not
+    split at its hidden pauses where through_hidden_pauses, soc0 as in start_socs (None: 1.0
+    for a record that starts rested at full charge)."""
+    for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
+        rec = read_record(p, **(read_options or {}))
+        if through_hidden_pauses:
+            rec = rec.through_hidden_pauses()
+        yield Path(p), rec, start_soc(rec, rec_soc0)
+
+
 def evaluate_model(model: LmnModel, paths: list[str | Path],
                    soc0: float | Sequence[float] | None = None,
                    capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None,
@@ -76,11 +91,8 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
     record's time column sees it (the model's state runs on through the pause)."""
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
-    for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
-        rec = read_record(p, **(read_options or {}))
-        if through_hidden_pauses:
-            rec = rec.through_hidden_pauses()
-        for seg in record_to_segments(rec, model.sample_time_s, start_soc(rec, rec_soc0), cap,
+    for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+        for seg in record_to_segments(rec, model.sample_time_s, rec_soc0, cap,
                                       current_delay_s=model.current_delay_s):
             check_range(model, seg)
             cell = None
@@ -194,6 +206,14 @@ def write_trace(trace: Trace, path: str | Path, name: str = "lmn") -> Path:
     return path
 
 
+def write_traces(traces: list[Trace], path: str | Path, name: str = "lmn") -> None:
+    """write_trace of each trace: to path where there is one, else to path's stem _0, _1, …"""
+    base = Path(path)
+    for k, t in enumerate(traces):
+        write_trace(t, base if len(traces) == 1
+                    else base.with_name(f"{base.stem}_{k}{base.suffix}"), name)
+
+
 def _mv(value: float | None) -> str:
     """An RMSE for the evaluate table: mV with two decimals, or "(none)" without samples."""
     return "(none)" if value is None else f"{value:.2f} mV"
@@ -210,12 +230,7 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
     traces, rows = evaluate_model(model, paths, soc0, read_options=read_options,
                                   ambient=ambient, through_hidden_pauses=through_hidden_pauses)
     if trace is not None:
-        if len(traces) == 1:
-            write_trace(traces[0], trace)
-        else:
-            base = Path(trace)
-            for k, t in enumerate(traces):
-                write_trace(t, base.with_name(f"{base.stem}_{k}{base.suffix}"))
+        write_traces(traces, trace)
     if plot_dir is not None:
         from lmncell.report import plots
 

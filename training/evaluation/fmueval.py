@@ -15,10 +15,15 @@ from typing import Any
 
 import numpy as np
 from lmncell.config import ConfigError
-from lmncell.data.dataset import Segment, record_parts, start_soc, start_socs
-from lmncell.data.readers import read_record
+from lmncell.data.dataset import Segment, record_parts
 from lmncell.data.records import Record
-from lmncell.evaluation.evaluate import Trace, ambient_of, print_rows, write_trace
+from lmncell.evaluation.evaluate import (
+    Trace,
+    ambient_of,
+    print_rows,
+    read_records,
+    write_traces,
+)
 from lmncell.evaluation.fmucheck import run_fmu_on_segment
 from lmncell.evaluation.metrics import record_metrics
 from lmncell.progress import Progress
@@ -92,10 +97,14 @@ def communication_points(sample_times_s: np.ndarray, ts: float, n: int,
     extra = grid - delay_s if delay_s else np.empty(0)
     points = np.union1d(np.union1d(t, extra[extra > 0.0]), grid)
     # points within rounding of a model step end are that step end
-    ends = np.abs(points - ts * np.round(points / ts)) < 1e-9 * ts
-    points = np.union1d(points[~ends], grid)
+    points = np.union1d(points[~at_step_ends(points, ts)], grid)
     keep = np.concatenate([[True], np.diff(points) > 1e-9 * ts])
     return points[keep]
+
+
+def at_step_ends(points: np.ndarray, ts: float) -> np.ndarray:
+    """Which points (s) lie on a model step end k·Ts, within rounding."""
+    return np.abs(points - ts * np.round(points / ts)) < 1e-9 * ts
 
 
 def held_inputs(part: Record, signals: Sequence[np.ndarray], points: np.ndarray,
@@ -181,7 +190,7 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     points = points[points > start_s * (1.0 + 1e-12)]
     signals = [part.current_a, temperature] + ([part.voltage_v] if observer else [])
     inputs = np.column_stack(held_inputs(part, signals, points, start_s))
-    ends = np.abs(points - ts * np.round(points / ts)) < 1e-9 * ts
+    ends = at_step_ends(points, ts)
     out = np.empty((n - start_step, 4))
     slave, t, k = None, start_s, 0
     try:
@@ -241,12 +250,8 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
     traces, rows = [], []
     how = "in steps of Ts with mean inputs" if at_model_steps else "through the samples"
     try:
-        for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
-            rec = read_record(p, **(read_options or {}))
-            if through_hidden_pauses:
-                rec = rec.through_hidden_pauses()
-            for part, seg in record_parts(rec, info.step_s, start_soc(rec, rec_soc0),
-                                          info.capacity_ah):
+        for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+            for part, seg in record_parts(rec, info.step_s, rec_soc0, info.capacity_ah):
                 progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
                          f"steps of {info.step_s:g} s")
                 run = (drive_at_model_steps(info, seg, ambient) if at_model_steps
@@ -278,10 +283,7 @@ def evaluate_fmu_files(fmu: str | Path, paths: Sequence[str | Path],
     traces, rows = evaluate_fmu(fmu, paths, soc0, ambient, read_options, through_hidden_pauses,
                                 at_model_steps, progress)
     if trace is not None:
-        base = Path(trace)
-        for k, t in enumerate(traces):
-            write_trace(t, base if len(traces) == 1
-                        else base.with_name(f"{base.stem}_{k}{base.suffix}"), "fmu")
+        write_traces(traces, trace, "fmu")
     if plot_dir is not None:
         _plot(Path(fmu), traces, Path(plot_dir), ambient, at_model_steps, progress)
     if as_json:
@@ -334,9 +336,9 @@ def evaluate_fmu_observer_files(fmu: str | Path, paths: Sequence[str | Path], ki
     from lmncell.evaluation.observe import (
         ObserverRun,
         observer_figure,
+        observer_result,
         observer_segment,
         print_observer_results,
-        soc_metrics,
         start_index,
     )
 
@@ -344,11 +346,8 @@ def evaluate_fmu_observer_files(fmu: str | Path, paths: Sequence[str | Path], ki
     unzipped = extract(str(info.path))
     results = []
     try:
-        for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
-            rec = read_record(p, **(read_options or {}))
-            if through_hidden_pauses:
-                rec = rec.through_hidden_pauses()
-            parts = record_parts(rec, info.step_s, start_soc(rec, rec_soc0), info.capacity_ah)
+        for p, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+            parts = record_parts(rec, info.step_s, rec_soc0, info.capacity_ah)
             seg = observer_segment([s for _, s in parts], start_at)
             part = next(pt for pt, s in parts if s is seg)
             k0 = start_index(seg, start_at) if start_at is not None else 0
@@ -359,11 +358,10 @@ def evaluate_fmu_observer_files(fmu: str | Path, paths: Sequence[str | Path], ki
                 run = drive_at_samples(info, unzipped, part, seg, False, code, k0, soc0_est)
                 runs.append(ObserverRun(name, seg.time_s[k0:], seg.soc_ref[k0:], run.soc,
                                         run.soc_std, None))
-            results.append({"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),
-                            "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}})
+            results.append(observer_result(seg.name, runs, soc0_est))
             if plot_dir is not None:
                 Path(plot_dir).mkdir(parents=True, exist_ok=True)
-                observer_figure(runs, Path(plot_dir) / f"fmu_soc_{kind}_{Path(p).stem}.png")
+                observer_figure(runs, Path(plot_dir) / f"fmu_soc_{kind}_{p.stem}.png")
     finally:
         shutil.rmtree(unzipped, ignore_errors=True)
     print_observer_results(results, kind, as_json)

@@ -9,9 +9,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
-from lmncell.data.readers import read_record
+from lmncell.data.dataset import Segment, record_to_segments
 from lmncell.data.records import DataError
+from lmncell.evaluation.evaluate import read_records
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.observers import ObserverSettings, SocObserver
 from lmncell.runtime.step import exo_series
@@ -152,23 +152,25 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
     read_record; through_hidden_pauses as in lmncell.evaluation.evaluate.evaluate_model)."""
     model = load_model(model_path)
     results = []
-    for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
-        rec = read_record(p, **(read_options or {}))
-        if through_hidden_pauses:
-            rec = rec.through_hidden_pauses()
-        seg = observer_segment(record_to_segments(rec, model.sample_time_s,
-                                                  start_soc(rec, rec_soc0), model.capacity_ah,
+    for p, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+        seg = observer_segment(record_to_segments(rec, model.sample_time_s, rec_soc0,
+                                                  model.capacity_ah,
                                                   current_delay_s=model.current_delay_s),
                                start_at)
         runs = observer_runs(model, seg, [kind], soc0_est, start_at)
-        row = {"record": seg.name, "start_soc_true": float(runs[0].soc_ref[0]),
-               "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}}
-        results.append(row)
+        results.append(observer_result(seg.name, runs, soc0_est))
         if plot_dir is not None:
             Path(plot_dir).mkdir(parents=True, exist_ok=True)
-            observer_figure(runs, Path(plot_dir) / f"soc_{kind}_{Path(p).stem}.png")
+            observer_figure(runs, Path(plot_dir) / f"soc_{kind}_{p.stem}.png")
     print_observer_results(results, kind, as_json)
     return results
+
+
+def observer_result(record: str, runs: list[ObserverRun], soc0_est: float) -> dict:
+    """One record's row of `lmncell evaluate --observer`: the true SoC at the start, the start
+    estimate and soc_metrics of each run (the observer and coulomb counting)."""
+    return {"record": record, "start_soc_true": float(runs[0].soc_ref[0]),
+            "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}}
 
 
 def print_observer_results(results: list[dict], kind: str, as_json: bool = False) -> None:

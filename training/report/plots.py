@@ -18,6 +18,7 @@ from matplotlib.ticker import FuncFormatter
 COLORS = {"measured": "k", "lmn": "tab:red", "fmu": "darkred", "arx": "tab:gray",
           "ecm2rc": "tab:blue", "ecm2rc_hyst": "tab:green", "ekf": "tab:red", "fuzzy": "tab:orange",
           "imm": "tab:purple"}
+MAIN = ("lmn", "fmu")      # the model a figure is about (lmn; fmu: an FMU of it)
 
 
 def safe_name(name: str) -> str:
@@ -29,8 +30,6 @@ def _baselines_first(voltages: dict[str, np.ndarray]) -> list[tuple[str, np.ndar
     """The LMN (or its FMU) last, so that it is drawn on top of the baselines."""
     return sorted(voltages.items(), key=lambda kv: kv[0] in MAIN)
 
-
-MAIN = ("lmn", "fmu")      # the model a figure is about (lmn; fmu: an FMU of it)
 
 
 def _style(name: str) -> dict:
