@@ -246,6 +246,7 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     ({"soc_window": [0.8, 0.2]}, "'soc_window'"),
     ({"robust_loss": "cauchy"}, "'robust_loss'"),
     ({"temperature_regions": "on"}, "'temperature_regions'"),
+    ({"region_growth": "per_level"}, "'region_growth'"),
     ({"record_weights": [1.0, -1.0]}, "'record_weights'"),
     ({"record_weights": [float("nan")]}, "'record_weights'"),
     ({"record_weights": [0.0, 0.0]}, "'record_weights'"),
@@ -355,6 +356,37 @@ def test_temperature_regions_split_only_between_the_chamber_temperatures() -> No
     w = model.node_weights[along[0]]
     t0 = model.partition_center[k - 1] - w[0] * model.partition_scale[k - 1] / w[k]
     assert t0 == pytest.approx(centre)           # act = 0 at the boundary's centre
+
+
+def test_each_temperature_region_grows_on_its_own_and_keeps_its_own_best_stage() -> None:
+    """Separate region growth: the coldest region first, each splitting only its own leaves up
+    to its share of max_local_models (4 of 8, one leaf to start), each keeping the stage that
+    its own records' validation error picks; the next region grows from there. Joint growth
+    has one curve over all records."""
+    from lmncell.identification.construction import chosen_stage, train_lmn
+
+    segs, cap = _two_chamber_cell()
+    kw = {"max_local_models": 8, "oe_refinement": False, "hysteresis": "off"}
+    res = train_lmn(segs, load_config(**kw), cap)
+    regions = [c["temperature_region_c"] for c in res.curve]
+    cold = [c for c in res.curve if c["temperature_region_c"] < 20.0]
+    warm = [c for c in res.curve if c["temperature_region_c"] > 20.0]
+    assert regions == sorted(regions) and len(cold) > 1 and len(warm) > 1
+    assert [c["local_models"] for c in cold] == list(range(2, 2 + len(cold)))
+    assert cold[-1]["local_models"] <= 2 + 3 and warm[-1]["local_models"] <= warm[0][
+        "local_models"] + 3
+
+    def kept(part: list[dict]) -> int:
+        return part[chosen_stage([c["validation_freerun_rmse_mv"] for c in part],
+                                 "validation")]["local_models"]
+
+    assert warm[0]["local_models"] == kept(cold)         # the warm region starts from there
+    assert res.chosen_m == kept(warm)
+    assert {c["validation_records"] for c in warm} == {f"{warm[0]['temperature_region_c']:.0f} "
+                                                       "°C records"}
+    joint = train_lmn(segs, load_config(**kw, region_growth="joint"), cap)
+    assert all("temperature_region_c" not in c for c in joint.curve)
+    assert [c["local_models"] for c in joint.curve] == list(range(2, 2 + len(joint.curve)))
 
 
 def _warming_cell(knee: bool) -> tuple[list, float]:

@@ -39,9 +39,14 @@ from lmncell.identification.prefit import (
     with_soc_reference_weights,
 )
 from lmncell.identification.refinement import refine_output_error
-from lmncell.identification.regions import region_boundaries, temperature_region_tree
+from lmncell.identification.regions import (
+    region_boundaries,
+    segment_levels,
+    temperature_region_tree,
+)
 from lmncell.identification.splitting import optimise_split
 from lmncell.identification.tree import (
+    Design,
     Tree,
     build_design,
     freerun_rmse,
@@ -199,54 +204,19 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         base.arrhenius_k = e_k
     else:
         design = build_design(base, segs, masks, ladder)
-    X, y, w = design.X, design.y, design.w_fit
-    n_eff = float(w.sum())
     tree = root_tree(base, design, cfg)
     if boundaries:
         tree = temperature_region_tree(tree, base, design, cfg, boundaries)
-    stages: list[Tree] = []
-    curve: list[dict] = []
     stop_stage = "validation" if cfg.stop == "validation" and cfg.validation != "none" else "aicc"
-    while True:
-        model = tree.apply(base)
-        Phi, yhat = one_step(model, design)
-        e = y - yhat
-        loss = float(np.sum(w * e * e))
-        n_par = model.theta.size + (d + 1) * len(tree.weights)
-        val = (freerun_rmse(model, segs, design, "val") if stop_stage == "validation"
-               else float("nan"))
-        fit_fr = freerun_rmse(model, segs, design, "fit")
-        curve.append({"local_models": model.n_local_models,
-                      "one_step_rmse_mv": 1e3 * float(np.sqrt(loss / n_eff)),
-                      "aicc": finite_or_none(aicc(loss, n_eff, n_par)),
-                      "train_freerun_rmse_mv": finite_or_none(1e3 * fit_fr),
-                      "validation_freerun_rmse_mv": finite_or_none(1e3 * val)})
-        stages.append(tree)
-        progress(f"  M={model.n_local_models}: one-step {curve[-1]['one_step_rmse_mv']:.2f} mV, "
-                 f"free-run train {1e3 * fit_fr:.2f} mV, validation {1e3 * val:.2f} mV "
-                 f"({time.perf_counter() - t_start:.1f} s)")
-        if model.n_local_models >= cfg.max_local_models:
-            break
-        leaf_err = np.sum(w[:, None] * Phi * e[:, None] ** 2, axis=0)
-        split = None
-        for j in np.argsort(-leaf_err, kind="stable"):
-            r_rest = y - (yhat - Phi[:, j] * (X @ model.theta[j]))
-            split = optimise_split(X, y, w, design.Z, Phi[:, j], r_rest, cfg, fixed_axes,
-                                   design.fit)
-            if split is not None:
-                tree = tree.split(int(j), split.psi, split.theta_a, split.theta_b)
-                break
-        if split is None:
-            progress("  no leaf can be split further")
-            break
-    key = "validation_freerun_rmse_mv" if stop_stage == "validation" else "aicc"
-    scores = np.array([np.inf if c[key] is None else c[key] for c in curve], dtype=float)
-    scores = np.where(np.isfinite(scores), scores, np.inf)
-    if key == "aicc":
-        chosen = int(np.argmin(scores))
+    grower = Grower(base, segs, design, cfg, fixed_axes, progress, t_start)
+    if (boundaries and cfg.region_growth == "separate" and stop_stage == "validation"
+            and cfg.validation == "block"):
+        tree = grow_regions_separately(grower, tree, segment_levels(segs))
     else:
-        chosen = int(np.flatnonzero(scores <= 1.02 * scores.min())[0])
-    model = stages[chosen].apply(base)
+        tree = grower.grow(tree, stop_stage)
+    key = "validation_freerun_rmse_mv" if stop_stage == "validation" else "aicc"
+    curve = grower.curve
+    model = tree.apply(base)
     progress(f"  chosen M={model.n_local_models} by {key}")
     info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
             "time_constant_activation_k": base.tau_activation_k,
@@ -261,6 +231,140 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             1e3 * freerun_rmse(model, segs, design, "fit"))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
+
+
+STOP_TOLERANCE = 1.02    # M: the fewest local models within 2 % of the best validation error
+
+
+class Grower:
+    """The tree's growth (step 3 of the module docstring): split the worst leaf, record the
+    curve (one-step, AICc, free-run training and validation RMSE per stage), pick M."""
+
+    def __init__(self, base: LmnModel, segs: list[Segment], design: Design, cfg: TrainConfig,
+                 fixed_axes: frozenset, progress: Progress, t_start: float) -> None:
+        self.base, self.segs, self.design, self.cfg = base, segs, design, cfg
+        self.fixed_axes, self.progress, self.t_start = fixed_axes, progress, t_start
+        self.curve: list[dict] = []
+        self.n_eff = float(design.w_fit.sum())
+
+    def record(self, tree: Tree, stop_stage: str, only: list[int] | None = None,
+               label: dict | None = None) -> tuple[float, np.ndarray, np.ndarray]:
+        """Append the stage's curve entry (validation over the segments `only`, all by
+        default); returns its stop score (validation RMSE or AICc), Φ and the one-step error."""
+        model, design = tree.apply(self.base), self.design
+        phi, yhat = one_step(model, design)
+        e = design.y - yhat
+        loss = float(np.sum(design.w_fit * e * e))
+        n_par = model.theta.size + (len(self.cfg.partition) + 1) * len(tree.weights)
+        val = (freerun_rmse(model, self.segs, design, "val", only)
+               if stop_stage == "validation" else float("nan"))
+        fit_fr = freerun_rmse(model, self.segs, design, "fit")
+        crit = aicc(loss, self.n_eff, n_par)
+        self.curve.append({"local_models": model.n_local_models,
+                           "one_step_rmse_mv": 1e3 * float(np.sqrt(loss / self.n_eff)),
+                           "aicc": finite_or_none(crit),
+                           "train_freerun_rmse_mv": finite_or_none(1e3 * fit_fr),
+                           "validation_freerun_rmse_mv": finite_or_none(1e3 * val),
+                           **(label or {})})
+        where = "" if not label else f" ({label['validation_records']})"
+        self.progress(f"  M={model.n_local_models}: one-step "
+                      f"{self.curve[-1]['one_step_rmse_mv']:.2f} mV, free-run train "
+                      f"{1e3 * fit_fr:.2f} mV, validation{where} {1e3 * val:.2f} mV "
+                      f"({time.perf_counter() - self.t_start:.1f} s)")
+        score = val if stop_stage == "validation" else crit
+        return (score if np.isfinite(score) else np.inf), phi, e
+
+    def split_worst(self, tree: Tree, phi: np.ndarray, e: np.ndarray,
+                    weight: np.ndarray | None = None, allowed: np.ndarray | None = None
+                    ) -> Tree | None:
+        """The tree with its worst leaf split (weighted error Σ w·Φ_j·e², w times `weight`
+        where given; only leaves where `allowed` is True), the next worst where a leaf cannot
+        be split; None where none can."""
+        d = self.design
+        w = d.w_fit if weight is None else d.w_fit * weight
+        model = tree.apply(self.base)
+        leaf_err = np.sum(w[:, None] * phi * e[:, None] ** 2, axis=0)
+        yhat = d.y - e
+        for j in np.argsort(-leaf_err, kind="stable"):
+            if allowed is not None and not allowed[j]:
+                continue
+            r_rest = d.y - (yhat - phi[:, j] * (d.X @ model.theta[j]))
+            split = optimise_split(d.X, d.y, d.w_fit, d.Z, phi[:, j], r_rest, self.cfg,
+                                   self.fixed_axes, d.fit)
+            if split is not None:
+                return tree.split(int(j), split.psi, split.theta_a, split.theta_b)
+        return None
+
+    def grow(self, tree: Tree, stop_stage: str) -> Tree:
+        """Split the worst leaf of the whole tree up to max_local_models; the stage M by the
+        validation error over all records (or AICc)."""
+        stages, scores = [], []
+        while True:
+            score, phi, e = self.record(tree, stop_stage)
+            stages.append(tree)
+            scores.append(score)
+            if tree.theta.shape[0] >= self.cfg.max_local_models:
+                break
+            nxt = self.split_worst(tree, phi, e)
+            if nxt is None:
+                self.progress("  no leaf can be split further")
+                break
+            tree = nxt
+        return stages[chosen_stage(scores, stop_stage)]
+
+
+def chosen_stage(scores: list[float], stop_stage: str) -> int:
+    """The stage of the lowest AICc, or the first within STOP_TOLERANCE of the lowest
+    validation error (fewer local models where more do not clearly help)."""
+    s = np.asarray(scores, dtype=float)
+    if stop_stage == "aicc":
+        return int(np.argmin(s))
+    return int(np.flatnonzero(s <= STOP_TOLERANCE * s.min())[0])
+
+
+def grow_regions_separately(grower: Grower, tree: Tree, levels: list[int]) -> Tree:
+    """Grow the local models of each temperature region in turn, coldest first: split only
+    that region's leaves (the worst by its records' error), up to its share of
+    max_local_models, and keep the stage whose validation error over that region's records is
+    best (chosen_stage); the next region grows from there. A leaf belongs to the region whose
+    records hold most of its validity."""
+    design, n_regions = grower.design, max(levels) + 1
+    sample_region = np.concatenate([np.full(b - a, levels[k])
+                                    for k, (a, b) in enumerate(design.bounds)])
+    share = max(grower.cfg.max_local_models // n_regions, 1)
+    temps = region_temperatures(grower.segs, levels)
+    for r in range(n_regions):
+        only = [k for k, lv in enumerate(levels) if lv == r]
+        label = {"temperature_region_c": temps[r],
+                 "validation_records": f"{temps[r]:.0f} °C records"}
+        in_region = (sample_region == r).astype(float)
+        stages, scores = [], []
+        while True:
+            score, phi, e = grower.record(tree, "validation", only, label)
+            stages.append(tree)
+            scores.append(score)
+            mass = np.stack([phi[sample_region == q].sum(axis=0) for q in range(n_regions)])
+            mine = np.argmax(mass, axis=0) == r
+            if int(mine.sum()) >= share:
+                break
+            nxt = grower.split_worst(tree, phi, e, in_region, mine)
+            if nxt is None:
+                grower.progress(f"  no leaf of the {temps[r]:.0f} °C region can be split further")
+                break
+            tree = nxt
+        pick = chosen_stage(scores, "validation")
+        tree = stages[pick]
+        grower.progress(f"  {temps[r]:.0f} °C region: {pick} split(s) kept by its records' "
+                        "validation error")
+    return tree
+
+
+def region_temperatures(segs: list[Segment], levels: list[int]) -> list[float]:
+    """Median cell temperature (°C) of each region's segments."""
+    return [float(np.median(np.concatenate([np.asarray(s.temperature_c, dtype=float)
+                                            for s, lv in zip(segs, levels, strict=True)
+                                            if lv == r])))
+            for r in range(max(levels) + 1)]
 
 
 DEPLETION_HOLD_FRACTION = 0.7   # the depletion factor is held below this share of the lowest

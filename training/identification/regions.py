@@ -37,18 +37,24 @@ def region_boundaries(segs: list[Segment]) -> list[tuple[float, float]]:
     if len(levels) < 2:
         return []
     per_level: list[list[np.ndarray]] = [[] for _ in levels]
-    for s in segs:
-        if s.temperature_c is None:
-            continue
-        median = float(np.median(s.temperature_c))
-        k = int(np.argmin([abs(median - t) for t in levels]))
-        per_level[k].append(np.asarray(s.temperature_c, dtype=float))
+    for s, k in zip(segs, segment_levels(segs), strict=True):
+        if s.temperature_c is not None:
+            per_level[k].append(np.asarray(s.temperature_c, dtype=float))
     out = []
     for low, high in itertools.pairwise(per_level):
         top = float(np.percentile(np.concatenate(low), 99))
         bottom = float(np.percentile(np.concatenate(high), 1))
         out.append((0.5 * (top + bottom), max(abs(bottom - top) / GAP_WIDTHS, MIN_WIDTH_K)))
     return out
+
+
+def segment_levels(segs: list[Segment]) -> list[int]:
+    """Per segment, the index of the temperature level (temperature_levels, coldest 0) nearest
+    its median temperature (0 for a segment without temperature)."""
+    levels = temperature_levels(segs)
+    return [0 if s.temperature_c is None or not levels
+            else int(np.argmin([abs(float(np.median(s.temperature_c)) - t) for t in levels]))
+            for s in segs]
 
 
 def region_weights(base: LmnModel, centre_c: float, width_k: float) -> np.ndarray:

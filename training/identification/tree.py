@@ -163,10 +163,13 @@ def stabilise(theta: np.ndarray, na: int, max_pole: float, X: np.ndarray | None 
 
 
 def freerun_rmse(model: LmnModel, segs: list[Segment], design: Design,
-                 which: str = "val") -> float:
-    """Weighted free-run RMSE (V) over validation ('val') or fit ('fit') samples."""
+                 which: str = "val", only: list[int] | None = None) -> float:
+    """Weighted free-run RMSE (V) over validation ('val') or fit ('fit') samples, of the
+    segments whose indices are in `only` (all by default)."""
     num = den = 0.0
-    for seg, ex, (a, b) in zip(segs, design.exo, design.bounds, strict=True):
+    for k, (seg, ex, (a, b)) in enumerate(zip(segs, design.exo, design.bounds, strict=True)):
+        if only is not None and k not in only:
+            continue
         w = (design.w_val if which == "val" else design.w_fit)[a:b]
         if w.sum() == 0:
             continue

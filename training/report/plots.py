@@ -104,32 +104,44 @@ def validity_figure(model: LmnModel, path: Path) -> Path:
 
 
 def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
-    """One-step and free-run RMSE against the number of local models."""
-    m = [c["local_models"] for c in curve]
+    """One-step and free-run RMSE against the number of local models; where each temperature
+    region grew on its own (curve entries with temperature_region_c), one set of lines per
+    region, its validation over that region's records."""
     fig, ax = plt.subplots(figsize=(7, 4), constrained_layout=True)
+    regions = [c.get("temperature_region_c") for c in curve]
+    for n, region in enumerate(dict.fromkeys(regions)):
+        part = [c for c, r in zip(curve, regions, strict=True) if r == region]
+        _curve_lines(ax, part, "" if region is None else f"{region:.0f} °C region growing: ", n)
+    ax.axvline(chosen, color="k", ls="--", lw=0.8, label=f"chosen M = {chosen}")
+    ax.set(xlabel="number of local models M", ylabel="RMSE / mV (log scale)", yscale="log")
+    plain = FuncFormatter(lambda v, _pos: f"{v:g}")
+    ax.yaxis.set_major_formatter(plain)
+    ax.yaxis.set_minor_formatter(plain)
+    ax.legend(fontsize=7 if len(set(regions)) > 1 else None)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+    return path
+
+
+def _curve_lines(ax: plt.Axes, curve: list[dict], prefix: str, n: int) -> None:
+    """The lines of one part of the curve (all of it, or one temperature region's growth)."""
+    m = [c["local_models"] for c in curve]
+    ls = ("-", "--", ":", "-.")[n % 4]
 
     def values(key: str) -> np.ndarray:
         return np.array([np.nan if c[key] is None else c[key] for c in curve], dtype=float)
 
     one, free = values("one_step_rmse_mv"), values("train_freerun_rmse_mv")
     if np.allclose(one, free, rtol=1e-6, equal_nan=True):
-        ax.plot(m, free, "s-", label="training: one-step = free-run (local models without "
-                                     "output feedback)")
+        ax.plot(m, free, "s" + ls, color="C1", label=f"{prefix}training (all records): one-step "
+                                                     "= free-run (no output feedback)")
     else:
-        ax.plot(m, one, "o-", label="one-step (training)")
-        ax.plot(m, free, "s-", label="free-run (training)")
+        ax.plot(m, one, "o" + ls, color="C0", label=f"{prefix}one-step (training)")
+        ax.plot(m, free, "s" + ls, color="C1", label=f"{prefix}free-run (training)")
     val = values("validation_freerun_rmse_mv")
     if np.isfinite(val).any():
-        ax.plot(m, val, "^-", label="free-run (validation)")
-    ax.axvline(chosen, color="k", ls="--", lw=0.8, label=f"chosen M = {chosen}")
-    ax.set(xlabel="number of local models M", ylabel="RMSE / mV (log scale)", yscale="log")
-    plain = FuncFormatter(lambda v, _pos: f"{v:g}")
-    ax.yaxis.set_major_formatter(plain)
-    ax.yaxis.set_minor_formatter(plain)
-    ax.legend()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+        ax.plot(m, val, "^" + ls, color="C2",
+                label=f"{prefix}free-run (validation{', its own records' if prefix else ''})")
 
 
 def record_figure(rec: Record, path: Path, soc: np.ndarray | None = None) -> Path:
