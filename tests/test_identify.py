@@ -389,6 +389,23 @@ def test_each_temperature_region_grows_on_its_own_and_keeps_its_own_best_stage()
     assert [c["local_models"] for c in joint.curve] == list(range(2, 2 + len(joint.curve)))
 
 
+def test_arrhenius_energy_with_temperature_regions_is_chosen_within_each_level() -> None:
+    """With temperature regions the levels' own local models carry the difference between the
+    chamber temperatures; E is chosen by pre-fits of each level on its own, i.e. by the warm-up
+    within the records. The synthetic cell's R0 doubles from 25 to 10 °C but does not follow
+    its 6 K warm-up inside a record: no E with regions; without them E explains the levels."""
+    from lmncell.identification.construction import train_lmn
+    from lmncell.identification.prefit import arrhenius_groups
+
+    segs, cap = _two_chamber_cell()
+    kw = {"max_local_models": 2, "oe_refinement": False, "hysteresis": "off"}
+    assert arrhenius_groups(load_config(**kw, partition=["soc", "current", "temperature"]),
+                            segs) == [{0, 1}, {2, 3}]
+    assert train_lmn(segs, load_config(**kw), cap).info["arrhenius_k"] is None
+    joint = train_lmn(segs, load_config(**kw, temperature_regions="off"), cap)
+    assert joint.info["arrhenius_k"] >= 3000.0
+
+
 def _warming_cell(knee: bool) -> tuple[list, float]:
     """Segments at 15/25/35 °C of a synthetic cell with R(SoC, T) = R(SoC)·exp(E(1/T − 1/T_ref)),
     E = 3000 K, that warms up while it empties (so a SoC trend and a temperature trend overlap),

@@ -34,16 +34,13 @@ from lmncell.identification.prefit import (
     choose_arrhenius_with_temperature_terms,
     choose_prefit,
     choose_time_constant_scaling,
+    segment_levels,
     temperature_degree,
     temperature_levels,
     with_soc_reference_weights,
 )
 from lmncell.identification.refinement import refine_output_error
-from lmncell.identification.regions import (
-    region_boundaries,
-    segment_levels,
-    temperature_region_tree,
-)
+from lmncell.identification.regions import region_boundaries, temperature_region_tree
 from lmncell.identification.splitting import optimise_split
 from lmncell.identification.tree import (
     Design,

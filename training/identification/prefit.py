@@ -113,17 +113,50 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     # γ keeps the fit weights: the hysteresis of LFP shows most where the OCV is steep
     select: list[list[np.ndarray]] = []       # computed on the first call: only 'auto' needs it
 
-    def prefit_selection(gamma: float | None, e_k: float | None, r_knots: int = 1) -> OcvFit:
+    def selection_weights() -> list[np.ndarray]:
         if not select:
             knots = np.linspace(0, 1, cfg.ocv_knots)
             table = fixed if fixed is not None else prefit(None, None).ocv_v
             select.append([w * f for w, f in zip(
                 fit_weights, soc_reference_factors(socs, knots, table, cfg), strict=True)])
-        return prefit(gamma, e_k, r_knots, weights=select[0])
+        return select[0]
 
+    groups = arrhenius_groups(cfg, segs)
+
+    def prefit_selection(gamma: float | None, e_k: float | None, r_knots: int = 1) -> OcvFit:
+        """The pre-fit that chooses E: over all segments, or with temperature regions one per
+        level (each its own resistances and offset), their RMSE pooled."""
+        weights = selection_weights()
+        if len(groups) < 2:
+            return prefit(gamma, e_k, r_knots, weights=weights)
+        fits, masses = [], []
+        for group in groups:
+            w = [wk if k in group else np.zeros_like(wk) for k, wk in enumerate(weights)]
+            fits.append(prefit(gamma, e_k, r_knots, weights=w))
+            masses.append(float(sum(float(np.sum(wk)) for wk in w)))
+        pooled = np.sqrt(sum(f.rmse_v ** 2 * m for f, m in zip(fits, masses, strict=True))
+                         / max(sum(masses), 1e-300))
+        return dataclasses.replace(fits[0], rmse_v=float(pooled))
+
+    if len(groups) > 1:
+        progress(f"  E from pre-fits of each of the {len(groups)} temperature levels on its own "
+                 "(the temperature regions carry the differences between levels, E the "
+                 "warm-up within each)")
     e_k = _choose_arrhenius(cfg, segs, prefit_selection, progress)
     gamma = _choose_hysteresis(cfg, e_k, prefit, progress)
     return gamma, e_k, prefit(gamma, e_k, weights=ocv_weights)
+
+
+def arrhenius_groups(cfg: TrainConfig, segs: list[Segment]) -> list[set[int]]:
+    """Segment indices per temperature level (segment_levels) where the network will hold one
+    set of local models per level (temperature regions: temperature in the partition, no
+    temperature terms, regions 'auto', two or more levels); else one group of all segments."""
+    if (len(temperature_levels(segs)) < 2 or "temperature" not in cfg.partition
+            or cfg.temperature_regions != "auto" or temperature_degree(cfg, segs)):
+        return [set(range(len(segs)))]
+    levels = segment_levels(segs)
+    return [g for g in ({k for k, lv in enumerate(levels) if lv == q}
+                        for q in range(max(levels) + 1)) if g]
 
 
 def _choose_arrhenius(cfg: TrainConfig, segs: list[Segment], prefit: Callable[..., OcvFit],
@@ -209,6 +242,15 @@ def temperature_levels(segs: list[Segment]) -> list[float]:
         if not levels or t - levels[-1] >= TEMPERATURE_LEVEL_GAP_K:
             levels.append(t)
     return levels
+
+
+def segment_levels(segs: list[Segment]) -> list[int]:
+    """Per segment, the index of the temperature level (temperature_levels, coldest 0) nearest
+    its median temperature (0 for a segment without temperature)."""
+    levels = temperature_levels(segs)
+    return [0 if s.temperature_c is None or not levels
+            else int(np.argmin([abs(float(np.median(s.temperature_c)) - t) for t in levels]))
+            for s in segs]
 
 
 def temperature_degree(cfg: TrainConfig, segs: list[Segment]) -> int:

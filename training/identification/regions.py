@@ -18,7 +18,7 @@ import itertools
 import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
-from lmncell.identification.prefit import temperature_levels
+from lmncell.identification.prefit import segment_levels, temperature_levels
 from lmncell.identification.tree import Design, Tree, fit_leaves, one_step
 from lmncell.runtime.model import LmnModel
 
@@ -46,15 +46,6 @@ def region_boundaries(segs: list[Segment]) -> list[tuple[float, float]]:
         bottom = float(np.percentile(np.concatenate(high), 1))
         out.append((0.5 * (top + bottom), max(abs(bottom - top) / GAP_WIDTHS, MIN_WIDTH_K)))
     return out
-
-
-def segment_levels(segs: list[Segment]) -> list[int]:
-    """Per segment, the index of the temperature level (temperature_levels, coldest 0) nearest
-    its median temperature (0 for a segment without temperature)."""
-    levels = temperature_levels(segs)
-    return [0 if s.temperature_c is None or not levels
-            else int(np.argmin([abs(float(np.median(s.temperature_c)) - t) for t in levels]))
-            for s in segs]
 
 
 def region_weights(base: LmnModel, centre_c: float, width_k: float) -> np.ndarray:
