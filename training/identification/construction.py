@@ -247,7 +247,7 @@ class Grower:
     def record(self, tree: Tree, stop_stage: str, only: list[int] | None = None,
                label: dict | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Append the stage's curve entry (validation over the segments `only`, all by
-        default); returns its stop score (validation RMSE or AICc), Φ and the one-step error."""
+        default); returns its stop score (validation RMSE or AICc), Φ and the one-step output."""
         model, design = tree.apply(self.base), self.design
         phi, yhat = one_step(model, design)
         e = design.y - yhat
@@ -269,9 +269,9 @@ class Grower:
                       f"{1e3 * fit_fr:.2f} mV, validation{where} {1e3 * val:.2f} mV "
                       f"({time.perf_counter() - self.t_start:.1f} s)")
         score = val if stop_stage == "validation" else crit
-        return (score if np.isfinite(score) else np.inf), phi, e
+        return (score if np.isfinite(score) else np.inf), phi, yhat
 
-    def split_worst(self, tree: Tree, phi: np.ndarray, e: np.ndarray,
+    def split_worst(self, tree: Tree, phi: np.ndarray, yhat: np.ndarray,
                     weight: np.ndarray | None = None, allowed: np.ndarray | None = None
                     ) -> Tree | None:
         """The tree with its worst leaf split (weighted error Σ w·Φ_j·e², w times `weight`
@@ -280,8 +280,8 @@ class Grower:
         d = self.design
         w = d.w_fit if weight is None else d.w_fit * weight
         model = tree.apply(self.base)
+        e = d.y - yhat
         leaf_err = np.sum(w[:, None] * phi * e[:, None] ** 2, axis=0)
-        yhat = d.y - e
         for j in np.argsort(-leaf_err, kind="stable"):
             if allowed is not None and not allowed[j]:
                 continue
@@ -297,12 +297,12 @@ class Grower:
         validation error over all records (or AICc)."""
         stages, scores = [], []
         while True:
-            score, phi, e = self.record(tree, stop_stage)
+            score, phi, yhat = self.record(tree, stop_stage)
             stages.append(tree)
             scores.append(score)
             if tree.theta.shape[0] >= self.cfg.max_local_models:
                 break
-            nxt = self.split_worst(tree, phi, e)
+            nxt = self.split_worst(tree, phi, yhat)
             if nxt is None:
                 self.progress("  no leaf can be split further")
                 break
@@ -337,14 +337,14 @@ def grow_regions_separately(grower: Grower, tree: Tree, levels: list[int]) -> Tr
         in_region = (sample_region == r).astype(float)
         stages, scores = [], []
         while True:
-            score, phi, e = grower.record(tree, "validation", only, label)
+            score, phi, yhat = grower.record(tree, "validation", only, label)
             stages.append(tree)
             scores.append(score)
             mass = np.stack([phi[sample_region == q].sum(axis=0) for q in range(n_regions)])
             mine = np.argmax(mass, axis=0) == r
             if int(mine.sum()) >= share:
                 break
-            nxt = grower.split_worst(tree, phi, e, in_region, mine)
+            nxt = grower.split_worst(tree, phi, yhat, in_region, mine)
             if nxt is None:
                 grower.progress(f"  no leaf of the {temps[r]:.0f} °C region can be split further")
                 break
