@@ -125,7 +125,8 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
 
     def prefit_selection(gamma: float | None, e_k: float | None, r_knots: int = 1) -> OcvFit:
         """The pre-fit that chooses E: over all segments, or with temperature regions one per
-        level (each its own resistances and offset), their RMSE pooled."""
+        level (each its own resistances, and its own OCV where no test fixes it), their RMSE
+        pooled."""
         weights = selection_weights()
         if len(groups) < 2:
             return prefit(gamma, e_k, r_knots, weights=weights)
