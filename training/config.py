@@ -181,7 +181,9 @@ class TrainConfig:
     over that region's records is lowest (within 2 %) is kept, so that each chamber
     temperature gets the local models its own records support, as if trained alone) or
     "joint" (one growth over all regions, the worst leaf anywhere, M by the validation error
-    over all records: the colder records, worse fitted, took most splits and decided M).
+    over all records: the colder records, worse fitted, took most splits and decided M;
+    also what "separate" does unless the stop is the validation error over "block"
+    validation samples, which every region's records then hold).
     Panasonic 25 + 10 °C drive cycles, C/20 OCV test, leave-one-record-out through hidden
     pauses, 20–80 % / whole record mV, joint → separate: 10 °C held out 8.94 / 12.75 →
     8.72 / 11.90 (chamber temperature only 9.17 / 13.07 → 8.96 / 12.34), 25 °C held out

@@ -37,6 +37,7 @@ from lmncell.identification.prefit import (
     segment_levels,
     temperature_degree,
     temperature_levels,
+    uses_temperature_regions,
     with_soc_reference_weights,
 )
 from lmncell.identification.refinement import refine_output_error
@@ -184,8 +185,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         progress("  temperature acts through the temperature terms, not through splits: "
                  "sigmoid splits between a few training temperatures interpolate badly")
     cfg = resolve_max_local_models(cfg, segs, bool(fixed_axes), progress)
-    boundaries = (region_boundaries(segs) if cfg.temperature_regions == "auto"
-                  and "temperature" in cfg.partition and not fixed_axes else [])
+    boundaries = region_boundaries(segs) if uses_temperature_regions(cfg, segs) else []
     if boundaries:
         fixed_axes = frozenset({cfg.partition.index("temperature")})
         progress("  temperature regions: fixed splits at " + ", ".join(
@@ -279,13 +279,12 @@ class Grower:
         be split; None where none can."""
         d = self.design
         w = d.w_fit if weight is None else d.w_fit * weight
-        model = tree.apply(self.base)
         e = d.y - yhat
         leaf_err = np.sum(w[:, None] * phi * e[:, None] ** 2, axis=0)
         for j in np.argsort(-leaf_err, kind="stable"):
             if allowed is not None and not allowed[j]:
                 continue
-            r_rest = d.y - (yhat - phi[:, j] * (d.X @ model.theta[j]))
+            r_rest = d.y - (yhat - phi[:, j] * (d.X @ tree.theta[j]))
             split = optimise_split(d.X, d.y, d.w_fit, d.Z, phi[:, j], r_rest, self.cfg,
                                    self.fixed_axes, d.fit)
             if split is not None:
@@ -328,19 +327,20 @@ def grow_regions_separately(grower: Grower, tree: Tree, levels: list[int]) -> Tr
     design, n_regions = grower.design, max(levels) + 1
     sample_region = np.concatenate([np.full(b - a, levels[k])
                                     for k, (a, b) in enumerate(design.bounds)])
+    region_samples = [sample_region == q for q in range(n_regions)]
     share = max(grower.cfg.max_local_models // n_regions, 1)
-    temps = region_temperatures(grower.segs, levels)
+    temps = temperature_levels(grower.segs)
     for r in range(n_regions):
         only = [k for k, lv in enumerate(levels) if lv == r]
         label = {"temperature_region_c": temps[r],
                  "validation_records": f"{temps[r]:.0f} °C records"}
-        in_region = (sample_region == r).astype(float)
+        in_region = region_samples[r].astype(float)
         stages, scores = [], []
         while True:
             score, phi, yhat = grower.record(tree, "validation", only, label)
             stages.append(tree)
             scores.append(score)
-            mass = np.stack([phi[sample_region == q].sum(axis=0) for q in range(n_regions)])
+            mass = np.stack([phi[m].sum(axis=0) for m in region_samples])
             mine = np.argmax(mass, axis=0) == r
             if int(mine.sum()) >= share:
                 break
@@ -354,14 +354,6 @@ def grow_regions_separately(grower: Grower, tree: Tree, levels: list[int]) -> Tr
         grower.progress(f"  {temps[r]:.0f} °C region: {pick} split(s) kept by its records' "
                         "validation error")
     return tree
-
-
-def region_temperatures(segs: list[Segment], levels: list[int]) -> list[float]:
-    """Median cell temperature (°C) of each region's segments."""
-    return [float(np.median(np.concatenate([np.asarray(s.temperature_c, dtype=float)
-                                            for s, lv in zip(segs, levels, strict=True)
-                                            if lv == r])))
-            for r in range(max(levels) + 1)]
 
 
 DEPLETION_HOLD_FRACTION = 0.7   # the depletion factor is held below this share of the lowest

@@ -149,15 +149,21 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
 
 
 def arrhenius_groups(cfg: TrainConfig, segs: list[Segment]) -> list[set[int]]:
-    """Segment indices per temperature level (segment_levels) where the network will hold one
-    set of local models per level (temperature regions: temperature in the partition, no
-    temperature terms, regions 'auto', two or more levels); else one group of all segments."""
-    if (len(temperature_levels(segs)) < 2 or "temperature" not in cfg.partition
-            or cfg.temperature_regions != "auto" or temperature_degree(cfg, segs)):
+    """Segment indices per temperature level (segment_levels) where the network holds one set
+    of local models per level (uses_temperature_regions); else one group of all segments."""
+    if not uses_temperature_regions(cfg, segs):
         return [set(range(len(segs)))]
     levels = segment_levels(segs)
     return [g for g in ({k for k, lv in enumerate(levels) if lv == q}
                         for q in range(max(levels) + 1)) if g]
+
+
+def uses_temperature_regions(cfg: TrainConfig, segs: list[Segment]) -> bool:
+    """Whether the network holds one set of local models per chamber-temperature level
+    (lmncell.identification.regions): temperature_regions 'auto', temperature in the (resolved)
+    partition, no temperature terms carrying it, and two or more levels."""
+    return (cfg.temperature_regions == "auto" and "temperature" in cfg.partition
+            and not temperature_degree(cfg, segs) and len(temperature_levels(segs)) >= 2)
 
 
 def _choose_arrhenius(cfg: TrainConfig, segs: list[Segment], prefit: Callable[..., OcvFit],

@@ -31,7 +31,6 @@ def _baselines_first(voltages: dict[str, np.ndarray]) -> list[tuple[str, np.ndar
     return sorted(voltages.items(), key=lambda kv: kv[0] in MAIN)
 
 
-
 def _style(name: str) -> dict:
     """Baselines thin and faint behind; the LMN (and the measurement) in front."""
     if name in MAIN:
