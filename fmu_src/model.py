@@ -1,8 +1,8 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 5 (versions 1 to 4, which have no ``thermal``, no
-``regressors.depletion``, no ``current_delay_s`` or no ``regressors.time_constant_activation_k``
-key, are read too).
+Format ``lmncell-model``, version 6 (versions 1 to 5, which have no ``thermal``, no
+``regressors.depletion``, no ``current_delay_s``, no ``regressors.time_constant_activation_k``
+or no ``depletion.fast_tau_s`` key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
@@ -28,13 +28,16 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
   regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K),
   ``depletion`` (version 3; null or absent: none, or {``tau_s``, ``power``, ``soc_scale``,
-  ``soc_min``}: the regressor d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC, soc_min))^power, LP_τ the
-  filters' low-pass state of time constant τ = ``tau_s``: a polarisation that grows as the cell
-  nears empty, the voltage collapse before cut-off; its coefficient is a resistance at
-  SoC = soc_scale, ≥ 0 in an RC-ladder model).
-  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, d, OCV, SoC, 1,
-  then those of the temperature terms ``<column>*dT^1`` …, (absent ones left out); ``columns``
-  lists their names.
+  ``soc_min``, ``fast_tau_s``}: the regressor d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC,
+  soc_min))^power, LP_τ the filters' low-pass state of time constant τ = ``tau_s``: a
+  polarisation that grows as the cell nears empty, the voltage collapse before cut-off; its
+  coefficient is a resistance at SoC = soc_scale, ≥ 0 in an RC-ladder model. ``fast_tau_s``
+  (version 6; null or absent: none): a second such regressor d2(k), the same factor times the
+  low-pass state LP_τ2(i) of that faster time constant: a collapse that follows the load within
+  seconds and recovers as fast at rest).
+  The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, d, d2,
+  OCV, SoC, 1, then those of the temperature terms ``<column>*dT^1`` …, (absent ones left
+  out); ``columns`` lists their names.
 - ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
   ``center`` and ``scale`` (z = (raw − center)/scale).
 - ``gating``: ``mode`` ``"none"`` or ``"current_sign"`` (separate charge and discharge trees;
@@ -78,9 +81,10 @@ import numpy as np
 from .thermal import ThermalModel
 
 FORMAT = "lmncell-model"
-VERSION = 5
+DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
+VERSION = 6
 MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
-READABLE_VERSIONS = (1, 2, 3, 4, 5)
+READABLE_VERSIONS = (1, 2, 3, 4, 5, 6)
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -95,12 +99,14 @@ class ModelFileError(ValueError):
 class Depletion:
     """The depletion regressor d(k) = g(T)·LP_τ(i)·factor(SoC) (see the module docstring):
     tau_s (s) picks the filters' low-pass state, factor(SoC) = (soc_scale/max(SoC, soc_min))^power
-    (1 at SoC = soc_scale, held below soc_min)."""
+    (1 at SoC = soc_scale, held below soc_min); with fast_tau_s (s) a second one,
+    d2(k) = g(T)·LP_τ2(i)·factor(SoC)."""
 
     tau_s: float
     power: float
     soc_scale: float = 0.1
     soc_min: float = 0.02
+    fast_tau_s: float | None = None    # the second regressor d2(k)'s time constant, or none
 
     def factor(self, soc: float) -> float:
         """(soc_scale/max(SoC, soc_min))^power for one SoC (an integer power by repeated
@@ -125,18 +131,28 @@ class Depletion:
             out = out * q
         return out
 
-    def state_index(self, filters: list[tuple[float, float]]) -> int:
-        """Index of the low-pass state of time constant tau_s among the filters' states
-        [fast_1, slow_1, fast_2, …] (the first that has it)."""
-        taus = [tau for f in filters for tau in f]
-        if self.tau_s not in taus:
-            raise ValueError(f"depletion tau_s {self.tau_s:g} s is none of the filters' time "
+    def state_index(self, filters: list[tuple[float, float]], tau_s: float | None = None) -> int:
+        """Index of the low-pass state of time constant tau_s (default: the d regressor's)
+        among the filters' states [fast_1, slow_1, fast_2, …] (the first that has it)."""
+        tau = self.tau_s if tau_s is None else tau_s
+        taus = [t for f in filters for t in f]
+        if tau not in taus:
+            raise ValueError(f"depletion time constant {tau:g} s is none of the filters' time "
                              f"constants {taus}")
-        return taus.index(self.tau_s)
+        return taus.index(tau)
+
+    def state_indices(self, filters: list[tuple[float, float]]) -> list[int]:
+        """The low-pass states of the regressors in column order: [d] or [d, d2]."""
+        taus = [self.tau_s] + ([] if self.fast_tau_s is None else [self.fast_tau_s])
+        return [self.state_index(filters, tau) for tau in taus]
+
+    def columns(self) -> list[str]:
+        """The regressors' column names: DEPLETION_COLUMNS, d2(k) where fast_tau_s is set."""
+        return list(DEPLETION_COLUMNS[:1 if self.fast_tau_s is None else 2])
 
     def to_dict(self) -> dict:
         return {"tau_s": self.tau_s, "power": self.power, "soc_scale": self.soc_scale,
-                "soc_min": self.soc_min}
+                "soc_min": self.soc_min, "fast_tau_s": self.fast_tau_s}
 
 
 @dataclass
@@ -254,7 +270,7 @@ class LmnModel:
         if self.hysteresis_gamma is not None:
             cols.append("h(k)")
         if self.depletion is not None:
-            cols.append("d(k)")
+            cols += self.depletion.columns()
         if self.ocv_input:
             cols.append("ocv(k)")
         if self.soc_input:
@@ -269,7 +285,7 @@ class LmnModel:
         the offset (resistances, time-constant gains and the OCV offset varying smoothly with
         temperature beyond the Arrhenius gain); not the depletion, OCV and SoC columns."""
         return [c for c in self._plain_columns()[self.output_lags:]
-                if c not in ("d(k)", "ocv(k)", "soc(k)")]
+                if c not in (*DEPLETION_COLUMNS, "ocv(k)", "soc(k)")]
 
     def temperature_source_indices(self) -> list[int]:
         """Positions of temperature_term_sources() among the exogenous columns (those after the
@@ -373,20 +389,27 @@ def _thermal(doc: object, source: str) -> ThermalModel | None:
         raise ModelFileError(str(exc)) from None
 
 
-def _depletion(doc: object, filters: list[tuple[float, float]], where: str
+def _depletion(doc: object, filters: list[tuple[float, float]], where: str, version: int
                ) -> Depletion | None:
     """regressors.depletion of a model document, or None (absent or null)."""
     if doc is None:
         return None
+    if version < 6 and isinstance(doc, dict) and doc.get("fast_tau_s") is not None:
+        raise ModelFileError(f"{where}: 'depletion' has 'fast_tau_s', which model files have "
+                             f"from version 6 on; this file says version {version}")
     keys = {"tau_s", "power", "soc_scale", "soc_min"}
-    if (not isinstance(doc, dict) or set(doc) != keys
+    if (not isinstance(doc, dict) or not keys <= set(doc) <= keys | {"fast_tau_s"}
             or not all(isinstance(doc[k], (int, float)) and not isinstance(doc[k], bool)
-                       and math.isfinite(doc[k]) and doc[k] > 0 for k in keys)):
-        raise ModelFileError(f"{where}: 'depletion' must be null or an object with exactly the "
-                             f"keys {sorted(keys)}, each a finite number > 0, got {doc!r}")
-    dep = Depletion(**{k: float(doc[k]) for k in keys})
+                       and math.isfinite(doc[k]) and doc[k] > 0
+                       for k in doc if doc[k] is not None or k != "fast_tau_s")):
+        raise ModelFileError(f"{where}: 'depletion' must be null or an object with the keys "
+                             f"{sorted(keys)} and optionally 'fast_tau_s' (null: none), each a "
+                             f"finite number > 0, got {doc!r}")
+    fast = doc.get("fast_tau_s")
+    dep = Depletion(**{k: float(doc[k]) for k in keys},
+                    fast_tau_s=None if fast is None else float(fast))
     try:
-        dep.state_index(filters)
+        dep.state_indices(filters)
     except ValueError as exc:
         raise ModelFileError(f"{where}: {exc}") from None
     return dep
@@ -525,7 +548,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         tau_activation_k=None if tau_activation is None else float(tau_activation),
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
-        depletion=_depletion(reg.get("depletion"), filters, w),
+        depletion=_depletion(reg.get("depletion"), filters, w, ver),
         thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
         limits=dict(doc.get("limits", {})), cell=dict(cell),
         noise=_noise(doc.get("noise", {}), source),

@@ -246,13 +246,14 @@ class SocObserver:
         self.state_columns = state_columns(model)
         self._fd_states = "filtered_current" in model.partition_variables
         exo_cols = model.columns()[model.output_lags:]
-        self._depletion = ((exo_cols.index("d(k)"),
-                            self.lowpass_state[self.stepper.exo.depletion_state])
-                           if model.depletion is not None else None)
+        # (column, EKF low-pass slot) of each depletion regressor
+        self._depletion = [(exo_cols.index(c), self.lowpass_state[k]) for c, k in zip(
+            model.depletion.columns(), self.stepper.exo.depletion_states, strict=True)
+                           ] if model.depletion is not None else []
         matrices = gradient_matrices(self.state_columns, model.n_exo)
         self._gradient_powers = len(matrices)
         self._gradient = local_gradients(matrices, model.theta[:, model.output_lags:],
-                                         self._depletion[0] if self._depletion else None)
+                                         [c for c, _ in self._depletion])
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._lowpass_coef = coef
         self._ekf_fg = (ekf_transition(coef, cov.shape[0]) if kind == "ekf"
@@ -368,8 +369,11 @@ class SocObserver:
         out = state_gradient(per_validity, len(self.state_columns), self._gradient_powers, gain,
                              (temperature - self.model.reference_temperature_c)
                              / TEMPERATURE_STEP_K)
-        if self._depletion is not None:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
-            out[self._depletion[1]] += per_validity[-1] * gain * exo.depletion_factor(soc)
+        if self._depletion:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
+            factor = gain * exo.depletion_factor(soc)
+            tail = per_validity[len(per_validity) - len(self._depletion):]
+            for (_, slot), coefficient in zip(self._depletion, tail, strict=True):
+                out[slot] += coefficient * factor
         return out
 
     # ----- one step ------------------------------------------------------------------------
@@ -678,13 +682,12 @@ def gradient_matrices(columns: list[list[tuple[int, int, bool, float]]], n_exo: 
 
 
 def local_gradients(matrices: list[tuple[np.ndarray, np.ndarray]], theta_exo: np.ndarray,
-                    depletion_column: int | None) -> np.ndarray:
+                    depletion_columns: list[int]) -> np.ndarray:
     """Per local model (rows) the blocks [θ_j·A_0ᵀ, θ_j·B_0ᵀ, θ_j·A_1ᵀ, …] of gradient_matrices
-    (θ_j: its exogenous coefficients), then its depletion coefficient where the model has
-    one: the validities times this matrix give state_gradient its terms in one product."""
+    (θ_j: its exogenous coefficients), then its coefficient of each depletion regressor the
+    model has: the validities times this matrix give state_gradient its terms in one product."""
     blocks = [theta_exo @ m.T for pair in matrices for m in pair]
-    if depletion_column is not None:
-        blocks.append(theta_exo[:, depletion_column:depletion_column + 1])
+    blocks += [theta_exo[:, c:c + 1] for c in depletion_columns]
     return np.ascontiguousarray(np.hstack(blocks))
 
 

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import TEMPERATURE_STEP_K, LmnModel
+from .model import DEPLETION_COLUMNS, TEMPERATURE_STEP_K, LmnModel
 from .thermal import heat_w, next_temperature, rested_temperature, step_coefficients
 
 CHARGE, DISCHARGE = 1, 2
@@ -102,7 +102,8 @@ class ExoStepper:
                               ("soc", "current", "filtered_current", "temperature"))
         self._temperature_source_cols = model.temperature_source_indices()
         dep = model.depletion
-        self.depletion_state = None if dep is None else dep.state_index(model.filters)
+        # the low-pass states of the depletion regressors d (and d2), in column order
+        self.depletion_states = [] if dep is None else dep.state_indices(model.filters)
         # the last features' (temperature, g(T)) and (SoC, depletion factor), for the
         # observers' derivatives of the same step
         self.last_gain = (math.nan, 1.0)
@@ -162,9 +163,10 @@ class ExoStepper:
             s.direction = DISCHARGE
 
     def features(self, s: ExoState, current_a: float, temperature_c: float,
-                 x: np.ndarray, z: np.ndarray) -> float:
+                 x: np.ndarray, z: np.ndarray) -> list[float]:
         """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken;
-        returns the depletion regressor's g(T)·LP_τ(i) (its SoC factor apart; 0 without one)."""
+        returns each depletion regressor's g(T)·LP_τ(i) (its SoC factor apart), in column order
+        (empty without one)."""
         m = self.model
         g = 1.0 if m.arrhenius_k is None else self.temperature_gain(temperature_c)
         self.last_gain = (temperature_c, g)
@@ -180,13 +182,13 @@ class ExoStepper:
         if m.hysteresis_gamma is not None:
             x[col] = s.h
             col += 1
-        source = 0.0
-        if m.depletion is not None:
-            source = g * lp[self.depletion_state]
+        sources = [g * lp[k] for k in self.depletion_states]
+        if sources:
             factor = m.depletion.factor(s.soc)
             self.last_depletion = (s.soc, factor)
-            x[col] = source * factor
-            col += 1
+            for source in sources:
+                x[col] = source * factor
+                col += 1
         if m.ocv_input:
             x[col] = float(m.ocv(s.soc))
             col += 1
@@ -207,7 +209,7 @@ class ExoStepper:
             z[z_filtered] = lp[1] if lp else current_a
         if z_temperature is not None:
             z[z_temperature] = temperature_c
-        return source
+        return sources
 
     def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
         """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
@@ -370,15 +372,16 @@ class _OneSample:
         self.block[:self.n_nodes, :node_w.shape[1]] = node_w
         self.block[self.n_nodes:, node_w.shape[1]:] = theta_exo
         # beside: (parent slot, first side's slot, other side's slot, ∂act/∂SoC) of each node
-        # in order (none without a SoC partition input), and (0: soc(k), 1: ocv(k), 2: d(k);
-        # each local model's coefficient) of the SoC regressors the model has
+        # in order (none without a SoC partition input), and (0: soc(k), 1: ocv(k), 2: d(k),
+        # 3: d2(k); each local model's coefficient) of the SoC regressors the model has
         pv = model.partition_variables
         self.slope_plan = ([(into, out, out + 1, weights[node][1][pv.index("soc")])
                             for (into, out), node in zip(self.plan, order, strict=True)]
                            if "soc" in pv else [])
         exo = model.columns()[na:]
         self.slope_columns = [(which, theta_exo[:, exo.index(name)].tolist())
-                              for which, name in enumerate(("soc(k)", "ocv(k)", "d(k)"))
+                              for which, name in enumerate(("soc(k)", "ocv(k)",
+                                                            *DEPLETION_COLUMNS))
                               if name in exo]
         self.gates = [GATE_CODES[g] for g in model.leaf_gates]
         self.gated = model.gating_mode == "current_sign"
@@ -511,8 +514,9 @@ class CellStepper:
         self._soc_entries = [(1 + pv.index("soc"), False)] if "soc" in pv else []
         self._soc_entries += [(1 + d + exo.index(name), name == "ocv(k)")
                               for name in ("ocv(k)", "soc(k)") if name in exo]
-        self._depletion_entry = 1 + d + exo.index("d(k)") if "d(k)" in exo else None
-        self._depletion_source = 0.0     # the last step's g(T)·LP_τ(i) (ExoStepper.features)
+        self._depletion_entries = [1 + d + exo.index(c) for c in DEPLETION_COLUMNS if c in exo]
+        # the last step's g(T)·LP_τ(i) of each depletion regressor (ExoStepper.features)
+        self._depletion_sources = [0.0] * len(self._depletion_entries)
         self.voltage_v = float(model.ocv(soc0)) + y0 if model.relative_ocv else y0
         self.validity: Sequence[float] = [0.0] * model.n_local_models   # Φ of the last step
         self._last_ocv = (math.nan, math.nan)      # (SoC, OCV) of the last step
@@ -533,7 +537,7 @@ class CellStepper:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
         m, s, exo = self.model, self.state, self.exo
         exo.update(s, current_a, temperature_c)
-        self._depletion_source = exo.features(s, current_a, temperature_c, self._x, self._z)
+        self._depletion_sources = exo.features(s, current_a, temperature_c, self._x, self._z)
         exo.shift(s, current_a)
         one = self._one
         self._products = (one.block @ self._u).tolist()
@@ -562,9 +566,11 @@ class CellStepper:
         ocv = [one.ocv(soc) for soc in socs]
         for index, is_ocv in self._soc_entries:
             rows[:, index] = ocv if is_ocv else socs
-        if self._depletion_entry is not None:
-            source, factor = self._depletion_source, self.model.depletion.factor
-            rows[:, self._depletion_entry] = [source * factor(soc) for soc in socs]
+        if self._depletion_entries:
+            factors = [self.model.depletion.factor(soc) for soc in socs]
+            for entry, source in zip(self._depletion_entries, self._depletion_sources,
+                                     strict=True):
+                rows[:, entry] = [source * factor for factor in factors]
         return (rows @ one.block.T).tolist(), ocv
 
     def voltages_at_socs(self, socs: list[float]) -> list[float]:
@@ -607,7 +613,7 @@ class CellStepper:
                 ocv0 = self.ocv(soc)
                 d_hi, d_lo = ocv_hi - ocv0, ocv_lo - ocv0
             else:
-                source, factor = self._depletion_source, m.depletion.factor
+                source, factor = self._depletion_sources[which - 2], m.depletion.factor
                 at = source * self.exo.depletion_factor(soc)
                 d_hi, d_lo = source * factor(hi) - at, source * factor(lo) - at
             u_hi += d_hi * sum(map(mul, phi_hi, column))

@@ -61,8 +61,8 @@ class VectorCells:
         ocv0 = m.ocv(self.soc) if m.relative_ocv else 0.0
         self.voltage_v = ocv0 + self.r * y0
         self._src = m.temperature_source_indices()
-        self._depletion_state = (None if m.depletion is None
-                                 else m.depletion.state_index(m.filters))
+        self._depletion_states = ([] if m.depletion is None
+                                  else m.depletion.state_indices(m.filters))
 
     # ----- the step ---------------------------------------------------------------------------
     def _features(self, i: np.ndarray, t: np.ndarray, soc: np.ndarray, lp: np.ndarray,
@@ -74,7 +74,8 @@ class VectorCells:
         if m.hysteresis_gamma is not None:
             cols.append(h)
         if m.depletion is not None:
-            cols.append(g * lp[:, self._depletion_state] * m.depletion.factors(soc))
+            factor = m.depletion.factors(soc)
+            cols += [g * lp[:, k] * factor for k in self._depletion_states]
         if m.ocv_input:
             cols.append(m.ocv(soc))
         if m.soc_input:

@@ -238,6 +238,35 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     assert resolve_max_local_models(own, two, temperature_fixed=False).max_local_models == 5
 
 
+def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_regions() -> None:
+    """depletion_fast_tau_s "auto": the filters' 5 s where the records lie at two chamber
+    temperatures and the network gets one set of local models per temperature, none at one
+    temperature, with temperature terms (three and more) or without a depletion regressor;
+    a given value kept; ConfigError for d's own time constant or one no filter has."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import resolve_fast_depletion, resolve_partition
+
+    def seg(t0: float) -> Segment:
+        n = 100
+        return Segment("s", np.arange(1.0, n + 1), -np.ones(n), np.full(n, 3.6),
+                       t0 + np.linspace(0.0, 6.0, n), 1.0, np.linspace(1.0, 0.97, n), np.ones(n))
+
+    def fast(segs: list[Segment], **settings) -> float:
+        cfg = resolve_partition(load_config(**settings), segs)
+        return resolve_fast_depletion(cfg, segs).depletion_fast_tau_s
+
+    two, one, three = [seg(25.0), seg(10.0)], [seg(25.0), seg(26.0)], [seg(-5.0), seg(5.0),
+                                                                       seg(45.0)]
+    assert fast(two) == 5.0 and fast(one) == 0.0 and fast(three) == 0.0
+    assert fast(two, temperature_regions="off") == 0.0 and fast(two, depletion_power=0) == 0.0
+    assert fast(two, depletion_fast_tau_s=0) == 0.0 and fast(one, depletion_fast_tau_s=30) == 30.0
+    with pytest.raises(ConfigError, match="expected a time constant other than"):
+        fast(one, depletion_fast_tau_s=150)
+    with pytest.raises(ConfigError, match="depletion_fast_tau_s' = 7: expected one of the "
+                                          "filters' time constants"):
+        load_config(depletion_fast_tau_s=7)
+
+
 @pytest.mark.parametrize("kw, message", [
     ({"partition": ["soc", "pressure"]}, "'partition'"),
     ({"filters": [[100.0, 5.0]]}, "'filters'"),

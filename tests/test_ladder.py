@@ -69,6 +69,25 @@ def test_ladder_solution_equals_least_squares_where_that_is_feasible_and_bounds_
     assert ladder.C[k] @ theta == pytest.approx(0.0, abs=1e-9)
 
 
+def test_both_depletion_resistances_are_held_non_negative() -> None:
+    """With the fast depletion regressor d2(k) the ladder has R_depletion_fast ≥ 0 beside
+    R_depletion ≥ 0: a fit whose d2 coefficient comes out negative ends on 0."""
+    cfg = load_config(hysteresis="off", temperature_scaling="off", depletion_fast_tau_s=5.0)
+    base = skeleton(cfg, 2.0, np.array([0.0, 1.0]), np.array([3.3, 4.1]), None,
+                    np.zeros(1), np.ones(1))
+    ladder = ladder_for(base)
+    assert ladder is not None and ladder.names.count("R_depletion_fast") == 1
+    col = base.columns().index("d2(k)")
+    row = ladder.C[ladder.names.index("R_depletion_fast")]
+    assert row[col] == 1.0 and np.count_nonzero(row) == 1
+    rng = np.random.default_rng(2)
+    X = rng.standard_normal((400, ladder.C.shape[1]))
+    theta = np.linalg.lstsq(ladder.C, np.full(ladder.C.shape[0], 0.01), rcond=None)[0]
+    theta[col] = -0.02
+    fitted = ladder.solve(X, X @ theta, np.ones(400))
+    assert ladder.holds(fitted, 1e-12) and fitted[col] == pytest.approx(0.0, abs=1e-9)
+
+
 def test_offset_bound_holds_the_local_ocv_offset_within_it() -> None:
     """With offset_bound_v the ladder also bounds |U_off|: a fit whose least-squares offset
     lies within it is unchanged, one beyond it ends on the bound."""

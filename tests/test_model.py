@@ -21,13 +21,16 @@ from lmncell.runtime.vector import VectorCells
 
 
 def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
-                      temperature_terms: int = 0, output_lags: int = 0):
+                      temperature_terms: int = 0, output_lags: int = 0,
+                      fast_depletion: bool = False):
     """A model with a tree of n_splits random oblique splits and random stable local models
-    (ARX with output_lags > 0)."""
+    (ARX with output_lags > 0); fast_depletion: with the second depletion regressor d2(k)
+    (τ2 = 5 s)."""
     rng = np.random.default_rng(0)
     cfg = load_config(partition=["soc", "current", "temperature"][:d], pre_partition=gating,
                       output_lags=output_lags,
-                      local_model_form="free" if output_lags else "auto")
+                      local_model_form="free" if output_lags else "auto",
+                      depletion_fast_tau_s=5.0 if fast_depletion else 0)
     base = skeleton(cfg, 2.0, np.linspace(0, 1, 5), np.linspace(3.0, 3.4, 5), 50.0,
                     np.zeros(d), np.ones(d), temperature_terms)
     p = len(base.columns())
@@ -54,9 +57,10 @@ def test_validities_sum_to_one(gating: str) -> None:
     assert np.allclose(Phi.sum(axis=1), 1.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("temperature_terms", [0, 2])
-def test_batch_and_step_paths_agree(temperature_terms: int) -> None:
-    m = random_tree_model("current_sign", temperature_terms=temperature_terms)
+@pytest.mark.parametrize("temperature_terms, fast", [(0, False), (2, False), (0, True)])
+def test_batch_and_step_paths_agree(temperature_terms: int, fast: bool) -> None:
+    m = random_tree_model("current_sign", temperature_terms=temperature_terms,
+                          fast_depletion=fast)
     rng = np.random.default_rng(2)
     cur = np.repeat(rng.normal(0, 2, 300), 5)
     temp = 20.0 + 10.0 * np.sin(np.arange(cur.size) / 200.0)
@@ -94,13 +98,15 @@ def test_step_path_takes_any_node_numbering() -> None:
     assert np.max(np.abs(np.subtract(vb, simulate(r, cur, temp, 0.6).voltage_v))) <= 1e-12
 
 
-@pytest.mark.parametrize("temperature_terms", [0, 2])
-def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int) -> None:
+@pytest.mark.parametrize("temperature_terms, fast", [(0, False), (2, False), (0, True)])
+def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int,
+                                                         fast: bool) -> None:
     """CellStepper.outputs_at_socs (the observers' measurement model) equals the batch path
     (LmnModel.blend on the step's regressors with the SoC replaced), and at the step's own
     SoC the step's voltage and validities; voltages_at_socs and local_voltages_at_socs give
     the same voltages and local voltages."""
-    m = random_tree_model("current_sign", temperature_terms=temperature_terms)
+    m = random_tree_model("current_sign", temperature_terms=temperature_terms,
+                          fast_depletion=fast)
     st = CellStepper(m, 0.7, temperature_c=18.0)
     rng = np.random.default_rng(4)
     for i in rng.normal(0, 2, 40):
@@ -113,12 +119,13 @@ def test_outputs_at_other_socs_are_the_batch_model_there(temperature_terms: int)
     assert st.local_voltages_at_socs(socs) == [local for _, _, local in got]
     na = m.output_lags
     assert m.depletion is not None             # the SoC enters its regressor d(k) too
-    d_col = m.columns().index("d(k)") - na
+    assert m.depletion.columns() == (["d(k)", "d2(k)"] if fast else ["d(k)"])
+    d_cols = [m.columns().index(c) - na for c in m.depletion.columns()]
     for soc, (u, phi, local) in zip(socs, got, strict=True):
         z = st._z.copy()
         z[m.partition_variables.index("soc")] = soc
         x = st._x.copy()
-        x[d_col] = st._x[d_col] / m.depletion.factor(st.soc) * m.depletion.factor(soc)
+        x[d_cols] = st._x[d_cols] / m.depletion.factor(st.soc) * m.depletion.factor(soc)
         A, b, Phi = m.blend(x[None, :], m.normalise(z[None, :]),
                             np.array([st.state.direction]))
         ocv = float(m.ocv(soc))
@@ -158,7 +165,7 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=6), r"version 6; this LMNCell reads versions \[1, 2, 3, 4, 5\]"),
+    (lambda d: d.update(version=7), r"version 7; this LMNCell reads versions \[1, 2, 3, 4, 5, 6\]"),
     (lambda d: d["regressors"].update(time_constant_activation_k=-5.0),
      r"'time_constant_activation_k' is -5.0, expected null or a number of K within 0…10000"),
     (lambda d: d["regressors"].update(time_constant_activation_k="1500"),
@@ -168,7 +175,7 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
     (lambda d: d["regressors"].update(depletion={"tau_s": 150.0}), "'depletion' must be null"),
     (lambda d: d["regressors"]["depletion"].update(power=-1.0), "'depletion' must be null"),
     (lambda d: d["regressors"]["depletion"].update(tau_s=7.0),
-     "depletion tau_s 7 s is none of the filters' time constants"),
+     "depletion time constant 7 s is none of the filters' time constants"),
     (lambda d: d["regressors"].update(depletion=None), "theta has shape"),
     (lambda d: d.update(version=True), "version True"),
     (lambda d: d.update(thermal={"resistance_k_per_w": 2.0}), "'thermal' must be null"),
@@ -237,6 +244,48 @@ def test_depletion_regressor_is_the_low_pass_current_times_the_soc_factor() -> N
     assert abs(batch[-1] - st.voltage_v) <= 1e-9
 
 
+def test_fast_depletion_regressor_is_the_fast_low_pass_current_times_the_same_factor(
+        tmp_path) -> None:
+    """d2(k) = g(T)·LP_τ2(i)·factor(SoC), τ2 the filters' 5 s state, the column after d(k),
+    in the step, the batch path and the vectorised stepper; the model file keeps τ2, a
+    version-5 file may not have it, and one without it loads as before."""
+    m = random_tree_model(temperature_terms=0, fast_depletion=True)
+    assert m.depletion.fast_tau_s == 5.0
+    exo = m.columns()[m.output_lags:]
+    assert exo.index("d2(k)") == exo.index("d(k)") + 1
+    assert "d2(k)" not in m.temperature_term_sources()
+    st, cells = CellStepper(m, 0.15), VectorCells(m, 0.15, n=1)
+    rng = np.random.default_rng(8)
+    cur = rng.normal(-2.0, 1.5, 300)
+    slow, fast = 0.0, 0.0
+    a_slow, a_fast = math.exp(-m.sample_time_s / 150.0), math.exp(-m.sample_time_s / 5.0)
+    for i in cur:
+        st.step(float(i), 25.0)
+        slow = a_slow * slow + (1.0 - a_slow) * float(i)
+        fast = a_fast * fast + (1.0 - a_fast) * float(i)
+        factor = (0.1 / max(st.soc, 0.02)) ** 4
+        assert st._x[exo.index("d(k)")] == pytest.approx(slow * factor, rel=1e-12, abs=1e-15)
+        assert st._x[exo.index("d2(k)")] == pytest.approx(fast * factor, rel=1e-12, abs=1e-15)
+        assert cells.step(np.array([i]), 25.0)[0] == pytest.approx(st.voltage_v, abs=1e-9)
+    assert abs(simulate(m, cur, None, 0.15).voltage_v[-1] - st.voltage_v) <= 1e-9
+    p = tmp_path / "fast.json"
+    save_model(m, p)
+    assert load_model(p).depletion == m.depletion
+    doc = json.loads(p.read_text())
+    doc["version"] = 5
+    with pytest.raises(ModelFileError, match="'fast_tau_s', which model files have from "
+                                             "version 6 on"):
+        model_from_dict(doc, "v5")
+    old = model_to_dict(random_tree_model())
+    old["version"] = 5
+    del old["regressors"]["depletion"]["fast_tau_s"]
+    assert model_from_dict(old, "v5").depletion.fast_tau_s is None
+    doc["version"] = 6
+    doc["regressors"]["depletion"]["fast_tau_s"] = 7.0
+    with pytest.raises(ModelFileError, match="depletion time constant 7 s is none"):
+        model_from_dict(doc, "v6")
+
+
 def test_version_1_files_without_thermal_model_still_load(tmp_path) -> None:
     doc = model_to_dict(random_tree_model())
     doc["version"] = 1
@@ -246,13 +295,14 @@ def test_version_1_files_without_thermal_model_still_load(tmp_path) -> None:
     assert load_model(p).thermal is None
 
 
-@pytest.mark.parametrize("gating", ["none", "current_sign"])
-def test_beside_is_the_voltage_beside_the_step(gating: str) -> None:
+@pytest.mark.parametrize("gating, fast", [("none", False), ("current_sign", False),
+                                          ("current_sign", True)])
+def test_beside_is_the_voltage_beside_the_step(gating: str, fast: bool) -> None:
     """CellStepper.beside (the EKF's secant voltages from the step's own products in one
     walk) equals voltages_at_socs at SoC ± d, with output lags, the depletion regressor and
     current-sign gates, near SoC 0 and 1 too; with a wrong ∂act/∂SoC sign the two secant
     voltages would swap their validities' moves."""
-    m = random_tree_model(gating, output_lags=2)
+    m = random_tree_model(gating, output_lags=2, fast_depletion=fast)
     assert m.output_lags == 2 and m.depletion is not None
     st = CellStepper(m, 0.7, temperature_c=18.0)
     rng = np.random.default_rng(6)

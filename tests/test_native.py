@@ -301,6 +301,31 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
     assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
 
 
+def test_native_with_the_fast_depletion_regressor_equals_the_runtime(tmp_path) -> None:
+    # d2(k) beside d(k): the step, the locals at another SoC and the EKF's gradient in C
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.identification.train import train_files
+
+    from tests.conftest import PAN_HWFET
+
+    path = tmp_path / "d2.json"
+    train_files([PAN_HWFET], path, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
+                max_local_models=3, oe_max_iterations=2, hysteresis="off",
+                depletion_fast_tau_s=5.0)
+    model = load_model(path)
+    assert model.depletion.fast_tau_s == 5.0 and "d2(k)" in model.columns()
+    fmu = build_native_fmu(path, tmp_path / "d2.fmu")
+    res = compare_fmu_with_pipeline(path, fmu, PAN_US06)
+    assert res["steps"] > 4000 and res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+    seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
+    start = seg.current_a.size - 1500     # the end of discharge: the depletion factor large
+    worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", start, 1500,
+                                                  float(seg.soc_ref[start]))
+    assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("observer", [0, 1, 2, 3])
 def test_sanitizers_find_nothing_on_hostile_inputs(native_fmu, us06, tmp_path, observer) -> None:

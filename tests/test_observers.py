@@ -466,3 +466,35 @@ def test_model_error_grows_beyond_the_trained_temperatures(a123_model) -> None:
         ob._step_inputs = (0.0, t, ob._step_inputs[2])
         beyond = max(t - hi, lo - t)
         assert ob._model_error(0.5) == pytest.approx(inside * (1.0 + beyond / EXTRAPOLATION_K))
+
+
+def test_ekf_regressor_gradient_is_the_network_output_moved_by_each_low_pass_state() -> None:
+    """∂u/∂(low-pass state) of the EKF (_regressor_gradient) against a central difference of
+    the step's regressors through the blended local models, on a model with both depletion
+    regressors d(k) and d2(k) near empty, where their SoC factor is large."""
+    from tests.test_model import random_tree_model
+
+    m = random_tree_model(fast_depletion=True, d=2)        # partition soc, current
+    assert m.depletion.columns() == ["d(k)", "d2(k)"] and m.output_lags == 0
+    ob = SocObserver(m, "ekf", 0.12)
+    rng = np.random.default_rng(9)
+    for i in rng.normal(-2.0, 1.0, 120):
+        ob.step(float(i), 3.3, 25.0)
+    st = ob.stepper
+    grad = ob._regressor_gradient(st.validity, st.soc)
+    theta = np.asarray(m.theta)
+    eps = 1e-4
+
+    def output(state) -> float:
+        x, z = np.zeros(m.n_exo), np.zeros(len(m.partition_variables))
+        st.exo.features(state, -1.0, 25.0, x, z)
+        return float(np.dot(st.validity, theta @ x))
+
+    for a in range(len(ob.lowpass_slots)):
+        moved = []
+        for sign in (1.0, -1.0):
+            s = copy.deepcopy(st.state)
+            s.lp = [v + sign * eps if ob.lowpass_state[k] == a else v
+                    for k, v in enumerate(s.lp)]
+            moved.append(output(s))
+        assert grad[a] == pytest.approx((moved[0] - moved[1]) / (2 * eps), rel=1e-7, abs=1e-9)

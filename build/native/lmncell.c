@@ -81,7 +81,7 @@ typedef struct {
     double x[NEXO + 1], z[ND + 1];
     double phi[NM], local[NM];                 /* the step's validities and local outputs */
     double act[NNODES + 1], ex[NNODES + 1];    /* the step's node activations and e^−act */
-    double dep_source;                         /* the step's g(T)·LP_τ(i) of d(k) */
+    double dep_source[2];                      /* the step's g(T)·LP_τ(i) of d(k), d2(k) */
 } State;
 
 /* the leading bytes of a State that a step can change (the IMM's modes with the IMM only) */
@@ -220,10 +220,16 @@ static void features(const State *s, double i, double t, double *x, double *z,
     x[col++] = s->h;
 #endif
 #if HAS_DEPLETION
-    {
-        double source = g * s->lp[DEP_STATE];   /* what ExoStepper.features returns */
-        if (dep_source) *dep_source = source;
-        x[col++] = source * depletion_factor(s->soc);
+    {   /* what ExoStepper.features returns: g·LP_τ of d(k) (and of d2(k)) */
+        double factor = depletion_factor(s->soc);
+        double source = g * s->lp[DEP_STATE];
+        if (dep_source) dep_source[0] = source;
+        x[col++] = source * factor;
+#if HAS_DEPLETION2
+        source = g * s->lp[DEP2_STATE];
+        if (dep_source) dep_source[1] = source;
+        x[col++] = source * factor;
+#endif
     }
 #else
     (void)dep_source;
@@ -369,7 +375,7 @@ static void stepper_step(State *s, double i, double t) {
     double y, slots[NSLOTS], q[NNODES + 1];    /* the tree's slots and the nodes' sigmoids */
     int k;
     exo_update(s, i, t, s->capacity);
-    features(s, i, t, s->x, s->z, &s->dep_source);
+    features(s, i, t, s->x, s->z, s->dep_source);
     shift_past(s, i);
     s->d = s->direction;
     for (k = 0; k < NA; k++) s->prev_lags[k] = s->lags[k];
@@ -409,10 +415,18 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
    SoC is among the regressors (runtime.CellStepper.local_voltages_at_socs) */
 static const double *locals_at(const State *s, double soc, double *local) {
 #if HAS_DEPLETION && !OCV_INPUT && !SOC_INPUT
-    /* only d(k) depends on SoC: the step's local outputs moved along its column */
-    double dx = s->dep_source * depletion_factor(soc) - s->x[DEP_COL];
+    /* only d(k) (and d2(k)) depend on SoC: the step's local outputs moved along them */
+    double factor = depletion_factor(soc);
+    double dx = s->dep_source[0] * factor - s->x[DEP_COL];
+    double dx2 = HAS_DEPLETION2 ? s->dep_source[1] * factor - s->x[DEP2_COL] : 0.0;
     int j;
-    for (j = 0; j < NM; j++) local[j] = s->local[j] + THETA[j][NA + DEP_COL] * dx;
+    (void)dx2;
+    for (j = 0; j < NM; j++) {
+        local[j] = s->local[j] + THETA[j][NA + DEP_COL] * dx;
+#if HAS_DEPLETION2
+        local[j] += THETA[j][NA + DEP2_COL] * dx2;
+#endif
+    }
     return local;
 #elif OCV_INPUT || SOC_INPUT || HAS_DEPLETION
     double x[NEXO + 1];
@@ -424,7 +438,10 @@ static const double *locals_at(const State *s, double soc, double *local) {
     x[SOC_COL] = soc;
 #endif
 #if HAS_DEPLETION
-    x[DEP_COL] = s->dep_source * depletion_factor(soc);
+    x[DEP_COL] = s->dep_source[0] * depletion_factor(soc);
+#endif
+#if HAS_DEPLETION2
+    x[DEP2_COL] = s->dep_source[1] * depletion_factor(soc);
 #endif
     local_outputs(x, s->prev_lags, local);
     return local;
@@ -572,6 +589,9 @@ static void regressor_gradient(const State *s, const double *phi, double soc, do
     }
 #if HAS_DEPLETION   /* d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor */
     hv[1 + DEP_LX] += blended[DEP_COL] * g * depletion_factor(soc);
+#if HAS_DEPLETION2
+    hv[1 + DEP2_LX] += blended[DEP2_COL] * g * depletion_factor(soc);
+#endif
 #else
     (void)soc;
 #endif

@@ -80,14 +80,15 @@ def _arx_row(model: LmnModel, th: np.ndarray, cols: list[str]) -> dict:
 
 def ladder_parameters(model: LmnModel, theta: np.ndarray, temperature_c: float) -> dict:
     """A feedback-free local model as an RC ladder at a temperature:
-    u − OCV = R0·i + Σ_τ R_τ·LP_τ(i) + H·h + R_d·d + U_off (+ the current lags' small
-    correction; d the depletion regressor, R_d its resistance at SoC 0.1).
+    u − OCV = R0·i + Σ_τ R_τ·LP_τ(i) + H·h + R_d·d (+ R_d2·d2) + U_off (+ the current lags'
+    small correction; d the depletion regressor, R_d its resistance at SoC 0.1, d2 and R_d2
+    the fast one's where the model has it).
 
     The filter coefficients map onto the ladder by ladder.filter_to_ladder (time constants below
     the sample time join R0, with the current lags); the Arrhenius gain g(T) scales every
     resistance. Returns R0, the RC elements (mΩ by τ in s, key
-    "0" = R0 as well), the static resistance R0 + Σ R_τ, H and U_off (mV), R_d (mΩ), and
-    whether every R, R_d and H is ≥ 0 (`rc_positive`)."""
+    "0" = R0 as well), the static resistance R0 + Σ R_τ, H and U_off (mV), R_d and R_d2 (mΩ),
+    and whether every R, R_d, R_d2 and H is ≥ 0 (`rc_positive`)."""
     c = {src: float(coefficient_row(model, src, temperature_c) @ theta)
          for src in model._plain_columns()}
     g = float(arrhenius_gain(np.array([temperature_c]), model.arrhenius_k, 1,
@@ -106,10 +107,13 @@ def ladder_parameters(model: LmnModel, theta: np.ndarray, temperature_c: float) 
         row["hysteresis_mv"] = _clean(1e3 * c["h(k)"])
     if "d(k)" in c:
         row["r_depletion_mohm"] = _clean(1e3 * g * c["d(k)"])
+    if "d2(k)" in c:
+        row["r_depletion_fast_mohm"] = _clean(1e3 * g * c["d2(k)"])
     if "1" in c:
         row["ocv_offset_mv"] = 1e3 * c["1"]
     row["rc_positive"] = bool(min(ladder.values()) >= 0.0 and row.get("hysteresis_mv", 0.0) >= 0.0
-                              and row.get("r_depletion_mohm", 0.0) >= 0.0)
+                              and row.get("r_depletion_mohm", 0.0) >= 0.0
+                              and row.get("r_depletion_fast_mohm", 0.0) >= 0.0)
     return row
 
 
@@ -152,6 +156,7 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
         head = (["LM", "gate", *part, "T/°C", "R0"] + [f"R@{t}s" for t in taus]
                 + ["R static"] + (["H"] if "hysteresis_mv" in rows[0] else [])
                 + (["R_dep@0.1"] if "r_depletion_mohm" in rows[0] else [])
+                + (["R_dep2@0.1"] if "r_depletion_fast_mohm" in rows[0] else [])
                 + (["U_off"] if "ocv_offset_mv" in rows[0] else []) + ["R ≥ 0"])
         body = []
         for r in rows:
@@ -161,8 +166,9 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
             cells.append(f"{r['r_static_mohm']:.2f}")
             if "hysteresis_mv" in r:
                 cells.append(f"{r['hysteresis_mv']:.1f}")
-            if "r_depletion_mohm" in r:
-                cells.append(f"{r['r_depletion_mohm']:.2f}")
+            for key in ("r_depletion_mohm", "r_depletion_fast_mohm"):
+                if key in r:
+                    cells.append(f"{r[key]:.2f}")
             if "ocv_offset_mv" in r:
                 cells.append(f"{r['ocv_offset_mv']:.1f}")
             cells.append("yes" if r["rc_positive"] else "NO")

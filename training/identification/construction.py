@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.config import ConfigError, TrainConfig
+from lmncell.config import DEPLETION_FAST_TAU_S, ConfigError, TrainConfig
 from lmncell.data.dataset import Segment
 from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ladder import Ladder, ladder_for, ladder_keys
@@ -133,6 +133,26 @@ def resolve_partition(cfg: TrainConfig, segs: list[Segment], progress: Progress 
     return dataclasses.replace(cfg, partition=partition)
 
 
+def resolve_fast_depletion(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
+                           ) -> TrainConfig:
+    """The settings with depletion_fast_tau_s "auto" replaced: the filters' time constant
+    nearest DEPLETION_FAST_TAU_S where the network has temperature regions
+    (uses_temperature_regions; the partition resolved), else 0 (none); ConfigError where it
+    is the depletion regressor's own time constant."""
+    fast = cfg.depletion_fast_tau_s
+    if fast == "auto":
+        on = bool(cfg.depletion_power) and uses_temperature_regions(cfg, segs)
+        fast = cfg.nearest_filter_time_constant_s(DEPLETION_FAST_TAU_S) if on else 0.0
+        if fast and fast == cfg.depletion_time_constant_s():
+            fast = 0.0              # the filters have no time constant apart from d's
+        if fast:
+            progress(f"  fast depletion regressor (auto, temperature regions): τ2 = {fast:g} s")
+    if fast and cfg.depletion_power and float(fast) == cfg.depletion_time_constant_s():
+        raise ConfigError(f"setting 'depletion_fast_tau_s' = {fast!r}: expected a time constant "
+                          f"other than the depletion regressor's {fast!r} s (or 0: none)")
+    return dataclasses.replace(cfg, depletion_fast_tau_s=float(fast))
+
+
 LOCAL_MODELS_PER_REGION = 8
 
 
@@ -163,6 +183,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     """Identify an LMN from model-rate segments (see the module docstring)."""
     t_start = time.perf_counter()
     cfg = resolve_partition(cfg, segs, progress)
+    cfg = resolve_fast_depletion(cfg, segs, progress)
     d = len(cfg.partition)
     n_temp = temperature_degree(cfg, segs)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,

@@ -8,11 +8,12 @@ filters exactly as in a ladder) is, term by term, an equivalent circuit:
 
 (R0 the instantaneous resistance including the sub-Ts filters and the current lags' sum, R_τ an RC
 element of time constant τ, H the hysteresis voltage, R_d the depletion resistance at SoC 0.1 of
-the depletion regressor d (model.Depletion), U_off the local OCV offset). The map from
+the depletion regressor d (model.Depletion; R_d2 of the fast one, d2, likewise), U_off the local
+OCV offset). The map from
 the regressor coefficients θ to these parameters is linear; with temperature terms (θ then
 holds polynomials in dT) it is taken at a grid of temperatures across the training range. The
 identification solves its (locally weighted) least-squares problems under C·θ ≥ h: R0, R_τ, H
-and R_d ≥ 0, and with an offset bound U_max (TrainConfig.offset_bound_mv) |U_off| ≤ U_max, at
+R_d (R_d2) ≥ 0, and with an offset bound U_max (TrainConfig.offset_bound_mv) |U_off| ≤ U_max, at
 every grid temperature (least squares with linear inequality constraints, by the
 Lawson–Hanson reduction to a least-distance problem solved by NNLS: exact, deterministic), so
 that the runtime, the model file and the FMUs are unchanged.
@@ -168,9 +169,11 @@ def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0,
         if "h(k)" in sources:
             rows.append(coefficient_row(model, "h(k)", t))
             names.append(f"H{tag}")
-    if model.depletion is not None:       # no temperature terms: one row
-        rows.append(coefficient_row(model, "d(k)", model.reference_temperature_c))
-        names.append("R_depletion")
+    if model.depletion is not None:       # no temperature terms: one row each
+        for col, name in zip(model.depletion.columns(), ("R_depletion", "R_depletion_fast"),
+                             strict=False):
+            rows.append(coefficient_row(model, col, model.reference_temperature_c))
+            names.append(name)
     h = [0.0] * len(rows)
     if offset_bound_v > 0.0 and "1" in model.columns():
         for t in temps:

@@ -149,6 +149,8 @@ def run_demo(out: Path) -> Path:
         cols.append(("hysteresis_mv", "hysteresis H / mV", ".1f"))
     if "r_depletion_mohm" in table[0]:
         cols.append(("r_depletion_mohm", "depletion R_d at SoC 0.1 / mΩ", ".2f"))
+    if "r_depletion_fast_mohm" in table[0]:
+        cols.append(("r_depletion_fast_mohm", "fast depletion R_d2 at SoC 0.1 / mΩ", ".2f"))
     if "ocv_offset_mv" in table[0]:
         cols.append(("ocv_offset_mv", "OCV offset / mV", ".1f"))
     rep.table(table, cols, "Local models (`lmncell explain MODEL` prints the same): operating "
