@@ -88,6 +88,28 @@ def native_fmu(quick_model, tmp_path_factory) -> Path:
 
 
 @pytest.fixture(scope="session")
+def fast_depletion_model(tmp_path_factory) -> Path:
+    """A small LMN with the second, fast depletion regressor d2(k) (τ2 = 5 s), trained on the
+    shipped Panasonic HWFET record."""
+    from lmncell.identification.train import train_files
+
+    out = tmp_path_factory.mktemp("d2") / "d2.json"
+    train_files([PAN_HWFET], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
+                max_local_models=3, oe_max_iterations=2, hysteresis="off",
+                depletion_fast_tau_s=5.0)
+    return out
+
+
+@pytest.fixture(scope="session")
+def fast_depletion_native_fmu(fast_depletion_model, tmp_path_factory) -> Path:
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.fmu.native_build import build_native_fmu
+
+    return build_native_fmu(fast_depletion_model, tmp_path_factory.mktemp("d2fmu") / "d2.fmu")
+
+
+@pytest.fixture(scope="session")
 def a123_model(tmp_path_factory) -> Path:
     """A small LMN with the one-state hysteresis, trained on the shipped A123 25 °C dynamic
     record (capacity 2.2 Ah, about the measured one): for observers that estimate h."""

@@ -301,22 +301,14 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
     assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
 
 
-def test_native_with_the_fast_depletion_regressor_equals_the_runtime(tmp_path) -> None:
+def test_native_with_the_fast_depletion_regressor_equals_the_runtime(
+        fast_depletion_model, fast_depletion_native_fmu) -> None:
     # d2(k) beside d(k): the step, the locals at another SoC and the EKF's gradient in C
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell.fmu.native_build import build_native_fmu
-    from lmncell.identification.train import train_files
-
     from tests.conftest import PAN_HWFET
 
-    path = tmp_path / "d2.json"
-    train_files([PAN_HWFET], path, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
-                max_local_models=3, oe_max_iterations=2, hysteresis="off",
-                depletion_fast_tau_s=5.0)
+    path, fmu = fast_depletion_model, fast_depletion_native_fmu
     model = load_model(path)
     assert model.depletion.fast_tau_s == 5.0 and "d2(k)" in model.columns()
-    fmu = build_native_fmu(path, tmp_path / "d2.fmu")
     res = compare_fmu_with_pipeline(path, fmu, PAN_US06)
     assert res["steps"] > 4000 and res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
     seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
@@ -327,12 +319,18 @@ def test_native_with_the_fast_depletion_regressor_equals_the_runtime(tmp_path) -
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("observer", [0, 1, 2, 3])
-def test_sanitizers_find_nothing_on_hostile_inputs(native_fmu, us06, tmp_path, observer) -> None:
+@pytest.mark.parametrize("observer, fmu_fixture", [
+    (0, "native_fmu"), (1, "native_fmu"), (2, "native_fmu"), (3, "native_fmu"),
+    (1, "fast_depletion_native_fmu")])
+def test_sanitizers_find_nothing_on_hostile_inputs(request, us06, tmp_path, observer,
+                                                   fmu_fixture) -> None:
     """The FMU's shipped sources and the C host built with -fsanitize=address,undefined, driven
     through a drive cycle mixed with NaN, ±inf, ±1e308 and zero currents and contradictory or
-    NaN voltages, from full and from empty: no sanitizer report, refused steps counted."""
+    NaN voltages, from full and from empty: no sanitizer report, refused steps counted (also a
+    model with the fast depletion regressor d2, with the EKF)."""
     from lmncell.fmu.native_build import compile_linux64, fmi_headers
+
+    native_fmu = request.getfixturevalue(fmu_fixture)
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed")
