@@ -157,19 +157,20 @@ class TrainConfig:
     faster time constant (one of the filters'), beside d: a collapse that follows the load
     within seconds and recovers as fast at rest. 0: none; "auto": the filters' time constant
     nearest 5 s on a log scale where the network has temperature regions (one set of local
-    models per chamber temperature: temperature_regions), else none. The cold records' collapse
-    is of that kind: in the Panasonic HWFET at 10 °C, which runs to SoC 0.11 where the other 10
-    °C records stop at 0.20, the model with d alone swung by up to 0.5 V where the current moved
-    between local models whose d coefficients, extrapolated from their data, differed tenfold.
-    Leave-one-out through hidden pauses, 20–80 % / whole record mV, 0 → auto (5 s): Panasonic 25
-    + 10 °C, 10 °C held out 7.12 / 14.43 → 7.04 / 10.02 (HWFET 4.24 / 26.1 → 4.74 / 11.9), 25 °C
-    held out 4.81 / 9.23 → 4.91 / 8.94; τ2 = 0.01 or 30 s: 10 °C held out 6.69 / 11.64, 7.74 /
-    14.64; d at 5 s alone: 7.10 / 10.57 and 5.35 / 10.09. At 25 °C alone d2 costs: 4.36 / 8.09 →
-    4.60 / 9.57, hence only with temperature regions. The observers on the 10 °C folds (from SoC
-    0.6 with the estimate 0.3, examples/observer_leave_one_out.py) lose a little: SoC RMSE EKF
-    0.23 → 0.60 %, fuzzy 1.55 → 1.88 %, IMM 1.59 → 2.03 %, none outside ±3σ (the EKF settles 1 %
-    high in the US06 at SoC 0.3–0.45, where the model now reads a few mV low); not from d2's own
-    SoC slope (held fixed in the secant: 0.63 %).
+    models per chamber temperature: temperature_regions), else none. The cold records'
+    collapse is of that kind: in the Panasonic HWFET at 10 °C, which runs to SoC 0.11 where
+    the other 10 °C records stop at 0.20, the model with d alone swung by up to 0.5 V where the
+    current moved between local models whose d coefficients, extrapolated from their data,
+    differed tenfold. Leave-one-out through hidden pauses, 20–80 % / whole record mV,
+    0 → auto (5 s): Panasonic 25 + 10 °C, 10 °C held out 7.12 / 14.43 → 7.04 / 10.02 (HWFET
+    4.24 / 26.1 → 4.74 / 11.9), 25 °C held out 4.81 / 9.23 → 4.91 / 8.94; τ2 = 0.01 or 30 s:
+    10 °C held out 6.69 / 11.64, 7.74 / 14.64; d at 5 s alone: 7.10 / 10.57 and 5.35 / 10.09.
+    At 25 °C alone d2 costs: 4.36 / 8.09 → 4.60 / 9.57, hence only with temperature regions.
+    The observers on the 10 °C folds (from SoC 0.6 with the estimate 0.3,
+    examples/observer_leave_one_out.py) lose a little: SoC RMSE EKF 0.23 → 0.60 %, fuzzy
+    1.55 → 1.88 %, IMM 1.59 → 2.03 %, none outside ±3σ (the EKF settles 1 % high in the US06
+    at SoC 0.3–0.45, where the model now reads a few mV low); not from d2's own SoC slope
+    (held fixed in the secant: 0.63 %).
     partition: partition-space variables (soc, current, filtered_current, temperature), or
     "auto": soc and current, plus temperature where the training records lie at two or more
     distinct temperatures (see lmncell.identification.prefit.temperature_levels; soc and
