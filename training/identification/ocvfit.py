@@ -96,9 +96,12 @@ def _monotone_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
     T[:n_knots, :n_knots] = np.tril(np.ones((n_knots, n_knots)))
     M = np.vstack([A @ T, np.sqrt(lam) * D @ T])
     rhs = np.concatenate([b, np.zeros(D.shape[0])])
+    # ‖M·x − rhs‖² = ‖R·x − Qᵀ·rhs‖² + const (M = Q·R): the bounded solver then works on p
+    # rows instead of one per sample (BVLS refactors its matrix at every step)
+    q, r = np.linalg.qr(M)
     lo = np.full(p, -np.inf)
     lo[1:n_knots] = 0.0
-    sol = lsq_linear(M, rhs, bounds=(lo, np.full(p, np.inf)), method="bvls")
+    sol = lsq_linear(r, q.T @ rhs, bounds=(lo, np.full(p, np.inf)), method="bvls")
     return T @ sol.x
 
 
