@@ -740,3 +740,30 @@ def test_depletion_factor_is_held_below_the_training_socs() -> None:
     hold_depletion_below_the_data(cold, [np.linspace(1.0, 0.11, 50)])
     again = model_from_dict(json.loads(json.dumps(model_to_dict(cold))), "test")
     assert again.depletion.soc_min == pytest.approx(0.077)
+
+
+def test_raw_partition_inputs_are_exo_series_bit_for_bit() -> None:
+    """partition_normalisation's loop-free inputs and SoC equal exo_series' exactly (the SoC
+    reference weights, the depletion hold and the pre-fit read that SoC), with coulombic
+    efficiencies below 1, without a temperature and with the filtered current in the
+    partition (exo_series itself then)."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import raw_partition_inputs
+    from lmncell.runtime.step import exo_series
+
+    rng = np.random.default_rng(11)
+    n = 5000
+    cur = np.repeat(rng.normal(-1.0, 4.0, n // 10), 10)
+    for partition, temperature in ((["soc", "current", "temperature"], 20.0 + rng.random(n)),
+                                   (["soc", "current"], None),
+                                   (["soc", "filtered_current"], None)):
+        cfg = load_config(partition=partition)
+        base = skeleton(cfg, 2.85, np.array([0.0, 1.0]), np.array([3.0, 4.2]), None,
+                        np.zeros(len(partition)), np.ones(len(partition)))
+        base.efficiency_charge, base.efficiency_discharge = 0.987, 0.999
+        seg = Segment("s", np.arange(1.0, n + 1), cur, np.full(n, 3.6), temperature, 0.83,
+                      np.zeros(n), np.ones(n))
+        z, soc = raw_partition_inputs(base, seg)
+        ex = exo_series(base, seg.current_a, seg.temperature_c, seg.soc0)
+        assert np.array_equal(soc, ex.soc) and np.array_equal(z, ex.z)
+        assert soc[-1] != pytest.approx(0.83, abs=0.05)          # the SoC moved

@@ -104,12 +104,29 @@ def validation_masks(segs: list[Segment], cfg: TrainConfig) -> list[np.ndarray]:
 def partition_normalisation(base: LmnModel, segs: list[Segment]
                             ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Centre and half-range of the raw partition inputs, and each segment's SoC series."""
-    series = [exo_series(base, s.current_a, s.temperature_c, s.soc0) for s in segs]
-    raw = np.vstack([ex.z for ex in series])
+    series = [raw_partition_inputs(base, s) for s in segs]
+    raw = np.vstack([z for z, _ in series])
     lo, hi = raw.min(axis=0), raw.max(axis=0)
     center = 0.5 * (lo + hi)
     scale = np.where(hi - lo > 1e-9, 0.5 * (hi - lo), 1.0)
-    return center, scale, [ex.soc for ex in series]
+    return center, scale, [soc for _, soc in series]
+
+
+def raw_partition_inputs(base: LmnModel, seg: Segment) -> tuple[np.ndarray, np.ndarray]:
+    """The raw partition inputs z (N, d) and the coulomb-counted SoC (N,) of a segment, bit
+    for bit as exo_series gives them (the same products, the SoC summed in the same order),
+    without its per-sample loop; exo_series itself where the partition has the filtered
+    current (a low-pass state)."""
+    if "filtered_current" in base.partition_variables:
+        ex = exo_series(base, seg.current_a, seg.temperature_c, seg.soc0)
+        return ex.z * base.partition_scale + base.partition_center, ex.soc
+    i = np.asarray(seg.current_a, dtype=float)
+    gain = base.sample_time_s / (3600.0 * base.capacity_ah)     # ExoStepper.soc_gain
+    eta = np.where(i > 0, base.efficiency_charge, base.efficiency_discharge)
+    soc = np.add.accumulate(np.concatenate([[float(seg.soc0)], gain * eta * i]))[1:]
+    temp = np.full(i.size, 25.0) if seg.temperature_c is None else seg.temperature_c
+    columns = {"soc": soc, "current": i, "temperature": temp}
+    return np.column_stack([columns[v] for v in base.partition_variables]), soc
 
 
 def resolve_partition(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
