@@ -384,9 +384,10 @@ class TrainConfig:
             if float(fast) not in taus:
                 raise bad("depletion_fast_tau_s", f"expected one of the filters' time constants "
                           f"{taus} (or 0: none)")
-            if self.depletion_tau_s != "auto" and float(fast) == float(self.depletion_tau_s):
-                raise bad("depletion_fast_tau_s", "expected a time constant other than "
-                          f"depletion_tau_s = {self.depletion_tau_s!r}")
+            if float(fast) == self.depletion_time_constant_s():
+                raise bad("depletion_fast_tau_s", "expected a time constant other than the "
+                          f"depletion regressor's {self.depletion_time_constant_s():g} s "
+                          f"(depletion_tau_s = {self.depletion_tau_s!r}) (or 0: none)")
         if self.local_model_form not in ("auto", "rc_ladder", "free"):
             raise bad("local_model_form", "expected 'auto', 'rc_ladder' or 'free'")
         if self.local_model_form == "rc_ladder" and not is_ladder(

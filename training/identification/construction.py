@@ -154,19 +154,16 @@ def resolve_fast_depletion(cfg: TrainConfig, segs: list[Segment], progress: Prog
                            ) -> TrainConfig:
     """The settings with depletion_fast_tau_s "auto" replaced: the filters' time constant
     nearest DEPLETION_FAST_TAU_S where the network has temperature regions
-    (uses_temperature_regions; the partition resolved), else 0 (none); ConfigError where it
-    is the depletion regressor's own time constant."""
+    (uses_temperature_regions; the partition resolved) and that is not d's own, else 0
+    (none). A given value was checked by TrainConfig.check."""
     fast = cfg.depletion_fast_tau_s
     if fast == "auto":
         on = bool(cfg.depletion_power) and uses_temperature_regions(cfg, segs)
         fast = cfg.nearest_filter_time_constant_s(DEPLETION_FAST_TAU_S) if on else 0.0
-        if fast and fast == cfg.depletion_time_constant_s():
+        if on and fast == cfg.depletion_time_constant_s():
             fast = 0.0              # the filters have no time constant apart from d's
         if fast:
             progress(f"  fast depletion regressor (auto, temperature regions): τ2 = {fast:g} s")
-    if fast and cfg.depletion_power and float(fast) == cfg.depletion_time_constant_s():
-        raise ConfigError(f"setting 'depletion_fast_tau_s' = {fast!r}: expected a time constant "
-                          f"other than the depletion regressor's {fast!r} s (or 0: none)")
     return dataclasses.replace(cfg, depletion_fast_tau_s=float(fast))
 
 
