@@ -27,6 +27,16 @@ def charge_throughput_ah(rec: Record, use_counters: bool = True) -> np.ndarray:
     return np.cumsum(held * dt) / 3600.0
 
 
+def logged_current_drift_ah(rec: Record) -> float | None:
+    """Net charge of the logged current minus the tester's counters' at the record's end (Ah,
+    > 0: the current counts more charge in), or None without counters: the SoC drift of a model
+    driven by the logged current, as an FMU is, against the counters' SoC."""
+    if rec.charge_ah is None:
+        return None
+    return float(charge_throughput_ah(rec, use_counters=False)[-1]
+                 - charge_throughput_ah(rec)[-1])
+
+
 def coulomb_count(rec: Record, soc0: float, capacity_ah: float,
                   use_counters: bool = True) -> np.ndarray:
     """SoC over the record from soc0 (fraction) and capacity (Ah)."""
