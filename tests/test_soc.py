@@ -7,11 +7,12 @@ import pytest
 from lmncell.data.dataset import starts_rested_full
 from lmncell.data.lag import channel_lag_samples, estimate_current_delay
 from lmncell.data.readers import read_record
-from lmncell.data.records import Record, RecordMeta
+from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.data.resample import resample, resample_segment
 from lmncell.data.soc import (
     capacity_from_discharge,
     coulomb_count,
+    current_scaled_to_counters,
     logged_current_drift_ah,
     ocv_from_slow_tests,
 )
@@ -130,3 +131,20 @@ def test_logged_current_drift_against_the_counters() -> None:
     assert logged_current_drift_ah(Record(t, i, np.full(t.size, 3.3), meta)) is None
     assert logged_current_drift_ah(read_record(A123_S1)) / 2.0307 == pytest.approx(0.0117,
                                                                                  abs=2e-4)
+
+
+def test_current_scaled_to_the_counters_meets_them_and_refuses_a_round_trip() -> None:
+    t = np.arange(0.0, 3600.0 + 1.0)
+    meta = RecordMeta(source="synthetic.csv", fmt="generic")
+    counted = -2.0 * 1.01 * (t - t[0]) / 3600.0
+    rec = Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta, charge_ah=counted)
+    scaled, factor = current_scaled_to_counters(rec)
+    assert factor == pytest.approx(1.01, rel=1e-12)
+    assert logged_current_drift_ah(scaled) == pytest.approx(0.0, abs=1e-12)
+    assert np.array_equal(rec.current_a, np.full(t.size, -2.0))       # the original untouched
+    trip = np.where(t < 1800, -2.0, 2.0)                                # out and back: net ≈ 0
+    with pytest.raises(DataError, match="synthetic.csv: cannot scale the current"):
+        current_scaled_to_counters(Record(t, trip, np.full(t.size, 3.3), meta,
+                                          charge_ah=np.zeros(t.size)))
+    with pytest.raises(DataError, match="charge counters"):
+        current_scaled_to_counters(Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta))

@@ -37,6 +37,24 @@ def logged_current_drift_ah(rec: Record) -> float | None:
                  - charge_throughput_ah(rec)[-1])
 
 
+def current_scaled_to_counters(rec: Record) -> tuple[Record, float]:
+    """The record with its logged current times one factor such that its net charge meets the
+    tester's counters' by the end, and that factor: a diagnostic of what the drift of the
+    logged current (logged_current_drift_ah) costs a model driven by it. DataError without
+    counters, or where the record's net charge is under 10 % of its charge throughput (a
+    round trip: one factor is then ill-determined)."""
+    drift = logged_current_drift_ah(rec)
+    logged = float(charge_throughput_ah(rec, use_counters=False)[-1])
+    dt = np.diff(rec.time_s, prepend=rec.time_s[0])
+    throughput = float(np.sum(np.abs(np.concatenate([[0.0], rec.current_a[:-1]])) * dt)) / 3600
+    if drift is None or not abs(logged) >= 0.1 * throughput > 0:
+        raise DataError(f"{rec.meta.source}: cannot scale the current to the tester's counters "
+                        "(expected charge counters and a net charge of at least 10 % of the "
+                        "charge throughput)")
+    factor = (logged - drift) / logged
+    return dataclasses.replace(rec, current_a=rec.current_a * factor), factor
+
+
 def coulomb_count(rec: Record, soc0: float, capacity_ah: float,
                   use_counters: bool = True) -> np.ndarray:
     """SoC over the record from soc0 (fraction) and capacity (Ah)."""

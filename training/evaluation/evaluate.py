@@ -89,9 +89,17 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
     the wall clock shows splits the record, and the next segment starts rested at its counted
     SoC (what the cell did); True: no split there, as a host that drives the FMU through the
     record's time column sees it (the model's state runs on through the pause)."""
+    return evaluate_records(model, [(rec, rec_soc0) for _, rec, rec_soc0 in read_records(
+        paths, soc0, read_options, through_hidden_pauses)], capacity_ah, ambient)
+
+
+def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
+                     capacity_ah: float | None = None, ambient: bool = False
+                     ) -> tuple[list[Trace], list[dict]]:
+    """evaluate_model on records already read, each with its start SoC (a fraction)."""
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
-    for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+    for rec, rec_soc0 in records:
         for seg in record_to_segments(rec, model.sample_time_s, rec_soc0, cap,
                                       current_delay_s=model.current_delay_s):
             check_range(model, seg)

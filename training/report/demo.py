@@ -18,14 +18,21 @@ import numpy as np
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record
-from lmncell.data.soc import capacity_from_discharge, coulomb_count, ocv_from_slow_tests
-from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.data.soc import (
+    capacity_from_discharge,
+    coulomb_count,
+    current_scaled_to_counters,
+    logged_current_drift_ah,
+    ocv_from_slow_tests,
+)
+from lmncell.evaluation.evaluate import evaluate_model, evaluate_records
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
 from lmncell.evaluation.interpret import local_model_table
 from lmncell.evaluation.metrics import WINDOW
 from lmncell.evaluation.observe import observer_figure, observer_runs, soc_metrics
 from lmncell.identification.train import train_files
 from lmncell.report.html import Report
+from lmncell.report.readme import drift_sentence
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.scenarios.drive import data_dir, load_vehicle, plot_cycle, run_cycle
 
@@ -189,6 +196,10 @@ def run_demo(out: Path) -> Path:
                 flat.append({"record": r["record"], "data": role,
                              "temperature": "–" if temp is None else float(np.median(temp)),
                              "model": name, **figures})
+    drift_pct = 100 * logged_current_drift_ah(val_rec) / capacity
+    scaled_rec, factor = current_scaled_to_counters(val_rec)
+    _, scaled_rows = evaluate_records(model, [(scaled_rec, 1.0)])
+    scaled_rmse = {k: v["rmse_mv"] for k, v in scaled_rows[0].items() if isinstance(v, dict)}
     rep.table(flat, [("record", "record", ""), ("data", "data", ""),
                      ("temperature", "T / °C", ".0f"), ("model", "model", ""),
                      ("rmse_mv", "RMSE whole record", ".2f"),
@@ -199,7 +210,7 @@ def run_demo(out: Path) -> Path:
               "Free-run voltage error (mV) of the LMN and the baselines fitted on the same "
               "data, over the whole record (down to the end of discharge), inside the 20–80 % "
               "SoC window and at each end of the SoC range alone (– where a record does not "
-              "reach it).")
+              "reach it). " + drift_sentence(drift_pct, factor, scaled_rmse))
 
     _charge_section(rep, model, dyn / CHARGE_25C, out)
     soc_figures, outside_figures = _observer_section(rep, model, val_rec, capacity, out)
@@ -243,6 +254,9 @@ def run_demo(out: Path) -> Path:
         "validation_rmse_mv": {k: v["rmse_mv"] for k, v in val.items() if isinstance(v, dict)},
         "validation_window_rmse_mv": {k: v["window_rmse_mv"] for k, v in val.items()
                                       if isinstance(v, dict)},
+        "validation_soc_drift_pct": drift_pct,
+        "validation_counter_current_factor": factor,
+        "validation_rmse_mv_counter_current": scaled_rmse,
         "fmu_max_dv_v": check["max_dv_v"], "cycles": cycles,
         "soc_rmse_pct_from_0_6_with_0_3": soc_figures,
         "soc_outside_3sigma_pct": outside_figures,

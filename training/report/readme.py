@@ -31,6 +31,10 @@ def render_figures(summary: dict) -> str:
              f"unseen 25 °C record `{record}` from full to empty):", "",
              "| model | RMSE whole record / mV | RMSE 20–80 % SoC / mV |", "|---|---|---|"]
     lines += [f"| {MODEL_NAMES.get(k, k)} | {whole[k]:.2f} | {window[k]:.2f} |" for k in window]
+    if "validation_soc_drift_pct" in summary:
+        lines += ["", drift_sentence(summary["validation_soc_drift_pct"],
+                                     summary["validation_counter_current_factor"],
+                                     summary["validation_rmse_mv_counter_current"])]
     soc = summary["soc_rmse_pct_from_0_6_with_0_3"]
     outside = summary["soc_outside_3sigma_pct"]
     lines += ["", "SoC estimation on the same record, started under load at true SoC 0.6 with "
@@ -42,6 +46,21 @@ def render_figures(summary: dict) -> str:
               f"The FMU driven by fmpy reproduces the pipeline within "
               f"{summary['fmu_max_dv_v']:.1e} V.", "", FIGURES_END]
     return "\n".join(lines)
+
+
+def drift_sentence(drift_pct: float, factor: float, scaled_rmse_mv: dict[str, float]) -> str:
+    """What the validation record's logged current does to every model's SoC and whole-record
+    figure. drift_pct: its net charge minus the tester's counters' by the end (% of capacity;
+    > 0: the counted SoC ends high); factor: the current scaling that meets the counters;
+    scaled_rmse_mv: each model's whole-record RMSE driven by the scaled current."""
+    return (f"The SoC counted from that record's logged current, as every model here and the "
+            f"FMU count it, ends {abs(drift_pct):.2f} % of the capacity "
+            f"{'above' if drift_pct > 0 else 'below'} the SoC of the tester's Ah counters; near "
+            "empty, where the OCV of LFP falls steeply, that offset dominates the whole-record "
+            f"figures. Driven by the current times {factor:.4f}, which meets the counters, "
+            "the whole-record RMSE is "
+            + ", ".join(f"{MODEL_NAMES.get(k, k)} {v:.2f} mV" for k, v in scaled_rmse_mv.items())
+            + ".")
 
 
 def figures_block(readme_text: str) -> str:
