@@ -22,9 +22,15 @@ def charge_throughput_ah(rec: Record, use_counters: bool = True) -> np.ndarray:
     """
     if use_counters and rec.charge_ah is not None:
         return rec.charge_ah - rec.charge_ah[0]
+    return np.cumsum(_held_charge_as(rec)) / 3600.0
+
+
+def _held_charge_as(rec: Record) -> np.ndarray:
+    """The charge (A·s) of each sample interval, the logged current held from each sample to
+    the next (0 for the first sample)."""
     dt = np.diff(rec.time_s, prepend=rec.time_s[0])
     held = np.concatenate([[0.0], rec.current_a[:-1]])
-    return np.cumsum(held * dt) / 3600.0
+    return held * dt
 
 
 def logged_current_drift_ah(rec: Record) -> float | None:
@@ -45,8 +51,7 @@ def current_scaled_to_counters(rec: Record) -> tuple[Record, float]:
     round trip: one factor is then ill-determined)."""
     drift = logged_current_drift_ah(rec)
     logged = float(charge_throughput_ah(rec, use_counters=False)[-1])
-    dt = np.diff(rec.time_s, prepend=rec.time_s[0])
-    throughput = float(np.sum(np.abs(np.concatenate([[0.0], rec.current_a[:-1]])) * dt)) / 3600
+    throughput = float(np.sum(np.abs(_held_charge_as(rec)))) / 3600.0
     if drift is None or not abs(logged) >= 0.1 * throughput > 0:
         raise DataError(f"{rec.meta.source}: cannot scale the current to the tester's counters "
                         "(expected charge counters and a net charge of at least 10 % of the "

@@ -12,7 +12,7 @@ from lmncell.data.dataset import starts_rested_full
 from lmncell.data.lag import channel_lag_samples
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record
-from lmncell.data.soc import charge_throughput_ah, logged_current_drift_ah
+from lmncell.data.soc import charge_throughput_ah
 
 NOMINAL_AH = {"A123": 2.3, "Pan18650PF": 2.9}
 
@@ -38,9 +38,8 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
         "starts_full": starts_rested_full(rec),
         "chamber_temp_c": rec.meta.chamber_temp_c, "notes": rec.meta.notes,
     }
-    drift = logged_current_drift_ah(rec)
-    if drift is not None:              # q came from the tester's counters
-        out["current_integral_ah"] = float(q[-1]) + drift
+    if rec.charge_ah is not None:      # q came from the tester's counters
+        out["current_integral_ah"] = float(charge_throughput_ah(rec, use_counters=False)[-1])
     if cap:
         out["capacity_ah_assumed"] = cap
         out["c_rate"] = [out["current_a"][0] / cap, out["current_a"][1] / cap]
