@@ -80,7 +80,38 @@ def run_demo(out: Path) -> Path:
     val_rec, empty = read_record(dyn / VALIDATE), read_record(dyn / EMPTY_25C)
     capacity = capacity_from_discharge(val_rec, empty)
     _say(f"capacity from the 25 °C full discharge (s1 + s2): {capacity:.4f} Ah")
+    _data_section(rep, dyn, capacity, out)
+    model_path = _train(dyn, capacity, out)
+    model = load_model(model_path)
+    _identification_section(rep, model, out)
+    rows = _accuracy_section(rep, model, dyn, out)
+    drift = _drift_figures(model, val_rec, capacity)
+    rep.text(drift_sentence(*drift))
+    _charge_section(rep, model, dyn / CHARGE_25C, out)
+    soc_figures, outside_figures = _observer_section(rep, model, val_rec, capacity, out)
+    fmu, check = _fmu_section(rep, model_path, dyn / VALIDATE, out)
+    cycles = _cycles_section(rep, fmu, out)
+    val = rows[-1]
+    headline = {
+        "local_models": model.n_local_models,
+        "validation_record": val["record"],
+        "validation_rmse_mv": {k: v["rmse_mv"] for k, v in val.items() if isinstance(v, dict)},
+        "validation_window_rmse_mv": {k: v["window_rmse_mv"] for k, v in val.items()
+                                      if isinstance(v, dict)},
+        "validation_soc_drift_pct": drift[0],
+        "validation_counter_current_factor": drift[1],
+        "validation_rmse_mv_counter_current": drift[2],
+        "fmu_max_dv_v": check["max_dv_v"], "cycles": cycles,
+        "soc_rmse_pct_from_0_6_with_0_3": soc_figures,
+        "soc_outside_3sigma_pct": outside_figures,
+        "seconds": time.perf_counter() - t0,
+    }
+    (out / "summary.json").write_text(json.dumps(headline, indent=1))
+    return _finish(rep, headline, model_path, fmu)
 
+
+def _data_section(rep: Report, dyn: Path, capacity: float, out: Path) -> None:
+    """The data: what was trained and validated on, the OCV hysteresis, one training record."""
     from lmncell.report import plots
 
     rep.section("Data")
@@ -100,18 +131,26 @@ def run_demo(out: Path) -> Path:
                f"walk the cell from full to {100 * float(soc_train.min()):.0f} % SoC "
                f"(coulomb-counted with {capacity:.3f} Ah).")
 
+
+def _train(dyn: Path, capacity: float, out: Path) -> Path:
+    """Train the LMN and its baselines on the training records; returns the model file."""
     _say("training the LMN and the baselines (ARX, 2RC, 2RC with hysteresis) …")
     model_path = out / "a123_lmn.json"
     train_files([dyn / f for f in TRAIN], model_path, capacity_ah=capacity, soc0=1.0,
                 partition=["soc"], baselines=True,
                 progress=lambda m: _say(m), soc_window=list(WINDOW),
                 outside_weight=OUTSIDE_WEIGHT)
-    model = load_model(model_path)
-    tr = model.extra["training"]
+    return model_path
 
-    rep.section("Identification")
+
+def _identification_section(rep: Report, model: LmnModel, out: Path) -> None:
+    """What the identification chose: hysteresis, temperature, M, validities, local models."""
+    from lmncell.report import plots
+
+    tr = model.extra["training"]
     info = tr["info"]
     gamma = info.get("hysteresis_gamma")
+    rep.section("Identification")
     rep.text("Hysteresis: " + ("off — the OCV pre-fit with a hysteresis state did not cut its "
                                "error by 3 %, so the model has none: its training records only "
                                "discharge, and the local models' offsets carry the discharge "
@@ -122,25 +161,32 @@ def run_demo(out: Path) -> Path:
              f"regressors; temperature terms of degree {info.get('temperature_terms', 0)} "
              "(every local model's gains and offset also vary with dT = (T − 25 °C)/10 K), "
              "which interpolate between the training temperatures.")
-    refinement = info.get("output_error")
-    if refinement is None:
-        refined = "No output-error refinement was run."
-    elif refinement["accepted"]:
-        refined = ("Then all local models were refined on the free-run (output) error: "
-                   f"training RMSE {refinement['train_rmse_before_mv']:.2f} → "
-                   f"{refinement['train_rmse_after_mv']:.2f} mV.")
-    else:
-        refined = ("The output-error refinement of all local models was tried and not kept "
-                   f"(training RMSE {refinement['train_rmse_before_mv']:.2f} → "
-                   f"{refinement['train_rmse_after_mv']:.2f} mV, not better).")
     rep.figure(plots.curve_figure(tr["curve"], out / "fig_local_models_curve.png",
                                   model.n_local_models),
                "Error against the number of local models (the 20–80 % SoC window weighted "
                f"fully, the rest at {OUTSIDE_WEIGHT}): the free-run validation error chose "
-               f"M = {model.n_local_models}. {refined}")
+               f"M = {model.n_local_models}. {_refinement_text(info.get('output_error'))}")
     rep.figure(plots.validity_figure(model, out / "fig_validity.png"),
                "Validity functions over SoC (temperature at the middle of the trained range): "
                "where each local linear model is in charge.")
+    _local_model_table(rep, model)
+
+
+def _refinement_text(refinement: dict | None) -> str:
+    """One sentence on the output-error refinement (training RMSE before and after)."""
+    if refinement is None:
+        return "No output-error refinement was run."
+    if refinement["accepted"]:
+        return ("Then all local models were refined on the free-run (output) error: "
+                f"training RMSE {refinement['train_rmse_before_mv']:.2f} → "
+                f"{refinement['train_rmse_after_mv']:.2f} mV.")
+    return ("The output-error refinement of all local models was tried and not kept "
+            f"(training RMSE {refinement['train_rmse_before_mv']:.2f} → "
+            f"{refinement['train_rmse_after_mv']:.2f} mV, not better).")
+
+
+def _local_model_table(rep: Report, model: LmnModel) -> None:
+    """The local models at the reference temperature, as `lmncell explain` prints them."""
     table = local_model_table(model, model.reference_temperature_c)
     cols = [("local_model", "LM", ""), *[(v, v, ".2f") for v in model.partition_variables],
             ("r0_mohm", "R0 / mΩ", ".1f"), ("r_static_mohm", "R static / mΩ", ".1f")]
@@ -152,14 +198,11 @@ def run_demo(out: Path) -> Path:
         cols.append(("rc_text", "RC elements: R / mΩ at τ", ""))
     elif any(row["time_constants_s"] for row in table):
         cols.append(("time_constants_s", "time constants / s", ".1f"))
-    if "hysteresis_mv" in table[0]:
-        cols.append(("hysteresis_mv", "hysteresis H / mV", ".1f"))
-    if "r_depletion_mohm" in table[0]:
-        cols.append(("r_depletion_mohm", "depletion R_d at SoC 0.1 / mΩ", ".2f"))
-    if "r_depletion_fast_mohm" in table[0]:
-        cols.append(("r_depletion_fast_mohm", "fast depletion R_d2 at SoC 0.1 / mΩ", ".2f"))
-    if "ocv_offset_mv" in table[0]:
-        cols.append(("ocv_offset_mv", "OCV offset / mV", ".1f"))
+    optional = [("hysteresis_mv", "hysteresis H / mV", ".1f"),
+                ("r_depletion_mohm", "depletion R_d at SoC 0.1 / mΩ", ".2f"),
+                ("r_depletion_fast_mohm", "fast depletion R_d2 at SoC 0.1 / mΩ", ".2f"),
+                ("ocv_offset_mv", "OCV offset / mV", ".1f")]
+    cols += [c for c in optional if c[0] in table[0]]
     rep.table(table, cols, "Local models (`lmncell explain MODEL` prints the same): operating "
                            "point (validity-weighted centre), instantaneous resistance R0, "
                            "static resistance (R0 plus all RC elements), the RC elements at the "
@@ -172,6 +215,12 @@ def run_demo(out: Path) -> Path:
                         "constrained ≥ 0 (setting local_model_form). " if ladder else "")
               + "SoC as a fraction, temperature in °C. Current > 0 charges, so a resistance is "
                 "u − OCV per ampere.")
+
+
+def _accuracy_section(rep: Report, model: LmnModel, dyn: Path, out: Path) -> list[dict]:
+    """Free-run fits and the error table on the training records and the unseen one; returns
+    evaluate_model's rows (the unseen record last)."""
+    from lmncell.report import plots
 
     _say("evaluating free-run on the training records and on the unseen 25 °C record …")
     traces, rows = evaluate_model(model, [dyn / f for f in TRAIN] + [dyn / VALIDATE], soc0=1.0)
@@ -196,10 +245,6 @@ def run_demo(out: Path) -> Path:
                 flat.append({"record": r["record"], "data": role,
                              "temperature": "–" if temp is None else float(np.median(temp)),
                              "model": name, **figures})
-    drift_pct = 100 * logged_current_drift_ah(val_rec) / capacity
-    scaled_rec, factor = current_scaled_to_counters(val_rec)
-    _, scaled_rows = evaluate_records(model, [(scaled_rec, 1.0)])
-    scaled_rmse = {k: v["rmse_mv"] for k, v in scaled_rows[0].items() if isinstance(v, dict)}
     rep.table(flat, [("record", "record", ""), ("data", "data", ""),
                      ("temperature", "T / °C", ".0f"), ("model", "model", ""),
                      ("rmse_mv", "RMSE whole record", ".2f"),
@@ -210,16 +255,30 @@ def run_demo(out: Path) -> Path:
               "Free-run voltage error (mV) of the LMN and the baselines fitted on the same "
               "data, over the whole record (down to the end of discharge), inside the 20–80 % "
               "SoC window and at each end of the SoC range alone (– where a record does not "
-              "reach it). " + drift_sentence(drift_pct, factor, scaled_rmse))
+              "reach it).")
+    return rows
 
-    _charge_section(rep, model, dyn / CHARGE_25C, out)
-    soc_figures, outside_figures = _observer_section(rep, model, val_rec, capacity, out)
 
+def _drift_figures(model: LmnModel, record: Record, capacity: float
+                   ) -> tuple[float, float, dict[str, float]]:
+    """The unseen record's SoC drift of the logged current (% of capacity), the current factor
+    that meets the tester's counters, and each model's whole-record RMSE (mV) driven by the
+    current so scaled."""
+    drift_pct = 100 * logged_current_drift_ah(record) / capacity
+    scaled, factor = current_scaled_to_counters(record)
+    _, rows = evaluate_records(model, [(scaled, 1.0)])
+    return drift_pct, factor, {k: v["rmse_mv"] for k, v in rows[0].items()
+                               if isinstance(v, dict)}
+
+
+def _fmu_section(rep: Report, model_path: Path, record: Path, out: Path) -> tuple[Path, dict]:
+    """Build the pythonfmu FMU (and the native one where gcc exists), check both against the
+    pipeline on the unseen record; returns the pythonfmu FMU and its check."""
     _say("building the FMU …")
     from lmncell.fmu.pythonfmu_build import build_fmu
 
     fmu = build_fmu(model_path, out / "A123_LMNCell.fmu")
-    check = compare_fmu_with_pipeline(model_path, fmu, dyn / VALIDATE, soc0=1.0)
+    check = compare_fmu_with_pipeline(model_path, fmu, record, soc0=1.0)
     _say(f"FMU vs pipeline on {check['record']}: max |Δu| = {check['max_dv_v']:.2e} V, "
          f"max |ΔSoC| = {check['max_dsoc']:.2e}")
     rep.section("FMU")
@@ -229,9 +288,14 @@ def run_demo(out: Path) -> Path:
                f"{check['max_dsoc']:.1e} in SoC over {check['steps']} steps, i.e. "
                "floating-point round-off (the lower panel's scale is logarithmic; the tests "
                "require 1e-9 V).")
-    native_note = _native(model_path, out, dyn / VALIDATE)
+    native_note = _native(model_path, out, record)
     if native_note:
         rep.text(native_note)
+    return fmu, check
+
+
+def _cycles_section(rep: Report, fmu: Path, out: Path) -> dict:
+    """WLTC and US06 through the FMU in the default vehicle; returns each cycle's figures."""
     vehicle = load_vehicle()
     cycles = {}
     for cyc in ("wltc", "us06"):
@@ -247,39 +311,29 @@ def run_demo(out: Path) -> Path:
                    f"{100 * res.figures['soc_end']:.1f} %; "
                    + (f"{oor} steps left the trained range (red dots)." if oor else
                       "every step within the trained range."))
-    val = rows[-1]
-    headline = {
-        "local_models": model.n_local_models,
-        "validation_record": val["record"],
-        "validation_rmse_mv": {k: v["rmse_mv"] for k, v in val.items() if isinstance(v, dict)},
-        "validation_window_rmse_mv": {k: v["window_rmse_mv"] for k, v in val.items()
-                                      if isinstance(v, dict)},
-        "validation_soc_drift_pct": drift_pct,
-        "validation_counter_current_factor": factor,
-        "validation_rmse_mv_counter_current": scaled_rmse,
-        "fmu_max_dv_v": check["max_dv_v"], "cycles": cycles,
-        "soc_rmse_pct_from_0_6_with_0_3": soc_figures,
-        "soc_outside_3sigma_pct": outside_figures,
-        "seconds": time.perf_counter() - t0,
-    }
-    (out / "summary.json").write_text(json.dumps(headline, indent=1))
+    return cycles
+
+
+def _finish(rep: Report, headline: dict, model_path: Path, fmu: Path) -> Path:
+    """The report's run note and lead summary, written; the headline printed."""
+    whole, window = headline["validation_rmse_mv"], headline["validation_window_rmse_mv"]
+    soc_figures = headline["soc_rmse_pct_from_0_6_with_0_3"]
     rep.section("Run")
     rep.text(f"Made by `lmncell demo` in {headline['seconds']:.0f} s; model file "
              f"{model_path.name}, FMU {fmu.name}, figures in this folder, numbers in "
              "summary.json.")
     rep.lead("Summary", "Unseen 25 °C record, free-run voltage RMSE over the whole record / "
              "inside 20–80 % SoC: " + "; ".join(
-                 f"{k} {headline['validation_rmse_mv'][k]:.2f} / {v:.2f} mV"
-                 for k, v in headline["validation_window_rmse_mv"].items())
+                 f"{k} {whole[k]:.2f} / {v:.2f} mV" for k, v in window.items())
              + ". SoC observers from a wrong start (RMSE after 10 min): "
              + ", ".join(f"{k} {v:.2f} %" for k, v in soc_figures.items())
-             + f". FMU = pipeline within {check['max_dv_v']:.1e} V.")
+             + f". FMU = pipeline within {headline['fmu_max_dv_v']:.1e} V.")
     path = rep.write()
-    whole, window = headline["validation_rmse_mv"], headline["validation_window_rmse_mv"]
     _say(f"report: {path.resolve()}")
     _say("unseen 25 °C record, free-run RMSE whole record / 20–80 % SoC: "
          + ", ".join(f"{k} {whole[k]:.2f} / {v:.2f} mV" for k, v in window.items())
-         + f"; FMU = pipeline within {check['max_dv_v']:.1e} V; {headline['seconds']:.0f} s")
+         + f"; FMU = pipeline within {headline['fmu_max_dv_v']:.1e} V; "
+           f"{headline['seconds']:.0f} s")
     return path
 
 
