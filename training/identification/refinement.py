@@ -47,122 +47,142 @@ def _sensitivity(A: np.ndarray, G: np.ndarray) -> np.ndarray:
     return S
 
 
+class _FreeRunProblem:
+    """The refinement's residuals and Jacobian in x = [θ of every local model, OCV increments]
+    (the increments only where refines_ocv): each segment's weighted free-run error, then the
+    penalty rows (a ridge towards the start θ, the offset ridge, and for the OCV its smoothness
+    and its anchor to the start), whose Jacobian is constant and built once."""
+
+    RIDGE = 1e-3
+
+    def __init__(self, model: LmnModel, segs: list[Segment], design: Design,
+                 cfg: TrainConfig) -> None:
+        self.model, self.segs, self.design = model, segs, design
+        self.M, self.p = model.theta.shape
+        self.na = model.output_lags
+        self.with_ocv = refines_ocv(model, segs, cfg)
+        knots = model.ocv_soc
+        self.K = knots.size if self.with_ocv else 0
+        self.w_all = [np.sqrt(design.w_fit[a:b] + design.w_val[a:b]) for a, b in design.bounds]
+        self.Phis = [model.validities(ex.z, ex.direction) for ex in design.exo]
+        self.Bs = [hat_basis(ex.soc, knots) for ex in design.exo] if self.with_ocv else []
+        self.h0s = [initial_hysteresis(s.soc0) for s in segs]
+        self.t0s = [25.0 if s.temperature_c is None else float(s.temperature_c[0]) for s in segs]
+        self.theta0 = model.theta.copy()
+        n_total = float(sum(float(np.sum(w * w)) for w in self.w_all))
+        self.lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
+        self.D2 = second_difference(self.K) if self.K >= 3 else np.zeros((0, self.K))
+        self.rho = offset_ridge_of(cfg, model)
+        self.off_col, self.off_lam = _offset_ridge(model, self.Phis, self.w_all, self.rho)
+        self.ocv0 = model.ocv_v.copy()
+        self.lam_anchor = ocv_anchor(knots, n_total, bool(cfg.ocv_tests))
+        self.tri = np.tril(np.ones((self.K, self.K)))
+        self.j_penalty = self._penalty_jacobian()
+        self.n_res = int(sum(w.size for w in self.w_all))
+        self._cache: dict = {}
+
+    def _penalty_jacobian(self) -> np.ndarray:
+        """The penalty rows' Jacobian (they are linear in x), in residuals' order."""
+        M, p, K = self.M, self.p, self.K
+        j_pen = [np.hstack([np.sqrt(self.RIDGE) * np.eye(M * p), np.zeros((M * p, K))])]
+        if self.off_col is not None:
+            j_off = np.zeros((M, M * p + K))
+            j_off[np.arange(M), np.arange(M) * p + self.off_col] = self.off_lam
+            j_pen.append(j_off)
+        if self.with_ocv and self.D2.shape[0]:
+            j_pen.append(np.hstack([np.zeros((self.D2.shape[0], M * p)),
+                                    self.lam_ocv * self.D2 @ self.tri]))
+        if self.with_ocv:
+            j_pen.append(np.hstack([np.zeros((K, M * p)), self.lam_anchor[:, None] * self.tri]))
+        return np.vstack(j_pen)
+
+    def start(self) -> np.ndarray:
+        """x of the model as identified: its θ and, with the OCV, the OCV's start value and its
+        non-negative increments (the OCV rises with SoC)."""
+        ocv0 = self.ocv0
+        incr0 = (np.concatenate([[ocv0[0]], np.maximum(np.diff(ocv0), 0.0)]) if self.with_ocv
+                 else [])
+        return np.concatenate([self.model.theta.ravel(), incr0])
+
+    def lower(self) -> np.ndarray:
+        """Lower bounds on x: the OCV increments ≥ 0, all else free."""
+        lower = np.full(self.M * self.p + self.K, -np.inf)
+        if self.with_ocv:
+            lower[self.M * self.p + 1:] = 0.0
+        return lower
+
+    def unpack(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """θ (M, p) and the OCV knot values of x."""
+        n = self.M * self.p
+        return x[:n].reshape(self.M, self.p), (np.cumsum(x[n:]) if self.with_ocv
+                                               else self.model.ocv_v)
+
+    def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Residuals and Jacobian at x (the last x's kept: least_squares asks for both)."""
+        key = x.tobytes()
+        if key in self._cache:
+            return self._cache[key]
+        theta, ocv_v = self.unpack(x)
+        m = copy.copy(self.model)
+        m.theta, m.ocv_v = theta, ocv_v.copy()
+        res, jac = [], []
+        for k in range(len(self.segs)):
+            r, J = self._segment_rows(m, k)
+            res.append(r)
+            jac.append(J)
+        out = (np.concatenate(res + self._penalty_values(theta, ocv_v)),
+               np.vstack([*jac, self.j_penalty]))
+        self._cache.clear()
+        self._cache[key] = out
+        return out
+
+    def _segment_rows(self, m: LmnModel, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """Segment k's weighted free-run residuals (measured − model) and their Jacobian, the
+        sensitivities propagated through the output feedback."""
+        seg, ex, Phi, sw = self.segs[k], self.design.exo[k], self.Phis[k], self.w_all[k]
+        na, theta = self.na, m.theta
+        A = Phi @ theta[:, :na]
+        b = np.sum(Phi * (ex.x @ theta[:, na:].T), axis=1)
+        y0 = fixed_point(m, seg.soc0, self.t0s[k], self.h0s[k])
+        y = recursion(A, b, [y0] * na)
+        u = y + m.ocv(ex.soc) if m.relative_ocv else y
+        r = sw * (seg.voltage_v - u)
+        if not np.isfinite(r).all():
+            r = np.where(np.isfinite(r), r, 1e3)
+        ylag = _lags(np.concatenate([[y0], y]), na)[1:]    # y(k−l), y0 before the start
+        Xs = np.hstack([ylag, ex.x])
+        G = (Phi[:, :, None] * Xs[:, None, :]).reshape(y.size, self.M * self.p)
+        J = -sw[:, None] * _sensitivity(A, G)
+        if self.with_ocv:
+            J = np.hstack([J, -sw[:, None] * (self.Bs[k] @ self.tri)])
+        return r, J
+
+    def _penalty_values(self, theta: np.ndarray, ocv_v: np.ndarray) -> list[np.ndarray]:
+        """The penalty rows at (θ, OCV), in _penalty_jacobian's order."""
+        rows = [np.sqrt(self.RIDGE) * (theta - self.theta0).ravel()]
+        if self.off_col is not None:
+            rows.append(self.off_lam * theta[:, self.off_col])
+        if self.with_ocv and self.D2.shape[0]:
+            rows.append(self.lam_ocv * self.D2 @ ocv_v)
+        if self.with_ocv:
+            rows.append(self.lam_anchor * (ocv_v - self.ocv0))
+        return rows
+
+
 def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
                         cfg: TrainConfig, progress: Progress) -> tuple[LmnModel, dict]:
     """Levenberg–Marquardt on the free-run error of all segments (θ of every local model and,
-    where refines_ocv says so, the OCV knots)."""
-    M, p = model.theta.shape
-    na = model.output_lags
-    with_ocv = refines_ocv(model, segs, cfg)
-    knots = model.ocv_soc
-    K = knots.size if with_ocv else 0
-    w_all = [np.sqrt(design.w_fit[a:b] + design.w_val[a:b]) for a, b in design.bounds]
-    Phis = [model.validities(ex.z, ex.direction) for ex in design.exo]
-    Bs = [hat_basis(ex.soc, knots) for ex in design.exo] if with_ocv else []
-    h0s = [initial_hysteresis(s.soc0) for s in segs]
-    t0s = [25.0 if s.temperature_c is None else float(s.temperature_c[0]) for s in segs]
-    theta0 = model.theta.copy()
-    n_total = float(sum(float(np.sum(w * w)) for w in w_all))
-    lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
-    D2 = second_difference(K) if K >= 3 else np.zeros((0, K))
-    ridge = 1e-3
-    rho = offset_ridge_of(cfg, model)
-    off_col, off_lam = _offset_ridge(model, Phis, w_all, rho)
-    cache: dict = {}
-
-    ocv0 = model.ocv_v.copy()
-    lam_anchor = ocv_anchor(knots, n_total, bool(cfg.ocv_tests))
-    tri = np.tril(np.ones((K, K)))
-    # the penalty rows below the residuals are linear in x: their Jacobian is built once
-    j_pen = [np.hstack([np.sqrt(ridge) * np.eye(M * p), np.zeros((M * p, K))])]
-    if off_col is not None:
-        j_off = np.zeros((M, M * p + K))
-        j_off[np.arange(M), np.arange(M) * p + off_col] = off_lam
-        j_pen.append(j_off)
-    if with_ocv and D2.shape[0]:
-        j_pen.append(np.hstack([np.zeros((D2.shape[0], M * p)), lam_ocv * D2 @ tri]))
-    if with_ocv:
-        j_pen.append(np.hstack([np.zeros((K, M * p)), lam_anchor[:, None] * tri]))
-    j_penalty = np.vstack(j_pen)
-
-    def unpack(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # OCV knots as a start value plus non-negative increments (OCV rises with SoC)
-        return x[: M * p].reshape(M, p), (np.cumsum(x[M * p:]) if with_ocv else model.ocv_v)
-
-    def evaluate(x: np.ndarray):
-        key = x.tobytes()
-        if key in cache:
-            return cache[key]
-        theta, ocv_v = unpack(x)
-        m = copy.copy(model)
-        m.theta, m.ocv_v = theta, ocv_v.copy()
-        res, jac = [], []
-        for seg, ex, Phi, sw, h0, t0, k in zip(segs, design.exo, Phis, w_all, h0s, t0s,
-                                               range(len(segs)), strict=True):
-            A = Phi @ theta[:, :na]
-            b = np.sum(Phi * (ex.x @ theta[:, na:].T), axis=1)
-            y0 = fixed_point(m, seg.soc0, t0, h0)
-            y = recursion(A, b, [y0] * na)
-            u = y + m.ocv(ex.soc) if m.relative_ocv else y
-            r = sw * (seg.voltage_v - u)
-            if not np.isfinite(r).all():
-                r = np.where(np.isfinite(r), r, 1e3)
-            res.append(r)
-            ylag = _lags(np.concatenate([[y0], y]), na)[1:]    # y(k−l), y0 before the start
-            Xs = np.hstack([ylag, ex.x])
-            G = (Phi[:, :, None] * Xs[:, None, :]).reshape(y.size, M * p)
-            S = _sensitivity(A, G)
-            J = -sw[:, None] * S
-            if with_ocv:
-                J = np.hstack([J, -sw[:, None] * (Bs[k] @ tri)])
-            jac.append(J)
-        x_extra = [np.sqrt(ridge) * (theta - theta0).ravel()]    # rows in j_penalty's order
-        if off_col is not None:
-            x_extra.append(off_lam * theta[:, off_col])
-        if with_ocv and D2.shape[0]:
-            x_extra.append(lam_ocv * D2 @ ocv_v)
-        if with_ocv:
-            x_extra.append(lam_anchor * (ocv_v - ocv0))
-        out = (np.concatenate(res + x_extra), np.vstack([*jac, j_penalty]))
-        cache.clear()
-        cache[key] = out
-        return out
-
-    incr0 = np.concatenate([[ocv0[0]], np.maximum(np.diff(ocv0), 0.0)]) if with_ocv else []
-    x0 = np.concatenate([model.theta.ravel(), incr0])
-    lower = np.full(x0.size, -np.inf)
-    if with_ocv:
-        lower[M * p + 1:] = 0.0
-    r0 = evaluate(x0)[0]
-    n_res = int(sum(w.size for w in w_all))
+    where refines_ocv says so, the OCV knots); the refined model where it lowers the free-run
+    training error, else the model as given, and what was done."""
+    prob = _FreeRunProblem(model, segs, design, cfg)
+    x0 = prob.start()
+    r0 = prob.evaluate(x0)[0]
     t_start = time.perf_counter()
-    upper = np.full(x0.size, np.inf)
-    if na == 0:
-        # no output feedback: the free-run error is affine in the parameters; (iteratively
-        # reweighted) bounded linear least squares gives the exact optimum (under the RC-ladder
-        # constraints where the local models are ladders)
-        r_0, J_0 = evaluate(x0)
-        if with_ocv:
-            on_theta = _ladder_constraints(design.ladder, M, p, np.full(x0.size, -np.inf))
-            sol = _solve_in_knot_values(J_0, J_0 @ x0 - r_0, n_res, cfg, on_theta, M * p, ocv0)
-        else:
-            sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
-                                       _ladder_constraints(design.ladder, M, p, lower))
-        sol.cost = float(0.5 * np.sum(evaluate(sol.x)[0] ** 2))
-    else:
-        robust = {}
-        if cfg.robust_loss == "huber":
-            robust = {"loss": "huber",
-                      "f_scale": HUBER_K * max(_robust_scale(r0[:n_res]), 1e-6)}
-        with np.errstate(over="ignore", invalid="ignore"):
-            sol = least_squares(lambda x: evaluate(x)[0], x0, jac=lambda x: evaluate(x)[1],
-                                bounds=(lower, upper), method="trf",
-                                x_scale="jac", max_nfev=cfg.oe_max_iterations,
-                                ftol=1e-8, xtol=1e-10, gtol=1e-10, **robust)
-    theta, ocv_v = unpack(sol.x)
-    theta = np.vstack([stabilise(t, na, cfg.max_pole) for t in theta])
+    sol = _solve_refinement(prob, x0, r0, cfg)
+    theta, ocv_v = prob.unpack(sol.x)
     out = copy.copy(model)
-    out.theta, out.ocv_v = theta, np.array(ocv_v, dtype=float)
+    out.theta = np.vstack([stabilise(t, prob.na, cfg.max_pole) for t in theta])
+    out.ocv_v = np.array(ocv_v, dtype=float)
     before = freerun_rmse(model, segs, design, "fit")
     after = freerun_rmse(out, segs, design, "fit")
     accepted = bool(np.isfinite(after) and after < before)
@@ -170,15 +190,46 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             "evaluations": int(sol.nfev), "seconds": time.perf_counter() - t_start,
             "status": int(sol.status), "train_rmse_before_mv": 1e3 * before,
             "train_rmse_after_mv": 1e3 * after, "accepted": accepted,
-            "offset_ridge": rho if off_col is not None else 0.0, "ocv_refined": with_ocv}
+            "offset_ridge": prob.rho if prob.off_col is not None else 0.0,
+            "ocv_refined": prob.with_ocv}
     progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
                 if info["offset_ridge"] else "")
              + (f", the test's OCV refined above SoC {OCV_REFINE_SOC_MIN:g}"
-                if with_ocv and cfg.ocv_tests else "")
+                if prob.with_ocv and cfg.ocv_tests else "")
              + ("" if accepted else " (not better: kept the model before refinement)"))
     return (out if accepted else model), info
+
+
+def _solve_refinement(prob: _FreeRunProblem, x0: np.ndarray, r0: np.ndarray,
+                      cfg: TrainConfig) -> _Solution:
+    """Without output feedback the free-run error is affine in x: (iteratively reweighted)
+    bounded linear least squares gives the exact optimum, under the RC-ladder constraints where
+    the local models are ladders. With feedback: least_squares (trf, Huber where asked)."""
+    M, p, n_res = prob.M, prob.p, prob.n_res
+    lower, upper = prob.lower(), np.full(x0.size, np.inf)
+    if prob.na == 0:
+        r_0, J_0 = prob.evaluate(x0)
+        ladder = prob.design.ladder
+        if prob.with_ocv:
+            on_theta = _ladder_constraints(ladder, M, p, np.full(x0.size, -np.inf))
+            sol = _solve_in_knot_values(J_0, J_0 @ x0 - r_0, n_res, cfg, on_theta, M * p,
+                                        prob.ocv0)
+        else:
+            sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
+                                       _ladder_constraints(ladder, M, p, lower))
+        sol.cost = float(0.5 * np.sum(prob.evaluate(sol.x)[0] ** 2))
+        return sol
+    robust = {}
+    if cfg.robust_loss == "huber":
+        robust = {"loss": "huber", "f_scale": HUBER_K * max(_robust_scale(r0[:n_res]), 1e-6)}
+    with np.errstate(over="ignore", invalid="ignore"):
+        return least_squares(lambda x: prob.evaluate(x)[0], x0,
+                             jac=lambda x: prob.evaluate(x)[1],
+                             bounds=(lower, upper), method="trf", x_scale="jac",
+                             max_nfev=cfg.oe_max_iterations, ftol=1e-8, xtol=1e-10,
+                             gtol=1e-10, **robust)
 
 
 def refines_ocv(model: LmnModel, segs: list[Segment], cfg: TrainConfig) -> bool:
