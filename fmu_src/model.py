@@ -437,6 +437,56 @@ def _noise(doc: object, source: str) -> dict:
 
 def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     """Check a model document and build the runtime model; errors name the file and key."""
+    ver = _check_format(doc, source)
+    ts, delay = _read_timing(doc, source)
+    cell = _get(doc, "cell", source, dict)
+    cap = float(_get(cell, "capacity_ah", f"{source}: cell", (int, float)))
+    if not cap > 0:
+        raise ModelFileError(f"{source}: cell.capacity_ah is {cap}, expected > 0")
+    output = _get(doc, "output", source, str)
+    if output not in ("relative_ocv", "absolute"):
+        raise ModelFileError(f"{source}: 'output' is {output!r}, expected 'relative_ocv' or "
+                             "'absolute'")
+    ocv_soc, ocv_v = _read_ocv(doc, source)
+    reg = _get(doc, "regressors", source, dict)
+    w = f"{source}: regressors"
+    na, nb, filters = _read_structure(reg, w)
+    gamma = reg.get("hysteresis_gamma")
+    arrhenius, tau_activation, temperature_terms = _read_temperature(reg, w)
+    variables, center, scale = _read_partition(doc, source)
+    weights, children, roots = _read_tree(doc, source, len(variables))
+    lm = _get(doc, "local_models", source, dict)
+    theta = _array(lm, "theta", f"{source}: local_models", 2)
+    gating = doc.get("gating", {"mode": "none"})
+    model = LmnModel(
+        sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
+        current_terms=nb, filters=filters,
+        hysteresis_gamma=None if gamma is None else float(gamma),
+        ocv_input=bool(reg.get("ocv_input", False)), soc_input=bool(reg.get("soc_input", False)),
+        offset=bool(reg.get("offset", True)), relative_ocv=output == "relative_ocv",
+        partition_variables=list(variables), partition_center=center, partition_scale=scale,
+        roots=roots, node_weights=weights, node_children=children,
+        theta=theta, efficiency_charge=float(cell.get("efficiency_charge", 1.0)),
+        efficiency_discharge=float(cell.get("efficiency_discharge", 1.0)),
+        gating_mode=str(gating.get("mode", "none")),
+        rest_current_a=float(gating.get("rest_current_a", 0.01)),
+        initial_direction=str(gating.get("initial_direction", "discharge")),
+        arrhenius_k=None if arrhenius is None else float(arrhenius),
+        tau_activation_k=None if tau_activation is None else float(tau_activation),
+        reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
+        temperature_terms=temperature_terms,
+        depletion=_depletion(reg.get("depletion"), filters, w, ver),
+        thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
+        limits=dict(doc.get("limits", {})), cell=dict(cell),
+        noise=_noise(doc.get("noise", {}), source),
+        extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
+               if k in doc})
+    _check_local_models(model, lm, source)
+    return model
+
+
+def _check_format(doc: dict, source: str) -> int:
+    """The document's format and version (returned), refused unless this LMNCell reads them."""
     if not isinstance(doc, dict):
         raise ModelFileError(f"{source}: expected a JSON object")
     fmt = doc.get("format")
@@ -446,6 +496,11 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     if ver not in READABLE_VERSIONS or isinstance(ver, bool):
         raise ModelFileError(f"{source}: model file version {ver!r}; this LMNCell reads versions "
                              f"{list(READABLE_VERSIONS)} (re-train or convert the model)")
+    return ver
+
+
+def _read_timing(doc: dict, source: str) -> tuple[float, float]:
+    """Sample time Ts (s, > 0) and current delay δ (s, 0 ≤ δ < Ts)."""
     ts = float(_get(doc, "sample_time_s", source, (int, float)))
     if not ts > 0:
         raise ModelFileError(f"{source}: 'sample_time_s' is {ts}, expected > 0")
@@ -454,45 +509,56 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
             or not 0.0 <= delay < ts):
         raise ModelFileError(f"{source}: 'current_delay_s' is {delay!r}, expected a number "
                              f"0 ≤ δ < sample_time_s = {ts} s")
-    cell = _get(doc, "cell", source, dict)
-    cap = float(_get(cell, "capacity_ah", f"{source}: cell", (int, float)))
-    if not cap > 0:
-        raise ModelFileError(f"{source}: cell.capacity_ah is {cap}, expected > 0")
-    output = _get(doc, "output", source, str)
-    if output not in ("relative_ocv", "absolute"):
-        raise ModelFileError(f"{source}: 'output' is {output!r}, expected 'relative_ocv' or "
-                             "'absolute'")
+    return ts, float(delay)
+
+
+def _read_ocv(doc: dict, source: str) -> tuple[np.ndarray, np.ndarray]:
+    """The OCV table: SoC knots (increasing) and voltages (V), of one length ≥ 2."""
     ocv = _get(doc, "ocv", source, dict)
     ocv_soc, ocv_v = _array(ocv, "soc", f"{source}: ocv", 1), _array(ocv, "voltage_v",
                                                                       f"{source}: ocv", 1)
     if ocv_soc.shape != ocv_v.shape or ocv_soc.size < 2 or (np.diff(ocv_soc) <= 0).any():
         raise ModelFileError(f"{source}: ocv.soc and ocv.voltage_v must have the same length "
                              "(≥ 2) and soc must increase")
-    reg = _get(doc, "regressors", source, dict)
-    w = f"{source}: regressors"
-    na = _get(reg, "output_lags", w, int)
-    nb = _get(reg, "current_terms", w, int)
-    filters = [tuple(float(x) for x in f) for f in _get(reg, "filters", w, list)]
+    return ocv_soc, ocv_v
+
+
+def _read_structure(reg: dict, where: str) -> tuple[int, int, list[tuple[float, ...]]]:
+    """Output lags na ≥ 0, current terms nb ≥ 1 and the filters [(τ_fast, τ_slow)] (s)."""
+    na = _get(reg, "output_lags", where, int)
+    nb = _get(reg, "current_terms", where, int)
+    filters = [tuple(float(x) for x in f) for f in _get(reg, "filters", where, list)]
     if na < 0 or nb < 1 or any(len(f) != 2 or not 0 < f[0] < f[1] for f in filters):
-        raise ModelFileError(f"{w}: need output_lags ≥ 0, current_terms ≥ 1 and filters "
+        raise ModelFileError(f"{where}: need output_lags ≥ 0, current_terms ≥ 1 and filters "
                              "[tau_fast_s, tau_slow_s] with 0 < fast < slow")
-    gamma = reg.get("hysteresis_gamma")
+    return na, nb, filters
+
+
+def _read_temperature(reg: dict, where: str) -> tuple[float | None, float | None, int]:
+    """Arrhenius E (K or None), the time constants' Eτ (K or None) and the degree of the
+    temperature terms."""
     arrhenius = reg.get("arrhenius_k")
     if arrhenius is not None and not (isinstance(arrhenius, (int, float))
                                       and math.isfinite(arrhenius)):
-        raise ModelFileError(f"{w}: 'arrhenius_k' is {arrhenius!r}, expected null or a number")
+        raise ModelFileError(f"{where}: 'arrhenius_k' is {arrhenius!r}, expected null or a "
+                             "number")
     tau_activation = reg.get("time_constant_activation_k")
     if tau_activation is not None and not (isinstance(tau_activation, (int, float))
                                            and not isinstance(tau_activation, bool)
                                            and math.isfinite(tau_activation)
                                            and 0 <= tau_activation <= MAX_TAU_ACTIVATION_K):
-        raise ModelFileError(f"{w}: 'time_constant_activation_k' is {tau_activation!r}, "
+        raise ModelFileError(f"{where}: 'time_constant_activation_k' is {tau_activation!r}, "
                              f"expected null or a number of K within 0…{MAX_TAU_ACTIVATION_K:g}")
     temperature_terms = reg.get("temperature_terms", 0)
     if (not isinstance(temperature_terms, int) or isinstance(temperature_terms, bool)
             or not 0 <= temperature_terms <= MAX_TEMPERATURE_TERMS):
-        raise ModelFileError(f"{w}: 'temperature_terms' is {temperature_terms!r}, expected an "
-                             f"integer 0…{MAX_TEMPERATURE_TERMS} (the degree in dT)")
+        raise ModelFileError(f"{where}: 'temperature_terms' is {temperature_terms!r}, expected "
+                             f"an integer 0…{MAX_TEMPERATURE_TERMS} (the degree in dT)")
+    return arrhenius, tau_activation, temperature_terms
+
+
+def _read_partition(doc: dict, source: str) -> tuple[list[str], np.ndarray, np.ndarray]:
+    """Partition variables and their normalisation (centre, scale > 0)."""
     part = _get(doc, "partition", source, dict)
     variables = _get(part, "variables", f"{source}: partition", list)
     bad = [v for v in variables if v not in PARTITION_VARIABLES]
@@ -504,6 +570,13 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     d = len(variables)
     if center.size != d or scale.size != d or (scale <= 0).any():
         raise ModelFileError(f"{source}: partition center/scale need {d} entries, scale > 0")
+    return variables, center, scale
+
+
+def _read_tree(doc: dict, source: str, d: int
+               ) -> tuple[np.ndarray, list[tuple[tuple[str, int], tuple[str, int]]],
+                          list[tuple[str, tuple[str, int]]]]:
+    """The tree: node weights (nodes, d + 1), each node's two children, the gated roots."""
     tree = _get(doc, "tree", source, dict)
     nodes = _get(tree, "nodes", f"{source}: tree", list)
     try:
@@ -528,32 +601,12 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         if gate not in GATES:
             raise ModelFileError(f"{source}: tree.roots[{k}].gate is {gate!r}, expected {GATES}")
         roots.append((gate, _ref(r.get("child"), f"{source}: tree.roots[{k}]")))
-    lm = _get(doc, "local_models", source, dict)
-    theta = _array(lm, "theta", f"{source}: local_models", 2)
-    gating = doc.get("gating", {"mode": "none"})
-    model = LmnModel(
-        sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
-        current_terms=nb, filters=filters,
-        hysteresis_gamma=None if gamma is None else float(gamma),
-        ocv_input=bool(reg.get("ocv_input", False)), soc_input=bool(reg.get("soc_input", False)),
-        offset=bool(reg.get("offset", True)), relative_ocv=output == "relative_ocv",
-        partition_variables=list(variables), partition_center=center, partition_scale=scale,
-        roots=roots, node_weights=weights.reshape(len(nodes), d + 1), node_children=children,
-        theta=theta, efficiency_charge=float(cell.get("efficiency_charge", 1.0)),
-        efficiency_discharge=float(cell.get("efficiency_discharge", 1.0)),
-        gating_mode=str(gating.get("mode", "none")),
-        rest_current_a=float(gating.get("rest_current_a", 0.01)),
-        initial_direction=str(gating.get("initial_direction", "discharge")),
-        arrhenius_k=None if arrhenius is None else float(arrhenius),
-        tau_activation_k=None if tau_activation is None else float(tau_activation),
-        reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
-        temperature_terms=temperature_terms,
-        depletion=_depletion(reg.get("depletion"), filters, w, ver),
-        thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
-        limits=dict(doc.get("limits", {})), cell=dict(cell),
-        noise=_noise(doc.get("noise", {}), source),
-        extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
-               if k in doc})
+    return weights.reshape(len(nodes), d + 1), children, roots
+
+
+def _check_local_models(model: LmnModel, lm: dict, source: str) -> None:
+    """θ's shape and named columns against the regressor definition; the gating mode."""
+    theta = model.theta
     p = len(model.columns())
     if theta.ndim != 2 or theta.shape[1] != p:
         raise ModelFileError(f"{source}: local_models.theta has shape {theta.shape}, expected "
@@ -563,7 +616,6 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
                              f"regressor definition {model.columns()}")
     if model.gating_mode not in ("none", "current_sign"):
         raise ModelFileError(f"{source}: gating.mode {model.gating_mode!r} unknown")
-    return model
 
 
 def model_to_dict(model: LmnModel) -> dict:
