@@ -29,6 +29,19 @@ class ConfigError(ValueError):
     """A training setting that cannot be used; the message names the setting."""
 
 
+SETTING_CHOICES = {  # the settings with a fixed set of names
+    "ocv_refinement": ("auto", "on", "off"),
+    "local_model_form": ("auto", "rc_ladder", "free"),
+    "output": ("relative_ocv", "absolute"),
+    "pre_partition": ("none", "current_sign"),
+    "temperature_regions": ("auto", "off"),
+    "region_growth": ("separate", "joint"),
+    "stop": ("validation", "aicc"),
+    "validation": ("block", "record", "none"),
+    "robust_loss": ("huber", "none"),
+}
+
+
 @dataclass
 class TrainConfig:
     """Settings of `lmncell train` (units in the names; see README for the meaning of each).
@@ -337,9 +350,21 @@ class TrainConfig:
 
     def check(self) -> TrainConfig:
         """Raise ConfigError for settings that cannot work; return self."""
-        def bad(name: str, why: str) -> ConfigError:
-            return ConfigError(f"setting '{name}' = {getattr(self, name)!r}: {why}")
+        self._check_structure()
+        self._check_temperature()
+        self._check_offsets()
+        self._check_depletion()
+        self._check_choices()
+        self._check_growth()
+        self._check_data()
+        return self
 
+    def _bad(self, name: str, why: str) -> ConfigError:
+        return ConfigError(f"setting '{name}' = {getattr(self, name)!r}: {why}")
+
+    def _check_structure(self) -> None:
+        """Sample time, delay, lags, filters, RC-ladder form, OCV knots, pole bound."""
+        bad = self._bad
         if not self.sample_time_s > 0:
             raise bad("sample_time_s", "expected > 0 s")
         if self.output_lags < 0 or self.output_lags > 10:
@@ -349,6 +374,25 @@ class TrainConfig:
         for f in self.filters:
             if len(f) != 2 or not 0 < f[0] < f[1]:
                 raise bad("filters", "expected pairs [tau_fast_s, tau_slow_s], 0 < fast < slow")
+        if self.local_model_form == "rc_ladder" and not is_ladder(
+                self.filters, self.sample_time_s, self.output_lags):
+            raise bad("local_model_form", "RC-ladder local models need output_lags = 0 and a "
+                      "chain of filters whose time constants at or above sample_time_s are "
+                      "shared like [[0.01, 5], [5, 30], [30, 150]]; use 'free' or 'auto'")
+        if not 0.9 < self.max_pole < 1:
+            raise bad("max_pole", "expected 0.9 < max_pole < 1")
+        if not (self.current_delay_s == "auto" or (
+                isinstance(self.current_delay_s, (int, float))
+                and not isinstance(self.current_delay_s, bool)
+                and 0.0 <= self.current_delay_s < self.sample_time_s)):
+            raise bad("current_delay_s", f"expected 'auto' or 0 ≤ δ < sample_time_s = "
+                                         f"{self.sample_time_s} s")
+        if self.ocv_knots < 3:
+            raise bad("ocv_knots", "expected ≥ 3")
+
+    def _check_temperature(self) -> None:
+        """Hysteresis rate, Arrhenius E, the time constants' Eτ, temperature terms."""
+        bad = self._bad
         if not (self.hysteresis in ("auto", "off") or (isinstance(self.hysteresis, (int, float))
                 and self.hysteresis > 0)):
             raise bad("hysteresis", "expected 'auto', 'off' or a γ > 0")
@@ -366,15 +410,20 @@ class TrainConfig:
                 and 0 <= self.temperature_terms <= MAX_TEMPERATURE_TERMS)):
             raise bad("temperature_terms",
                       f"expected 'auto' or a degree 0…{MAX_TEMPERATURE_TERMS}")
+
+    def _check_offsets(self) -> None:
+        """The local OCV offsets' bound and ridge."""
         bound = self.offset_bound_mv
         if not (bound == "auto" or (isinstance(bound, (int, float)) and 0 <= bound < 1e4)):
-            raise bad("offset_bound_mv", "expected 'auto', 0 (unbounded) or a bound in mV")
+            raise self._bad("offset_bound_mv", "expected 'auto', 0 (unbounded) or a bound in mV")
         ridge = self.offset_ridge
         if not (ridge == "auto" or (isinstance(ridge, (int, float)) and not isinstance(ridge, bool)
                                     and 0 <= ridge <= 1)):
-            raise bad("offset_ridge", "expected 'auto' or a weight ρ within 0…1 (0: off)")
-        if self.ocv_refinement not in ("auto", "on", "off"):
-            raise bad("ocv_refinement", "expected 'auto', 'on' or 'off'")
+            raise self._bad("offset_ridge", "expected 'auto' or a weight ρ within 0…1 (0: off)")
+
+    def _check_depletion(self) -> None:
+        """The depletion regressors' power and time constants (each one of the filters')."""
+        bad = self._bad
         if not (isinstance(self.depletion_power, (int, float)) and 0 <= self.depletion_power <= 8):
             raise bad("depletion_power", "expected 0 (off) … 8")
         if self.depletion_power and self.depletion_tau_s != "auto":
@@ -398,37 +447,32 @@ class TrainConfig:
                 raise bad("depletion_fast_tau_s", "expected a time constant other than the "
                           f"depletion regressor's {self.depletion_time_constant_s():g} s "
                           f"(depletion_tau_s = {self.depletion_tau_s!r}) (or 0: none)")
-        if self.local_model_form not in ("auto", "rc_ladder", "free"):
-            raise bad("local_model_form", "expected 'auto', 'rc_ladder' or 'free'")
-        if self.local_model_form == "rc_ladder" and not is_ladder(
-                self.filters, self.sample_time_s, self.output_lags):
-            raise bad("local_model_form", "RC-ladder local models need output_lags = 0 and a "
-                      "chain of filters whose time constants at or above sample_time_s are "
-                      "shared like [[0.01, 5], [5, 30], [30, 150]]; use 'free' or 'auto'")
-        if self.output not in ("relative_ocv", "absolute"):
-            raise bad("output", "expected 'relative_ocv' or 'absolute'")
+
+    def _check_choices(self) -> None:
+        """Every setting with a fixed set of names (SETTING_CHOICES)."""
+        for name, allowed in SETTING_CHOICES.items():
+            if getattr(self, name) not in allowed:
+                names = [f"'{a}'" for a in allowed]
+                raise self._bad(name, f"expected {', '.join(names[:-1])} or {names[-1]}")
+
+    def _check_growth(self) -> None:
+        """Partition, the bound on M and the validation share."""
         part = self.partition
         if part != "auto" and (isinstance(part, str) or not part or len(set(part)) != len(part)
                                or any(p not in PARTITION_VARIABLES for p in part)):
-            raise bad("partition", f"expected 'auto' or a list of distinct names from "
-                      f"{PARTITION_VARIABLES}")
-        if self.pre_partition not in ("none", "current_sign"):
-            raise bad("pre_partition", "expected 'none' or 'current_sign'")
-        if self.temperature_regions not in ("auto", "off"):
-            raise bad("temperature_regions", "expected 'auto' or 'off'")
-        if self.region_growth not in ("separate", "joint"):
-            raise bad("region_growth", "expected 'separate' or 'joint'")
+            raise self._bad("partition", f"expected 'auto' or a list of distinct names from "
+                            f"{PARTITION_VARIABLES}")
         if not (self.max_local_models == "auto" or (
                 isinstance(self.max_local_models, int)
                 and not isinstance(self.max_local_models, bool)
                 and 1 <= self.max_local_models <= 64)):
-            raise bad("max_local_models", "expected 'auto' or an integer 1…64")
-        if self.stop not in ("validation", "aicc"):
-            raise bad("stop", "expected 'validation' or 'aicc'")
-        if self.validation not in ("block", "record", "none"):
-            raise bad("validation", "expected 'block', 'record' or 'none'")
+            raise self._bad("max_local_models", "expected 'auto' or an integer 1…64")
         if not 0 < self.validation_fraction < 0.5:
-            raise bad("validation_fraction", "expected 0 < fraction < 0.5")
+            raise self._bad("validation_fraction", "expected 0 < fraction < 0.5")
+
+    def _check_data(self) -> None:
+        """SoC window and weights, the SoC reference's and the model's error σ, record weights."""
+        bad = self._bad
         lo, hi = self.soc_window
         if not 0 <= lo < hi <= 1:
             raise bad("soc_window", "expected [low, high] with 0 ≤ low < high ≤ 1")
@@ -443,19 +487,6 @@ class TrainConfig:
                       "not all 0")
         if not 0 <= self.outside_weight <= 1:
             raise bad("outside_weight", "expected 0…1")
-        if self.robust_loss not in ("huber", "none"):
-            raise bad("robust_loss", "expected 'huber' or 'none'")
-        if not 0.9 < self.max_pole < 1:
-            raise bad("max_pole", "expected 0.9 < max_pole < 1")
-        if not (self.current_delay_s == "auto" or (
-                isinstance(self.current_delay_s, (int, float))
-                and not isinstance(self.current_delay_s, bool)
-                and 0.0 <= self.current_delay_s < self.sample_time_s)):
-            raise bad("current_delay_s", f"expected 'auto' or 0 ≤ δ < sample_time_s = "
-                                         f"{self.sample_time_s} s")
-        if self.ocv_knots < 3:
-            raise bad("ocv_knots", "expected ≥ 3")
-        return self
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
