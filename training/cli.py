@@ -261,7 +261,21 @@ def build_parser() -> argparse.ArgumentParser:
                                 "charges; SI units; SoC as a fraction 0…1.", **fmt)
     p.add_argument("--version", action="version", version=f"lmncell {__version__}")
     sub = p.add_subparsers(dest="command", metavar="COMMAND")
+    for add in (_add_inspect_command,
+                _add_train_command,
+                _add_evaluate_command,
+                _add_explain_command,
+                _add_build_fmu_command,
+                _add_simulate_command,
+                _add_sweep_command,
+                _add_design_command,
+                _add_demo_command):
+        add(sub, fmt)
+    return p
 
+
+def _add_inspect_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell inspect` subcommand."""
     s = sub.add_parser("inspect", help="summarise cycler files (and plot them)", **fmt)
     s.add_argument("files", nargs="+", help="data files (CSV, .mat, BDF; .gz too)")
     s.add_argument("--plot", metavar="OUT.png", help="one figure of all files")
@@ -270,6 +284,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reader_options(s)
     s.set_defaults(func=cmd_inspect)
 
+
+def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell train` subcommand."""
     s = sub.add_parser("train", help="identify an LMN from measurements", **fmt)
     s.add_argument("data", nargs="+", help="training data files")
     s.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
@@ -294,6 +311,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reader_options(s)
     s.set_defaults(func=cmd_train)
 
+
+def _add_evaluate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell evaluate` subcommand."""
     s = sub.add_parser("evaluate", help="free-run error of a model or an FMU on records",
                        **fmt)
     s.add_argument("model", help="model file (JSON), or an LMNCell FMU (.fmu, pythonfmu or "
@@ -324,6 +344,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reader_options(s)
     s.set_defaults(func=cmd_evaluate)
 
+
+def _add_explain_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell explain` subcommand."""
     s = sub.add_parser("explain", help="every local model as the cell it describes: R0, RC "
                        "elements, hysteresis and OCV offset per operating regime", **fmt)
     s.add_argument("model", help="model file (JSON)")
@@ -333,6 +356,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the rows as JSON")
     s.set_defaults(func=cmd_explain)
 
+
+def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell build-fmu` subcommand."""
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU",
                        **fmt)
     s.add_argument("model", help="model file (JSON)")
@@ -341,6 +367,9 @@ def build_parser() -> argparse.ArgumentParser:
                    "importer (linux64 binary built here with gcc, sources included)")
     s.set_defaults(func=cmd_build_fmu)
 
+
+def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell simulate` subcommand."""
     s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy",
                        **fmt)
     s.add_argument("fmu", help="an LMNCell FMU")
@@ -357,6 +386,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--json", action="store_true", help="print the results as JSON")
     s.set_defaults(func=cmd_simulate)
 
+
+def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell sweep` subcommand."""
     s = sub.add_parser("sweep", help="many drive-cycle scenarios of an FMU on Dask", **fmt)
     s.add_argument("fmu", help="an LMNCell FMU (pythonfmu or native)")
     s.add_argument("--cycles", default="wltc", help="comma list of wltc, udds, us06, hwfet")
@@ -385,6 +417,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--plot", metavar="DIR", help="summary figures")
     s.set_defaults(func=cmd_sweep)
 
+
+def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell design` subcommand."""
     s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile",
                        **fmt)
     s.add_argument("--capacity", type=_positive, required=True, help="cell capacity, Ah")
@@ -419,11 +454,13 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", required=True, metavar="P.csv", help="cycler programme to write")
     s.set_defaults(func=cmd_design)
 
+
+def _add_demo_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
+    """The `lmncell demo` subcommand."""
     s = sub.add_parser("demo", help="train, evaluate, build the FMU, drive it, write a report",
                        **fmt)
     s.add_argument("--out", default="lmncell-demo", help="output folder")
     s.set_defaults(func=cmd_demo)
-    return p
 
 
 def run_script(main_function, script: str) -> None:
