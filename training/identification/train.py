@@ -27,7 +27,7 @@ from lmncell.data.records import DataError, Record
 from lmncell.evaluation.evaluate import simulate_segment
 from lmncell.evaluation.metrics import ENDS, pooled, record_metrics
 from lmncell.identification.baselines import fit_ecm2rc
-from lmncell.identification.construction import train_lmn
+from lmncell.identification.construction import TrainResult, train_lmn
 from lmncell.identification.ocvfit import lowpass
 from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.thermal import fit_thermal
@@ -36,6 +36,7 @@ from lmncell.progress import print_progress as _print
 from lmncell.runtime.model import LmnModel, model_to_dict, save_model
 from lmncell.runtime.observers import offline_fuzzy_design
 from lmncell.runtime.step import exo_series, initial_hysteresis
+from lmncell.runtime.thermal import ThermalModel
 
 
 def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float | None,
@@ -75,6 +76,57 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
             segs.append(seg)
     return segs, records, float(capacity_ah), float(delay)
 
+
+
+def _thermal_text(thermal: ThermalModel | None, info: dict) -> str:
+    """The progress line's account of the thermal model (or why there is none)."""
+    if thermal is None:
+        return f"off ({info['reason']})"
+    return (f"R = {thermal.resistance_k_per_w:.2f} K/W, τ = {thermal.time_constant_s:.0f}"
+            f" s, rested {thermal.offset_k:+.2f} K above ambient; cell temperature RMSE "
+            f"{info['rmse_k']:.2f} K on {len(info['segments'])} segment(s)"
+            + (f"; at the bound of the search range, so not determined by these records: "
+               f"{', '.join(info['at_bound'])} (records that warm up and cool down "
+               "determine R and τ)" if info.get("at_bound") else ""))
+
+
+def _noise_doc(segs: list[Segment], sims: list[np.ndarray], residual_v: float, info: dict,
+               sample_time_s: float) -> dict:
+    """The model file's noise block: the free-run training residual (V), overall and by SoC,
+    and the recent current RMS, for the observers."""
+    return {"residual_std_v": residual_v,
+            "recent_current_rms_a": _recent_current_rms(segs, sample_time_s),
+            "residual_std_by_soc": residual_std_by_soc(
+                segs, sims, residual_v, generalisation_factor(info)),
+            "residual_rms_by_soc": training_rms_by_soc(segs, sims, residual_v)}
+
+
+def _training_doc(paths: list[str | Path], cap: float, cfg: TrainConfig, result: TrainResult,
+                  train_metrics: list[dict], thermal_info: dict) -> dict:
+    """The model file's record of its training: software, files with their SHA-256, capacity,
+    settings, the growth curve, the choices made and the training errors."""
+    return {
+        "software": f"lmncell {__version__} (python {platform.python_version()}, numpy "
+                    f"{np.__version__})",
+        "files": [{"path": str(p), "sha256": file_sha256(p)} for p in paths],
+        "capacity_ah": cap, "settings": cfg.to_dict(), "curve": result.curve,
+        "chosen_local_models": result.chosen_m, "info": result.info,
+        "train_metrics": train_metrics, "thermal": thermal_info,
+    }
+
+
+def _train_summary(model: LmnModel, train_metrics: list[dict], info: dict, seconds: float,
+                   baseline_docs: dict) -> dict:
+    """train_files' summary: M, the pooled free-run training RMSE (mV) overall, in the window
+    and at each end, the refined validation RMSE, the times and the baselines' fits."""
+    return {"local_models": model.n_local_models,
+            "train_rmse_mv": pooled(train_metrics),
+            "train_window_rmse_mv": pooled(train_metrics, "window_"),
+            "train_low_soc_rmse_mv": pooled(train_metrics, "low_soc_"),
+            "train_high_soc_rmse_mv": pooled(train_metrics, "high_soc_"),
+            "validation_rmse_mv": info.get("refined_validation_freerun_rmse_mv"),
+            "seconds_lmn": info["seconds"], "seconds_total": seconds,
+            "baselines": {k: v.get("fit", {}) for k, v in baseline_docs.items()}}
 
 def _limits(segs: list[Segment], model: LmnModel) -> dict:
     cur = np.concatenate([s.current_a for s in segs])
@@ -129,20 +181,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     train_metrics = [{"segment": s.name, **record_metrics(s.voltage_v, v, s.soc_ref)}
                      for s, v in zip(segs, sims, strict=True)]
     model.thermal, thermal_info = fit_thermal(model, segs)
-    progress("thermal model: " + (
-        f"R = {model.thermal.resistance_k_per_w:.2f} K/W, τ = {model.thermal.time_constant_s:.0f}"
-        f" s, rested {model.thermal.offset_k:+.2f} K above ambient; cell temperature RMSE "
-        f"{thermal_info['rmse_k']:.2f} K on {len(thermal_info['segments'])} segment(s)"
-        + (f"; at the bound of the search range, so not determined by these records: "
-           f"{', '.join(thermal_info['at_bound'])} (records that warm up and cool down "
-           "determine R and τ)" if thermal_info.get("at_bound") else "")
-        if model.thermal is not None else f"off ({thermal_info['reason']})"))
-    residual_v = 1e-3 * pooled(train_metrics)
-    model.noise = {"residual_std_v": residual_v,
-                   "recent_current_rms_a": _recent_current_rms(segs, cfg.sample_time_s),
-                   "residual_std_by_soc": residual_std_by_soc(
-                       segs, sims, residual_v, generalisation_factor(result.info)),
-                   "residual_rms_by_soc": training_rms_by_soc(segs, sims, residual_v)}
+    progress("thermal model: " + _thermal_text(model.thermal, thermal_info))
+    model.noise = _noise_doc(segs, sims, 1e-3 * pooled(train_metrics), result.info,
+                             cfg.sample_time_s)
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
@@ -150,27 +191,13 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     seconds = time.perf_counter() - t0
     model.extra = {
         "description": f"LMN of {model.cell['name']} with {model.n_local_models} local models",
-        "training": {
-            "software": f"lmncell {__version__} (python {platform.python_version()}, numpy "
-                        f"{np.__version__})",
-            "files": [{"path": str(p), "sha256": file_sha256(p)} for p in paths],
-            "capacity_ah": cap, "settings": cfg.to_dict(), "curve": result.curve,
-            "chosen_local_models": result.chosen_m, "info": result.info,
-            "train_metrics": train_metrics, "thermal": thermal_info,
-        },
+        "training": _training_doc(paths, cap, cfg, result, train_metrics, thermal_info),
     }
     model.extra["observers"] = {"fuzzy": offline_fuzzy_design(model)}
     if baseline_docs:
         model.extra["baselines"] = baseline_docs
     save_model(model, out)
-    summary = {"local_models": model.n_local_models,
-               "train_rmse_mv": pooled(train_metrics),
-               "train_window_rmse_mv": pooled(train_metrics, "window_"),
-               "train_low_soc_rmse_mv": pooled(train_metrics, "low_soc_"),
-               "train_high_soc_rmse_mv": pooled(train_metrics, "high_soc_"),
-               "validation_rmse_mv": result.info.get("refined_validation_freerun_rmse_mv"),
-               "seconds_lmn": result.info["seconds"], "seconds_total": seconds,
-               "baselines": {k: v.get("fit", {}) for k, v in baseline_docs.items()}}
+    summary = _train_summary(model, train_metrics, result.info, seconds, baseline_docs)
     progress(f"wrote {out}: {model.n_local_models} local models, free-run training RMSE "
              f"{summary['train_rmse_mv']:.2f} mV (20–80 % SoC: "
              f"{summary['train_window_rmse_mv']:.2f} mV{_ends_text(summary)}), LMN training "
