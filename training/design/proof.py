@@ -244,10 +244,12 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     programmes = [("designed", designed.current_a)] + [
         (f"{kind}_seed_{s}", random_programme(cell, same_hold, spec, s, kind).current_a)
         for kind in kinds for s in seeds]
-    # free local models: the design maximises the information of the unconstrained
-    # least-squares estimator, which the RC-ladder bounds would replace by another one
+    # free local models and no offset ridge: the design maximises the information of the
+    # unconstrained least-squares estimator, which the RC-ladder bounds or a ridge on the local
+    # OCV offsets (a parameter of that information) would replace by another one
     cfg = load_config(partition=["soc", "current"], validation="none", stop="aicc",
-                      max_local_models=8, ocv_tests=[str(ocv_path)], local_model_form="free")
+                      max_local_models=8, ocv_tests=[str(ocv_path)], local_model_form="free",
+                      offset_ridge=0.0)
     rows: dict = {}
     for name, cur in programmes:
         res = train_lmn([segment(name, cur, soc0)], cfg, cell.capacity_ah)
