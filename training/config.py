@@ -336,10 +336,13 @@ class TrainConfig:
             return float(self.depletion_tau_s)
         return self.nearest_filter_time_constant_s(DEPLETION_TAU_S)
 
+    def filter_time_constants_s(self) -> list[float]:
+        """Every filter's time constants, in order [fast_1, slow_1, fast_2, …] (s)."""
+        return [float(t) for f in self.filters for t in f]
+
     def nearest_filter_time_constant_s(self, tau_s: float) -> float:
         """The filters' time constant nearest tau_s on a log scale (the first of equals)."""
-        taus = [float(t) for f in self.filters for t in f]
-        return min(taus, key=lambda t: abs(math.log(t / tau_s)))
+        return min(self.filter_time_constants_s(), key=lambda t: abs(math.log(t / tau_s)))
 
     def depletion_fast_time_constant_s(self) -> float | None:
         """τ2 of the fast depletion regressor, or None (0, no depletion regressor, or "auto"
@@ -439,7 +442,7 @@ class TrainConfig:
                                or fast < 0):
             raise bad("depletion_fast_tau_s", "expected 'auto', 0 (none) or a time constant in s")
         if self.depletion_power and fast not in ("auto", 0):
-            taus = [float(t) for f in self.filters for t in f]
+            taus = self.filter_time_constants_s()
             if float(fast) not in taus:
                 raise bad("depletion_fast_tau_s", f"expected one of the filters' time constants "
                           f"{taus} (or 0: none)")
