@@ -42,12 +42,12 @@ from pathlib import Path
 from lmncell.api import build_fmu
 from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
 from lmncell.config import parse_setting
-from lmncell.data.readers import read_record
 from lmncell.data.soc import logged_current_drift_ah
 from lmncell.evaluation.evaluate import (
-    evaluate_model,
+    evaluate_records,
     hold_out_clause,
     leave_one_out_folds,
+    read_records,
     through_pauses_clause,
 )
 from lmncell.evaluation.fmueval import evaluate_fmu
@@ -98,10 +98,11 @@ def main() -> None:
         fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
                          native=a.fmu == "native") if a.fmu else None)
         folds.append((Path(held).name, {}))
-        drift = logged_current_drift_ah(read_record(held))
+        held_records = [(rec, start) for _, rec, start in read_records(
+            [held], held_soc0, through_hidden_pauses=a.through_hidden_pauses)]
+        drift = logged_current_drift_ah(held_records[0][0])
         for ambient in (False, True):
-            _, rows = evaluate_model(model, [held], soc0=held_soc0, ambient=ambient,
-                                     through_hidden_pauses=a.through_hidden_pauses)
+            _, rows = evaluate_records(model, held_records, ambient=ambient)
             if ambient and "cell_temperature_rmse_k" not in rows[0]:
                 continue                  # no measured cell temperature: one run says it all
             if fmu is not None:

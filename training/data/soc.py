@@ -49,14 +49,14 @@ def current_scaled_to_counters(rec: Record) -> tuple[Record, float]:
     logged current (logged_current_drift_ah) costs a model driven by it. DataError without
     counters, or where the record's net charge is under 10 % of its charge throughput (a
     round trip: one factor is then ill-determined)."""
-    drift = logged_current_drift_ah(rec)
-    logged = float(charge_throughput_ah(rec, use_counters=False)[-1])
-    throughput = float(np.sum(np.abs(_held_charge_as(rec)))) / 3600.0
-    if drift is None or not abs(logged) >= 0.1 * throughput > 0:
+    held = _held_charge_as(rec)
+    logged = float(np.cumsum(held)[-1]) / 3600.0      # charge_throughput_ah's, without counters
+    throughput = float(np.sum(np.abs(held))) / 3600.0
+    if rec.charge_ah is None or not abs(logged) >= 0.1 * throughput > 0:
         raise DataError(f"{rec.meta.source}: cannot scale the current to the tester's counters "
                         "(expected charge counters and a net charge of at least 10 % of the "
                         "charge throughput)")
-    factor = (logged - drift) / logged
+    factor = float(charge_throughput_ah(rec)[-1]) / logged
     return dataclasses.replace(rec, current_a=rec.current_a * factor), factor
 
 
