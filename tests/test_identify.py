@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -557,6 +558,43 @@ def test_time_constant_scaling_auto_only_where_cells_warm_up_inside_records() ->
                                         quiet) == 800.0
 
 
+def test_oe_ridge_holds_the_refinement_near_the_local_fit() -> None:
+    """The refinement's ridge (oe_ridge) weighs ‖θ − θ_tree‖² against the free-run error: with
+    a small one it finds the true offset from a start without one, with a large one the
+    coefficients stay near the start; a bad value is refused with the setting's name."""
+    from lmncell.data.dataset import Segment
+    from lmncell.runtime.step import simulate
+
+    settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
+                    depletion_power=0, robust_loss="none", offset_ridge=0.0)
+    cfg = load_config(**settings)
+    base = skeleton(cfg, 3.0, np.array([0.0, 1.0]), np.array([3.4, 4.1]), None,
+                    np.array([0.5]), np.array([0.5]))
+    cols = base.columns()
+    truth = np.zeros(len(cols))
+    truth[cols.index("i(k)")] = 0.03
+    truth[cols.index("1")] = -0.02
+    base.theta = truth[None, :].copy()
+    n = 3000
+    t = np.arange(1, n + 1, dtype=float)
+    current = -1.5 + 0.5 * np.sin(2 * np.pi * t / 60.0)
+    sim = simulate(base, current, None, 1.0)
+    seg = Segment("synthetic", t, current, sim.voltage_v, None, 1.0, sim.soc, np.ones(n))
+    start = copy.deepcopy(base)
+    start.theta[0, cols.index("1")] = 0.0
+    offsets = {}
+    for rho in (1e-3, 1e5):
+        cfg = load_config(oe_ridge=rho, **settings)
+        design = build_design(start, [seg], validation_masks([seg], cfg))
+        model, info = refine_output_error(start, [seg], design, cfg, lambda _m: None)
+        offsets[rho] = model.theta[0, cols.index("1")] if info["accepted"] else 0.0
+    assert offsets[1e-3] == pytest.approx(-0.02, abs=1e-4)
+    assert abs(offsets[1e5]) < 0.1 * 0.02
+    for bad in (-1.0, "strong", True):
+        with pytest.raises(ConfigError, match="oe_ridge"):
+            load_config(oe_ridge=bad)
+
+
 def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     """A steady discharge with a ripple: an OCV offset and the slowest RC element explain the
     voltage nearly alike. Without the ridge the refinement finds the true offset (20 mV, the
@@ -566,7 +604,8 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     from lmncell.runtime.step import simulate
 
     settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
-                    depletion_power=0, robust_loss="none", ocv_tests=["ocv.mat"])
+                    depletion_power=0, robust_loss="none", ocv_tests=["ocv.mat"],
+                    oe_ridge=1e-3)                    # the refinement's own ridge: weak
     cfg0 = load_config(offset_ridge=0.0, **settings)
     base = skeleton(cfg0, 3.0, np.array([0.0, 1.0]), np.array([3.4, 4.1]), None,
                     np.array([0.5]), np.array([0.5]))

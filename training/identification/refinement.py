@@ -50,10 +50,9 @@ def _sensitivity(A: np.ndarray, G: np.ndarray) -> np.ndarray:
 class _FreeRunProblem:
     """The refinement's residuals and Jacobian in x = [θ of every local model, OCV increments]
     (the increments only where refines_ocv): each segment's weighted free-run error, then the
-    penalty rows (a ridge towards the start θ, the offset ridge, and for the OCV its smoothness
-    and its anchor to the start), whose Jacobian is constant and built once."""
-
-    RIDGE = 1e-3
+    penalty rows (a ridge towards the start θ, TrainConfig.oe_ridge, the offset ridge, and for
+    the OCV its smoothness and its anchor to the start), whose Jacobian is constant and built
+    once."""
 
     def __init__(self, model: LmnModel, segs: list[Segment], design: Design,
                  cfg: TrainConfig) -> None:
@@ -69,6 +68,7 @@ class _FreeRunProblem:
         self.h0s = [initial_hysteresis(s.soc0) for s in segs]
         self.t0s = [25.0 if s.temperature_c is None else float(s.temperature_c[0]) for s in segs]
         self.theta0 = model.theta.copy()
+        self.ridge = np.sqrt(float(cfg.oe_ridge))
         n_total = float(sum(float(np.sum(w * w)) for w in self.w_all))
         self.lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
         self.D2 = second_difference(self.K) if self.K >= 3 else np.zeros((0, self.K))
@@ -84,7 +84,7 @@ class _FreeRunProblem:
     def _penalty_jacobian(self) -> np.ndarray:
         """The penalty rows' Jacobian (they are linear in x), in residuals' order."""
         M, p, K = self.M, self.p, self.K
-        j_pen = [np.hstack([np.sqrt(self.RIDGE) * np.eye(M * p), np.zeros((M * p, K))])]
+        j_pen = [np.hstack([self.ridge * np.eye(M * p), np.zeros((M * p, K))])]
         if self.off_col is not None:
             j_off = np.zeros((M, M * p + K))
             j_off[np.arange(M), np.arange(M) * p + self.off_col] = self.off_lam
@@ -159,7 +159,7 @@ class _FreeRunProblem:
 
     def _penalty_values(self, theta: np.ndarray, ocv_v: np.ndarray) -> list[np.ndarray]:
         """The penalty rows at (θ, OCV), in _penalty_jacobian's order."""
-        rows = [np.sqrt(self.RIDGE) * (theta - self.theta0).ravel()]
+        rows = [self.ridge * (theta - self.theta0).ravel()]
         if self.off_col is not None:
             rows.append(self.off_lam * theta[:, self.off_col])
         if self.with_ocv and self.D2.shape[0]:
