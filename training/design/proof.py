@@ -36,6 +36,7 @@ from lmncell.design.optimal import (
 RANDOM_SEEDS = (1, 2, 3, 4, 5)
 OCV_TEST_C_RATE = 1 / 20
 PULSE_C_RATES = (3.0,)     # characterisation pulses, C
+DESIGN_PROOF_OE_RIDGE = 1e-3  # the proof's LMNs: a numerical refinement ridge only
 PULSE_S, PULSE_REST_S = 30, 120
 NEGLIGIBLE_RC = 0.05                 # an RC element below this share of R0 is dropped
 
@@ -244,12 +245,13 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     programmes = [("designed", designed.current_a)] + [
         (f"{kind}_seed_{s}", random_programme(cell, same_hold, spec, s, kind).current_a)
         for kind in kinds for s in seeds]
-    # free local models and no offset ridge: the design maximises the information of the
-    # unconstrained least-squares estimator, which the RC-ladder bounds or a ridge on the local
-    # OCV offsets (a parameter of that information) would replace by another one
+    # free local models, no offset ridge and only a numerical refinement ridge (oe_ridge): the
+    # design maximises the information of the unconstrained least-squares estimator, which the
+    # RC-ladder bounds or a ridge on the coefficients or the local OCV offsets (parameters of
+    # that information) would replace by another one
     cfg = load_config(partition=["soc", "current"], validation="none", stop="aicc",
                       max_local_models=8, ocv_tests=[str(ocv_path)], local_model_form="free",
-                      offset_ridge=0.0)
+                      offset_ridge=0.0, oe_ridge=DESIGN_PROOF_OE_RIDGE)
     rows: dict = {}
     for name, cur in programmes:
         res = train_lmn([segment(name, cur, soc0)], cfg, cell.capacity_ah)
