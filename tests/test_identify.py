@@ -558,13 +558,22 @@ def test_time_constant_scaling_auto_only_where_cells_warm_up_inside_records() ->
                                         quiet) == 800.0
 
 
+def _rippled_discharge(model, n: int):
+    """A Segment of n s of 1.5 A discharge with a 0.5 A ripple of period 60 s and the voltage
+    that model simulates for it (exact data)."""
+    from lmncell.data.dataset import Segment
+    from lmncell.runtime.step import simulate
+
+    t = np.arange(1, n + 1, dtype=float)
+    current = -1.5 + 0.5 * np.sin(2 * np.pi * t / 60.0)
+    sim = simulate(model, current, None, 1.0)
+    return Segment("synthetic", t, current, sim.voltage_v, None, 1.0, sim.soc, np.ones(n))
+
+
 def test_oe_ridge_holds_the_refinement_near_the_local_fit() -> None:
     """The refinement's ridge (oe_ridge) weighs ‖θ − θ_tree‖² against the free-run error: with
     a small one it finds the true offset from a start without one, with a large one the
     coefficients stay near the start; a bad value is refused with the setting's name."""
-    from lmncell.data.dataset import Segment
-    from lmncell.runtime.step import simulate
-
     settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
                     depletion_power=0, robust_loss="none", offset_ridge=0.0)
     cfg = load_config(**settings)
@@ -575,11 +584,7 @@ def test_oe_ridge_holds_the_refinement_near_the_local_fit() -> None:
     truth[cols.index("i(k)")] = 0.03
     truth[cols.index("1")] = -0.02
     base.theta = truth[None, :].copy()
-    n = 3000
-    t = np.arange(1, n + 1, dtype=float)
-    current = -1.5 + 0.5 * np.sin(2 * np.pi * t / 60.0)
-    sim = simulate(base, current, None, 1.0)
-    seg = Segment("synthetic", t, current, sim.voltage_v, None, 1.0, sim.soc, np.ones(n))
+    seg = _rippled_discharge(base, 3000)
     start = copy.deepcopy(base)
     start.theta[0, cols.index("1")] = 0.0
     offsets = {}
@@ -600,8 +605,6 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     voltage nearly alike. Without the ridge the refinement finds the true offset (20 mV, the
     data are exact); with it the offset shrinks towards 0 and the RC element takes the rest,
     at a small cost in fit. 'auto' turns it on only where OCV tests fix the OCV."""
-    from lmncell.data.dataset import Segment
-    from lmncell.runtime.step import simulate
 
     settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
                     depletion_power=0, robust_loss="none", ocv_tests=["ocv.mat"],
@@ -616,10 +619,7 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     truth[cols.index("1")] = -0.02                    # U_off = −20 mV
     base.theta = truth[None, :].copy()
     n = 6000
-    t = np.arange(1, n + 1, dtype=float)
-    current = -1.5 + 0.5 * np.sin(2 * np.pi * t / 60.0)
-    sim = simulate(base, current, None, 1.0)
-    seg = Segment("synthetic", t, current, sim.voltage_v, None, 1.0, sim.soc, np.ones(n))
+    seg = _rippled_discharge(base, n)
     start = skeleton(cfg0, 3.0, base.ocv_soc, base.ocv_v, None, np.array([0.5]),
                      np.array([0.5]))
     start.theta = truth[None, :].copy()
