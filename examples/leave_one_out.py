@@ -42,7 +42,6 @@ from pathlib import Path
 from lmncell.api import build_fmu
 from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
 from lmncell.config import parse_setting
-from lmncell.data.soc import logged_current_drift_ah
 from lmncell.evaluation.evaluate import (
     evaluate_records,
     hold_out_clause,
@@ -100,7 +99,6 @@ def main() -> None:
         folds.append((Path(held).name, {}))
         held_records = [(rec, start) for _, rec, start in read_records(
             [held], held_soc0, through_hidden_pauses=a.through_hidden_pauses)]
-        drift = logged_current_drift_ah(held_records[0][0])
         for ambient in (False, True):
             _, rows = evaluate_records(model, held_records, ambient=ambient)
             if ambient and "cell_temperature_rmse_k" not in rows[0]:
@@ -127,8 +125,8 @@ def main() -> None:
                 extra += f"  | lmn below {100 * ENDS[0]:.0f} % SoC {low:6.1f}"
             if "cell_temperature_rmse_k" in rows[0]:
                 extra += f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
-            if drift is not None:
-                extra += f"  SoC drift {100 * drift / a.capacity_ah:+.2f} %"
+            if "soc_drift_pct" in rows[0]:
+                extra += f"  SoC drift {rows[0]['soc_drift_pct']:+.2f} %"
             print(f"{Path(held).name[:40]:40s} {mode:7s} M={model.n_local_models:2d} "
                   f"E={model.arrhenius_k}  " + "  ".join(cells) + extra, flush=True)
     print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(

@@ -133,6 +133,33 @@ def test_logged_current_drift_against_the_counters() -> None:
                                                                                  abs=2e-4)
 
 
+def test_evaluate_rows_carry_the_drift_and_the_table_names_it_once(capsys) -> None:
+    """record_notes puts the drift in % of capacity into each row of a record with counters
+    (none without); print_rows names it once per record (its segments '#1', '#2' alike) from
+    DRIFT_NOTE_PCT on, with its side."""
+    from lmncell.evaluation.evaluate import DRIFT_NOTE_PCT, print_rows, record_notes
+
+    t = np.arange(0.0, 3600.0 + 1.0)
+    meta = RecordMeta(source="synthetic.csv", fmt="generic")
+    counted = -2.0 * 1.01 * (t - t[0]) / 3600.0              # logged current +0.02 Ah high
+    rec = Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta, charge_ah=counted)
+    assert record_notes(rec, 2.0)["soc_drift_pct"] == pytest.approx(1.0, rel=1e-9)
+    assert "soc_drift_pct" not in record_notes(
+        Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta), 2.0)
+    metrics = {"rmse_mv": 1.0, "mae_mv": 1.0, "max_mv": 1.0, "window_rmse_mv": 1.0,
+               "low_soc_rmse_mv": None, "high_soc_rmse_mv": None}
+    rows = [{"record": "a.csv#1", "lmn": metrics, "soc_drift_pct": 1.0},
+            {"record": "a.csv#2", "lmn": metrics, "soc_drift_pct": 1.0},
+            {"record": "b.csv", "lmn": metrics, "soc_drift_pct": -0.5},
+            {"record": "c.csv", "lmn": metrics, "soc_drift_pct": DRIFT_NOTE_PCT / 2}]
+    print_rows(rows, print)
+    out = capsys.readouterr().out
+    assert out.count("a.csv: the SoC counted from its logged current") == 1
+    assert "ends 1.00 % of the capacity above" in out
+    assert "b.csv: the SoC counted" in out and "ends 0.50 % of the capacity below" in out
+    assert "c.csv: the SoC counted" not in out
+
+
 def test_current_scaled_to_the_counters_meets_them_and_refuses_a_round_trip() -> None:
     t = np.arange(0.0, 3600.0 + 1.0)
     meta = RecordMeta(source="synthetic.csv", fmt="generic")

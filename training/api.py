@@ -83,7 +83,9 @@ def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
              through_hidden_pauses: bool = False) -> list[dict]:
     """Free-run error of a model (and its baselines) on records: one row per segment with,
     per model, RMSE, MAE and maximum error in mV over the whole record and RMSE over the
-    20–80 % SoC window and each end (`rmse_mv`, `window_rmse_mv`, …). soc0 as in train;
+    20–80 % SoC window and each end (`rmse_mv`, `window_rmse_mv`, …), and where the record
+    logs the tester's Ah counters `soc_drift_pct`, how far the SoC counted from its logged
+    current (as the model counts it) ends from the counters' (% of capacity). soc0 as in train;
     ambient: driven by the chamber temperature (the thermal model computes the cell's);
     through_hidden_pauses: as `lmncell evaluate --through-hidden-pauses`. model may also be an
     LMNCell FMU (a path ending in .fmu): fmpy then drives it through the records' samples and

@@ -16,6 +16,7 @@ import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record
+from lmncell.data.soc import logged_current_drift_ah
 from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
 from lmncell.progress import Progress
@@ -121,10 +122,25 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
             if cell is not None and seg.ambient_c is not None and seg.temperature_c is not None:
                 row["cell_temperature_rmse_k"] = float(np.sqrt(np.mean(
                     (cell - seg.temperature_c) ** 2)))
-            if rec.meta.pause_starts:
-                row["hidden_pauses_split"] = len(rec.meta.pause_starts)
-            rows.append(row)
+            rows.append(row | record_notes(rec, cap))
     return traces, rows
+
+
+DRIFT_NOTE_PCT = 0.1   # print_rows names a record's SoC drift from this much (% of capacity)
+
+
+def record_notes(rec: Record, capacity_ah: float) -> dict:
+    """What a row of a record's figures also says about the record: the hidden pauses it was
+    split at, and where the tester's Ah counters are logged the SoC drift of its logged current
+    by its end (soc_drift_pct: net charge of the current minus the counters', % of
+    capacity_ah; > 0: the model's SoC, counted from the current, ends above the counters')."""
+    notes: dict = {}
+    if rec.meta.pause_starts:
+        notes["hidden_pauses_split"] = len(rec.meta.pause_starts)
+    drift = logged_current_drift_ah(rec)
+    if drift is not None:
+        notes["soc_drift_pct"] = 100.0 * drift / capacity_ah
+    return notes
 
 
 def leave_one_out_folds(records: list[str], hold_out: str = "",
@@ -281,3 +297,20 @@ def print_rows(rows: list[dict], progress: Progress = _print) -> None:
                      "wall clock shows, each segment after one started rested; an FMU "
                      "driven through its time column runs on through them "
                      "(--through-hidden-pauses scores it that way)")
+    _print_drifts(rows, progress)
+
+
+def _print_drifts(rows: list[dict], progress: Progress) -> None:
+    """One line per record whose logged current drifts from the tester's Ah counters by at
+    least DRIFT_NOTE_PCT of the capacity by its end."""
+    told = set()
+    for r in rows:
+        name, drift = r["record"].split("#")[0], r.get("soc_drift_pct")
+        if drift is None or abs(drift) < DRIFT_NOTE_PCT or name in told:
+            continue
+        told.add(name)
+        side = "above" if drift > 0 else "below"
+        progress(f"{name}: the SoC counted from its logged current (as the model and an FMU "
+                 f"count it) ends {abs(drift):.2f} % of the capacity {side} the SoC of the "
+                 "tester's Ah counters; where the OCV is steep (near empty) that drift shows "
+                 "in the whole-record RMSE")

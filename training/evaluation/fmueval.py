@@ -22,6 +22,7 @@ from lmncell.evaluation.evaluate import (
     ambient_of,
     print_rows,
     read_records,
+    record_notes,
     write_traces,
 )
 from lmncell.evaluation.fmucheck import run_fmu_on_segment
@@ -263,9 +264,8 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                              "fmu": record_metrics(seg.voltage_v, run.voltage_v, seg.soc_ref),
                              "out_of_range_steps": int(run.out_of_range.sum()),
                              "steps": len(seg),
-                             "driven": "model_steps" if at_model_steps else "samples"})
-                if rec.meta.pause_starts:
-                    rows[-1]["hidden_pauses_split"] = len(rec.meta.pause_starts)
+                             "driven": "model_steps" if at_model_steps else "samples"}
+                            | record_notes(rec, info.capacity_ah))
     finally:
         if unzipped is not None:
             shutil.rmtree(unzipped, ignore_errors=True)
