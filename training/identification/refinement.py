@@ -1,7 +1,7 @@
 """Final output-error refinement: every local model (and the OCV knots) by Levenberg–Marquardt
 on the free-run simulation error, sensitivities propagated through the output feedback, with
-a Huber loss (iteratively reweighted least squares where there is no output feedback), and
-where slow OCV tests fix the OCV a ridge that pulls each local OCV offset towards 0
+a Huber loss (iteratively reweighted least squares where there is no output feedback), a
+ridge towards the tree's local fits (TrainConfig.oe_ridge), and where slow OCV tests fix the OCV a ridge that pulls each local OCV offset towards 0
 (TrainConfig.offset_ridge) and, for records at three or more temperatures, OCV knots anchored
 to the test's (TrainConfig.ocv_refinement)."""
 
@@ -68,7 +68,7 @@ class _FreeRunProblem:
         self.h0s = [initial_hysteresis(s.soc0) for s in segs]
         self.t0s = [25.0 if s.temperature_c is None else float(s.temperature_c[0]) for s in segs]
         self.theta0 = model.theta.copy()
-        self.ridge = np.sqrt(float(cfg.oe_ridge))
+        self.sqrt_ridge = np.sqrt(float(cfg.oe_ridge))
         n_total = float(sum(float(np.sum(w * w)) for w in self.w_all))
         self.lam_ocv = np.sqrt(SMOOTHNESS * n_total) * 1e-3
         self.D2 = second_difference(self.K) if self.K >= 3 else np.zeros((0, self.K))
@@ -84,7 +84,7 @@ class _FreeRunProblem:
     def _penalty_jacobian(self) -> np.ndarray:
         """The penalty rows' Jacobian (they are linear in x), in residuals' order."""
         M, p, K = self.M, self.p, self.K
-        j_pen = [np.hstack([self.ridge * np.eye(M * p), np.zeros((M * p, K))])]
+        j_pen = [np.hstack([self.sqrt_ridge * np.eye(M * p), np.zeros((M * p, K))])]
         if self.off_col is not None:
             j_off = np.zeros((M, M * p + K))
             j_off[np.arange(M), np.arange(M) * p + self.off_col] = self.off_lam
@@ -159,7 +159,7 @@ class _FreeRunProblem:
 
     def _penalty_values(self, theta: np.ndarray, ocv_v: np.ndarray) -> list[np.ndarray]:
         """The penalty rows at (θ, OCV), in _penalty_jacobian's order."""
-        rows = [self.ridge * (theta - self.theta0).ravel()]
+        rows = [self.sqrt_ridge * (theta - self.theta0).ravel()]
         if self.off_col is not None:
             rows.append(self.off_lam * theta[:, self.off_col])
         if self.with_ocv and self.D2.shape[0]:
