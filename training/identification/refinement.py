@@ -1,9 +1,9 @@
-"""Final output-error refinement: every local model (and the OCV knots) by Levenberg–Marquardt
-on the free-run simulation error, sensitivities propagated through the output feedback, with
-a Huber loss (iteratively reweighted least squares where there is no output feedback), a
-ridge towards the tree's local fits (TrainConfig.oe_ridge), and where slow OCV tests fix the OCV a ridge that pulls each local OCV offset towards 0
-(TrainConfig.offset_ridge) and, for records at three or more temperatures, OCV knots anchored
-to the test's (TrainConfig.ocv_refinement)."""
+"""Final output-error refinement: every local model (and the OCV knots) by Levenberg–Marquardt on
+the free-run simulation error, sensitivities propagated through the output feedback, with a
+Huber loss (iteratively reweighted least squares where there is no output feedback), a ridge
+towards the tree's local fits (TrainConfig.oe_ridge), and where slow OCV tests fix the OCV a
+ridge that pulls each local OCV offset towards 0 (TrainConfig.offset_ridge) and, for records at
+three or more temperatures, OCV knots anchored to the test's (TrainConfig.ocv_refinement)."""
 
 from __future__ import annotations
 
