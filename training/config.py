@@ -270,11 +270,11 @@ class TrainConfig:
     (4.99 / 9.29) → 4.93 / 9.05 (5.00 / 9.38) → 4.89 / 9.26 (4.96 / 9.59). The SoC observers
     lose (examples/observer_leave_one_out.py, from SoC 0.6 with the estimate 0.3, SoC RMSE %
     EKF / fuzzy / IMM): A123 3.64 / 3.50 / 3.32 → 4.18 / 3.37 / 3.10 → 4.77 / 3.78 / 3.52;
-    10 °C held out 0.60 / 1.88 / 2.03 → 0.59 / 2.22 / 2.40 → 0.77 / 2.66 / 2.82 (their
-    measurement error follows the free-run training error, which the ridge raises). Hence the
-    default stays 0.001. Scaled by each coefficient's own data curvature instead
-    (ρ_j = c·(JᵀJ)_jj) it held back the well-determined coefficients too: A123 c = 0.001 /
-    0.01: 3.23 / 11.58, 3.21 / 11.46.
+    10 °C held out 0.60 / 1.88 / 2.03 → 0.59 / 2.22 / 2.40 → 0.77 / 2.66 / 2.82 (why is not
+    established: the model file's residual σ, which sets their measurement noise, rose by only
+    6 % at ρ = 1 on the A123 N05 fold). Hence the default stays 0.001. Scaled by each
+    coefficient's own data curvature instead (ρ_j = c·(JᵀJ)_jj) it held back the
+    well-determined coefficients too: A123 c = 0.001 / 0.01: 3.23 / 11.58, 3.21 / 11.46.
     robust_loss: "huber" (the refinement's loss is quadratic within 1.345 robust standard
     deviations of the residual and linear beyond, so that the few samples a local linear model
     cannot follow, such as the voltage collapse near empty, do not dominate it) or "none".
