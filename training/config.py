@@ -42,6 +42,11 @@ SETTING_CHOICES = {  # the settings with a fixed set of names
 }
 
 
+def _is_real(value: object) -> bool:
+    """A setting's value is a real number: an int or a float, not a bool (True is an int)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 @dataclass
 class TrainConfig:
     """Settings of `lmncell train` (units in the names; see README for the meaning of each).
@@ -406,8 +411,7 @@ class TrainConfig:
         if not 0.9 < self.max_pole < 1:
             raise bad("max_pole", "expected 0.9 < max_pole < 1")
         if not (self.current_delay_s == "auto" or (
-                isinstance(self.current_delay_s, (int, float))
-                and not isinstance(self.current_delay_s, bool)
+                _is_real(self.current_delay_s)
                 and 0.0 <= self.current_delay_s < self.sample_time_s)):
             raise bad("current_delay_s", f"expected 'auto' or 0 ≤ δ < sample_time_s = "
                                          f"{self.sample_time_s} s")
@@ -424,8 +428,7 @@ class TrainConfig:
                 or isinstance(self.temperature_scaling, (int, float))):
             raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
         if not (self.time_constant_scaling in ("auto", "off")
-                or (isinstance(self.time_constant_scaling, (int, float))
-                    and not isinstance(self.time_constant_scaling, bool)
+                or (_is_real(self.time_constant_scaling)
                     and 0 <= self.time_constant_scaling <= MAX_TAU_ACTIVATION_K)):
             raise bad("time_constant_scaling",
                       f"expected 'auto', 'off' or Eτ in K within 0…{MAX_TAU_ACTIVATION_K:g}")
@@ -441,13 +444,9 @@ class TrainConfig:
         if not (bound == "auto" or (isinstance(bound, (int, float)) and 0 <= bound < 1e4)):
             raise self._bad("offset_bound_mv", "expected 'auto', 0 (unbounded) or a bound in mV")
         ridge = self.offset_ridge
-        if not (ridge == "auto" or (isinstance(ridge, (int, float)) and not isinstance(ridge, bool)
-                                    and 0 <= ridge <= 1)):
+        if not (ridge == "auto" or (_is_real(ridge) and 0 <= ridge <= 1)):
             raise self._bad("offset_ridge", "expected 'auto' or a weight ρ within 0…1 (0: off)")
-
-        oe_ridge = self.oe_ridge
-        if not (isinstance(oe_ridge, (int, float)) and not isinstance(oe_ridge, bool)
-                and 0 <= oe_ridge < 1e6):
+        if not (_is_real(self.oe_ridge) and 0 <= self.oe_ridge < 1e6):
             raise self._bad("oe_ridge", "expected a weight ρ ≥ 0 (V² per unit² of coefficient)")
 
     def _check_depletion(self) -> None:
@@ -464,8 +463,7 @@ class TrainConfig:
             except ValueError as exc:
                 raise bad("depletion_tau_s", f"{exc} (or set depletion_power = 0)") from None
         fast = self.depletion_fast_tau_s
-        if fast != "auto" and (not isinstance(fast, (int, float)) or isinstance(fast, bool)
-                               or fast < 0):
+        if fast != "auto" and (not _is_real(fast) or fast < 0):
             raise bad("depletion_fast_tau_s", "expected 'auto', 0 (none) or a time constant in s")
         if self.depletion_power and fast not in ("auto", 0):
             taus = self.filter_time_constants_s()
@@ -509,9 +507,9 @@ class TrainConfig:
             raise bad("soc_reference_sigma", "expected 0 ≤ σ < 0.1 (a SoC fraction)")
         if not self.model_error_sigma_v > 0:
             raise bad("model_error_sigma_v", "expected > 0 V")
-        if any(not (isinstance(w, (int, float)) and not isinstance(w, bool) and 0 <= w < 1e6)
-               for w in self.record_weights) or (self.record_weights
-                                                 and max(self.record_weights) <= 0):
+        weights = self.record_weights
+        if (any(not (_is_real(w) and 0 <= w < 1e6) for w in weights)
+                or (weights and max(weights) <= 0)):
             raise bad("record_weights", "expected finite weights ≥ 0, one per data file, "
                       "not all 0")
         if not 0 <= self.outside_weight <= 1:
