@@ -101,6 +101,7 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
     for rec, rec_soc0 in records:
+        notes = record_notes(rec, cap)
         for seg in record_to_segments(rec, model.sample_time_s, rec_soc0, cap,
                                       current_delay_s=model.current_delay_s):
             check_range(model, seg)
@@ -122,7 +123,7 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
             if cell is not None and seg.ambient_c is not None and seg.temperature_c is not None:
                 row["cell_temperature_rmse_k"] = float(np.sqrt(np.mean(
                     (cell - seg.temperature_c) ** 2)))
-            rows.append(row | record_notes(rec, cap))
+            rows.append(row | notes)
     return traces, rows
 
 

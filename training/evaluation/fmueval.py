@@ -252,6 +252,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
     how = "in steps of Ts with mean inputs" if at_model_steps else "through the samples"
     try:
         for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+            notes = record_notes(rec, info.capacity_ah)
             for part, seg in record_parts(rec, info.step_s, rec_soc0, info.capacity_ah):
                 progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
                          f"steps of {info.step_s:g} s")
@@ -265,7 +266,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                              "out_of_range_steps": int(run.out_of_range.sum()),
                              "steps": len(seg),
                              "driven": "model_steps" if at_model_steps else "samples"}
-                            | record_notes(rec, info.capacity_ah))
+                            | notes)
     finally:
         if unzipped is not None:
             shutil.rmtree(unzipped, ignore_errors=True)
