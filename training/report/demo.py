@@ -22,7 +22,6 @@ from lmncell.data.soc import (
     capacity_from_discharge,
     coulomb_count,
     current_scaled_to_counters,
-    logged_current_drift_ah,
     ocv_from_slow_tests,
 )
 from lmncell.evaluation.evaluate import evaluate_model, evaluate_records
@@ -85,7 +84,7 @@ def run_demo(out: Path) -> Path:
     model = load_model(model_path)
     _identification_section(rep, model, out)
     rows = _accuracy_section(rep, model, dyn, out)
-    drift = _drift_figures(model, val_rec, capacity)
+    drift = (rows[-1]["soc_drift_pct"], *_counter_current_figures(model, val_rec))
     rep.text(drift_sentence(*drift))
     _charge_section(rep, model, dyn / CHARGE_25C, out)
     soc_figures, outside_figures = _observer_section(rep, model, val_rec, capacity, out)
@@ -259,16 +258,13 @@ def _accuracy_section(rep: Report, model: LmnModel, dyn: Path, out: Path) -> lis
     return rows
 
 
-def _drift_figures(model: LmnModel, record: Record, capacity: float
-                   ) -> tuple[float, float, dict[str, float]]:
-    """The unseen record's SoC drift of the logged current (% of capacity), the current factor
-    that meets the tester's counters, and each model's whole-record RMSE (mV) driven by the
-    current so scaled."""
-    drift_pct = 100 * logged_current_drift_ah(record) / capacity
+def _counter_current_figures(model: LmnModel, record: Record) -> tuple[float, dict[str, float]]:
+    """The factor on the unseen record's logged current that meets the tester's counters, and
+    each model's whole-record RMSE (mV) driven by the current so scaled (its SoC drift is in
+    the record's evaluate row, soc_drift_pct)."""
     scaled, factor = current_scaled_to_counters(record)
     _, rows = evaluate_records(model, [(scaled, 1.0)])
-    return drift_pct, factor, {k: v["rmse_mv"] for k, v in rows[0].items()
-                               if isinstance(v, dict)}
+    return factor, {k: v["rmse_mv"] for k, v in rows[0].items() if isinstance(v, dict)}
 
 
 def _fmu_section(rep: Report, model_path: Path, record: Path, out: Path) -> tuple[Path, dict]:
