@@ -77,7 +77,6 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
     return segs, records, float(capacity_ah), float(delay)
 
 
-
 def _thermal_text(thermal: ThermalModel | None, info: dict) -> str:
     """The progress line's account of the thermal model (or why there is none)."""
     if thermal is None:
@@ -127,6 +126,7 @@ def _train_summary(model: LmnModel, train_metrics: list[dict], info: dict, secon
             "validation_rmse_mv": info.get("refined_validation_freerun_rmse_mv"),
             "seconds_lmn": info["seconds"], "seconds_total": seconds,
             "baselines": {k: v.get("fit", {}) for k, v in baseline_docs.items()}}
+
 
 def _limits(segs: list[Segment], model: LmnModel) -> dict:
     cur = np.concatenate([s.current_a for s in segs])
