@@ -83,14 +83,13 @@ def run_demo(out: Path) -> Path:
     model_path = _train(dyn, capacity, out)
     model = load_model(model_path)
     _identification_section(rep, model, out)
-    rows = _accuracy_section(rep, model, dyn, out)
-    drift = (rows[-1]["soc_drift_pct"], *_counter_current_figures(model, val_rec))
+    val = _accuracy_section(rep, model, dyn, out)[-1]       # the unseen record's row
+    drift = (val["soc_drift_pct"], *_counter_current_figures(model, val_rec))
     rep.text(drift_sentence(*drift))
     _charge_section(rep, model, dyn / CHARGE_25C, out)
     soc_figures, outside_figures = _observer_section(rep, model, val_rec, capacity, out)
     fmu, check = _fmu_section(rep, model_path, dyn / VALIDATE, out)
     cycles = _cycles_section(rep, fmu, out)
-    val = rows[-1]
     headline = {
         "local_models": model.n_local_models,
         "validation_record": val["record"],
