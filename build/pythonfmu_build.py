@@ -123,6 +123,7 @@ def documentation_html(model: LmnModel, model_path: Path, flavour: str = "python
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v[0]:.4g} … {v[1]:.4g}</td></tr>"
                    for k, v in lim.items())
     metrics = tr.get("train_metrics", [])
+
     def num(v: float | None, fmt: str) -> str:
         return "–" if v is None else format(v, fmt)
 

@@ -458,6 +458,7 @@ class _OneSample:
         return [0.0 if gate and gate != direction else value
                 for value, gate in zip(values, self.gates, strict=True)]
 
+
 def interp_one(x: float, xs: list[float], ys: list[float]) -> float:
     """np.interp(x, xs, ys) for one value (xs increasing): linear, held beyond the ends, NaN
     for NaN; without numpy's per-call array conversion."""

@@ -185,7 +185,6 @@ def test_libcosim_gives_the_same_outputs(quick_fmu) -> None:
                                                               abs=1e-12)
 
 
-
 def test_fmu_manipulation_toolbox_check(quick_fmu) -> None:
     exe = shutil.which("fmutool")
     if exe is None:

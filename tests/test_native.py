@@ -237,7 +237,6 @@ def test_native_loads_in_libcosim(native_fmu) -> None:
                                                               abs=1e-12)
 
 
-
 def test_native_runs_in_the_ecos_host(native_fmu, quick_model, tmp_path) -> None:
     """DNV's `ecos` command-line host (from the ecospy wheel; needs Debian's libtbb12)."""
     ecospy = import_or_skip("ecospy", "ecospy cannot be loaded (needs Debian libtbb12)")

@@ -62,6 +62,7 @@ def test_own_csv_through_the_cli_equals_the_bdf_record(user_data, capsys) -> Non
     mine_txt = capsys.readouterr().out
     assert main(["inspect", str(bdf)]) == 0
     ref_txt = capsys.readouterr().out
+
     def figures(text: str) -> list[str]:       # all but the file name and the sign note
         return [ln.split("; sign:")[0] for ln in text.splitlines()[1:]]
 
