@@ -346,6 +346,12 @@ class LmnModel:
 
 
 # ----- reading and writing ---------------------------------------------------------------
+def is_real_number(value: object) -> bool:
+    """A real number: an int or a float, not a bool (True is an int); for model files and the
+    training settings alike."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 def _get(doc: dict, key: str, where: str, kind: type | tuple[type, ...]):
     if key not in doc:
         raise ModelFileError(f"{where}: missing key '{key}'")
@@ -399,8 +405,7 @@ def _depletion(doc: object, filters: list[tuple[float, float]], where: str, vers
                              f"from version 6 on; this file says version {version}")
     keys = {"tau_s", "power", "soc_scale", "soc_min"}
     if (not isinstance(doc, dict) or not keys <= set(doc) <= keys | {"fast_tau_s"}
-            or not all(isinstance(doc[k], (int, float)) and not isinstance(doc[k], bool)
-                       and math.isfinite(doc[k]) and doc[k] > 0
+            or not all(is_real_number(doc[k]) and math.isfinite(doc[k]) and doc[k] > 0
                        for k in doc if doc[k] is not None or k != "fast_tau_s")):
         raise ModelFileError(f"{where}: 'depletion' must be null or an object with the keys "
                              f"{sorted(keys)} and optionally 'fast_tau_s' (null: none), each a "
@@ -505,8 +510,7 @@ def _read_timing(doc: dict, source: str) -> tuple[float, float]:
     if not ts > 0:
         raise ModelFileError(f"{source}: 'sample_time_s' is {ts}, expected > 0")
     delay = doc.get("current_delay_s", 0.0)
-    if (not isinstance(delay, (int, float)) or isinstance(delay, bool)
-            or not 0.0 <= delay < ts):
+    if not is_real_number(delay) or not 0.0 <= delay < ts:
         raise ModelFileError(f"{source}: 'current_delay_s' is {delay!r}, expected a number "
                              f"0 ≤ δ < sample_time_s = {ts} s")
     return ts, float(delay)
@@ -543,8 +547,7 @@ def _read_temperature(reg: dict, where: str) -> tuple[float | None, float | None
         raise ModelFileError(f"{where}: 'arrhenius_k' is {arrhenius!r}, expected null or a "
                              "number")
     tau_activation = reg.get("time_constant_activation_k")
-    if tau_activation is not None and not (isinstance(tau_activation, (int, float))
-                                           and not isinstance(tau_activation, bool)
+    if tau_activation is not None and not (is_real_number(tau_activation)
                                            and math.isfinite(tau_activation)
                                            and 0 <= tau_activation <= MAX_TAU_ACTIVATION_K):
         raise ModelFileError(f"{where}: 'time_constant_activation_k' is {tau_activation!r}, "

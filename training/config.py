@@ -14,6 +14,7 @@ from lmncell.runtime.model import (
     MAX_TEMPERATURE_TERMS,
     PARTITION_VARIABLES,
     Depletion,
+    is_real_number,
 )
 
 DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant for "auto" (s)
@@ -40,11 +41,6 @@ SETTING_CHOICES = {  # the settings with a fixed set of names
     "validation": ("block", "record", "none"),
     "robust_loss": ("huber", "none"),
 }
-
-
-def _is_real(value: object) -> bool:
-    """A setting's value is a real number: an int or a float, not a bool (True is an int)."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 @dataclass
@@ -411,7 +407,7 @@ class TrainConfig:
         if not 0.9 < self.max_pole < 1:
             raise bad("max_pole", "expected 0.9 < max_pole < 1")
         if not (self.current_delay_s == "auto" or (
-                _is_real(self.current_delay_s)
+                is_real_number(self.current_delay_s)
                 and 0.0 <= self.current_delay_s < self.sample_time_s)):
             raise bad("current_delay_s", f"expected 'auto' or 0 ≤ δ < sample_time_s = "
                                          f"{self.sample_time_s} s")
@@ -428,7 +424,7 @@ class TrainConfig:
                 or isinstance(self.temperature_scaling, (int, float))):
             raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
         if not (self.time_constant_scaling in ("auto", "off")
-                or (_is_real(self.time_constant_scaling)
+                or (is_real_number(self.time_constant_scaling)
                     and 0 <= self.time_constant_scaling <= MAX_TAU_ACTIVATION_K)):
             raise bad("time_constant_scaling",
                       f"expected 'auto', 'off' or Eτ in K within 0…{MAX_TAU_ACTIVATION_K:g}")
@@ -444,9 +440,9 @@ class TrainConfig:
         if not (bound == "auto" or (isinstance(bound, (int, float)) and 0 <= bound < 1e4)):
             raise self._bad("offset_bound_mv", "expected 'auto', 0 (unbounded) or a bound in mV")
         ridge = self.offset_ridge
-        if not (ridge == "auto" or (_is_real(ridge) and 0 <= ridge <= 1)):
+        if not (ridge == "auto" or (is_real_number(ridge) and 0 <= ridge <= 1)):
             raise self._bad("offset_ridge", "expected 'auto' or a weight ρ within 0…1 (0: off)")
-        if not (_is_real(self.oe_ridge) and 0 <= self.oe_ridge < 1e6):
+        if not (is_real_number(self.oe_ridge) and 0 <= self.oe_ridge < 1e6):
             raise self._bad("oe_ridge", "expected a weight ρ ≥ 0 (V² per unit² of coefficient)")
 
     def _check_depletion(self) -> None:
@@ -463,7 +459,7 @@ class TrainConfig:
             except ValueError as exc:
                 raise bad("depletion_tau_s", f"{exc} (or set depletion_power = 0)") from None
         fast = self.depletion_fast_tau_s
-        if fast != "auto" and (not _is_real(fast) or fast < 0):
+        if fast != "auto" and (not is_real_number(fast) or fast < 0):
             raise bad("depletion_fast_tau_s", "expected 'auto', 0 (none) or a time constant in s")
         if self.depletion_power and fast not in ("auto", 0):
             taus = self.filter_time_constants_s()
@@ -508,7 +504,7 @@ class TrainConfig:
         if not self.model_error_sigma_v > 0:
             raise bad("model_error_sigma_v", "expected > 0 V")
         weights = self.record_weights
-        if (any(not (_is_real(w) and 0 <= w < 1e6) for w in weights)
+        if (any(not (is_real_number(w) and 0 <= w < 1e6) for w in weights)
                 or (weights and max(weights) <= 0)):
             raise bad("record_weights", "expected finite weights ≥ 0, one per data file, "
                       "not all 0")
