@@ -605,7 +605,6 @@ def test_offset_ridge_pulls_the_local_offsets_towards_zero() -> None:
     voltage nearly alike. Without the ridge the refinement finds the true offset (20 mV, the
     data are exact); with it the offset shrinks towards 0 and the RC element takes the rest,
     at a small cost in fit. 'auto' turns it on only where OCV tests fix the OCV."""
-
     settings = dict(partition=["soc"], hysteresis="off", temperature_scaling="off",
                     depletion_power=0, robust_loss="none", ocv_tests=["ocv.mat"],
                     oe_ridge=1e-3)                    # the refinement's own ridge: weak
