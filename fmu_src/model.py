@@ -287,6 +287,11 @@ class LmnModel:
         return [c for c in self._plain_columns()[self.output_lags:]
                 if c not in (*DEPLETION_COLUMNS, "ocv(k)", "soc(k)")]
 
+    def temperature_step(self, temperature_c: np.ndarray | float) -> np.ndarray | float:
+        """dT = (T − T_ref)/TEMPERATURE_STEP_K of the temperature terms at T (°C), one
+        temperature or an array of them."""
+        return (temperature_c - self.reference_temperature_c) / TEMPERATURE_STEP_K
+
     def temperature_source_indices(self) -> list[int]:
         """Positions of temperature_term_sources() among the exogenous columns (those after the
         output lags), as the step fills them."""

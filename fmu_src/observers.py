@@ -85,7 +85,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .model import TEMPERATURE_STEP_K, LmnModel
+from .model import LmnModel
 from .step import CellStepper, ExoState, interp_one, picker
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
@@ -367,8 +367,7 @@ class SocObserver:
         gain = exo.gain_at(temperature)
         per_validity = np.dot(validity, self._gradient).tolist()
         out = state_gradient(per_validity, len(self.state_columns), self._gradient_powers, gain,
-                             (temperature - self.model.reference_temperature_c)
-                             / TEMPERATURE_STEP_K)
+                             self.model.temperature_step(temperature))
         if self._depletion:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
             factor = gain * exo.depletion_factor(soc)
             tail = per_validity[len(per_validity) - len(self._depletion):]

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .model import DEPLETION_COLUMNS, TEMPERATURE_STEP_K, LmnModel
+from .model import DEPLETION_COLUMNS, LmnModel
 from .thermal import heat_w, next_temperature, rested_temperature, step_coefficients
 
 CHARGE, DISCHARGE = 1, 2
@@ -214,7 +214,7 @@ class ExoStepper:
     def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
         """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
         m = self.model
-        dt = (temperature_c - m.reference_temperature_c) / TEMPERATURE_STEP_K
+        dt = m.temperature_step(temperature_c)
         power = 1.0
         for _ in range(m.temperature_terms):
             power *= dt

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model import TEMPERATURE_STEP_K, LmnModel
+from .model import LmnModel
 from .step import (
     CHARGE,
     DISCHARGE,
@@ -84,7 +84,7 @@ class VectorCells:
             cols.append(np.ones(n))
         x = np.column_stack(cols)
         if m.temperature_terms:
-            dt = (t - m.reference_temperature_c) / TEMPERATURE_STEP_K
+            dt = m.temperature_step(t)
             terms, power = [], np.ones(n)
             for _ in range(m.temperature_terms):
                 power = power * dt

@@ -24,7 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel
+from lmncell.runtime.model import LmnModel
 from scipy.linalg import cho_factor, solve_triangular
 from scipy.optimize import nnls
 
@@ -64,7 +64,7 @@ def coefficient_row(model: LmnModel, source: str, temperature_c: float) -> np.nd
     """Row vector over the model's columns: the coefficient of a plain column at a
     temperature, its temperature terms summed in (row @ θ gives the value)."""
     cols = model.columns()
-    dt = (temperature_c - model.reference_temperature_c) / TEMPERATURE_STEP_K
+    dt = model.temperature_step(temperature_c)
     v = np.zeros(len(cols))
     v[cols.index(source)] = 1.0
     for power in range(1, model.temperature_terms + 1):
