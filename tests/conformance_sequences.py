@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import math
+import random
 import sys
 
 from fmpy import extract, read_model_description
@@ -213,9 +214,150 @@ def instantiate_many(fmu: str, cycles: int = 2000) -> dict:
     return rss
 
 
+HOSTILE_REALS = (0.0, 1.0, -1.0, 0.5, 2.0, 4.2, 25.0, -40.0, 80.0, 1e-300, 1e308, -1e308,
+                 math.nan, math.inf, -math.inf)
+STEP_SIZES = (1.0, 1.0, 1.0, 0.1, 10.0, 3600.0, 1e5, 1e-12, 0.0, -1.0, math.nan)
+
+
+class RandomHost:
+    """A host that makes the FMI 2.0 calls of one instance in an order and with arguments
+    chosen by a seeded random generator: NaN, ±inf, ±1e308, negative or zero step sizes,
+    communication points that are not the FMU's time, unknown references."""
+
+    def __init__(self, slave: FMU2Slave, md, rng: random.Random) -> None:
+        self.slave, self.rng, self.clock = slave, rng, 0.0
+        self.vars = {t: [v for v in md.modelVariables if v.type == t]
+                     for t in ("Real", "Integer", "Boolean", "String")}
+        self.outputs = [v.valueReference for v in self.vars["Real"] if v.causality == "output"]
+        self.calls = {"setup": self.setup, "enter": self.enter, "exit": self.exit,
+                      "set_real": self.set_real, "set_integer": self.set_integer,
+                      "set_boolean": self.set_boolean, "get_outputs": self.get_outputs,
+                      "get_others": self.get_others, "step": self.step, "reset": self.reset,
+                      "terminate": self.terminate, "unknown_reference": self.unknown_reference}
+        self.weights = [0.3, 0.3, 0.3, 3, 0.5, 0.5, 3, 0.5, 6, 0.2, 0.2, 0.5]
+
+    def call(self) -> str:
+        """One random call: its name, arguments and status; AssertionError where an OK status
+        came with a non-finite output."""
+        name = self.rng.choices(list(self.calls), self.weights)[0]
+        what, status = self.calls[name]()
+        return f"{name}{what} -> {status}"
+
+    def initialise(self) -> list[str]:
+        """What most hosts do first: setupExperiment at 0, enter, set a few values (an observer
+        among them), exit, so that the random calls after it reach step mode."""
+        self.clock = 0.0
+        calls = [("setup", (" 0.0", _status(lambda: self.slave.setupExperiment(startTime=0.0)))),
+                 ("enter", self.enter())]
+        calls += [("set_real", self.set_real()) for _ in range(self.rng.randint(0, 3))]
+        calls += [("set_integer", self.set_integer()) for _ in range(self.rng.randint(0, 1))]
+        calls.append(("exit", self.exit()))
+        return [f"{name}{what} -> {status}" for name, (what, status) in calls]
+
+    def setup(self):
+        start = self.rng.choice((0.0, 0.0, 5.0, -1.0, math.nan))
+        stop = self.rng.choice((None, 1e4, -5.0))
+        self.clock = start if math.isfinite(start) else 0.0
+        return f" {start!r}…{stop!r}", _status(
+            lambda: self.slave.setupExperiment(startTime=start, stopTime=stop))
+
+    def enter(self):
+        return "", _status(self.slave.enterInitializationMode)
+
+    def exit(self):
+        return "", _status(self.slave.exitInitializationMode)
+
+    def set_real(self):
+        var = self.rng.choice(self.vars["Real"])
+        value = (self.rng.choice(HOSTILE_REALS) if self.rng.random() < 0.5
+                 else self.rng.uniform(-10.0, 60.0))
+        return f" {var.name}={value!r}", _status(
+            lambda: self.slave.setReal([var.valueReference], [value]))
+
+    def set_integer(self):
+        if not self.vars["Integer"]:
+            return "", -1
+        var = self.rng.choice(self.vars["Integer"])
+        value = self.rng.choice((0, 1, 2, 3, 4, -1, 2**31 - 1))
+        return f" {var.name}={value}", _status(
+            lambda: self.slave.setInteger([var.valueReference], [value]))
+
+    def set_boolean(self):
+        if not self.vars["Boolean"]:
+            return "", -1
+        var = self.rng.choice(self.vars["Boolean"])
+        value = self.rng.random() < 0.5
+        return f" {var.name}={value}", _status(
+            lambda: self.slave.setBoolean([var.valueReference], [value]))
+
+    def get_outputs(self):
+        got: list[float] = []
+        status = _status(lambda: got.extend(self.slave.getReal(self.outputs)))
+        assert status != OK or all(math.isfinite(x) for x in got), f"OK with outputs {got}"
+        return "", status
+
+    def get_others(self):
+        refs = {t: [v.valueReference for v in self.vars[t]] for t in ("Integer", "Boolean",
+                                                                       "String")}
+        statuses = [_status(lambda: self.slave.getInteger(refs["Integer"])),
+                    _status(lambda: self.slave.getBoolean(refs["Boolean"])),
+                    _status(lambda: self.slave.getString(refs["String"]))]
+        return "", max(statuses)
+
+    def step(self):
+        size = self.rng.choice(STEP_SIZES)
+        point = (self.clock if self.rng.random() < 0.85
+                 else self.rng.choice((self.clock + 1.0, math.nan, -1.0)))
+        status = _status(lambda: self.slave.doStep(currentCommunicationPoint=point,
+                                                   communicationStepSize=size))
+        if status == OK:
+            self.clock = point + size
+        return f" at {point!r} by {size!r}", status
+
+    def reset(self):
+        self.clock = 0.0
+        return "", _status(self.slave.reset)
+
+    def terminate(self):
+        return "", _status(self.slave.terminate)
+
+    def unknown_reference(self):
+        ref = self.rng.choice((9999, 2**31, 2**32 - 1))
+        return f" {ref}", _status(lambda: self.slave.getReal([ref]))
+
+
+def random_calls(fmu: str, seed: int = 1, sequences: int = 20) -> dict:
+    """Seeded RandomHost sequences of 5…60 calls each between instantiation and freeInstance,
+    seven in ten after an ordinary initialisation.
+    The host must not die (the test sees the child's exit code), and an OK status never comes
+    with a non-finite output."""
+    rng = random.Random(seed)
+    md = read_model_description(fmu)
+    where = extract(fmu)
+    findings, calls = [], 0
+    for k in range(sequences):
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=where,
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=f"r{k}")
+        slave.instantiate(loggingOn=False)
+        host = RandomHost(slave, md, rng)
+        log = host.initialise() if rng.random() < 0.7 else []
+        try:
+            for _ in range(rng.randint(5, 60)):
+                log.append(host.call())
+                calls += 1
+        except AssertionError as exc:
+            findings.append({"sequence": k, "finding": str(exc), "calls": log})
+        slave.freeInstance()
+    return {"sequences": sequences, "calls": calls, "findings": findings}
+
+
+def random_calls_long(fmu: str) -> dict:
+    """random_calls over 300 sequences of another seed (the slow test)."""
+    return random_calls(fmu, seed=2, sequences=300)
+
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
-                                      instantiate_many)}
+                                      instantiate_many, random_calls, random_calls_long)}
 
 if __name__ == "__main__":
     print(json.dumps(SEQUENCES[sys.argv[2]](sys.argv[1])))

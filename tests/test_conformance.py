@@ -144,3 +144,16 @@ def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> No
 
     assert "needs Python 3 with numpy" in doc(quick_fmu)
     assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
+
+
+def test_random_call_sequences_never_crash_or_return_nan_with_ok(fmu) -> None:
+    res = _run(fmu, "random_calls")
+    assert res["calls"] > 300
+    assert res["findings"] == []
+
+
+@pytest.mark.slow
+def test_many_random_call_sequences(fmu) -> None:
+    res = _run(fmu, "random_calls_long")
+    assert res["calls"] > 5000
+    assert res["findings"] == []
