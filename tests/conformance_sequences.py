@@ -268,27 +268,27 @@ class RandomHost:
         return "", _status(self.slave.exitInitializationMode)
 
     def set_real(self):
-        var = self.rng.choice(self.vars["Real"])
-        value = (self.rng.choice(HOSTILE_REALS) if self.rng.random() < 0.5
-                 else self.rng.uniform(-10.0, 60.0))
-        return f" {var.name}={value!r}", _status(
-            lambda: self.slave.setReal([var.valueReference], [value]))
+        return self._set_one("Real", self._real_value, self.slave.setReal)
 
     def set_integer(self):
-        if not self.vars["Integer"]:
-            return "", -1
-        var = self.rng.choice(self.vars["Integer"])
-        value = self.rng.choice((0, 1, 2, 3, 4, -1, 2**31 - 1))
-        return f" {var.name}={value}", _status(
-            lambda: self.slave.setInteger([var.valueReference], [value]))
+        return self._set_one("Integer", lambda: self.rng.choice((0, 1, 2, 3, 4, -1, 2**31 - 1)),
+                             self.slave.setInteger)
 
     def set_boolean(self):
-        if not self.vars["Boolean"]:
+        return self._set_one("Boolean", lambda: self.rng.random() < 0.5, self.slave.setBoolean)
+
+    def _real_value(self) -> float:
+        if self.rng.random() < 0.5:
+            return self.rng.choice(HOSTILE_REALS)
+        return self.rng.uniform(-10.0, 60.0)
+
+    def _set_one(self, kind: str, value_of, setter):
+        """Set one random variable of a type (Real, Integer, Boolean) to value_of()."""
+        if not self.vars[kind]:
             return "", -1
-        var = self.rng.choice(self.vars["Boolean"])
-        value = self.rng.random() < 0.5
-        return f" {var.name}={value}", _status(
-            lambda: self.slave.setBoolean([var.valueReference], [value]))
+        var = self.rng.choice(self.vars[kind])
+        value = value_of()
+        return f" {var.name}={value!r}", _status(lambda: setter([var.valueReference], [value]))
 
     def get_outputs(self):
         got: list[float] = []
@@ -354,6 +354,7 @@ def random_calls(fmu: str, seed: int = 1, sequences: int = 20) -> dict:
 def random_calls_long(fmu: str) -> dict:
     """random_calls over 300 sequences of another seed (the slow test)."""
     return random_calls(fmu, seed=2, sequences=300)
+
 
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
