@@ -39,6 +39,19 @@ from lmncell.runtime.step import exo_series, initial_hysteresis
 from lmncell.runtime.thermal import ThermalModel
 
 
+def capacity_estimate_note(capacity_ah: float, with_ocv_tests: bool) -> str:
+    """What the training says when it estimates the capacity (Ah) itself: a lower bound, and
+    with slow OCV tests, whose curve then meets the records' SoC at the wrong place near empty,
+    a costly one."""
+    note = (f"capacity estimated from full discharges: {capacity_ah:.4f} Ah (a lower bound; "
+            "give --capacity for a measured value)")
+    if with_ocv_tests:
+        note += ("; with an OCV test, models are much worse near empty on it (the records' "
+                 "SoC reaches 0 at their cut-off): give the capacity from full to the cut-off "
+                 "at a slow rate")
+    return note
+
+
 def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float | None,
                   soc0: float | Sequence[float] | None, progress: Progress = _print,
                   read_options: Mapping[str, Any] | None = None
@@ -56,8 +69,7 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
         records.append(read_record(p, **(read_options or {})))
     if capacity_ah is None:
         capacity_ah = estimate_capacity(records)
-        progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
-                 "(a lower bound; give --capacity for a measured value)")
+        progress(capacity_estimate_note(capacity_ah, bool(cfg.ocv_tests)))
     delay = cfg.current_delay_s
     if delay == "auto":
         delay = estimate_current_delay(records, cfg.sample_time_s)
