@@ -57,9 +57,24 @@ from lmncell.report.plots import folds_figure
 MODELS = ("lmn", "fmu", "arx", "ecm2rc", "ecm2rc_hyst")
 
 
+def capacity_argument(text: str) -> float | None:
+    """The capacity argument: Ah > 0, or 'auto' (None: estimated by each fold's training)."""
+    if text == "auto":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"capacity {text!r}: expected Ah > 0 or 'auto'")
+    return value
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=float)
+    ap.add_argument("capacity_ah", type=capacity_argument,
+                    help="Ah, or 'auto': each fold's training estimates it (with --ocv-tests "
+                         "by the free-run error, lmncell.identification.train.fit_capacity)")
     ap.add_argument("records", nargs="+")
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
                     help="start SoC: one for every record or one per record, in order")

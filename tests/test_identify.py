@@ -807,21 +807,38 @@ def test_raw_partition_inputs_are_exo_series_bit_for_bit() -> None:
         assert soc[-1] != pytest.approx(0.83, abs=0.05)          # the SoC moved
 
 
-def test_an_estimated_capacity_with_an_ocv_test_asks_for_the_measured_one() -> None:
-    """Without --capacity the training takes the largest discharge (a lower bound); with a slow
-    OCV test that costs the end of discharge most (Panasonic 25 °C leave-one-out, whole record:
-    2.71 Ah estimated 76.9 mV against 8.1 mV at 2.85 Ah), so it says so and asks for it."""
-    from lmncell.config import TrainConfig
-    from lmncell.identification.train import load_segments
+def test_without_a_capacity_an_ocv_test_gets_the_one_the_records_follow_best(tmp_path) -> None:
+    """fit_capacity: with a slow OCV test and no capacity, the training does not keep the lower
+    bound (the largest discharge, where the record's SoC reaches 0 as it stops) but the
+    candidate whose model follows the record best in free run; its model is better than the
+    lower bound's."""
+    from lmncell.data.dataset import estimate_capacity
+    from lmncell.data.readers import read_record
 
     from tests.conftest import A123_S1, DATA
 
-    tests = [str(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"),
-             str(DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz")]
-    for ocv_tests, asks in (([], False), (tests, True)):
-        said: list[str] = []
-        _, _, cap, _ = load_segments([A123_S1], TrainConfig(ocv_tests=ocv_tests), None, 1.0,
-                                     progress=said.append)
-        note = next(m for m in said if m.startswith("capacity estimated"))
-        assert f"{cap:.4f} Ah (a lower bound" in note
-        assert ("give the capacity from full to the cut-off at a slow rate" in note) is asks
+    kw = {"soc0": 1.0, "progress": lambda _m: None, "max_local_models": 4,
+          "oe_max_iterations": 2, "ocv_tests": [str(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"),
+                                                str(DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz")]}
+    lower = estimate_capacity([read_record(A123_S1)])
+    fitted, summary = train_files([A123_S1], tmp_path / "fit.json", **kw)
+    _, at_lower = train_files([A123_S1], tmp_path / "low.json", capacity_ah=lower, **kw)
+    assert fitted.capacity_ah > lower * 1.005
+    assert summary["train_rmse_mv"] < at_lower["train_rmse_mv"]
+
+
+def test_a_record_given_as_full_counts_for_the_estimated_capacity() -> None:
+    """estimate_capacity: a record that does not start rested at its top voltage counts as a
+    discharge from full where its start SoC is given as 1 (--soc0 1), not otherwise."""
+    from lmncell.data.dataset import estimate_capacity
+    from lmncell.data.readers import read_record
+    from lmncell.data.records import DataError
+    from lmncell.data.soc import discharged_ah
+
+    from tests.conftest import A123_S1
+
+    rec = read_record(A123_S1)
+    late = rec.slice(2000, len(rec.time_s))        # starts under load, no rest at the top
+    assert estimate_capacity([late], [1.0]) == pytest.approx(discharged_ah(late))
+    with pytest.raises(DataError, match="no record starts full"):
+        estimate_capacity([late])

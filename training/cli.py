@@ -290,7 +290,10 @@ def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s = sub.add_parser("train", help="identify an LMN from measurements", **fmt)
     s.add_argument("data", nargs="+", help="training data files")
     s.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
-    s.add_argument("--capacity", type=_positive, help="Ah (default: from full discharges)")
+    s.add_argument("--capacity", type=_positive, help="Ah from full to the cut-off at a slow "
+                   "rate (default: with --ocv-tests, of the largest discharge from full among the "
+                   "records and up to 15 %% more, the one whose model follows them best; else "
+                   "that largest discharge, a lower bound)")
     s.add_argument("--soc0", type=soc_list_argument, help="start SoC: one value for every "
                    "record, or a comma list with one per data file in order, e.g. 1,1,0 for "
                    "two records that start full and one that starts empty (default: 1.0 for "

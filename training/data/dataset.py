@@ -88,9 +88,14 @@ def start_socs(soc0: float | Sequence[float] | None, n: int) -> list[float | Non
     return [None if v is None else float(v) for v in values]
 
 
-def estimate_capacity(records: list[Record]) -> float:
-    """Largest net discharge (Ah) of the records that start full: a lower bound of capacity."""
-    full = [discharged_ah(r) for r in records if starts_rested_full(r)]
+def estimate_capacity(records: list[Record],
+                      soc0: Sequence[float | None] | None = None) -> float:
+    """Largest net discharge (Ah) of the records that start full: a lower bound of capacity.
+    soc0: each record's given start SoC (start_socs; None: unknown), 1.0 marks it full; records
+    without one start full where they start rested at the top voltage."""
+    given = list(soc0) if soc0 is not None else [None] * len(records)
+    full = [discharged_ah(r) for r, s in zip(records, given, strict=True)
+            if s == 1.0 or (s is None and starts_rested_full(r))]
     if not full or max(full) <= 0:
         raise DataError("cannot estimate the capacity: no record starts full and discharges; "
                         "give --capacity")
