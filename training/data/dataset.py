@@ -97,8 +97,9 @@ def estimate_capacity(records: list[Record],
     full = [discharged_ah(r) for r, s in zip(records, given, strict=True)
             if s == 1.0 or (s is None and starts_rested_full(r))]
     if not full or max(full) <= 0:
-        raise DataError("cannot estimate the capacity: no record starts full and discharges; "
-                        "give --capacity")
+        raise DataError("cannot estimate the capacity: no record starts full (rested at its "
+                        "top voltage, or given as full by --soc0 1) and discharges; give "
+                        "--capacity, or --soc0 for records that start full")
     return max(full)
 
 
