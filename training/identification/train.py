@@ -31,7 +31,7 @@ from lmncell.identification.construction import TrainResult, train_lmn
 from lmncell.identification.ocvfit import lowpass
 from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.thermal import fit_thermal
-from lmncell.progress import Progress, quiet
+from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
 from lmncell.runtime.model import LmnModel, model_to_dict, save_model
 from lmncell.runtime.observers import offline_fuzzy_design
@@ -45,6 +45,18 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
                   ) -> tuple[list[Segment], list[Record], float, float]:
     """Read files, fix capacity, start SoC and the current delay (s; cfg.current_delay_s),
     split and resample to the model rate; returns segments, records, capacity and delay."""
+    records = read_training_records(paths, cfg, progress, read_options)
+    if capacity_ah is None:
+        capacity_ah = lower_bound_capacity(records, soc0, progress)
+    delay = current_delay(cfg, records, progress)
+    return (training_segments(records, cfg, capacity_ah, soc0, delay), records,
+            float(capacity_ah), delay)
+
+
+def read_training_records(paths: list[str | Path], cfg: TrainConfig,
+                          progress: Progress = _print,
+                          read_options: Mapping[str, Any] | None = None) -> list[Record]:
+    """The training files' records (one record weight per file where the setting gives them)."""
     if not paths:
         raise DataError("no data files given")
     if cfg.record_weights and len(cfg.record_weights) != len(paths):
@@ -54,15 +66,32 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
     for p in paths:
         progress(f"reading {p}")
         records.append(read_record(p, **(read_options or {})))
-    if capacity_ah is None:
-        capacity_ah = estimate_capacity(records, start_socs(soc0, len(records)))
-        progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
-                 "(a lower bound; give --capacity for a measured value)")
+    return records
+
+
+def lower_bound_capacity(records: list[Record], soc0: float | Sequence[float] | None,
+                         progress: Progress = _print) -> float:
+    """The largest discharge from full among the records (Ah, estimate_capacity), said."""
+    capacity_ah = estimate_capacity(records, start_socs(soc0, len(records)))
+    progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
+             "(a lower bound; give --capacity for a measured value)")
+    return capacity_ah
+
+
+def current_delay(cfg: TrainConfig, records: list[Record], progress: Progress = _print) -> float:
+    """The current delay (s): the setting, or for 'auto' the voltage channel's lag."""
     delay = cfg.current_delay_s
     if delay == "auto":
         delay = estimate_current_delay(records, cfg.sample_time_s)
         progress(f"current delay {delay:.3f} s: the lag of the voltage channel behind the "
                  "current (lmncell.data.lag)")
+    return float(delay)
+
+
+def training_segments(records: list[Record], cfg: TrainConfig, capacity_ah: float,
+                      soc0: float | Sequence[float] | None, delay: float) -> list[Segment]:
+    """The records split and resampled to the model rate, their reference SoC counted with
+    capacity_ah from each record's start SoC, weighted by the record weights."""
     segs: list[Segment] = []
     weights = cfg.record_weights or [1.0] * len(records)
     for rec, weight, rec_soc0 in zip(records, weights, start_socs(soc0, len(records)),
@@ -74,7 +103,7 @@ def load_segments(paths: list[str | Path], cfg: TrainConfig, capacity_ah: float 
             seg.weight = seg.weight * float(weight)
             seg.record_weight = float(weight)
             segs.append(seg)
-    return segs, records, float(capacity_ah), float(delay)
+    return segs
 
 
 def _thermal_text(thermal: ThermalModel | None, info: dict) -> str:
@@ -158,33 +187,36 @@ CAPACITY_CANDIDATES = 16
 CAPACITY_PATIENCE = 2       # … stopping after this many candidates worse than the best
 
 
-def fit_capacity(paths: list[str | Path], cfg: TrainConfig,
-                 soc0: float | Sequence[float] | None, progress: Progress = _print,
-                 read_options: Mapping[str, Any] | None = None) -> float:
+def fit_capacity(records: list[Record], cfg: TrainConfig,
+                 soc0: float | Sequence[float] | None, delay: float,
+                 progress: Progress = _print) -> tuple[float, list[Segment], TrainResult]:
     """The capacity (Ah) for records trained with a slow OCV test and no capacity given: of the
     lower bound L (the largest discharge from full among the records) × 1.00, 1.01, … (at
     most 1.15, stopping two candidates after the best), the one whose model follows its
-    training records best in free run (RMSE over the whole records). At L the records' SoC
-    reaches 0 where they stop, and the OCV test's curve meets them at the wrong place near
-    empty (Panasonic 25 °C leave-one-out, whole record: 76.9 mV at L = 2.71 Ah against 8.1 mV
-    at 2.85 Ah)."""
-    records = [read_record(p, **(read_options or {})) for p in paths]
+    training records best in free run (RMSE over the whole records); with its segments and
+    its training, which are the model's. At L the records' SoC reaches 0 where they stop,
+    and the OCV test's curve meets them at the wrong place near empty (Panasonic 25 °C
+    leave-one-out, whole record: 76.9 mV at L = 2.71 Ah against 8.1 mV at 2.85 Ah)."""
     lower = estimate_capacity(records, start_socs(soc0, len(records)))
-    scores: list[tuple[float, float]] = []
+    best: tuple[float, float, list[Segment], TrainResult] | None = None
+    best_k = 0
     for k in range(CAPACITY_CANDIDATES):
         cap = lower * (1.0 + CAPACITY_STEP * k)
-        segs, _, _, _ = load_segments(paths, cfg, cap, soc0, quiet, read_options)
-        model = train_lmn(segs, cfg, cap).model
-        err = np.concatenate([simulate_segment(model, s).voltage_v - s.voltage_v for s in segs])
-        scores.append((float(np.sqrt(np.mean(err * err))), cap))
+        segs = training_segments(records, cfg, cap, soc0, delay)
+        result = train_lmn(segs, cfg, cap)
+        err = np.concatenate([simulate_segment(result.model, s).voltage_v - s.voltage_v
+                              for s in segs])
+        rmse = float(np.sqrt(np.mean(err * err)))
         progress(f"  capacity {cap:.4f} Ah ({100 * k * CAPACITY_STEP:.0f} % above the largest "
-                 f"discharge): free-run training RMSE {1e3 * scores[-1][0]:.2f} mV")
-        if k - scores.index(min(scores)) >= CAPACITY_PATIENCE:
+                 f"discharge): free-run training RMSE {1e3 * rmse:.2f} mV")
+        if best is None or rmse < best[0]:
+            best, best_k = (rmse, cap, segs, result), k
+        elif k - best_k >= CAPACITY_PATIENCE:
             break
-    rmse, cap = min(scores)
+    rmse, cap, segs, result = best
     progress(f"capacity {cap:.4f} Ah, chosen by the free-run error ({1e3 * rmse:.2f} mV; give "
              "--capacity for a measured value)")
-    return cap
+    return cap, segs, result
 
 
 def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | None = None,
@@ -203,13 +235,19 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
+    records = read_training_records(paths, cfg, progress, read_options)
     if capacity_ah is None and cfg.ocv_tests:
-        capacity_ah = fit_capacity(paths, cfg, soc0, progress, read_options)
-    segs, records, cap, delay = load_segments(paths, cfg, capacity_ah, soc0, progress,
-                                              read_options)
-    n = sum(len(s) for s in segs)
-    progress(f"training on {len(segs)} segment(s), {n} samples at Ts = {cfg.sample_time_s} s")
-    result = train_lmn(segs, cfg, cap, progress)
+        delay = current_delay(cfg, records, progress)
+        cap, segs, result = fit_capacity(records, cfg, soc0, delay, progress)
+    else:
+        cap = (lower_bound_capacity(records, soc0, progress) if capacity_ah is None
+               else float(capacity_ah))
+        delay = current_delay(cfg, records, progress)
+        segs = training_segments(records, cfg, cap, soc0, delay)
+        n = sum(len(s) for s in segs)
+        progress(f"training on {len(segs)} segment(s), {n} samples at Ts = "
+                 f"{cfg.sample_time_s} s")
+        result = train_lmn(segs, cfg, cap, progress)
     model = result.model
     model.current_delay_s = delay
     model.limits = _limits(segs, model)
