@@ -40,7 +40,7 @@ import tempfile
 from pathlib import Path
 
 from lmncell.api import build_fmu
-from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
+from lmncell.cli import THROUGH_PAUSES_HELP, number_argument, run_script, soc_list_argument
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import (
     evaluate_records,
@@ -57,17 +57,12 @@ from lmncell.report.plots import folds_figure
 MODELS = ("lmn", "fmu", "arx", "ecm2rc", "ecm2rc_hyst")
 
 
+_capacity_ah = number_argument(float, lambda v: v > 0, "Ah > 0 or 'auto'")
+
+
 def capacity_argument(text: str) -> float | None:
     """The capacity argument: Ah > 0, or 'auto' (None: estimated by each fold's training)."""
-    if text == "auto":
-        return None
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"capacity {text!r}: expected Ah > 0 or 'auto'")
-    return value
+    return None if text == "auto" else _capacity_ah(text)
 
 
 def main() -> None:

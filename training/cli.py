@@ -31,7 +31,7 @@ class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
         return text
 
 
-def _number(cast: type, ok, expected: str):
+def number_argument(cast: type, ok, expected: str):
     """An argparse type: text → cast(text), refused with `expected` unless ok(value)."""
     def parse(text: str):
         try:
@@ -44,10 +44,10 @@ def _number(cast: type, ok, expected: str):
     return parse
 
 
-_float01 = _number(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
-_positive = _number(float, lambda v: v > 0, "a number > 0")
-_positive_int = _number(int, lambda v: v >= 1, "a whole number ≥ 1")
-_temperature = _number(float, lambda v: MIN_TEMPERATURE_C < v < MAX_TEMPERATURE_C,
+_float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
+_positive = number_argument(float, lambda v: v > 0, "a number > 0")
+_positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
+_temperature = number_argument(float, lambda v: MIN_TEMPERATURE_C < v < MAX_TEMPERATURE_C,
                        "a temperature in °C above absolute zero")
 
 
