@@ -231,6 +231,8 @@ class RandomHost:
         self.vars = {t: [v for v in md.modelVariables if v.type == t]
                      for t in ("Real", "Integer", "Boolean", "String")}
         self.outputs = [v.valueReference for v in self.vars["Real"] if v.causality == "output"]
+        self.other_refs = {t: [v.valueReference for v in self.vars[t]]
+                           for t in ("Integer", "Boolean", "String")}
         self.calls = {   # call: (method, relative frequency); most hosts mostly step and read
             "setup": (self.setup, 0.3), "enter": (self.enter, 0.3), "exit": (self.exit, 0.3),
             "set_real": (self.set_real, 3.0), "set_integer": (self.set_integer, 0.5),
@@ -301,8 +303,7 @@ class RandomHost:
         return "", status
 
     def get_others(self) -> tuple[str, int]:
-        refs = {t: [v.valueReference for v in self.vars[t]] for t in ("Integer", "Boolean",
-                                                                       "String")}
+        refs = self.other_refs
         statuses = [_status(lambda: self.slave.getInteger(refs["Integer"])),
                     _status(lambda: self.slave.getBoolean(refs["Boolean"])),
                     _status(lambda: self.slave.getString(refs["String"]))]
