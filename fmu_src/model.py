@@ -18,9 +18,10 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
 - ``ocv``: ``soc`` and ``voltage_v`` knots, linear between them (held beyond the ends).
 - ``regressors``: ``output_lags`` na, ``current_terms`` nb (i(k) … i(k−nb+1)), ``filters``: list of
   ``[tau_fast_s, tau_slow_s]`` each giving v = LP_fast(i) − LP_slow(i) (zero DC gain, eq. 19),
-  ``hysteresis_gamma`` (null, or γ of h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ|i|Ts/(3600·Cn))),
-  ``ocv_input``, ``soc_input`` (extra regressors), ``offset`` (constant 1),
-  ``arrhenius_k`` (null, or E in K: the current and filter regressors are multiplied by
+  ``hysteresis_gamma`` (null, or γ > 0 of h(k) = e·h(k−1) + (1−e)·sgn(i),
+  e = exp(−γ|i|Ts/(3600·Cn))), ``ocv_input``, ``soc_input`` (extra regressors), ``offset``
+  (constant 1),
+  ``arrhenius_k`` (null, or E in K, 0…20000: the current and filter regressors are multiplied by
   g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``),
   ``time_constant_activation_k`` (version 5; null or absent: none, or Eτ in K: every filter
   time constant is τ·exp(Eτ·(1/(T+273.15) − 1/(T_ref+273.15))) at the step's temperature T, the
@@ -84,6 +85,7 @@ FORMAT = "lmncell-model"
 DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
 VERSION = 6
 MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
+MAX_ARRHENIUS_K = 20000.0    # E beyond it (≈ 166 kJ/mol): above any Li-ion activation energy
 READABLE_VERSIONS = (1, 2, 3, 4, 5, 6)
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
@@ -461,7 +463,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     reg = _get(doc, "regressors", source, dict)
     w = f"{source}: regressors"
     na, nb, filters = _read_structure(reg, w)
-    gamma = reg.get("hysteresis_gamma")
+    gamma = _read_hysteresis_gamma(reg, w)
     arrhenius, tau_activation, temperature_terms = _read_temperature(reg, w)
     variables, center, scale = _read_partition(doc, source)
     weights, children, roots = _read_tree(doc, source, len(variables))
@@ -471,7 +473,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     model = LmnModel(
         sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
         current_terms=nb, filters=filters,
-        hysteresis_gamma=None if gamma is None else float(gamma),
+        hysteresis_gamma=gamma,
         ocv_input=bool(reg.get("ocv_input", False)), soc_input=bool(reg.get("soc_input", False)),
         offset=bool(reg.get("offset", True)), relative_ocv=output == "relative_ocv",
         partition_variables=list(variables), partition_center=center, partition_scale=scale,
@@ -543,14 +545,23 @@ def _read_structure(reg: dict, where: str) -> tuple[int, int, list[tuple[float, 
     return na, nb, filters
 
 
+def _read_hysteresis_gamma(reg: dict, where: str) -> float | None:
+    """The hysteresis rate γ > 0 (None: no hysteresis state)."""
+    gamma = reg.get("hysteresis_gamma")
+    if gamma is not None and not (is_real_number(gamma) and math.isfinite(gamma) and gamma > 0):
+        raise ModelFileError(f"{where}: 'hysteresis_gamma' is {gamma!r}, expected null or a "
+                             "finite number > 0")
+    return None if gamma is None else float(gamma)
+
+
 def _read_temperature(reg: dict, where: str) -> tuple[float | None, float | None, int]:
     """Arrhenius E (K or None), the time constants' Eτ (K or None) and the degree of the
     temperature terms."""
     arrhenius = reg.get("arrhenius_k")
-    if arrhenius is not None and not (isinstance(arrhenius, (int, float))
-                                      and math.isfinite(arrhenius)):
+    if arrhenius is not None and not (is_real_number(arrhenius) and math.isfinite(arrhenius)
+                                      and 0 <= arrhenius <= MAX_ARRHENIUS_K):
         raise ModelFileError(f"{where}: 'arrhenius_k' is {arrhenius!r}, expected null or a "
-                             "number")
+                             f"number of K within 0…{MAX_ARRHENIUS_K:g}")
     tau_activation = reg.get("time_constant_activation_k")
     if tau_activation is not None and not (is_real_number(tau_activation)
                                            and math.isfinite(tau_activation)

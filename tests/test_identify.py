@@ -291,6 +291,13 @@ def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_region
     ({"time_constant_scaling": "on"}, "'time_constant_scaling' = 'on': expected 'auto', 'off'"),
     ({"time_constant_scaling": -100.0}, "'time_constant_scaling' = -100.0"),
     ({"time_constant_scaling": True}, "'time_constant_scaling' = True"),
+    ({"temperature_scaling": True}, "'temperature_scaling' = True"),
+    ({"temperature_scaling": -2000.0}, "'temperature_scaling' = -2000.0"),
+    ({"temperature_scaling": float("nan")}, "'temperature_scaling' = nan"),
+    ({"temperature_scaling": 1e5}, "within 0…20000"),
+    ({"hysteresis": True}, "'hysteresis' = True"),
+    ({"hysteresis": float("inf")}, "'hysteresis' = inf"),
+    ({"offset_bound_mv": True}, "'offset_bound_mv' = True"),
     ({"partition": "soc"}, "'partition'"),
     ({"partition": ["soc", "pressure"]}, "'partition'"),
 ])

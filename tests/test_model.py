@@ -202,6 +202,12 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
      "residual_rms_by_soc: expected"),
     (lambda d: d.update(noise={"residual_rms_by_soc": {"soc": [0.5]}}), "rms_v"),
     (lambda d: d.update(noise=[1]), "'noise' must be an object"),
+    (lambda d: d["regressors"].update(arrhenius_k=True), "'arrhenius_k' is True"),
+    (lambda d: d["regressors"].update(arrhenius_k=-3000.0), "'arrhenius_k' is -3000.0"),
+    (lambda d: d["regressors"].update(arrhenius_k=1e6), "within 0…20000"),
+    (lambda d: d["regressors"].update(hysteresis_gamma="fast"), "'hysteresis_gamma' is 'fast'"),
+    (lambda d: d["regressors"].update(hysteresis_gamma=-10.0), "'hysteresis_gamma' is -10.0"),
+    (lambda d: d["regressors"].update(hysteresis_gamma=False), "'hysteresis_gamma' is False"),
 ])
 def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
     doc = model_to_dict(random_tree_model())

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from lmncell.identification.ladder import is_ladder
 from lmncell.runtime.model import (
+    MAX_ARRHENIUS_K,
     MAX_TAU_ACTIVATION_K,
     MAX_TEMPERATURE_TERMS,
     PARTITION_VARIABLES,
@@ -417,12 +418,14 @@ class TrainConfig:
     def _check_temperature(self) -> None:
         """Hysteresis rate, Arrhenius E, the time constants' Eτ, temperature terms."""
         bad = self._bad
-        if not (self.hysteresis in ("auto", "off") or (isinstance(self.hysteresis, (int, float))
-                and self.hysteresis > 0)):
-            raise bad("hysteresis", "expected 'auto', 'off' or a γ > 0")
+        if not (self.hysteresis in ("auto", "off") or (is_real_number(self.hysteresis)
+                and 0 < self.hysteresis < math.inf)):
+            raise bad("hysteresis", "expected 'auto', 'off' or a finite γ > 0")
         if not (self.temperature_scaling in ("auto", "off")
-                or isinstance(self.temperature_scaling, (int, float))):
-            raise bad("temperature_scaling", "expected 'auto', 'off' or E in K")
+                or (is_real_number(self.temperature_scaling)
+                    and 0 <= self.temperature_scaling <= MAX_ARRHENIUS_K)):
+            raise bad("temperature_scaling",
+                      f"expected 'auto', 'off' or E in K within 0…{MAX_ARRHENIUS_K:g}")
         if not (self.time_constant_scaling in ("auto", "off")
                 or (is_real_number(self.time_constant_scaling)
                     and 0 <= self.time_constant_scaling <= MAX_TAU_ACTIVATION_K)):
@@ -437,7 +440,7 @@ class TrainConfig:
     def _check_offsets(self) -> None:
         """The local OCV offsets' bound and ridge, and the refinement's ridge."""
         bound = self.offset_bound_mv
-        if not (bound == "auto" or (isinstance(bound, (int, float)) and 0 <= bound < 1e4)):
+        if not (bound == "auto" or (is_real_number(bound) and 0 <= bound < 1e4)):
             raise self._bad("offset_bound_mv", "expected 'auto', 0 (unbounded) or a bound in mV")
         ridge = self.offset_ridge
         if not (ridge == "auto" or (is_real_number(ridge) and 0 <= ridge <= 1)):
