@@ -40,7 +40,8 @@ class ThermalModel:
         for name, value, positive in (("resistance_k_per_w", self.resistance_k_per_w, True),
                                       ("time_constant_s", self.time_constant_s, True),
                                       ("offset_k", self.offset_k, False)):
-            if not (isinstance(value, (int, float)) and math.isfinite(value)
+            if not (isinstance(value, (int, float)) and not isinstance(value, bool)
+                    and math.isfinite(value)
                     and (value > 0 or not positive)):
                 raise ValueError(f"{where}: thermal.{name} is {value!r}, expected a finite "
                                  f"number{' > 0' if positive else ''}")

@@ -298,6 +298,8 @@ def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_region
     ({"hysteresis": True}, "'hysteresis' = True"),
     ({"hysteresis": float("inf")}, "'hysteresis' = inf"),
     ({"offset_bound_mv": True}, "'offset_bound_mv' = True"),
+    ({"depletion_power": True}, "'depletion_power' = True"),
+    ({"depletion_tau_s": True}, "'depletion_tau_s' = True"),
     ({"partition": "soc"}, "'partition'"),
     ({"partition": ["soc", "pressure"]}, "'partition'"),
 ])

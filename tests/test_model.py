@@ -183,6 +183,8 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
                                  "offset_k": 0.0}), "thermal.resistance_k_per_w is -2.0"),
     (lambda d: d.update(thermal={"resistance_k_per_w": 2.0, "time_constant_s": "x",
                                  "offset_k": 0.0}), "thermal.time_constant_s is 'x'"),
+    (lambda d: d.update(thermal={"resistance_k_per_w": True, "time_constant_s": 900.0,
+                                 "offset_k": 0.0}), "thermal.resistance_k_per_w is True"),
     (lambda d: d.update(format="other"), "format is 'other'"),
     (lambda d: d["local_models"]["theta"][0].pop(), "inhomogeneous|theta"),
     (lambda d: d["local_models"]["theta"].pop(), "belong to no leaf|leaf"),

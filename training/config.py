@@ -451,10 +451,10 @@ class TrainConfig:
     def _check_depletion(self) -> None:
         """The depletion regressors' power and time constants (each one of the filters')."""
         bad = self._bad
-        if not (isinstance(self.depletion_power, (int, float)) and 0 <= self.depletion_power <= 8):
+        if not (is_real_number(self.depletion_power) and 0 <= self.depletion_power <= 8):
             raise bad("depletion_power", "expected 0 (off) … 8")
         if self.depletion_power and self.depletion_tau_s != "auto":
-            if not isinstance(self.depletion_tau_s, (int, float)):
+            if not is_real_number(self.depletion_tau_s):
                 raise bad("depletion_tau_s", "expected 'auto' or a time constant in s")
             try:
                 Depletion(float(self.depletion_tau_s), 1.0).state_index(
