@@ -162,6 +162,23 @@ def test_python_api_end_to_end(tmp_path) -> None:
     assert fmu.stat().st_size > 1000
 
 
+def test_api_takes_one_ocv_test_file_on_its_own(monkeypatch, tmp_path) -> None:
+    """lmncell.train(..., ocv_tests="c20.mat") passes that one file, not its characters."""
+    import lmncell
+    import lmncell.identification.train as train_module
+
+    seen: dict = {}
+
+    def fake_train_files(paths, out, *args, **kwargs):
+        seen.update(kwargs)
+        return "model", None
+
+    monkeypatch.setattr(train_module, "train_files", fake_train_files)
+    for given in ("c20.mat", tmp_path / "c20.mat"):
+        assert lmncell.train([PAN_US06], tmp_path / "m.json", ocv_tests=given) == "model"
+        assert seen["ocv_tests"] == [str(given)]
+
+
 def test_api_reads_a123(tmp_path) -> None:
     import lmncell
 

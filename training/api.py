@@ -30,7 +30,7 @@ __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_mod
 
 def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | None = None,
           soc0: float | Sequence[float] | None = None, *,
-          ocv_tests: Sequence[str | Path] | None = None,
+          ocv_tests: str | Path | Sequence[str | Path] | None = None,
           baselines: bool = False, config: str | Path | None = None,
           read_options: Mapping[str, Any] | None = None, progress: Progress = print_progress,
           **settings: Any) -> LmnModel:
@@ -38,11 +38,14 @@ def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | Non
 
     capacity_ah: the cell's capacity (default: the charge of the full discharges found);
     soc0: every record's start SoC, or one per file in order (default: 1.0 for records that
-    start rested at full charge); ocv_tests: slow OCV test files that fix the OCV;
+    start rested at full charge); ocv_tests: slow OCV test files that fix the OCV (one file,
+    or a list of one or two);
     settings: training settings of lmncell.config.TrainConfig (e.g. max_local_models=4,
     partition=["soc", "current"]);
     read_options: a column mapping and reader options for your own CSV (see read_record).
     Returns the model (also written to `out`)."""
+    if isinstance(ocv_tests, (str, Path)):
+        ocv_tests = [ocv_tests]              # one round-trip test file, given on its own
     if ocv_tests:
         settings["ocv_tests"] = [str(p) for p in ocv_tests]
     from lmncell.identification.train import train_files

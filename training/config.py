@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,6 +26,14 @@ OFFSET_RIDGE = 0.003       # offset_ridge 'auto' where slow OCV tests fix the OC
 OCV_TEST_ANCHOR = 0.003    # ocv_refinement: 1 mV off the test costs like this share of samples
 OCV_REFINE_SOC_MIN = 0.1   # ocv_refinement: the test's OCV knots below this SoC stay as measured
 OCV_REFINE_LEVELS = 3      # ocv_refinement 'auto': on for records at this many temperature levels
+
+
+SWITCH_SETTINGS = ("ocv_input", "soc_input", "oblique", "oe_refinement")
+COUNT_SETTINGS = {"output_lags": (0, 10), "current_terms": (1, 10), "oe_max_iterations": (1, 10000),
+                  "lm_iterations": (0, 1000), "ocv_knots": (3, 1001)}
+REAL_SETTINGS = ("sample_time_s", "depletion_power", "validation_fraction", "outside_weight",
+                 "soc_reference_sigma", "model_error_sigma_v", "oe_ridge", "max_pole",
+                 "rest_current_a")
 
 
 class ConfigError(ValueError):
@@ -376,6 +385,7 @@ class TrainConfig:
 
     def check(self) -> TrainConfig:
         """Raise ConfigError for settings that cannot work; return self."""
+        self._check_kinds()
         self._check_structure()
         self._check_temperature()
         self._check_offsets()
@@ -388,15 +398,52 @@ class TrainConfig:
     def _bad(self, name: str, why: str) -> ConfigError:
         return ConfigError(f"setting '{name}' = {getattr(self, name)!r}: {why}")
 
+    def _check_kinds(self) -> None:
+        """The settings that are a plain switch, count or number: true/false, an integer in
+        its range (not a bool) or a finite real number (not a bool); the OCV tests a list of
+        file names."""
+        for name in SWITCH_SETTINGS:
+            if not isinstance(getattr(self, name), bool):
+                raise self._bad(name, "expected true or false")
+        for name, (low, high) in COUNT_SETTINGS.items():
+            value = getattr(self, name)
+            if not (isinstance(value, int) and not isinstance(value, bool)
+                    and low <= value <= high):
+                raise self._bad(name, f"expected an integer {low}…{high}")
+        for name in REAL_SETTINGS:
+            value = getattr(self, name)
+            if not (is_real_number(value) and math.isfinite(value)):
+                raise self._bad(name, "expected a finite number")
+        self._check_lists()
+        tests = self.ocv_tests
+        if not (isinstance(tests, list) and len(tests) <= 2
+                and all(isinstance(t, (str, os.PathLike)) for t in tests)):
+            raise self._bad("ocv_tests", "expected a list of one or two OCV test files")
+
+    def _check_lists(self) -> None:
+        """The list-valued settings are lists of the right shape (their values are checked
+        later): filters of pairs, the SoC window of two, the partition and the record weights
+        of any length."""
+        if not (isinstance(self.filters, list) and all(
+                isinstance(f, list) and len(f) == 2 and all(is_real_number(x) for x in f)
+                for f in self.filters)):
+            raise self._bad("filters", "expected a list of [tau_fast_s, tau_slow_s] pairs")
+        window = self.soc_window
+        if not (isinstance(window, list) and len(window) == 2
+                and all(is_real_number(x) for x in window)):
+            raise self._bad("soc_window", "expected [low, high]")
+        if not (self.partition == "auto" or (isinstance(self.partition, list)
+                                             and all(isinstance(v, str) for v in self.partition))):
+            raise self._bad("partition", f"expected 'auto' or a list of names from "
+                            f"{PARTITION_VARIABLES}")
+        if not isinstance(self.record_weights, list):
+            raise self._bad("record_weights", "expected a list of weights, one per data file")
+
     def _check_structure(self) -> None:
         """Sample time, delay, lags, filters, RC-ladder form, OCV knots, pole bound."""
         bad = self._bad
         if not self.sample_time_s > 0:
             raise bad("sample_time_s", "expected > 0 s")
-        if self.output_lags < 0 or self.output_lags > 10:
-            raise bad("output_lags", "expected 0…10")
-        if self.current_terms < 1 or self.current_terms > 10:
-            raise bad("current_terms", "expected 1…10")
         for f in self.filters:
             if len(f) != 2 or not 0 < f[0] < f[1]:
                 raise bad("filters", "expected pairs [tau_fast_s, tau_slow_s], 0 < fast < slow")
@@ -412,8 +459,6 @@ class TrainConfig:
                 and 0.0 <= self.current_delay_s < self.sample_time_s)):
             raise bad("current_delay_s", f"expected 'auto' or 0 ≤ δ < sample_time_s = "
                                          f"{self.sample_time_s} s")
-        if self.ocv_knots < 3:
-            raise bad("ocv_knots", "expected ≥ 3")
 
     def _check_temperature(self) -> None:
         """Hysteresis rate, Arrhenius E, the time constants' Eτ, temperature terms."""
@@ -513,6 +558,8 @@ class TrainConfig:
                       "not all 0")
         if not 0 <= self.outside_weight <= 1:
             raise bad("outside_weight", "expected 0…1")
+        if not 0 < self.rest_current_a < 10:
+            raise bad("rest_current_a", "expected 0 < current < 10 A")
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
