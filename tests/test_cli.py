@@ -222,3 +222,25 @@ def test_observer_folds_figure_draws_the_folds_and_refuses_none(tmp_path) -> Non
     assert height > 300 and width > 600
     with pytest.raises(ValueError, match="no folds"):
         observer_folds_figure([], tmp_path / "none.png", "")
+
+
+@pytest.mark.parametrize("argv", [
+    ["train", "DATA", "--out", "NODIR/m.json"],
+    ["build-fmu", "m.json", "--out", "NODIR/m.fmu"],
+    ["simulate", "m.json", "--plot", "NODIR/s.png"],
+    ["inspect", "DATA", "--plot", "NODIR/r.png"],
+    ["evaluate", "m.json", "DATA", "--trace", "NODIR/t.csv"],
+    ["design", "--capacity", "2", "--soc-profile", "0.8,0.2", "--out", "NODIR/p.csv"],
+    ["train", "DATA", "--out", "TMP"],
+])
+def test_output_files_in_missing_folders_are_refused_before_any_work(tmp_path, capsys,
+                                                                    argv) -> None:
+    """A file to write whose folder does not exist (or a folder given as the file) is refused
+    when the arguments are read, not after a training or a simulation."""
+    argv = [a.replace("NODIR", str(tmp_path / "missing")).replace("DATA", str(PAN_US06))
+            .replace("TMP", str(tmp_path)) for a in argv]
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert ("does not exist" in err or "is a folder" in err) and "argument" in err

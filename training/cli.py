@@ -44,6 +44,18 @@ def number_argument(cast: type, ok, expected: str):
     return parse
 
 
+def output_file_argument(text: str) -> str:
+    """An argparse type for a file to write: refused at once (not after a training) where its
+    folder does not exist or the path is a folder."""
+    path = Path(text)
+    if path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r}: is a folder; expected a file name")
+    folder = path.parent
+    if not folder.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r}: the folder {str(folder)!r} does not exist")
+    return text
+
+
 _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
@@ -278,7 +290,8 @@ def _add_inspect_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell inspect` subcommand."""
     s = sub.add_parser("inspect", help="summarise cycler files (and plot them)", **fmt)
     s.add_argument("files", nargs="+", help="data files (CSV, .mat, BDF; .gz too)")
-    s.add_argument("--plot", metavar="OUT.png", help="one figure of all files")
+    s.add_argument("--plot", type=output_file_argument, metavar="OUT.png",
+                   help="one figure of all files")
     s.add_argument("--capacity", type=_positive, help="Ah, for C-rates and SoC (default: the "
                    "discharged charge of a record that starts full)")
     _add_reader_options(s)
@@ -289,7 +302,8 @@ def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell train` subcommand."""
     s = sub.add_parser("train", help="identify an LMN from measurements", **fmt)
     s.add_argument("data", nargs="+", help="training data files")
-    s.add_argument("--out", required=True, metavar="MODEL.json", help="model file to write")
+    s.add_argument("--out", required=True, type=output_file_argument, metavar="MODEL.json",
+                   help="model file to write")
     s.add_argument("--capacity", type=_positive, help="Ah from full to the cut-off at a slow "
                    "rate (default: with --ocv-tests, of the largest discharge from full among the "
                    "records and up to 15 %% more, the one whose model follows them best; else "
@@ -328,8 +342,8 @@ def _add_evaluate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
     s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table "
                    "(an FMU: one fit figure per record)")
-    s.add_argument("--trace", metavar="OUT.csv", help="write time, current, measured and "
-                   "model voltage and SoC per model step")
+    s.add_argument("--trace", type=output_file_argument, metavar="OUT.csv",
+                   help="write time, current, measured and model voltage and SoC per model step")
     s.add_argument("--ambient", action="store_true", help="drive the model with the ambient "
                    "(chamber) temperature only, as a vehicle simulation does: the model's "
                    "thermal model computes the cell temperature (default: the measured cell "
@@ -365,7 +379,8 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU",
                        **fmt)
     s.add_argument("model", help="model file (JSON)")
-    s.add_argument("--out", required=True, metavar="CELL.fmu", help="FMU to write")
+    s.add_argument("--out", required=True, type=output_file_argument, metavar="CELL.fmu",
+                   help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
                    "importer (linux64 binary built here with gcc, sources included)")
     s.set_defaults(func=cmd_build_fmu)
@@ -385,7 +400,8 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts)")
-    s.add_argument("--plot", metavar="OUT.png", help="figure of speed, current, voltage, SoC")
+    s.add_argument("--plot", type=output_file_argument, metavar="OUT.png",
+                   help="figure of speed, current, voltage, SoC")
     s.add_argument("--json", action="store_true", help="print the results as JSON")
     s.set_defaults(func=cmd_simulate)
 
@@ -415,7 +431,8 @@ def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "(default: one per core)")
     g.add_argument("--scheduler", metavar="ADDRESS", help="a running Dask scheduler, e.g. "
                    "tcp://10.0.0.5:8786, instead of a LocalCluster")
-    s.add_argument("--out", required=True, metavar="RESULTS.csv", help="table to write "
+    s.add_argument("--out", required=True, type=output_file_argument, metavar="RESULTS.csv",
+                   help="table to write "
                    "(.csv, or .parquet with pyarrow)")
     s.add_argument("--plot", metavar="DIR", help="summary figures")
     s.set_defaults(func=cmd_sweep)
@@ -454,7 +471,8 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "pybamm where installed)")
     s.add_argument("--json", action="store_true", help="print the proof as JSON on stdout "
                    "(progress on stderr)")
-    s.add_argument("--out", required=True, metavar="P.csv", help="cycler programme to write")
+    s.add_argument("--out", required=True, type=output_file_argument, metavar="P.csv",
+                   help="cycler programme to write")
     s.set_defaults(func=cmd_design)
 
 
