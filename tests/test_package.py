@@ -179,6 +179,16 @@ def test_api_takes_one_ocv_test_file_on_its_own(monkeypatch, tmp_path) -> None:
         assert seen["ocv_tests"] == [str(given)]
 
 
+def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -> None:
+    import lmncell
+    from lmncell.config import ConfigError
+
+    with pytest.raises(ConfigError, match="the folder .*missing.* does not exist"):
+        lmncell.train(["not read.csv"], tmp_path / "missing" / "m.json")
+    with pytest.raises(ConfigError, match="is a folder"):
+        lmncell.train(["not read.csv"], tmp_path)
+
+
 def test_api_reads_a123(tmp_path) -> None:
     import lmncell
 

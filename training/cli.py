@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from lmncell import __version__
-from lmncell.config import ConfigError, parse_setting
+from lmncell.config import ConfigError, output_file_problem, parse_setting
 from lmncell.data.records import DataError
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
@@ -46,13 +46,10 @@ def number_argument(cast: type, ok, expected: str):
 
 def output_file_argument(text: str) -> str:
     """An argparse type for a file to write: refused at once (not after a training) where its
-    folder does not exist or the path is a folder."""
-    path = Path(text)
-    if path.is_dir():
-        raise argparse.ArgumentTypeError(f"{text!r}: is a folder; expected a file name")
-    folder = path.parent
-    if not folder.is_dir():
-        raise argparse.ArgumentTypeError(f"{text!r}: the folder {str(folder)!r} does not exist")
+    folder does not exist or the path is a folder (config.output_file_problem)."""
+    problem = output_file_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}")
     return text
 
 

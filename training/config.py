@@ -40,6 +40,17 @@ class ConfigError(ValueError):
     """A training setting that cannot be used; the message names the setting."""
 
 
+def output_file_problem(path: str | Path) -> str | None:
+    """Why `path` cannot be a file to write (its folder does not exist, or it is a folder), or
+    None; asked before work whose result would otherwise be lost when it is written."""
+    path = Path(path)
+    if path.is_dir():
+        return "is a folder; expected a file name"
+    if not path.parent.is_dir():
+        return f"the folder {str(path.parent)!r} does not exist"
+    return None
+
+
 SETTING_CHOICES = {  # the settings with a fixed set of names
     "ocv_refinement": ("auto", "on", "off"),
     "local_model_form": ("auto", "rc_ladder", "free"),

@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 from lmncell import __version__
-from lmncell.config import TrainConfig, load_config
+from lmncell.config import ConfigError, TrainConfig, load_config, output_file_problem
 from lmncell.data.dataset import (
     Segment,
     estimate_capacity,
@@ -235,6 +235,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
+    problem = output_file_problem(out)
+    if problem:
+        raise ConfigError(f"{out}: {problem}")
     records = read_training_records(paths, cfg, progress, read_options)
     if capacity_ah is None and cfg.ocv_tests:
         delay = current_delay(cfg, records, progress)
