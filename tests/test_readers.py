@@ -236,3 +236,25 @@ def test_evaluation_through_hidden_pauses_runs_the_model_state_on(tmp_path, quic
         assert len(json.loads(capsys.readouterr().out)) == segments
     assert main(["evaluate", str(quick_model), str(path), "--soc0", "1"]) == 0
     assert "split at 1 pause(s) that only its wall clock shows" in capsys.readouterr().out          # SoC counts on across it
+
+
+@pytest.mark.parametrize("columns, rows, message", [
+    ("t,i,v", ["0,1,3650", "1,1,3640"], r"'voltage_v' is 3650 V at row 0 \(2 sample\(s\) outside "
+                                        r"0…6 V\); expected a cell's terminal voltage in V"),
+    ("t,i,v", ["0,1,3.6", "1,1,-0.2"], r"'voltage_v' is -0.2 V at row 1"),
+    ("t,i,v,T", ["0,1,3.6,298.15", "1,1,3.6,298.2"], r"'temperature_c' is 298.15 °C at row 0 "
+                                                      r".*expected a cell temperature in °C"),
+])
+def test_voltages_and_temperatures_outside_a_cells_range_are_refused(tmp_path, columns, rows,
+                                                                     message) -> None:
+    """A record in mV, of a pack, or in kelvin is refused with the column, row and value."""
+    from lmncell.data.readers import read_record
+    from lmncell.data.records import DataError
+
+    p = tmp_path / "r.csv"
+    p.write_text(columns + "\n" + "\n".join(rows) + "\n")
+    names = columns.split(",")
+    mapping = dict(zip(("time", "current", "voltage", "temperature")[:len(names)], names,
+                       strict=True))
+    with pytest.raises(DataError, match=message):
+        read_record(p, columns=mapping)

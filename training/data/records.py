@@ -128,8 +128,25 @@ def _check_finite(name: str, values: np.ndarray, source: str) -> None:
                         "finite numbers")
 
 
+CELL_VOLTAGE_RANGE_V = (0.0, 6.0)           # a record's terminal voltage must lie in it
+CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # and its cell or chamber temperature in this
+
+
+def _check_range(name: str, values: np.ndarray, bounds: tuple[float, float], unit: str,
+                 expected: str, source: str) -> None:
+    """DataError naming the first sample of `values` outside `bounds` (inclusive)."""
+    low, high = bounds
+    bad = (values < low) | (values > high)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        raise DataError(f"{source}: column '{name}' is {float(values[row]):g} {unit} at row "
+                        f"{row} ({int(bad.sum())} sample(s) outside {low:g}…{high:g} {unit}); "
+                        f"expected {expected}")
+
+
 def validate_record(rec: Record) -> None:
-    """Raise DataError unless the record is complete, finite and strictly increasing in time."""
+    """Raise DataError unless the record is complete, finite, strictly increasing in time and
+    its voltage and temperature within CELL_VOLTAGE_RANGE_V and CELL_TEMPERATURE_RANGE_C."""
     src = rec.meta.source
     n = rec.time_s.size
     if n == 0:
@@ -151,6 +168,11 @@ def validate_record(rec: Record) -> None:
         raise DataError(f"{src}: column 'time_s' is {kind} at row {row}: "
                         f"{float(rec.time_s[row - 1])!r} s then {float(rec.time_s[row])!r} s; "
                         "expected strictly increasing time")
+    _check_range("voltage_v", rec.voltage_v, CELL_VOLTAGE_RANGE_V, "V",
+                 "a cell's terminal voltage in V (not mV, not a pack's)", src)
+    if rec.temperature_c is not None:
+        _check_range("temperature_c", rec.temperature_c, CELL_TEMPERATURE_RANGE_C, "°C",
+                     "a cell temperature in °C (not K)", src)
     if rec.soc_ref is not None and ((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05)).any():
         row = int(np.flatnonzero((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05))[0])
         raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected a "
