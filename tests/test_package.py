@@ -189,6 +189,22 @@ def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -
         lmncell.train(["not read.csv"], tmp_path)
 
 
+@pytest.mark.parametrize("kwargs, message", [
+    ({"current_a": np.zeros((3, 2))}, r"current_a has shape \(3, 2\); expected a non-empty 1-D"),
+    ({"current_a": "abc"}, "current_a is 'abc'; expected numbers"),
+    ({"current_a": [0.0, float("nan")]}, "current_a has 1 NaN or infinite value.*index 1"),
+    ({"temperature_c": np.zeros(3)}, "temperature_c has 3 values for 5 current steps"),
+    ({"temperature_c": 298.15}, r"within -60…100 °C \(a cell temperature in °C, not K\)"),
+    ({"temperature_c": "warm"}, "temperature_c is 'warm'"),
+])
+def test_api_simulate_names_what_is_wrong_with_its_inputs(quick_model, kwargs, message) -> None:
+    import lmncell
+
+    args = {"current_a": np.full(5, -1.0), **kwargs}
+    with pytest.raises(lmncell.api.DataError, match=message):
+        lmncell.simulate(quick_model, args.pop("current_a"), **args)
+
+
 def test_api_reads_a123(tmp_path) -> None:
     import lmncell
 

@@ -67,17 +67,49 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     (after each step), plus the network output `y` and the local models' `validity`."""
     if not isinstance(model, LmnModel):
         model = load_model(model)
-    current = np.asarray(current_a, dtype=float).ravel()
-    if current.size == 0 or not np.isfinite(current).all():
-        raise DataError("simulate: current_a must be a non-empty array of finite values (A)")
+    current = _profile("current_a", current_a, "A")
     if not 0.0 <= float(soc0) <= 1.0:
         raise DataError(f"simulate: soc0 = {float(soc0)!r}; expected a fraction within 0…1")
     temp = None
     if temperature_c is not None:
-        temp = np.broadcast_to(np.asarray(temperature_c, dtype=float), current.shape).copy()
-        if not np.isfinite(temp).all():
-            raise DataError("simulate: temperature_c must be finite (°C)")
+        temp = _temperature_profile(temperature_c, current.size)
     return _simulate_runtime(model, current, temp, float(soc0), capacity_ah)
+
+
+def _profile(name: str, values: Any, unit: str) -> np.ndarray:
+    """A non-empty 1-D array of finite floats (one number: an array of one), or DataError
+    naming `name`."""
+    try:
+        arr = np.atleast_1d(np.asarray(values, dtype=float))
+    except (TypeError, ValueError):
+        raise DataError(f"simulate: {name} is {values!r:.60}; expected numbers ({unit})") from None
+    if arr.ndim != 1 or arr.size == 0:
+        raise DataError(f"simulate: {name} has shape {arr.shape}; expected a non-empty 1-D "
+                        f"array ({unit})")
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        first = int(np.flatnonzero(bad)[0])
+        raise DataError(f"simulate: {name} has {int(bad.sum())} NaN or infinite value(s), first "
+                        f"at index {first}; expected finite numbers ({unit})")
+    return arr
+
+
+def _temperature_profile(temperature_c: Any, steps: int) -> np.ndarray:
+    """One temperature or one per step (°C) as an array of `steps`, within
+    CELL_TEMPERATURE_RANGE_C, or DataError."""
+    from lmncell.data.records import CELL_TEMPERATURE_RANGE_C
+
+    temp = _profile("temperature_c", temperature_c, "°C")
+    if np.ndim(temperature_c) == 0:
+        temp = np.full(steps, temp[0])
+    if temp.size != steps:
+        raise DataError(f"simulate: temperature_c has {temp.size} values for {steps} current "
+                        "steps; expected one value or one per step")
+    low, high = CELL_TEMPERATURE_RANGE_C
+    if not ((temp >= low) & (temp <= high)).all():
+        raise DataError(f"simulate: temperature_c must lie within {low:g}…{high:g} °C (a cell "
+                        "temperature in °C, not K)")
+    return temp
 
 
 def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
