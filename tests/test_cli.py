@@ -244,3 +244,11 @@ def test_output_files_in_missing_folders_are_refused_before_any_work(tmp_path, c
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert ("does not exist" in err or "is a folder" in err) and "argument" in err
+
+
+def test_temperatures_on_the_command_line_are_cell_temperatures_in_celsius(quick_model,
+                                                                          capsys) -> None:
+    """298.15 (kelvin) is refused, with the range, before anything is simulated."""
+    with pytest.raises(SystemExit):
+        main(["explain", str(quick_model), "--temperature", "298.15"])
+    assert "a cell temperature in °C within -60…100 (not K)" in capsys.readouterr().err

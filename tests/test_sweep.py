@@ -40,6 +40,7 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
     (["--cycles", "wltc,nedc"], "--cycles ['nedc'] unknown"),
     (["--soc0", "0.5,1.5"], "--soc0 1.5"),
     (["--ambient", "-300"], "--ambient -300.0"),
+    (["--ambient", "298.15"], "--ambient 298.15: expected temperatures in °C within -60…100"),
     (["--ambient", "warm"], "--ambient 'warm'"),
     (["--workers", "0"], "expected a whole number"),
     (["--pack", "96x3"], "--pack '96x3'"),

@@ -10,10 +10,10 @@ from typing import Any
 
 from lmncell import __version__
 from lmncell.config import ConfigError, output_file_problem, parse_setting
-from lmncell.data.records import DataError
+from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
-from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C, InputError
+from lmncell.runtime.cosim import InputError
 from lmncell.runtime.model import ModelFileError
 
 USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
@@ -56,8 +56,9 @@ def output_file_argument(text: str) -> str:
 _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
-_temperature = number_argument(float, lambda v: MIN_TEMPERATURE_C < v < MAX_TEMPERATURE_C,
-                       "a temperature in °C above absolute zero")
+_temperature = number_argument(
+    float, lambda v: CELL_TEMPERATURE_RANGE_C[0] <= v <= CELL_TEMPERATURE_RANGE_C[1],
+    "a cell temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
 
 
 def soc_list_argument(text: str) -> list[float]:

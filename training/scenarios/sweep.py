@@ -23,8 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from lmncell.data.records import DataError
-from lmncell.runtime.cosim import MAX_TEMPERATURE_C, MIN_TEMPERATURE_C
+from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import CYCLES, Vehicle, load_cycle, load_vehicle, pack_power, run_cycle
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
@@ -62,8 +61,10 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
     if bad:
         raise DataError(f"sweep: --cycles {bad} unknown; expected some of {list(CYCLES)}")
     for t in ambients:
-        if not (math.isfinite(t) and MIN_TEMPERATURE_C < t < MAX_TEMPERATURE_C):
-            raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C")
+        low, high = CELL_TEMPERATURE_RANGE_C
+        if not (math.isfinite(t) and low <= t <= high):
+            raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C within "
+                            f"{low:g}…{high:g} (not K)")
     for s in soc0s:
         if not (math.isfinite(s) and 0.0 <= s <= 1.0):
             raise DataError(f"sweep: --soc0 {s!r}: expected fractions within 0…1")
