@@ -252,3 +252,14 @@ def test_temperatures_on_the_command_line_are_cell_temperatures_in_celsius(quick
     with pytest.raises(SystemExit):
         main(["explain", str(quick_model), "--temperature", "298.15"])
     assert "a cell temperature in °C within -60…100 (not K)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("command", [["simulate"], ["sweep", "--out", "OUT"]])
+def test_a_model_file_where_an_fmu_belongs_is_named_not_a_traceback(quick_model, tmp_path,
+                                                                   capsys, command) -> None:
+    """`lmncell simulate` and `lmncell sweep` take an FMU; given the model's JSON they say so
+    (sweep's workers raised a BadZipFile traceback)."""
+    argv = [command[0], str(quick_model)] + [str(tmp_path / "r.csv") if c == "OUT" else c
+                                             for c in command[1:]]
+    assert main(argv) == 2
+    assert f"{quick_model}: not a readable FMU" in capsys.readouterr().err

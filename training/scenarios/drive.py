@@ -218,6 +218,9 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
 
 
 def simulate_cycle_cli(a) -> int:
+    from lmncell.evaluation.fmueval import read_fmu_info
+
+    read_fmu_info(a.fmu)               # ConfigError naming the file unless an LMNCell FMU
     vehicle = load_vehicle(a.vehicle)
     res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step, a.ambient)
     if a.plot:

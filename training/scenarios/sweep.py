@@ -169,10 +169,10 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     import pandas as pd
     from dask.distributed import Client, LocalCluster
     from dask.distributed import progress as dask_progress
+    from lmncell.evaluation.fmueval import read_fmu_info
 
     fmu = Path(fmu)
-    if not fmu.is_file():
-        raise DataError(f"{fmu}: no such FMU file")
+    read_fmu_info(fmu)                 # ConfigError naming the file unless an LMNCell FMU
     if workers is not None and workers < 1:
         raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
     data = fmu.read_bytes()
