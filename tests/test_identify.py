@@ -328,6 +328,14 @@ def test_bad_configuration(kw, message) -> None:
         load_config(**kw)
 
 
+def test_list_settings_may_be_tuples() -> None:
+    """From Python, tuples do for the list-valued settings (the kind check asks for a
+    sequence of the right shape, not the list type)."""
+    cfg = load_config(filters=((0.01, 5.0), (5.0, 30.0)), soc_window=(0.1, 0.9),
+                      partition=("soc",), record_weights=(1.0,), ocv_tests=("a.mat",))
+    assert cfg.soc_window == (0.1, 0.9) and len(cfg.filters) == 2
+
+
 def test_bad_config_file(tmp_path) -> None:
     p = tmp_path / "c.toml"
     p.write_text("[train]\nmax_local_models = 'many'\n")

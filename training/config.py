@@ -427,27 +427,27 @@ class TrainConfig:
                 raise self._bad(name, "expected a finite number")
         self._check_lists()
         tests = self.ocv_tests
-        if not (isinstance(tests, list) and len(tests) <= 2
+        if not (isinstance(tests, (list, tuple)) and len(tests) <= 2
                 and all(isinstance(t, (str, os.PathLike)) for t in tests)):
             raise self._bad("ocv_tests", "expected a list of one or two OCV test files")
 
     def _check_lists(self) -> None:
-        """The list-valued settings are lists of the right shape (their values are checked
-        later): filters of pairs, the SoC window of two, the partition and the record weights
-        of any length."""
-        if not (isinstance(self.filters, list) and all(
-                isinstance(f, list) and len(f) == 2 and all(is_real_number(x) for x in f)
+        """The list-valued settings are lists (or tuples) of the right shape (their values are
+        checked later): filters of pairs, the SoC window of two, the partition and the record
+        weights of any length."""
+        if not (isinstance(self.filters, (list, tuple)) and all(
+                isinstance(f, (list, tuple)) and len(f) == 2 and all(is_real_number(x) for x in f)
                 for f in self.filters)):
             raise self._bad("filters", "expected a list of [tau_fast_s, tau_slow_s] pairs")
         window = self.soc_window
-        if not (isinstance(window, list) and len(window) == 2
+        if not (isinstance(window, (list, tuple)) and len(window) == 2
                 and all(is_real_number(x) for x in window)):
             raise self._bad("soc_window", "expected [low, high]")
-        if not (self.partition == "auto" or (isinstance(self.partition, list)
+        if not (self.partition == "auto" or (isinstance(self.partition, (list, tuple))
                                              and all(isinstance(v, str) for v in self.partition))):
             raise self._bad("partition", f"expected 'auto' or a list of names from "
                             f"{PARTITION_VARIABLES}")
-        if not isinstance(self.record_weights, list):
+        if not isinstance(self.record_weights, (list, tuple)):
             raise self._bad("record_weights", "expected a list of weights, one per data file")
 
     def _check_structure(self) -> None:
