@@ -97,7 +97,7 @@ def _profile(name: str, values: Any, unit: str) -> np.ndarray:
 def _temperature_profile(temperature_c: Any, steps: int) -> np.ndarray:
     """One temperature or one per step (°C) as an array of `steps`, within
     CELL_TEMPERATURE_RANGE_C, or DataError."""
-    from lmncell.data.records import CELL_TEMPERATURE_RANGE_C
+    from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, is_cell_temperature
 
     temp = _profile("temperature_c", temperature_c, "°C")
     if np.ndim(temperature_c) == 0:
@@ -105,10 +105,9 @@ def _temperature_profile(temperature_c: Any, steps: int) -> np.ndarray:
     if temp.size != steps:
         raise DataError(f"simulate: temperature_c has {temp.size} values for {steps} current "
                         "steps; expected one value or one per step")
-    low, high = CELL_TEMPERATURE_RANGE_C
-    if not ((temp >= low) & (temp <= high)).all():
-        raise DataError(f"simulate: temperature_c must lie within {low:g}…{high:g} °C (a cell "
-                        "temperature in °C, not K)")
+    if not is_cell_temperature(temp):
+        raise DataError("simulate: temperature_c must lie within {:g}…{:g} °C (a cell "
+                        "temperature in °C, not K)".format(*CELL_TEMPERATURE_RANGE_C))
     return temp
 
 

@@ -10,7 +10,7 @@ from typing import Any
 
 from lmncell import __version__
 from lmncell.config import ConfigError, output_file_problem, parse_setting
-from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError
+from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
@@ -57,7 +57,7 @@ _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction wit
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
 _temperature = number_argument(
-    float, lambda v: CELL_TEMPERATURE_RANGE_C[0] <= v <= CELL_TEMPERATURE_RANGE_C[1],
+    float, is_cell_temperature,
     "a cell temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
 
 

@@ -132,6 +132,14 @@ CELL_VOLTAGE_RANGE_V = (0.0, 6.0)           # a record's terminal voltage must l
 CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # and its cell or chamber temperature in this
 
 
+def is_cell_temperature(values: float | np.ndarray) -> bool:
+    """Whether every value is a finite cell temperature in °C within CELL_TEMPERATURE_RANGE_C
+    (a value in kelvin is not)."""
+    low, high = CELL_TEMPERATURE_RANGE_C
+    arr = np.asarray(values, dtype=float)
+    return bool(np.all(np.isfinite(arr) & (arr >= low) & (arr <= high)))
+
+
 def _check_range(name: str, values: np.ndarray, bounds: tuple[float, float], unit: str,
                  expected: str, source: str) -> None:
     """DataError naming the first sample of `values` outside `bounds` (inclusive)."""

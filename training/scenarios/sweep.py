@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError
+from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import CYCLES, Vehicle, load_cycle, load_vehicle, pack_power, run_cycle
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
@@ -61,10 +61,9 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
     if bad:
         raise DataError(f"sweep: --cycles {bad} unknown; expected some of {list(CYCLES)}")
     for t in ambients:
-        low, high = CELL_TEMPERATURE_RANGE_C
-        if not (math.isfinite(t) and low <= t <= high):
+        if not is_cell_temperature(t):
             raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C within "
-                            f"{low:g}…{high:g} (not K)")
+                            "{:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
     for s in soc0s:
         if not (math.isfinite(s) and 0.0 <= s <= 1.0):
             raise DataError(f"sweep: --soc0 {s!r}: expected fractions within 0…1")
