@@ -197,7 +197,7 @@ def fit_capacity(records: list[Record], cfg: TrainConfig,
     its training, which are the model's. At L the records' SoC reaches 0 where they stop,
     and the OCV test's curve meets them at the wrong place near empty (Panasonic 25 °C
     leave-one-out, whole record: 76.9 mV at L = 2.71 Ah against 8.1 mV at 2.85 Ah)."""
-    lower = estimate_capacity(records, start_socs(soc0, len(records)))
+    lower = lower_bound_capacity(records, soc0, progress)
     best: tuple[float, float, list[Segment], TrainResult] | None = None
     best_k = 0
     for k in range(CAPACITY_CANDIDATES):
