@@ -79,7 +79,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .thermal import ThermalModel
+from .thermal import ThermalModel, is_real_number
 
 FORMAT = "lmncell-model"
 DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
@@ -353,12 +353,6 @@ class LmnModel:
 
 
 # ----- reading and writing ---------------------------------------------------------------
-def is_real_number(value: object) -> bool:
-    """A real number: an int or a float, not a bool (True is an int); for model files and the
-    training settings alike."""
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
 def _get(doc: dict, key: str, where: str, kind: type | tuple[type, ...]):
     if key not in doc:
         raise ModelFileError(f"{where}: missing key '{key}'")

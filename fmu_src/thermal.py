@@ -23,6 +23,12 @@ TEMPERATURE_DESCRIPTION = ("ambient temperature (the model computes the cell tem
                            "measured cell temperature with temperature_is_cell = true [degC]")
 
 
+def is_real_number(value: object) -> bool:
+    """A real number: an int or a float, not a bool (True is an int); for model files and the
+    training settings alike (lmncell.runtime.model re-exports it)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
 @dataclass(frozen=True)
 class ThermalModel:
     """Parameters of the lumped model (see the module docstring)."""
@@ -40,8 +46,7 @@ class ThermalModel:
         for name, value, positive in (("resistance_k_per_w", self.resistance_k_per_w, True),
                                       ("time_constant_s", self.time_constant_s, True),
                                       ("offset_k", self.offset_k, False)):
-            if not (isinstance(value, (int, float)) and not isinstance(value, bool)
-                    and math.isfinite(value)
+            if not (is_real_number(value) and math.isfinite(value)
                     and (value > 0 or not positive)):
                 raise ValueError(f"{where}: thermal.{name} is {value!r}, expected a finite "
                                  f"number{' > 0' if positive else ''}")
