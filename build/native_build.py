@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from lmncell.fmu.interface import dependency_indices
-from lmncell.runtime.cosim import OUT_OF_RANGE_DESCRIPTION, VOLTAGE_MARGIN_V
+from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, OUT_OF_RANGE_DESCRIPTION, VOLTAGE_MARGIN_V
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE,
@@ -88,11 +88,12 @@ def model_header(model: LmnModel, guid: str) -> str:
 
 
 def _dimension_defines(m: LmnModel, n_slots: int) -> list[str]:
-    """Sample time, capacity, delay, efficiencies and the sizes of every table (n_slots: the
-    tree's, tree_plan)."""
+    """Sample time, capacity, the model steps one communication step may span, delay,
+    efficiencies and the sizes of every table (n_slots: the tree's, tree_plan)."""
     cols = m.columns()
     return [
         f"#define TS {m.sample_time_s!r}", f"#define CAPACITY_AH {m.capacity_ah!r}",
+        f"#define MAX_STEPS_PER_CALL {float(MAX_STEPS_PER_CALL)!r}",
         f"#define DELAY_S {float(m.current_delay_s)!r}",
         f"#define ETA_CHARGE {m.efficiency_charge!r}",
         f"#define ETA_DISCHARGE {m.efficiency_discharge!r}",

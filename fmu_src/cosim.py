@@ -26,6 +26,9 @@ OUT_OF_RANGE_DESCRIPTION = (
     "true while current, SoC or temperature leave the trained region or the model's voltage "
     f"its trained range by more than {VOLTAGE_MARGIN_V:g} V (the model extrapolates)")
 MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
+MAX_STEPS_PER_CALL = 10_000_000   # model steps one communication step may span (116 days at
+# Ts = 1 s, about 2.5 min of this engine): a longer step is refused, where it would hold the
+# host for hours, or for ever once Ts no longer changes the remaining time (h ≳ 1e16·Ts)
 ACCUMULATORS = 8   # get_state's "acc": the step's five, the current delay's three
 
 
@@ -167,15 +170,16 @@ class CellCosim:
                 voltage_measured_v: float = 0.0) -> int:
         """Advance by one communication step with held inputs; returns model steps taken.
 
-        voltage_measured_v ≤ 0 means "not measured". Raises InputError (naming the variable)
-        before changing any state.
+        voltage_measured_v ≤ 0 means "not measured". Raises InputError (naming the variable,
+        or the step size where it spans more than MAX_STEPS_PER_CALL model steps) before
+        changing any state.
         """
         i_max = self._i_max
+        ts = self.model.sample_time_s
         if not (-i_max <= current_a <= i_max and MIN_TEMPERATURE_C <= temperature_c
-                <= MAX_TEMPERATURE_C and 0.0 < step_s < math.inf
+                <= MAX_TEMPERATURE_C and 0.0 < step_s <= MAX_STEPS_PER_CALL * ts
                 and math.isfinite(voltage_measured_v)):
             self._refuse(step_s, current_a, temperature_c, voltage_measured_v)
-        ts = self.model.sample_time_s
         delay = self.model.current_delay_s
         if delay and math.isnan(self.delay_charge_as):   # before the start: the first current
             self.delay_charge_as = current_a * delay
@@ -219,6 +223,11 @@ class CellCosim:
                 raise InputError(f"input '{name}' = {val!r}: expected a finite number")
         if not math.isfinite(step_s) or step_s <= 0:
             raise InputError(f"communication step size {step_s!r}: expected > 0 s")
+        ts = self.model.sample_time_s
+        if step_s > MAX_STEPS_PER_CALL * ts:
+            raise InputError(f"communication step size {step_s!r} s: more than "
+                             f"{MAX_STEPS_PER_CALL:,} model steps of {ts:g} s; expected at most "
+                             f"{MAX_STEPS_PER_CALL * ts:g} s in one step (split it)")
         if not math.isfinite(voltage_measured_v):
             raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
                              "finite number (0 when not measured)")

@@ -75,8 +75,9 @@ def state_machine(fmu: str) -> dict:
 
 
 def impossible_inputs(fmu: str) -> dict:
-    """Row 5: a finite but absurd current and a temperature below absolute zero are refused;
-    the outputs stay finite and unchanged."""
+    """Row 5: a finite but absurd current, a temperature below absolute zero and a step of
+    more model steps than one call may take are refused; the outputs stay finite and
+    unchanged."""
     inst = Instance(fmu)
     inst.step(-2.0)
     before = inst.get("voltage", "soc")
@@ -86,6 +87,8 @@ def impossible_inputs(fmu: str) -> dict:
     out["after_cold"] = inst.get("voltage", "soc")
     out["nan_current"] = _status(lambda: inst.step(math.nan))
     out["after_nan"] = inst.get("voltage", "soc")
+    out["endless_step"] = _status(lambda: inst.step(-1.0, h=1e300))   # looped for ever
+    out["after_endless"] = inst.get("voltage", "soc")
     out["before"] = before
     out["still_steps"] = _status(lambda: inst.step(-1.0))
     out["finite"] = all(math.isfinite(x) for x in inst.get("voltage", "soc", "soc_std"))
@@ -218,7 +221,8 @@ def instantiate_many(fmu: str, cycles: int = 2000) -> dict:
 
 HOSTILE_REALS = (0.0, 1.0, -1.0, 0.5, 2.0, 4.2, 25.0, -40.0, 80.0, 1e-300, 1e308, -1e308,
                  math.nan, math.inf, -math.inf)
-STEP_SIZES = (1.0, 1.0, 1.0, 0.1, 10.0, 3600.0, 1e5, 1e-12, 0.0, -1.0, math.nan)
+STEP_SIZES = (1.0, 1.0, 1.0, 0.1, 10.0, 3600.0, 1e5, 1e-12, 0.0, -1.0, math.nan, math.inf,
+              1e300)   # 1e300: more model steps than one call may take (looped for ever)
 
 
 class RandomHost:

@@ -104,6 +104,7 @@ def test_physically_impossible_inputs_are_refused(fmu) -> None:
     assert res["nan_current"] == ERROR                   # row 9: the same status from both
     assert res["after_huge"] == res["before"] and res["after_cold"] == res["before"]
     assert res["after_nan"] == res["before"]
+    assert res["endless_step"] == ERROR and res["after_endless"] == res["before"]
     assert res["still_steps"] == 0 and res["finite"]
 
 
@@ -144,6 +145,8 @@ def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> No
 
     assert "needs Python 3 with numpy" in doc(quick_fmu)
     assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
+    for path in (quick_fmu, native_fmu):       # the step-size limit both refuse beyond
+        assert "more than\n10,000,000 model steps" in doc(path)
 
 
 def test_random_call_sequences_never_crash_or_return_nan_with_ok(fmu) -> None:

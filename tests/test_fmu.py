@@ -240,3 +240,25 @@ def test_a_state_of_another_shape_is_refused_before_anything_changes(quick_model
     assert (cosim.voltage_v, cosim.steps, cosim.get_state()["acc"]) == before
     cosim.set_state(saved)
     assert cosim.steps == 3
+
+
+def test_a_step_of_more_model_steps_than_the_limit_is_refused_at_once(quick_model,
+                                                                      monkeypatch) -> None:
+    """A communication step beyond MAX_STEPS_PER_CALL model steps is refused before anything
+    changes (1e300 s used to loop for ever: Ts no longer changes the remaining time); one of
+    exactly the limit is taken."""
+    from lmncell.runtime import cosim as engine
+
+    model = load_model(quick_model)
+    cosim = engine.CellCosim(model, engine.Parameters(0.8, 2.85))
+    cosim.advance(0.5, -2.0)
+    before = cosim.get_state()
+    for h in (1e300, engine.MAX_STEPS_PER_CALL * model.sample_time_s * (1 + 1e-9)):
+        with pytest.raises(engine.InputError, match=r"communication step size .* s: more "
+                           r"than 10,000,000 model steps of 1 s; expected at most 1e\+07 s"):
+            cosim.advance(h, 0.0)
+        assert cosim.get_state() == before
+    monkeypatch.setattr(engine, "MAX_STEPS_PER_CALL", 40)
+    assert cosim.advance(40 * model.sample_time_s, -1.0) == 40
+    with pytest.raises(engine.InputError, match="more than 40 model steps"):
+        cosim.advance(40 * model.sample_time_s + 0.5, -1.0)

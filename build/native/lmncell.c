@@ -1032,6 +1032,12 @@ static fmi2Status cosim_advance(Instance *in, double h) {
         logf_(in, fmi2Error, "logStatusError", "communication step size %g: expected > 0 s", h);
         return fmi2Error;
     }
+    if (h > MAX_STEPS_PER_CALL * TS) {  /* for ever, once TS no longer changes `remaining` */
+        logf_(in, fmi2Error, "logStatusError", "communication step size %.17g s: more than %.0f "
+              "model steps of %g s; expected at most %g s in one step (split it); the step was "
+              "not taken", h, MAX_STEPS_PER_CALL, TS, MAX_STEPS_PER_CALL * TS);
+        return fmi2Error;
+    }
     if (fabs(s->current) > MAX_C_RATE * s->capacity) {
         logf_(in, fmi2Error, "logStatusError", "input 'current' = %g A: beyond %g C of %g Ah, "
               "not a current a cell carries; the step was not taken", s->current, MAX_C_RATE,
