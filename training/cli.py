@@ -397,7 +397,8 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--soc0", type=_float01, default=0.9, help="start SoC")
     s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
-    s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts)")
+    s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
+                   "a step longer than the cycle's 1 s samples holds their mean power")
     s.add_argument("--plot", type=output_file_argument, metavar="OUT.png",
                    help="figure of speed, current, voltage, SoC")
     s.add_argument("--json", action="store_true", help="print the results as JSON")

@@ -117,10 +117,30 @@ class CycleResult:
     cell_temperature_c: np.ndarray | None = None
 
 
+def step_means(values: np.ndarray, dt: float, h: float, n: int) -> np.ndarray:
+    """The mean over each communication step [k·h, (k+1)·h), k < n, of a series held over its
+    samples (values[j] over [j·dt, (j+1)·dt)): the sample itself where a step lies inside one
+    sample, else the time-weighted mean of those it covers (the energy of a coarse step is the
+    cycle's, not that of the sample at its start)."""
+    m = round(h / dt)
+    if m >= 1 and abs(h / dt - m) < 1e-9:
+        return values[: n * m].reshape(n, m).mean(axis=1)
+    edges = np.arange(n + 1) * h
+    integral = np.interp(edges, np.arange(values.size + 1) * dt,
+                         np.concatenate([[0.0], np.cumsum(values * dt)]))
+    means = np.diff(integral) / h
+    first = np.minimum((edges[:-1] / dt + 1e-9).astype(int), values.size - 1)
+    inside = edges[1:] <= (first + 1) * dt * (1.0 + 1e-12)
+    means[inside] = values[first[inside]]
+    return means
+
+
 def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = None,
               repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
               temperature_c: float = 25.0) -> CycleResult:
-    """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step.
+    """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step
+    (the cycle's mean power over a step longer than its 1 s samples, step_means; a step longer
+    than the cycles is refused with a DataError).
     temperature_c is the ambient temperature (the model computes the cell temperature where it
     has a thermal model)."""
     from fmpy import extract, read_model_description
@@ -135,11 +155,16 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     md = read_model_description(str(fmu))
     default = md.defaultExperiment
     h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
+    n = math.floor(power.size * dt / h + 1e-9)
+    if n < 1:
+        copies = f"{repeat} × " if repeat > 1 else ""
+        raise DataError(f"communication step {h:g} s: longer than {copies}the {cycle.upper()} "
+                        f"cycle ({power.size * dt:g} s); expected at most {power.size * dt:g} s")
+    cell_power, speed = step_means(cell_power, dt, h, n), step_means(speed, dt, h, n)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipped = extract(str(fmu))
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cycle")
-    n = math.floor(power.size * dt / h + 1e-9)
     out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed",
                                     "cell_t")}
     has_cell_t = "cell_temperature" in vr
@@ -154,8 +179,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
         u = slave.getReal([vr["voltage"]])[0]
         for k in range(n):
             t0 = k * h
-            idx = min(int(t0 / dt + 1e-9), power.size - 1)
-            i = -cell_power[idx] / u
+            i = -cell_power[k] / u
             slave.setReal([vr["current"]], [i])
             status = slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
             if status is not None and status > 1:
@@ -164,7 +188,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
             out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
             out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
             out["cell_t"][k] = cell_t[0] if cell_t else math.nan
-            out["speed"][k] = speed[idx]
+            out["speed"][k] = speed[k]
         slave.terminate()
     finally:
         slave.freeInstance()
