@@ -81,6 +81,10 @@ def test_bad_design_inputs() -> None:
     with pytest.raises(DataError, match="above the"):
         design_programme(CellSpec(capacity_ah=2.3, max_c_rate=1.0), CyclerSpec(),
                          DesignSpec([1.0, 0.0], duration_s=600), progress=lambda _m: None)
+    # a duration shorter than one sequence was designed as one sequence of 300 s, unsaid
+    with pytest.raises(DataError, match="--duration 10 s gives 0 sequence.* at least 300 s"):
+        design_programme(CellSpec(capacity_ah=2.85), CyclerSpec(),
+                         DesignSpec([0.8, 0.2], duration_s=10), progress=lambda _m: None)
 
 
 def test_random_programme_has_the_designs_amplitude_bands_and_limits() -> None:

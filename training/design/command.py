@@ -13,6 +13,7 @@ from lmncell.design.optimal import (
     design_programme,
     parse_profile,
     plot_programme,
+    sequence_count,
     write_programme,
 )
 
@@ -53,7 +54,7 @@ def run_design(a) -> int:
                       information=a.information)
 
     def design(c: CellSpec):
-        say(f"designing {round(spec.duration_s / spec.sequence_s)} sequences of "
+        say(f"designing {sequence_count(spec)} sequence(s) of "
             f"{spec.sequence_s:.0f} s through SoC {spec.soc_profile} ({spec.method}, "
             f"{spec.information} information) …")
         return design_programme(c, cyc, spec, progress=say)

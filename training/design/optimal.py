@@ -395,14 +395,24 @@ def allocate(profile: list[float], n_seq: int) -> tuple[list[float], list[int]]:
     return steps, counts.tolist()
 
 
+def sequence_count(spec: DesignSpec) -> int:
+    """The number of sequences: the duration over the sequence length, rounded; at least one
+    per leg of the SoC profile, else a DataError (a duration shorter than one sequence was
+    taken as one sequence, longer than asked)."""
+    n_seq = round(spec.duration_s / spec.sequence_s)
+    if n_seq < len(spec.soc_profile) - 1:
+        raise DataError(f"--duration {spec.duration_s:g} s gives {n_seq} sequence(s) of "
+                        f"{spec.sequence_s:g} s, fewer than the {len(spec.soc_profile) - 1} "
+                        "leg(s) of the SoC profile; expected a duration of at least "
+                        f"{(len(spec.soc_profile) - 1) * spec.sequence_s:g} s (or a shorter "
+                        "--sequence)")
+    return n_seq
+
+
 def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
                      progress=print) -> Programme:
     """Chain locally optimal sequences through the SoC profile."""
-    n_seq = max(1, round(spec.duration_s / spec.sequence_s))
-    if n_seq < len(spec.soc_profile) - 1:
-        raise DataError(f"--duration {spec.duration_s:.0f} s gives {n_seq} sequence(s) of "
-                        f"{spec.sequence_s:.0f} s, fewer than the {len(spec.soc_profile) - 1} "
-                        "legs of the SoC profile")
+    n_seq = sequence_count(spec)
     i_max = current_limit(cell, cyc)
     cyc = dataclasses.replace(cyc, hold_s=settling_hold(cell, cyc, spec))
     progress(f"  hold time {cyc.hold_s:g} s ({SETTLING_TAUS:g} × the design model's longest "
@@ -460,7 +470,7 @@ def random_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     charge-moving mean) of the same length, hold time, amplitude bands and SoC walk as the
     design; a sequence whose predicted voltage leaves the limits has its spread reduced (that
     sequence only, as the design's constraint acts)."""
-    n_seq = max(1, round(spec.duration_s / spec.sequence_s))
+    n_seq = sequence_count(spec)
     i_max = current_limit(cell, cyc)
     rng = np.random.default_rng(seed)
     per = round(cyc.hold_s / cyc.sample_time_s)
