@@ -2,8 +2,9 @@
 
 In Initialization Mode an output already shows what exitInitializationMode will give; these are
 the variables that value is computed from (ModelStructure/InitialUnknowns). During stepping the
-outputs are those of the last completed model step: no input reaches them directly, so the
-Outputs list no dependencies.
+outputs are computed in fmi2DoStep (the last completed model step's, or the voltage's preview of
+the step in progress): no input set between steps reaches them directly, so the Outputs list no
+dependencies.
 """
 
 from __future__ import annotations

@@ -299,7 +299,8 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
     ("temperature", 2, "input", "continuous", "Real", "degC", "25",
      "see temperature_description"),
     ("voltage", 3, "output", "continuous", "Real", "V", None,
-     "model terminal voltage of the last completed model step [V]"),
+     "model terminal voltage now: the last model step's, or between model steps the step in "
+     "progress previewed [V]"),
     ("soc", 4, "output", "continuous", "Real", "1", None,
      "state of charge: coulomb counting, or the observer's estimate [1]"),
     ("soc_std", 5, "output", "continuous", "Real", "1", None,

@@ -5,7 +5,11 @@ The engine integrates them; whenever a full Ts has been covered it takes one mod
 means over that Ts (a communication step that is a multiple of Ts gives that many sub-steps with
 the held input; a shorter or uneven step is accumulated exactly across calls). Outputs are those
 of the last completed model step. This is the resampling rule of training (step means), so the FMU
-and the pipeline see the same inputs.
+and the pipeline see the same inputs. Between model steps (a communication step shorter than Ts
+ended inside one) the voltage is the step in progress previewed: taken on a copy with the inputs'
+means so far, and not kept (CellCosim._preview). A host that steps at a record's 10 Hz samples
+then sees the ohmic response to each sample, not the last second's (tests/test_fmu.py,
+test_between_model_steps_the_voltage_follows_the_latest_input).
 """
 
 from __future__ import annotations
@@ -99,13 +103,39 @@ class CellCosim:
         self.out_of_range = False
         self.range_message = ""
         self.steps = 0
+        self.preview_v: float | None = None
         self._start_temperature_c = t_cell
         self._bounds = self._range_bounds()
         self._i_max = MAX_C_RATE * p.capacity_ah
 
     @property
     def voltage_v(self) -> float:
-        return self.stepper.voltage_v
+        """The terminal voltage now (V): the last model step's, or while a model step is
+        partly covered (communication steps shorter than Ts) and no observer runs, that
+        step's preview (preview_v)."""
+        return self.stepper.voltage_v if self.preview_v is None else self.preview_v
+
+    def _preview(self) -> float | None:
+        """The model step in progress taken, but not kept, with the means of the inputs over
+        the part of it covered so far (with a current delay: over the open delayed window):
+        the voltage now, whose ohmic part follows the latest input instead of lagging it by
+        up to Ts. None at a model-step boundary and with an observer (its outputs are the
+        model steps')."""
+        if self.covered_s <= 0.0 or self.observer:
+            return None
+        if self.model.current_delay_s:
+            i = (self.delay_charge_as / self.delay_covered_s if self.delay_covered_s > 0.0
+                 else self.delayed_current_a)
+        else:
+            i = self.charge_as / self.covered_s
+        temp_input = self.temp_int / self.covered_s
+        th = self.thermal
+        temp = (temp_input if not th.active else
+                th.temperature_c if th.temperature_c is not None else th.rested(temp_input))
+        saved = self.stepper.get_state()
+        v = self.stepper.step(i, temp)
+        self.stepper.set_state(saved)
+        return v
 
     @property
     def soc(self) -> float:
@@ -191,6 +221,7 @@ class CellCosim:
                 self.volt_int += voltage_measured_v * ts
                 self.volt_time += ts
             self._model_step()
+            self.preview_v = None
             return 1
         remaining = step_s
         taken = 0
@@ -213,6 +244,7 @@ class CellCosim:
             if self.covered_s >= ts * (1.0 - STEP_TOL):
                 self._model_step()
                 taken += 1
+        self.preview_v = self._preview()
         return taken
 
     def _refuse(self, step_s: float, current_a: float, temperature_c: float,
@@ -289,3 +321,4 @@ class CellCosim:
          self.delay_covered_s, self.delay_charge_as, self.delayed_current_a) = acc
         self.out_of_range, self.range_message, self.steps = (
             bool(state["flags"][0]), str(state["flags"][1]), int(state["flags"][2]))
+        self.preview_v = self._preview()

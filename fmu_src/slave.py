@@ -77,7 +77,8 @@ class LmnCellSlave(Fmi2Slave):
         reg(Real("voltage", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
                  getter=lambda: (self._cosim or self._initial_cosim()).voltage_v,
-                 description="model terminal voltage of the last completed model step [V]"))
+                 description=("model terminal voltage now: the last model step's, or "
+                              "between model steps the step in progress previewed [V]")))
         reg(Real("soc", causality=Fmi2Causality.output, variability=Fmi2Variability.continuous,
                  getter=lambda: (self._cosim or self._initial_cosim()).soc,
                  description="state of charge: coulomb counting, or the observer's estimate "

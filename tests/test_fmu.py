@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import subprocess
@@ -220,8 +221,8 @@ def test_current_delay_takes_the_window_delta_earlier(quick_model) -> None:
     cosim = CellCosim(model, Parameters(1.0, 2.85, temperature_is_cell=True))   # at 25 °C
     worst = 0.0
     for h, i in zip(steps, currents, strict=True):
-        if cosim.advance(float(h), float(i)):
-            worst = max(worst, abs(cosim.voltage_v - ref_v[cosim.steps - 1]))
+        if cosim.advance(float(h), float(i)):        # the last completed model step's
+            worst = max(worst, abs(cosim.stepper.voltage_v - ref_v[cosim.steps - 1]))
     assert cosim.steps == len(ref_v) and worst <= 1e-9
 
 
@@ -262,3 +263,39 @@ def test_a_step_of_more_model_steps_than_the_limit_is_refused_at_once(quick_mode
     assert cosim.advance(40 * model.sample_time_s, -1.0) == 40
     with pytest.raises(engine.InputError, match="more than 40 model steps"):
         cosim.advance(40 * model.sample_time_s + 0.5, -1.0)
+
+
+def test_between_model_steps_the_voltage_follows_the_latest_input(quick_model) -> None:
+    """Communication steps shorter than Ts: the voltage output is the model step in progress
+    taken on a copy with the inputs' means so far (the preview), so its ohmic part follows the
+    input at once; the committed steps are those of whole-Ts steps, bit for bit. Driven as
+    fmpy drives a 10 Hz record (each sample held until the next) and scored against the raw
+    samples, the preview cuts the error of holding the last model step by over 30 %."""
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = load_model(quick_model)
+    plain = dataclasses.replace(model, current_delay_s=0.0)   # the preview's input: the mean
+    fine, whole = CellCosim(plain, Parameters(0.9, 2.85)), CellCosim(plain, Parameters(0.9, 2.85))
+    for k in range(30):
+        current = -3.0 if k % 7 < 4 else 1.0
+        for j in range(10):
+            fine.advance(0.1, current)
+            if j < 9:        # mid-step: the step in progress, taken and not kept
+                ref = CellStepper(plain, 0.9, 2.85)
+                ref.set_state(fine.stepper.get_state())
+                assert fine.voltage_v == pytest.approx(
+                    ref.step(current, fine.thermal.cell_temperature(25.0)), abs=1e-12)
+        whole.advance(1.0, current)
+        assert fine.voltage_v == whole.voltage_v and fine.steps == whole.steps == k + 1
+
+    rec = read_record(PAN_HWFET)
+    t, i, v = rec.time_s - rec.time_s[0], rec.current_a, rec.voltage_v
+    keep = np.flatnonzero(np.diff(t) > 0)[:6000]            # 10 minutes of samples
+    cosim = CellCosim(model, Parameters(1.0, 2.85))
+    now, held = [], []
+    for k in keep:
+        cosim.advance(float(t[k + 1] - t[k]), float(i[k]))
+        now.append(cosim.voltage_v)
+        held.append(cosim.stepper.voltage_v)
+    rmse = [float(np.sqrt(np.mean((np.array(x) - v[keep + 1]) ** 2))) for x in (now, held)]
+    assert rmse[0] < 0.7 * rmse[1], rmse      # 7.25 against 12.54 mV

@@ -406,14 +406,26 @@ def test_native_ekf_with_the_filtered_current_in_the_partition_equals_the_runtim
     assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
 
 
-def test_native_current_delay_over_uneven_steps_equals_the_runtime(quick_model,
-                                                                    native_fmu) -> None:
+@pytest.mark.parametrize("delay", [True, False])
+def test_native_over_uneven_steps_equals_the_runtime(quick_model, native_fmu, tmp_path,
+                                                     delay) -> None:
     # the delayed current's window (δ before each model step) accumulates across uneven
-    # communication steps the same way in C as in the runtime's engine
+    # communication steps the same way in C as in the runtime's engine, and between model
+    # steps both give the same preview of the step in progress (with and without the delay)
+    import dataclasses
+
+    from lmncell.fmu.native_build import build_native_fmu
     from lmncell.runtime.cosim import CellCosim, Parameters
+    from lmncell.runtime.model import save_model
 
     model = load_model(quick_model)
     assert model.current_delay_s > 0
+    if not delay:
+        if shutil.which("gcc") is None:
+            pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+        model = dataclasses.replace(model, current_delay_s=0.0)
+        native_fmu = build_native_fmu(save_model(model, tmp_path / "plain.json"),
+                                      tmp_path / "plain.fmu")
     rng = np.random.default_rng(7)
     cosim = CellCosim(model, Parameters(0.9, 2.85))
     inst = Instance(native_fmu, start={"soc0": 0.9})

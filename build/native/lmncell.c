@@ -30,7 +30,8 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
 #define EXTRAPOLATION_K 10.0     /* observers.EXTRAPOLATION_K */
 #define GATE_V 0.5
 #define NX (1 + NLX + HAS_HYSTERESIS) /* EKF state: SoC, low-pass states (NLX), h */
-#define STATE_MAGIC 0x4C4D4E38u /* "LMN8" (LMN7 before the current delay's window, LMN6
+#define STATE_MAGIC 0x4C4D4E39u /* "LMN9" (LMN8 before the preview, LMN7 before the
+                                      current delay's window, LMN6
                                       before one EKF state per distinct low-pass
                                       time constant, LMN5 before ob_hist, LMN4 before
                                       dep_source, LMN3 before the innovation RMS) */
@@ -64,6 +65,10 @@ typedef struct {
        window's mean current */
     double d_covered, d_charge, d_current;
     int out_of_range, steps;
+    /* the voltage now while a model step is partly covered, without an observer
+       (cosim.CellCosim._preview): the step in progress taken on a copy */
+    double preview;
+    int preview_on;
     /* observer (observers.SocObserver) */
     double q, r, ob_soc, ob_var, ob_floor;
     double ob_innov_ms, ob_innov_w;            /* innovations' weighted mean square (V²), weights */
@@ -1010,6 +1015,23 @@ static void model_step(Instance *in) {
     s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
 }
 
+/* cosim.CellCosim._preview: while a model step is partly covered and no observer runs, the
+   voltage now is that step taken on a copy with the inputs' means over the covered part (with a
+   current delay: over the open delayed window) */
+static void preview(State *s) {
+    State copy;
+    double i, ta, t;
+    s->preview_on = s->covered > 0.0 && !s->observer;
+    if (!s->preview_on) return;
+    i = DELAY_S > 0 ? (s->d_covered > 0.0 ? s->d_charge / s->d_covered : s->d_current)
+                    : s->charge / s->covered;
+    ta = s->temp_int / s->covered;
+    t = !thermal_active(s) ? ta : (s->t_cell_set ? s->t_cell : ta + THERMAL_OFFSET_K);
+    copy = *s;
+    stepper_step(&copy, i, t);
+    s->preview = copy.voltage;
+}
+
 static fmi2Status cosim_advance(Instance *in, double h) {
     State *s = &in->s;
     double remaining = h;
@@ -1072,13 +1094,14 @@ static fmi2Status cosim_advance(Instance *in, double h) {
         }
         if (s->covered >= TS * (1.0 - STEP_TOL)) model_step(in);
     }
+    preview(s);
     s->time += h;
     return fmi2OK;
 }
 
 static int outputs_finite(const State *s) {
     return isfinite(s->voltage) && isfinite(s->soc) && isfinite(s->ob_soc) &&
-           isfinite(s->ob_var) && isfinite(s->t_cell);
+           isfinite(s->ob_var) && isfinite(s->t_cell) && (!s->preview_on || isfinite(s->preview));
 }
 
 /* the state right after initialisation, from the parameters and the temperature input */
@@ -1236,7 +1259,8 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
     case VR_CURRENT: return s->current;
     case VR_VOLTAGE_MEASURED: return s->voltage_measured;
     case VR_TEMPERATURE: return s->temperature;
-    case VR_VOLTAGE: return s->initialized ? s->voltage : (RELATIVE_OCV ? ocv(s->soc0) : NAN);
+    case VR_VOLTAGE: return s->initialized ? (s->preview_on ? s->preview : s->voltage)
+                                           : (RELATIVE_OCV ? ocv(s->soc0) : NAN);
     case VR_SOC: return s->initialized ? (s->observer ? s->ob_soc : s->soc) : s->soc0;
     case VR_SOC_STD: {   /* the reported σ: at least the floor (SocObserver.soc_std) */
         double var = s->ob_var > s->ob_floor ? s->ob_var : s->ob_floor;
