@@ -160,8 +160,9 @@ parameters. The observers compare the model with <b>voltage_measured</b> (0 = no
 <p>Sub-stepping: inputs are integrated over the communication step; each completed Ts is one
 model step with the mean inputs over it. A step that is a multiple of Ts gives that many
 sub-steps; other steps are accumulated exactly across calls. The outputs hold the last completed
-model step. A NaN or infinite input, and a communication step of more than
-{MAX_STEPS_PER_CALL:,} model steps, are refused with fmi2Error and a logged message; the step is
+model step (the voltage between model steps: the step in progress previewed). A NaN or
+infinite input, and a communication step of more than {MAX_STEPS_PER_CALL:,} model steps, are
+refused with fmi2Error and a logged message; the step is
 not taken.</p>
 <h2>Training data</h2><ul>{files}</ul>
 <h2>Trained region</h2><table border="1"><tr><th>quantity</th><th>range</th></tr>{rows}</table>

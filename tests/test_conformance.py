@@ -146,7 +146,7 @@ def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> No
     assert "needs Python 3 with numpy" in doc(quick_fmu)
     assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
     for path in (quick_fmu, native_fmu):       # the step-size limit both refuse beyond
-        assert "more than\n10,000,000 model steps" in doc(path)
+        assert "more than 10,000,000 model steps" in " ".join(doc(path).split())
 
 
 def test_random_call_sequences_never_crash_or_return_nan_with_ok(fmu) -> None:
