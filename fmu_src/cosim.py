@@ -128,10 +128,7 @@ class CellCosim:
                  else self.delayed_current_a)
         else:
             i = self.charge_as / self.covered_s
-        temp_input = self.temp_int / self.covered_s
-        th = self.thermal
-        temp = (temp_input if not th.active else
-                th.temperature_c if th.temperature_c is not None else th.rested(temp_input))
+        temp = self.thermal.next_temperature(self.temp_int / self.covered_s)
         saved = self.stepper.get_state()
         v = self.stepper.step(i, temp)
         self.stepper.set_state(saved)

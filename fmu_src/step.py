@@ -711,14 +711,19 @@ class CellThermal:
         changes."""
         return rested_temperature(self.model.thermal, input_c) if self.active else input_c
 
-    def cell_temperature(self, input_c: float) -> float:
-        """The cell temperature for the next step, given the step's `temperature` input (the
-        first step's starts rested at it)."""
+    def next_temperature(self, input_c: float) -> float:
+        """The cell temperature the next step takes, given its `temperature` input (the first
+        step's: rested at it); nothing changes."""
         if not self.active:
             return input_c
-        if self.temperature_c is None:
-            self.temperature_c = self.rested(input_c)
-        return self.temperature_c
+        return self.temperature_c if self.temperature_c is not None else self.rested(input_c)
+
+    def cell_temperature(self, input_c: float) -> float:
+        """next_temperature, kept as the cell temperature at the step's start."""
+        temperature = self.next_temperature(input_c)
+        if self.active:
+            self.temperature_c = temperature
+        return temperature
 
     def update(self, input_c: float, current_a: float, stepper: CellStepper) -> None:
         """After a step taken at cell_temperature(input_c): heat the cell for the next one."""

@@ -284,7 +284,7 @@ def test_between_model_steps_the_voltage_follows_the_latest_input(quick_model) -
                 ref = CellStepper(plain, 0.9, 2.85)
                 ref.set_state(fine.stepper.get_state())
                 assert fine.voltage_v == pytest.approx(
-                    ref.step(current, fine.thermal.cell_temperature(25.0)), abs=1e-12)
+                    ref.step(current, fine.thermal.next_temperature(25.0)), abs=1e-12)
         whole.advance(1.0, current)
         assert fine.voltage_v == whole.voltage_v and fine.steps == whole.steps == k + 1
 

@@ -1020,15 +1020,13 @@ static void model_step(Instance *in) {
    current delay: over the open delayed window) */
 static void preview(State *s) {
     State copy;
-    double i, ta, t;
+    double i;
     s->preview_on = s->covered > 0.0 && !s->observer;
     if (!s->preview_on) return;
     i = DELAY_S > 0 ? (s->d_covered > 0.0 ? s->d_charge / s->d_covered : s->d_current)
                     : s->charge / s->covered;
-    ta = s->temp_int / s->covered;
-    t = !thermal_active(s) ? ta : (s->t_cell_set ? s->t_cell : ta + THERMAL_OFFSET_K);
-    copy = *s;
-    stepper_step(&copy, i, t);
+    copy = *s;           /* cell_temperature may fix the copy's start temperature, not s's */
+    stepper_step(&copy, i, cell_temperature(&copy, s->temp_int / s->covered));
     s->preview = copy.voltage;
 }
 
