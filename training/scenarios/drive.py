@@ -122,9 +122,6 @@ def step_means(values: np.ndarray, dt: float, h: float, n: int) -> np.ndarray:
     samples (values[j] over [j·dt, (j+1)·dt)): the sample itself where a step lies inside one
     sample, else the time-weighted mean of those it covers (the energy of a coarse step is the
     cycle's, not that of the sample at its start)."""
-    m = round(h / dt)
-    if m >= 1 and abs(h / dt - m) < 1e-9:
-        return values[: n * m].reshape(n, m).mean(axis=1)
     edges = np.arange(n + 1) * h
     integral = np.interp(edges, np.arange(values.size + 1) * dt,
                          np.concatenate([[0.0], np.cumsum(values * dt)]))
