@@ -3,6 +3,7 @@ number of workers, bad option values are refused with the option's name."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from lmncell.cli import main
 
@@ -45,6 +46,8 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
     (["--workers", "0"], "expected a whole number"),
     (["--pack", "96x3"], "--pack '96x3'"),
     (["--pack", "4s2p", "--spread", "capacity=0.5"], "--spread capacity=0.5"),
+    (["--cutoff", "-1"], "--cutoff: '-1': expected a cell voltage in V"),
+    (["--cutoff", "nan"], "--cutoff: 'nan'"),
 ])
 def test_bad_options_name_the_option(native_fmu, tmp_path, capsys, args, message) -> None:
     code = None
@@ -127,3 +130,44 @@ def test_coarse_steps_drive_the_same_charge_and_a_step_longer_than_the_cycle_is_
     assert main(["simulate", str(native_fmu), "--cycle", "udds", "--step", "1400"]) == 2
     assert ("communication step 1400 s: longer than the UDDS cycle (1370 s); expected at most "
             "1370 s") in capsys.readouterr().err
+
+
+def test_a_run_stops_where_the_cell_is_empty(native_fmu) -> None:
+    """Repeated US06 from SoC 0.3 at 25 °C empties the cell: the run stops after the first step
+    whose voltage is below the cut-off (by default the lowest voltage the model was trained on)
+    or whose SoC is below 0, and reports why and when; the figures cover the steps up to there.
+    Before, the cell was driven on past empty (SoC −470 %, 515 km, on the demo's A123 FMU)."""
+    from lmncell.scenarios.drive import shipped_cutoff_v
+
+    cutoff = shipped_cutoff_v(native_fmu)
+    assert 2.0 < cutoff < 3.0                    # the Panasonic training records' lowest voltage
+    res = run_cycle(native_fmu, "us06", repeat=10, soc0=0.3, temperature_c=25.0)
+    f = res.figures
+    assert f["stop"] and f["cutoff_v"] == cutoff
+    assert f["stopped_at_s"] == res.time_s[-1] < 10 * 600
+    empty = (res.voltage_v < cutoff) | (res.soc < 0.0)
+    assert empty[-1] and not empty[:-1].any()
+    assert f["voltage_min_v"] == res.voltage_v.min() and f["soc_end"] == res.soc[-1]
+    same = run_cycle(native_fmu, "us06", repeat=10, soc0=0.3, temperature_c=25.0,
+                     cutoff_v=cutoff).figures
+    assert same == f
+    # without a cut-off voltage the run goes on until the SoC or the voltage falls below 0
+    on = run_cycle(native_fmu, "us06", repeat=10, soc0=0.3, temperature_c=25.0, cutoff_v=0.0)
+    beyond = (on.voltage_v < 0.0) | (on.soc < 0.0)
+    assert on.figures["stop"] and beyond[-1] and not beyond[:-1].any()
+    assert on.time_s.size > res.time_s.size
+
+
+def test_a_pack_stops_where_its_weakest_cell_is_empty(quick_model) -> None:
+    """The vectorised pack stops at the step where its weakest cell crosses the cut-off."""
+    from lmncell.runtime.model import load_model
+    from lmncell.scenarios.pack import PackSpec, drive_pack
+
+    model = load_model(quick_model)
+    spec = PackSpec(2, 1, capacity_spread=0.05, seed=3)
+    power = np.full(4000, 2 * 3.6 * 2.85)           # about 1 C per cell for 4000 s
+    f = drive_pack(model, spec, power, 25.0, 0.5, cutoff_v=3.0)
+    assert "below the cut-off 3.000 V" in f["stop"] and f["voltage_min_v"] < 3.0
+    assert f["steps"] < 4000 and f["stopped_at_s"] == f["steps"] * model.sample_time_s
+    longer = drive_pack(model, spec, power[: f["steps"] - 1], 25.0, 0.5, cutoff_v=3.0)
+    assert longer["stop"] == "" and longer["voltage_min_v"] >= 3.0

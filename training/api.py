@@ -154,15 +154,19 @@ def build_fmu(model_path: str | Path, out: str | Path, native: bool = False) -> 
 def sweep(fmu: str | Path, cycles: Sequence[str] = ("wltc",), ambient_c: Sequence[float] = (25.0,),
           soc0: Sequence[float] = (0.9,), vehicles: Sequence[str | Path | None] = (None,),
           repeat: int = 1, workers: int | None = None, scheduler: str | None = None,
-          progress: bool = True):
+          progress: bool = True, cutoff_v: float | None = None):
     """Drive an FMU through every combination of cycles × vehicles × ambient temperatures (°C)
     × start SoC on Dask (a LocalCluster of `workers` processes, or the cluster behind
     `scheduler`); returns a pandas DataFrame, one row per scenario (minimum and maximum cell
     voltage, end SoC, Ah throughput, energy, maximum cell temperature, out-of-range steps,
-    wall time). Needs the `sweep` extra (dask[distributed], pandas)."""
+    why and when a run stopped with the cell empty, wall time). A run stops where the cell
+    voltage falls below cutoff_v (V; None: the lowest voltage of the model's training records;
+    0: none, then below 0 V) or its SoC below 0. Needs the `sweep` extra (dask[distributed],
+    pandas)."""
     from lmncell.scenarios.sweep import scenarios
     from lmncell.scenarios.sweep import sweep as _sweep
 
     cases = scenarios(list(cycles), list(ambient_c), list(soc0),
-                      [None if v is None else str(v) for v in vehicles], repeat)
+                      [None if v is None else str(v) for v in vehicles], repeat,
+                      cutoff_v=cutoff_v)
     return _sweep(fmu, cases, workers, scheduler, progress)

@@ -56,6 +56,8 @@ def output_file_argument(text: str) -> str:
 _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
+_cutoff = number_argument(float, lambda v: 0.0 <= v < 10.0,
+                          "a cell voltage in V, ≥ 0 and below 10 (0: no cut-off voltage)")
 _temperature = number_argument(
     float, is_cell_temperature,
     "a cell temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
@@ -221,7 +223,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     from lmncell.scenarios.sweep import plot_sweep, scenarios, sweep, write_table
 
     cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat,
-                      a.pack, a.spread, a.seed, a.cells)
+                      a.pack, a.spread, a.seed, a.cells, a.cutoff)
     print(f"sweep: {len(cases)} scenario(s) on "
           + (f"the scheduler {a.scheduler}" if a.scheduler else
              f"a LocalCluster of {a.workers or 'all'} worker(s)"), flush=True)
@@ -230,6 +232,10 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     print(f"wrote {a.out}: {len(table)} rows; minimum cell voltage "
           f"{table['voltage_min_v'].min():.3f} V, end SoC {table['soc_end'].min():.3f}…"
           f"{table['soc_end'].max():.3f}, {table['wall_s'].sum():.1f} s of FMU runs")
+    empty = int((table["stop"] != "").sum())
+    if empty:
+        print(f"{empty} scenario(s) stopped early, a cell empty (columns stop, stopped_at_s); "
+              "--cutoff sets the cut-off voltage")
     if a.plot:
         for f in plot_sweep(table, a.plot):
             print(f"plot: {f}")
@@ -399,6 +405,10 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
                    "a step longer than the cycle's 1 s samples holds their mean power")
+    s.add_argument("--cutoff", type=_cutoff, metavar="V", help="discharge cut-off cell voltage: "
+                   "the run stops where the voltage falls below it or the SoC below 0 (default: "
+                   "the lowest voltage of the model's training records; 0: none, the run stops "
+                   "at SoC 0 or a voltage below 0)")
     s.add_argument("--plot", type=output_file_argument, metavar="OUT.png",
                    help="figure of speed, current, voltage, SoC")
     s.add_argument("--json", action="store_true", help="print the results as JSON")
@@ -425,6 +435,10 @@ def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--cells", type=_positive_int, help="without --pack: a string of N cells "
                    "with the spread, each carrying the vehicle's cell current")
     s.add_argument("--seed", type=int, default=0, help="seed of the spread")
+    s.add_argument("--cutoff", type=_cutoff, metavar="V", help="discharge cut-off cell voltage: "
+                   "a run stops where a cell's voltage falls below it or its SoC below 0 "
+                   "(default: the lowest voltage of the model's training records; 0: none, the "
+                   "run stops at SoC 0 or a voltage below 0)")
     g = s.add_mutually_exclusive_group()
     g.add_argument("--workers", type=_positive_int, help="LocalCluster worker processes "
                    "(default: one per core)")

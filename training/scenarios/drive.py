@@ -4,6 +4,10 @@ speed trace (m/s, 1 s) → longitudinal vehicle model → pack power → cell po
 i = −P_cell / u_cell (current > 0 charges; u_cell is the FMU's voltage of the previous step) →
 FMU. Wheel force F = k_rot·m·a + m·g·(c_r·cos θ + sin θ) + ½·ρ·c_d·A·v²; battery power
 P = F·v/η_drive + P_aux when driving, max(F·v·η_regen, −P_regen,max) + P_aux when braking.
+A run stops where the cell is empty: its voltage below the discharge cut-off (by default the
+lowest voltage of the model's training records, `cell.voltage_min_v` of the model file every
+LMNCell FMU ships) or its SoC below 0; past that the figures would be those of a cell the model
+was never trained on, discharged beyond its capacity.
 """
 
 from __future__ import annotations
@@ -12,6 +16,7 @@ import json
 import math
 import shutil
 import tomllib
+import zipfile
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -132,14 +137,47 @@ def step_means(values: np.ndarray, dt: float, h: float, n: int) -> np.ndarray:
     return means
 
 
+def shipped_cutoff_v(fmu: str | Path) -> float:
+    """The discharge cut-off (V) of an LMNCell FMU's model file (resources/model.json): its
+    cell's voltage_min_v, the lowest terminal voltage of the training records; 0 (none) where
+    the file gives none."""
+    try:
+        with zipfile.ZipFile(fmu) as z:
+            doc = json.loads(z.read("resources/model.json"))
+        value = float(doc["cell"]["voltage_min_v"])
+    except (KeyError, ValueError, TypeError, OSError, zipfile.BadZipFile):
+        return 0.0
+    return value if math.isfinite(value) and value > 0.0 else 0.0
+
+
+def check_cutoff(cutoff_v: float, option: str = "--cutoff") -> float:
+    """The cut-off voltage as given, or a DataError naming the option."""
+    if not (math.isfinite(cutoff_v) and 0.0 <= cutoff_v < 10.0):
+        raise DataError(f"{option} {cutoff_v!r}: expected a cell voltage in V, ≥ 0 and below "
+                        "10 (0: no cut-off voltage)")
+    return float(cutoff_v)
+
+
+def empty_reason(voltage_v: float, soc: float, cutoff_v: float) -> str:
+    """Why the cell counts as empty after a step ('' while it does not): its voltage below the
+    cut-off (V) or its SoC below 0."""
+    if voltage_v < cutoff_v:
+        return f"cell voltage {voltage_v:.3f} V below the cut-off {cutoff_v:.3f} V"
+    if soc < 0.0:
+        return f"SoC {100 * soc:.2f} % below 0"
+    return ""
+
+
 def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = None,
               repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
-              temperature_c: float = 25.0) -> CycleResult:
+              temperature_c: float = 25.0, cutoff_v: float | None = None) -> CycleResult:
     """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step
     (the cycle's mean power over a step longer than its 1 s samples, step_means; a step longer
     than the cycles is refused with a DataError).
     temperature_c is the ambient temperature (the model computes the cell temperature where it
-    has a thermal model)."""
+    has a thermal model). The run stops after the first step that leaves the cell empty
+    (empty_reason): cutoff_v in V, None for the FMU's own (shipped_cutoff_v), 0 for none (a
+    SoC or a voltage below 0 still stops it)."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
@@ -152,6 +190,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     md = read_model_description(str(fmu))
     default = md.defaultExperiment
     h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
+    cutoff = shipped_cutoff_v(fmu) if cutoff_v is None else check_cutoff(cutoff_v)
     n = math.floor(power.size * dt / h + 1e-9)
     if n < 1:
         copies = f"{repeat} × " if repeat > 1 else ""
@@ -166,6 +205,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
                                     "cell_t")}
     has_cell_t = "cell_temperature" in vr
     outputs = [vr["voltage"], vr["soc"], *([vr["cell_temperature"]] if has_cell_t else [])]
+    stop = ""
     try:
         slave.instantiate()
         slave.setupExperiment(startTime=0.0)
@@ -186,10 +226,15 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
             out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
             out["cell_t"][k] = cell_t[0] if cell_t else math.nan
             out["speed"][k] = speed[k]
+            stop = empty_reason(u, soc, cutoff)
+            if stop:
+                n = k + 1
+                break
         slave.terminate()
     finally:
         slave.freeInstance()
         shutil.rmtree(unzipped, ignore_errors=True)
+    out = {key: values[:n] for key, values in out.items()}
     cur, volt = out["current"], out["voltage"]
     figures = {
         "cycle": cycle, "repetitions": repeat, "step_s": h, "duration_s": float(n * h),
@@ -205,6 +250,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
         "out_of_range_steps": int(out["oor"].sum()), "vehicle": vehicle.name,
         "ambient_c": float(temperature_c),
         "cell_temperature_max_c": float(np.max(out["cell_t"])) if has_cell_t else None,
+        "cutoff_v": cutoff, "stop": stop, "stopped_at_s": float(n * h) if stop else None,
     }
     return CycleResult(out["time"], out["speed"], cur, volt, out["soc"], out["oor"].astype(bool),
                        figures, out["cell_t"] if has_cell_t else None)
@@ -216,14 +262,20 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     t = res.time_s / 60.0
     fig, ax = plt.subplots(4, 1, figsize=(10, 8.5), sharex=True, constrained_layout=True)
     ax[0].plot(t, 3.6 * res.speed_mps)
-    ax[0].set(ylabel="speed / km/h", title=f"{res.figures['cycle'].upper()} through the FMU "
-              f"({res.figures['vehicle']})")
+    f = res.figures
+    stop = f" — stopped, the cell empty after {f['stopped_at_s']:g} s" if f["stop"] else ""
+    ax[0].set(ylabel="speed / km/h", title=f"{f['cycle'].upper()} through the FMU "
+              f"({f['vehicle']}){stop}")
     ax[1].plot(t, res.current_a, lw=0.7)
     ax[1].set(ylabel="cell current / A")
     ax[2].plot(t, res.voltage_v, color="k", lw=0.7)
     if res.out_of_range.any():
         ax[2].plot(t[res.out_of_range], res.voltage_v[res.out_of_range], "r.", ms=2,
                    label="outside trained range")
+        ax[2].legend()
+    if f["cutoff_v"] > 0:
+        ax[2].axhline(f["cutoff_v"], color="tab:red", lw=0.8, ls="--",
+                      label=f"cut-off {f['cutoff_v']:.3f} V")
         ax[2].legend()
     ax[2].set(ylabel="cell voltage / V")
     ax[3].plot(t, 100 * res.soc, color="tab:green")
@@ -243,7 +295,7 @@ def simulate_cycle_cli(a) -> int:
 
     read_fmu_info(a.fmu)               # ConfigError naming the file unless an LMNCell FMU
     vehicle = load_vehicle(a.vehicle)
-    res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step, a.ambient)
+    res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step, a.ambient, a.cutoff)
     if a.plot:
         plot_cycle(res, a.plot)
     f = res.figures
@@ -259,6 +311,9 @@ def simulate_cycle_cli(a) -> int:
               + ("" if f["cell_temperature_max_c"] is None else
                  f", cell temperature up to {f['cell_temperature_max_c']:.1f} °C at "
                  f"{f['ambient_c']:g} °C ambient"))
+        if f["stop"]:
+            print(f"stopped after {f['stopped_at_s']:g} s, {f['distance_km']:.1f} km: the cell is "
+                  f"empty ({f['stop']}); --cutoff sets the cut-off voltage")
     if f["out_of_range_steps"]:
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
               "(current, SoC or temperature); see the FMU log and the plot")

@@ -18,6 +18,7 @@ import numpy as np
 from lmncell.data.records import DataError
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.vector import VectorCells
+from lmncell.scenarios.drive import empty_reason
 
 DELTA_A = 1e-3     # current step of the linearisation (A)
 
@@ -126,23 +127,31 @@ class Pack:
 
 
 def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambient_c: float,
-               soc0: float) -> dict:
+               soc0: float, cutoff_v: float = 0.0) -> dict:
     """Drive a pack through a power profile (one value per model step); the figures a sweep
-    reports: the weakest cell's minimum voltage and SoC, the hottest cell, the string's Ah."""
+    reports: the weakest cell's minimum voltage and SoC, the hottest cell, the string's Ah.
+    The run stops after the first step that leaves a cell empty (drive.empty_reason: its
+    voltage below cutoff_v (V) or its SoC below 0): "stop" says why, "stopped_at_s" when."""
     pack = Pack(model, spec, soc0, ambient_c)
     ts = model.sample_time_s
     v_min, v_max, t_max = np.inf, -np.inf, -np.inf
     string_ah = energy_wh = 0.0
+    stop, steps = "", 0
     for p in np.asarray(pack_power_w, dtype=float).tolist():
         u = pack.step_power(p)
+        steps += 1
         v_min, v_max = min(v_min, float(u.min())), max(v_max, float(u.max()))
         t_max = max(t_max, float(pack.cells.cell_temperature_c.max()))
         i_string = float(pack.current_a[: spec.n_parallel].sum())
         string_ah += abs(i_string) * ts / 3600.0
         energy_wh += -i_string * pack.voltage_v * ts / 3600.0
+        stop = empty_reason(float(u.min()), float(pack.cells.soc.min()), cutoff_v)
+        if stop:
+            break
     soc = pack.cells.soc
     return {"pack": spec.label, "voltage_min_v": v_min, "voltage_max_v": v_max,
             "soc_end": float(soc.mean()), "soc_end_min": float(soc.min()),
             "ah_throughput": string_ah, "pack_energy_kwh": energy_wh / 1000.0,
             "cell_temperature_max_c": t_max if model.thermal is not None else float("nan"),
-            "cell_steps": int(np.asarray(pack_power_w).size * pack.cells.n)}
+            "cell_steps": int(steps * pack.cells.n), "steps": steps, "stop": stop,
+            "stopped_at_s": steps * ts if stop else None}

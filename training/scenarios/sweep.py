@@ -25,12 +25,20 @@ from pathlib import Path
 import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
-from lmncell.scenarios.drive import CYCLES, Vehicle, load_cycle, load_vehicle, pack_power, run_cycle
+from lmncell.scenarios.drive import (
+    CYCLES,
+    Vehicle,
+    check_cutoff,
+    load_cycle,
+    load_vehicle,
+    pack_power,
+    run_cycle,
+)
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
 
 RESULT_COLUMNS = ("voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
                   "cell_energy_wh", "pack_energy_kwh", "cell_temperature_max_c",
-                  "out_of_range_steps")
+                  "out_of_range_steps", "stop", "stopped_at_s")
 
 
 @dataclass(frozen=True)
@@ -44,17 +52,21 @@ class Scenario:
     soc0: float
     repeat: int = 1
     pack: PackSpec | None = None     # None: one cell through the FMU; else the vectorised pack
+    cutoff_v: float | None = None    # discharge cut-off (V); None: the FMU's model's
 
 
 def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[float],
               vehicle_files: Sequence[str | None] = (None,), repeat: int = 1,
               pack: str | None = None, spread: str | None = None,
-              seed: int = 0, cells: int | None = None) -> list[Scenario]:
+              seed: int = 0, cells: int | None = None,
+              cutoff_v: float | None = None) -> list[Scenario]:
     """The Cartesian product, cycle slowest and start SoC fastest; values checked with
     messages that name the option. pack ('96s3p') or spread ('capacity=0.02,resistance=0.05')
     simulate the whole pack with the vectorised runtime (the pack of the vehicle file where
     only a spread is given); cells N without pack: a string of N cells in series (each
-    carrying the cell current of the vehicle's pack, spread as given)."""
+    carrying the cell current of the vehicle's pack, spread as given). cutoff_v: every run
+    stops where a cell's voltage falls below it (V; None: the FMU model's lowest training
+    voltage, drive.shipped_cutoff_v) or its SoC below 0."""
     if not cycles or not ambients or not soc0s or not vehicle_files:
         raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
     bad = [c for c in cycles if c not in CYCLES]
@@ -69,6 +81,8 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
             raise DataError(f"sweep: --soc0 {s!r}: expected fractions within 0…1")
     if repeat < 1:
         raise DataError(f"sweep: --repeat {repeat!r}: expected a whole number ≥ 1")
+    if cutoff_v is not None:
+        check_cutoff(cutoff_v, "sweep: --cutoff")
     vehicles = [(load_vehicle(v), str(v) if v else "built-in") for v in vehicle_files]
     spreads = parse_spread(spread) if spread else {}
     if cells is not None and (cells < 1 or pack):
@@ -84,7 +98,7 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
                         spreads.get("resistance", 0.0), int(seed),
                         whole if cells is not None else None)
 
-    return [Scenario(c, veh, vf, float(t), float(s), int(repeat), spec(veh))
+    return [Scenario(c, veh, vf, float(t), float(s), int(repeat), spec(veh), cutoff_v)
             for c, (veh, vf), t, s in itertools.product(cycles, vehicles, ambients, soc0s)]
 
 
@@ -119,6 +133,11 @@ def _settings(sc: Scenario, pack: str) -> dict:
             "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat, "pack": pack}
 
 
+def _or_nan(value: float | None) -> float:
+    """A table cell: the value, NaN for None (no such figure)."""
+    return math.nan if value is None else float(value)
+
+
 def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     """A pack scenario: the vehicle's pack power through the vectorised pack model."""
     t0 = time.perf_counter()
@@ -129,7 +148,8 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     ts = model.sample_time_s
     steps = math.floor(power.size * dt / ts + 1e-9)
     idx = np.minimum((np.arange(steps) * ts / dt + 1e-9).astype(int), power.size - 1)
-    f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0)
+    cutoff = model.cell.get("voltage_min_v", 0.0) if sc.cutoff_v is None else sc.cutoff_v
+    f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0, float(cutoff))
     return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
             "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
             "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
@@ -137,7 +157,8 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
             "ah_throughput": f["ah_throughput"], "cell_energy_wh": math.nan,
             "pack_energy_kwh": f["pack_energy_kwh"],
             "cell_temperature_max_c": f["cell_temperature_max_c"], "out_of_range_steps": 0,
-            "steps": steps, "wall_s": time.perf_counter() - t0}
+            "stop": f["stop"], "stopped_at_s": _or_nan(f["stopped_at_s"]),
+            "steps": f["steps"], "wall_s": time.perf_counter() - t0}
 
 
 def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
@@ -147,15 +168,15 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
         return run_pack_scenario(fmu_bytes, sc)
     t0 = time.perf_counter()
     res = run_cycle(_fmu_file(fmu_bytes), sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
-                    temperature_c=sc.ambient_c)
+                    temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v)
     f = res.figures
     return {**_settings(sc, f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p"),
            "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
            "soc_end": f["soc_end"], "ah_throughput": f["ah_throughput"],
            "cell_energy_wh": f["cell_energy_wh"], "pack_energy_kwh": f["pack_energy_kwh"],
-           "cell_temperature_max_c": (math.nan if f["cell_temperature_max_c"] is None
-                                      else f["cell_temperature_max_c"]),
-           "out_of_range_steps": f["out_of_range_steps"], "steps": int(res.time_s.size),
+           "cell_temperature_max_c": _or_nan(f["cell_temperature_max_c"]),
+           "out_of_range_steps": f["out_of_range_steps"], "stop": f["stop"],
+           "stopped_at_s": _or_nan(f["stopped_at_s"]), "steps": int(res.time_s.size),
            "wall_s": time.perf_counter() - t0}
 
 
