@@ -80,12 +80,21 @@ def shipped_current_delay(path: Path, step_s: float) -> float:
     there is none or it is not a delay 0 ≤ δ < Ts: the points at which evaluate splits the
     communication steps, not the model itself, which the FMU runs."""
     try:
-        with zipfile.ZipFile(path) as z:
-            doc = json.loads(z.read("resources/model.json"))
-        delay = float(doc.get("current_delay_s", 0.0))
-    except (KeyError, ValueError, TypeError, AttributeError, OSError, zipfile.BadZipFile):
+        delay = float(shipped_model_doc(path).get("current_delay_s", 0.0))
+    except (ValueError, TypeError):
         return 0.0
     return delay if 0.0 <= delay < step_s else 0.0
+
+
+def shipped_model_doc(path: str | Path) -> dict:
+    """The model file an LMNCell FMU ships (resources/model.json) as parsed JSON, {} where the
+    FMU has none or it is not a JSON object."""
+    try:
+        with zipfile.ZipFile(path) as z:
+            doc = json.loads(z.read("resources/model.json"))
+    except (KeyError, ValueError, OSError, zipfile.BadZipFile):
+        return {}
+    return doc if isinstance(doc, dict) else {}
 
 
 def communication_points(sample_times_s: np.ndarray, ts: float, n: int,

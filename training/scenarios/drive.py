@@ -16,7 +16,6 @@ import json
 import math
 import shutil
 import tomllib
-import zipfile
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -141,11 +140,11 @@ def shipped_cutoff_v(fmu: str | Path) -> float:
     """The discharge cut-off (V) of an LMNCell FMU's model file (resources/model.json): its
     cell's voltage_min_v, the lowest terminal voltage of the training records; 0 (none) where
     the file gives none."""
+    from lmncell.evaluation.fmueval import shipped_model_doc
+
     try:
-        with zipfile.ZipFile(fmu) as z:
-            doc = json.loads(z.read("resources/model.json"))
-        value = float(doc["cell"]["voltage_min_v"])
-    except (KeyError, ValueError, TypeError, OSError, zipfile.BadZipFile):
+        value = float(shipped_model_doc(fmu)["cell"]["voltage_min_v"])
+    except (KeyError, ValueError, TypeError):
         return 0.0
     return value if math.isfinite(value) and value > 0.0 else 0.0
 
