@@ -210,3 +210,24 @@ def test_api_reads_a123(tmp_path) -> None:
 
     rec = lmncell.read_record(A123_S1)
     assert rec.meta.fmt == "plett" and rec.current_a.min() < 0
+
+
+def test_api_simulate_warns_where_it_leaves_the_trained_range(quick_model) -> None:
+    """A discharge past empty, or a current and temperature beyond the training data, gives a
+    UserWarning that names the variable, the values reached and the trained range (the model
+    still extrapolates: the values are not clamped); inside the range there is none."""
+    import warnings
+
+    import lmncell
+
+    model = lmncell.load_model(quick_model)
+    lo, hi = model.limits["soc"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        lmncell.simulate(model, np.full(600, -2.85), temperature_c=25.0, soc0=1.0)
+    with pytest.warns(UserWarning, match=r"simulate: SoC -0\.\d+…1\.000 leaves the trained "
+                      rf"{lo:.3f}…{hi:.3f} first at step \d+ \(below 0 the cell is past empty\)"):
+        sim = lmncell.simulate(model, np.full(4000, -2.85), temperature_c=25.0, soc0=1.0)
+    assert sim.soc[-1] < 0                                 # not clamped
+    with pytest.warns(UserWarning, match=r"simulate: current -40\.00…-40\.00 A exceeds"):
+        lmncell.simulate(model, np.full(10, -40.0), temperature_c=25.0, soc0=1.0)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
+from lmncell.evaluation.evaluate import warn_outside_training
 from lmncell.progress import Progress, print_progress
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.step import SimResult
@@ -64,7 +65,9 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
 
     temperature_c: cell temperature per step or one value (°C; default 25 °C); soc0: the SoC
     before the first step. Returns arrays `voltage_v` (V, the mean over each step) and `soc`
-    (after each step), plus the network output `y` and the local models' `validity`."""
+    (after each step), plus the network output `y` and the local models' `validity`. Where the
+    current, temperature or SoC leaves what the model was trained on, a UserWarning says so
+    (the model extrapolates there; below SoC 0 the cell is past empty)."""
     if not isinstance(model, LmnModel):
         model = load_model(model)
     current = _profile("current_a", current_a, "A")
@@ -73,7 +76,9 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     temp = None
     if temperature_c is not None:
         temp = _temperature_profile(temperature_c, current.size)
-    return _simulate_runtime(model, current, temp, float(soc0), capacity_ah)
+    sim = _simulate_runtime(model, current, temp, float(soc0), capacity_ah)
+    warn_outside_training(model, "simulate", current, temp, sim.soc)
+    return sim
 
 
 def _profile(name: str, values: Any, unit: str) -> np.ndarray:

@@ -197,23 +197,39 @@ def through_pauses_clause(through_hidden_pauses: bool, what: str = "model") -> s
 
 def check_range(model: LmnModel, seg: Segment) -> list[str]:
     """Warnings for inputs outside what the model was trained on (they are not clamped)."""
+    return warn_outside_training(model, seg.name, seg.current_a, seg.temperature_c)
+
+
+def warn_outside_training(model: LmnModel, name: str, current_a: np.ndarray,
+                          temperature_c: np.ndarray | None,
+                          soc: np.ndarray | None = None) -> list[str]:
+    """Warn (UserWarning) where a run's current (A), cell temperature (°C) or SoC leaves what
+    the model was trained on (model.limits: current by more than 10 % + 10 mA, temperature
+    2 K, SoC 0.02, as the FMU flags it); the values are not clamped. Returns the messages."""
     import warnings
 
     msgs = []
     lim = model.limits
     lo, hi = lim.get("current_a", [-np.inf, np.inf])
-    imin, imax = float(seg.current_a.min()), float(seg.current_a.max())
+    imin, imax = float(current_a.min()), float(current_a.max())
     if imin < 1.1 * lo - 0.01 or imax > 1.1 * hi + 0.01:
-        msgs.append(f"{seg.name}: current {imin:.2f}…{imax:.2f} A exceeds the trained range "
+        msgs.append(f"{name}: current {imin:.2f}…{imax:.2f} A exceeds the trained range "
                     f"{lo:.2f}…{hi:.2f} A")
-    if seg.temperature_c is not None and "temperature_c" in lim:
+    if temperature_c is not None and "temperature_c" in lim:
         tlo, thi = lim["temperature_c"]
-        if seg.temperature_c.min() < tlo - 2 or seg.temperature_c.max() > thi + 2:
-            msgs.append(f"{seg.name}: temperature {seg.temperature_c.min():.1f}…"
-                        f"{seg.temperature_c.max():.1f} °C outside the trained {tlo:.1f}…"
+        if temperature_c.min() < tlo - 2 or temperature_c.max() > thi + 2:
+            msgs.append(f"{name}: temperature {temperature_c.min():.1f}…"
+                        f"{temperature_c.max():.1f} °C outside the trained {tlo:.1f}…"
                         f"{thi:.1f} °C")
+    if soc is not None and "soc" in lim:
+        slo, shi = lim["soc"]
+        outside = np.flatnonzero((soc < slo - 0.02) | (soc > shi + 0.02))
+        if outside.size:
+            msgs.append(f"{name}: SoC {soc.min():.3f}…{soc.max():.3f} leaves the trained "
+                        f"{slo:.3f}…{shi:.3f} first at step {int(outside[0])}"
+                        + (" (below 0 the cell is past empty)" if soc.min() < 0 else ""))
     for m in msgs:
-        warnings.warn(m, UserWarning, stacklevel=2)
+        warnings.warn(m, UserWarning, stacklevel=3)
     return msgs
 
 
