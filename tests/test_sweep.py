@@ -29,7 +29,7 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
     for sc, (_, row) in zip(cases, one.iterrows(), strict=True):
         single = run_cycle(native_fmu, sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
                            temperature_c=sc.ambient_c).figures
-        for key in ("voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
+        for key in ("distance_km", "voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
                     "cell_energy_wh", "out_of_range_steps", "cell_temperature_max_c"):
             assert row[key] == single[key], key
     warm = one[one["ambient_c"] == 35.0]["cell_temperature_max_c"].to_numpy()
@@ -67,6 +67,7 @@ def test_cli_writes_table_and_plots(native_fmu, tmp_path, capsys) -> None:
     text = out.read_text().splitlines()
     assert len(text) == 3 and text[0].startswith("cycle,vehicle")
     assert (tmp_path / "plots" / "sweep_voltage_min_v.png").exists()
+    assert (tmp_path / "plots" / "sweep_distance_km.png").exists()
 
 
 def test_pack_scenarios_with_spread(native_fmu) -> None:
@@ -102,6 +103,7 @@ def test_a_sample_string_of_cells_carries_the_cell_current(native_fmu) -> None:
     assert string.loc[0, "soc_end"] == pytest.approx(single.figures["soc_end"], abs=2e-3)
     assert string.loc[0, "voltage_min_v"] == pytest.approx(single.figures["voltage_min_v"],
                                                            abs=5e-3)
+    assert string.loc[0, "distance_km"] == pytest.approx(single.figures["distance_km"])
 
 
 def test_step_means_keep_the_cycles_energy_at_any_step() -> None:

@@ -36,7 +36,7 @@ from lmncell.scenarios.drive import (
 )
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
 
-RESULT_COLUMNS = ("voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
+RESULT_COLUMNS = ("distance_km", "voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
                   "cell_energy_wh", "pack_energy_kwh", "cell_temperature_max_c",
                   "out_of_range_steps", "stop", "stopped_at_s")
 
@@ -150,8 +150,10 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     idx = np.minimum((np.arange(steps) * ts / dt + 1e-9).astype(int), power.size - 1)
     cutoff = model.cell.get("voltage_min_v", 0.0) if sc.cutoff_v is None else sc.cutoff_v
     f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0, float(cutoff))
+    driven = np.tile(speed, sc.repeat)[idx][: f["steps"]]
     return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
             "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
+            "distance_km": float(np.sum(driven) * ts / 1000.0),
             "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
             "soc_end": f["soc_end"], "soc_end_min": f["soc_end_min"],
             "ah_throughput": f["ah_throughput"], "cell_energy_wh": math.nan,
@@ -171,6 +173,7 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
                     temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v)
     f = res.figures
     return {**_settings(sc, f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p"),
+           "distance_km": f["distance_km"],
            "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
            "soc_end": f["soc_end"], "ah_throughput": f["ah_throughput"],
            "cell_energy_wh": f["cell_energy_wh"], "pack_energy_kwh": f["pack_energy_kwh"],
@@ -232,13 +235,15 @@ def write_table(table, path: str | Path) -> Path:
 
 
 def plot_sweep(table, out_dir: str | Path) -> list[Path]:
-    """Minimum cell voltage and end SoC over ambient × cycle (mean over the other settings)."""
+    """Distance driven, minimum cell voltage and end SoC over ambient × cycle (mean over the
+    other settings; a run that stopped with the cell empty counts up to there)."""
     from lmncell.report.plots import plt
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = []
-    for column, label in (("voltage_min_v", "minimum cell voltage / V"),
+    for column, label in (("distance_km", "distance / km"),
+                          ("voltage_min_v", "minimum cell voltage / V"),
                           ("soc_end", "end SoC")):
         grid = table.pivot_table(index="cycle", columns="ambient_c", values=column,
                                  aggfunc="mean")
