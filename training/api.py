@@ -163,11 +163,11 @@ def sweep(fmu: str | Path, cycles: Sequence[str] = ("wltc",), ambient_c: Sequenc
     """Drive an FMU through every combination of cycles × vehicles × ambient temperatures (°C)
     × start SoC on Dask (a LocalCluster of `workers` processes, or the cluster behind
     `scheduler`); returns a pandas DataFrame, one row per scenario (distance driven, minimum and
-    maximum cell voltage, end SoC, Ah throughput, energy, maximum cell temperature, out-of-range steps,
-    why and when a run stopped with the cell empty, wall time). A run stops where the cell
-    voltage falls below cutoff_v (V; None: the lowest voltage of the model's training records;
-    0: none, then below 0 V) or its SoC below 0. Needs the `sweep` extra (dask[distributed],
-    pandas)."""
+    maximum cell voltage, end SoC, Ah throughput, energy, maximum cell temperature,
+    out-of-range steps, why and when a run stopped with the cell empty, wall time). A run stops
+    where the cell voltage falls below cutoff_v (V; None: the lowest voltage of the model's
+    training records; 0: none, then below 0 V) or its SoC below 0. Needs the `sweep` extra
+    (dask[distributed], pandas)."""
     from lmncell.scenarios.sweep import scenarios
     from lmncell.scenarios.sweep import sweep as _sweep
 

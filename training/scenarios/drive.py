@@ -24,6 +24,7 @@ import numpy as np
 from lmncell.data.records import DataError
 
 G = 9.81
+CUTOFF_SHOWN_WITHIN_V = 0.3   # the plot draws the cut-off where the voltage comes this near
 CYCLES = {"udds": "udds.csv", "us06": "us06.csv", "hwfet": "hwfet.csv", "wltc": "wltc_3b.csv"}
 
 
@@ -272,7 +273,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
         ax[2].plot(t[res.out_of_range], res.voltage_v[res.out_of_range], "r.", ms=2,
                    label="outside trained range")
         ax[2].legend()
-    if f["cutoff_v"] > 0:
+    if f["cutoff_v"] > 0 and res.voltage_v.min() < f["cutoff_v"] + CUTOFF_SHOWN_WITHIN_V:
         ax[2].axhline(f["cutoff_v"], color="tab:red", lw=0.8, ls="--",
                       label=f"cut-off {f['cutoff_v']:.3f} V")
         ax[2].legend()
