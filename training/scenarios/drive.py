@@ -16,9 +16,11 @@ import json
 import math
 import shutil
 import tomllib
+from collections.abc import Mapping
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lmncell.data.records import DataError
@@ -138,16 +140,22 @@ def step_means(values: np.ndarray, dt: float, h: float, n: int) -> np.ndarray:
 
 
 def shipped_cutoff_v(fmu: str | Path) -> float:
-    """The discharge cut-off (V) of an LMNCell FMU's model file (resources/model.json): its
-    cell's voltage_min_v, the lowest terminal voltage of the training records; 0 (none) where
-    the file gives none."""
+    """The discharge cut-off (V) of an LMNCell FMU's model file (resources/model.json), as
+    cell_cutoff_v gives it."""
     from lmncell.evaluation.fmueval import shipped_model_doc
 
+    return cell_cutoff_v(shipped_model_doc(fmu).get("cell"))
+
+
+def cell_cutoff_v(cell: Mapping[str, Any] | None) -> float:
+    """The discharge cut-off (V) of a model file's `cell` table: its voltage_min_v, the lowest
+    terminal voltage of the training records; 0 (none) where it gives no positive number."""
+    value = cell.get("voltage_min_v") if isinstance(cell, Mapping) else None
     try:
-        value = float(shipped_model_doc(fmu)["cell"]["voltage_min_v"])
-    except (KeyError, ValueError, TypeError):
+        volts = float(value)
+    except (TypeError, ValueError):
         return 0.0
-    return value if math.isfinite(value) and value > 0.0 else 0.0
+    return volts if math.isfinite(volts) and volts > 0.0 else 0.0
 
 
 def check_cutoff(cutoff_v: float, option: str = "--cutoff") -> float:

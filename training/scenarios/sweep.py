@@ -28,6 +28,7 @@ from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
     CYCLES,
     Vehicle,
+    cell_cutoff_v,
     check_cutoff,
     load_cycle,
     load_vehicle,
@@ -148,8 +149,8 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     ts = model.sample_time_s
     steps = math.floor(power.size * dt / ts + 1e-9)
     idx = np.minimum((np.arange(steps) * ts / dt + 1e-9).astype(int), power.size - 1)
-    cutoff = model.cell.get("voltage_min_v", 0.0) if sc.cutoff_v is None else sc.cutoff_v
-    f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0, float(cutoff))
+    cutoff = cell_cutoff_v(model.cell) if sc.cutoff_v is None else sc.cutoff_v
+    f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0, cutoff)
     driven = np.tile(speed, sc.repeat)[idx][: f["steps"]]
     return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
             "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
