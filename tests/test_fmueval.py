@@ -118,3 +118,43 @@ def test_fmu_observer_scores_as_the_model_files_observer(quick_model, native_fmu
         for key in ("rmse_pct", "max_pct", "median_3sigma_pct", "outside_3sigma_share"):
             assert fmu_rows[0][name][key] == pytest.approx(ref_rows[0][name][key], abs=1e-3)
     assert fmu_rows[0][kind]["rmse_pct"] < fmu_rows[0]["coulomb"]["rmse_pct"]
+
+
+def test_fmu_is_also_scored_at_the_records_own_samples(native_fmu, tmp_path) -> None:
+    """A record sampled faster than Ts (US06, 10 Hz) is also scored sample by sample
+    ("fmu_samples"): the FMU's voltage at each sample time (between model steps the step in
+    progress) against the voltage logged there. At the samples that end a model step that is
+    the step's output; the figures cover every sample of the segment. A record sampled at Ts
+    gets no such row (it would repeat the model steps')."""
+    from fmpy import extract
+    from lmncell.data.dataset import record_parts
+    from lmncell.evaluation.fmueval import (
+        at_step_ends,
+        drive_at_samples,
+        read_fmu_info,
+        sample_metrics,
+    )
+    from lmncell.evaluation.metrics import record_metrics
+
+    from tests.conftest import A123_S1
+
+    _, rows = evaluate_fmu(native_fmu, [PAN_US06], 1.0, progress=quiet)
+    raw = rows[0]["fmu_samples"]
+    info = read_fmu_info(native_fmu)
+    part, seg = record_parts(read_record(PAN_US06), info.step_s, 1.0, info.capacity_ah)[0]
+    t = part.time_s - part.time_s[0]
+    inside = (t > 0) & (t <= len(seg) * info.step_s + 1e-9)
+    assert raw["samples"] == int(inside.sum()) > 5 * len(seg)
+    run = drive_at_samples(info, extract(str(native_fmu), str(tmp_path / "fmu")), part, seg,
+                           False)
+    assert np.array_equal(run.point_voltage_v[at_step_ends(run.points_s, info.step_s)],
+                          run.voltage_v)
+    at = np.searchsorted(run.points_s, t[inside] - 1e-9 * info.step_s)
+    assert np.allclose(run.points_s[at], t[inside], rtol=0, atol=1e-9 * info.step_s)
+    soc = np.interp(t[inside], info.step_s * np.arange(1, len(seg) + 1), seg.soc_ref)
+    expected = record_metrics(part.voltage_v[inside], run.point_voltage_v[at], soc)
+    assert sample_metrics(part, seg, run, info.step_s) == expected
+    assert raw["rmse_mv"] == pytest.approx(expected["rmse_mv"])
+    assert raw["rmse_mv"] != pytest.approx(rows[0]["fmu"]["rmse_mv"], rel=1e-3)
+    _, a123_rows = evaluate_fmu(native_fmu, [A123_S1], 1.0, progress=quiet)
+    assert "fmu_samples" not in a123_rows[0]

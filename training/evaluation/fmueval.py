@@ -132,12 +132,15 @@ def held_inputs(part: Record, signals: Sequence[np.ndarray], points: np.ndarray,
 
 @dataclass
 class FmuRun:
-    """The FMU's outputs at the end of each model step it was driven through."""
+    """The FMU's outputs at the end of each model step it was driven through; driven through
+    the samples, also its voltage at every communication point (s from the part's start)."""
 
     voltage_v: np.ndarray
     soc: np.ndarray
     soc_std: np.ndarray
     out_of_range: np.ndarray
+    points_s: np.ndarray | None = None
+    point_voltage_v: np.ndarray | None = None
 
 
 class _Slave:
@@ -202,18 +205,21 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     inputs = np.column_stack(held_inputs(part, signals, points, start_s))
     ends = at_step_ends(points, ts)
     out = np.empty((n - start_step, 4))
+    every = np.empty(points.size)
     slave, t, k = None, start_s, 0
     try:
         slave = _Slave(info, unzipped, seg.soc0 if soc0 is None else soc0, not ambient,
                        inputs[0], observer)
-        for point, values, end in zip(points.tolist(), inputs.tolist(), ends.tolist(),
-                                      strict=True):
+        for j, (point, values, end) in enumerate(zip(points.tolist(), inputs.tolist(),
+                                                     ends.tolist(), strict=True)):
             slave.set_inputs(values)
             slave.slave.doStep(currentCommunicationPoint=t - start_s,
                                communicationStepSize=point - t)
             t = point
+            now = slave.outputs()
+            every[j] = now[0]
             if end:
-                out[k] = slave.outputs()
+                out[k] = now
                 k += 1
     except Exception as exc:          # fmpy raises where a call returns an error status
         raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
@@ -221,7 +227,24 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     finally:
         if slave is not None:
             slave.free()
-    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool))
+    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool), points, every)
+
+
+def sample_metrics(part: Record, seg: Segment, run: FmuRun, ts: float) -> dict | None:
+    """The FMU's figures against the record's own samples (its voltage output at each sample
+    time, between model steps the step in progress; SoC windows by the reference SoC at that
+    time), where the record is sampled faster than Ts; None otherwise (then every sample is a
+    model step end and the figures are the model steps')."""
+    if run.points_s is None or run.point_voltage_v is None:
+        return None
+    t = part.time_s - part.time_s[0]
+    if t.size < 2 or float(np.median(np.diff(t))) >= ts * (1.0 - 1e-6):
+        return None
+    inside = (t > 0.0) & (t <= run.points_s[-1] * (1.0 + 1e-12))
+    at = np.clip(np.searchsorted(run.points_s, t[inside] - 1e-9 * ts), 0,
+                 run.points_s.size - 1)
+    soc = np.interp(t[inside], ts * np.arange(1, len(seg) + 1), seg.soc_ref)
+    return record_metrics(part.voltage_v[inside], run.point_voltage_v[at], soc)
 
 
 def drive_at_model_steps(info: FmuInfo, seg: Segment, ambient: bool) -> FmuRun:
@@ -249,10 +272,11 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                  progress: Progress = _print) -> tuple[list[Trace], list[dict]]:
     """Each record's segments through the FMU: traces and one row of metrics per segment (as
     evaluate_model's, the FMU under the name "fmu", plus how many model steps it flagged
-    out_of_range). The FMU is stepped through the record's own samples (drive_at_samples), or
-    with at_model_steps in steps of Ts with the mean inputs (drive_at_model_steps). The
-    reference SoC counts the record's current with the FMU's capacity. soc0, ambient and
-    through_hidden_pauses as in evaluate_model."""
+    out_of_range; driven through the samples of a record sampled faster than Ts, also
+    "fmu_samples", its figures against every sample: sample_metrics). The FMU is stepped
+    through the record's own samples (drive_at_samples), or with at_model_steps in steps of Ts
+    with the mean inputs (drive_at_model_steps). The reference SoC counts the record's current
+    with the FMU's capacity. soc0, ambient and through_hidden_pauses as in evaluate_model."""
     from fmpy import extract
 
     info = read_fmu_info(fmu)
@@ -269,9 +293,11 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                        else drive_at_samples(info, unzipped, part, seg, ambient))
                 traces.append(Trace(seg, {"fmu": run.voltage_v}, run.soc,
                                     np.zeros((len(seg), 0))))
+                raw = None if at_model_steps else sample_metrics(part, seg, run, info.step_s)
                 rows.append({"record": seg.name,
                              "temperature_input": "ambient" if ambient else "cell",
                              "fmu": record_metrics(seg.voltage_v, run.voltage_v, seg.soc_ref),
+                             **({"fmu_samples": raw} if raw else {}),
                              "out_of_range_steps": int(run.out_of_range.sum()),
                              "steps": len(seg),
                              "driven": "model_steps" if at_model_steps else "samples"}
