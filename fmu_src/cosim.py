@@ -241,6 +241,8 @@ class CellCosim:
             if self.covered_s >= ts * (1.0 - STEP_TOL):
                 self._model_step()
                 taken += 1
+                if remaining < STEP_TOL * ts:   # the rest is rounding of the step's end
+                    remaining = 0.0
         self.preview_v = self._preview()
         return taken
 

@@ -265,6 +265,33 @@ def test_a_step_of_more_model_steps_than_the_limit_is_refused_at_once(quick_mode
         cosim.advance(40 * model.sample_time_s + 0.5, -1.0)
 
 
+# a host's sample 1.1e-6 s before a model step end of Ts = 0.1 s: the step that ends the model
+# step leaves 8.3e-17 s of rounding over (a 10 Hz record's own times do this)
+ROUNDING_POINTS_S = (2.0, 2.099998891657932, 2.1)
+
+
+def test_a_step_end_within_rounding_gives_the_steps_voltage(quick_model) -> None:
+    """Communication points that end a model step up to rounding leave no sliver of a new step
+    behind: the output there is the step's voltage, not the preview of the next one. Before,
+    8.3e-17 s was left over, the output became the next step previewed, and a Ts = 0.1 s model
+    through a 10 Hz record drifted from its pipeline by up to 0.30 V (Panasonic HWFET)."""
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = dataclasses.replace(load_model(quick_model), sample_time_s=0.1, current_delay_s=0.0)
+    split, whole = CellCosim(model, Parameters(0.9, 2.85)), CellCosim(model, Parameters(0.9, 2.85))
+    t0, t1, t2 = ROUNDING_POINTS_S
+    for _ in range(20):                                      # 2 s in whole steps
+        split.advance(0.1, -2.0)
+        whole.advance(0.1, -2.0)
+    split.advance(t1 - t0, -2.0)
+    split.advance(t2 - t1, -2.0)
+    whole.advance(0.1, -2.0)
+    assert split.covered_s == 0.0 and split.preview_v is None
+    assert split.voltage_v == pytest.approx(whole.voltage_v, abs=1e-12)
+    split.advance(0.05, 1.0)                                  # a new step in progress: a preview
+    assert split.covered_s == pytest.approx(0.05) and split.preview_v is not None
+
+
 def test_between_model_steps_the_voltage_follows_the_latest_input(quick_model) -> None:
     """Communication steps shorter than Ts: the voltage output is the model step in progress
     taken on a copy with the inputs' means so far (the preview), so its ohmic part follows the

@@ -442,6 +442,39 @@ def test_native_over_uneven_steps_equals_the_runtime(quick_model, native_fmu, tm
     assert worst <= 1e-9
 
 
+def test_native_step_end_within_rounding_equals_the_runtime(quick_model, tmp_path) -> None:
+    # C drops the rounding left over at a model step's end as the runtime's engine does: the
+    # output there is the step's voltage in both (test_fmu: ROUNDING_POINTS_S)
+    import dataclasses
+
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.runtime.cosim import CellCosim, Parameters
+    from lmncell.runtime.model import save_model
+
+    from tests.test_fmu import ROUNDING_POINTS_S
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    model = dataclasses.replace(load_model(quick_model), sample_time_s=0.1, current_delay_s=0.0)
+    fmu = build_native_fmu(save_model(model, tmp_path / "fast.json"), tmp_path / "fast.fmu")
+    cosim, whole = CellCosim(model, Parameters(0.9, 2.85)), CellCosim(model, Parameters(0.9, 2.85))
+    inst = Instance(fmu, start={"soc0": 0.9})
+    t0, t1, t2 = ROUNDING_POINTS_S
+    try:
+        for _ in range(20):
+            cosim.advance(0.1, -2.0)
+            whole.advance(0.1, -2.0)
+            inst.step(-2.0, h=0.1)
+        for h in (t1 - t0, t2 - t1):
+            cosim.advance(h, -2.0)
+            inst.step(-2.0, h=h)
+        whole.advance(0.1, -2.0)
+        assert inst.get("voltage")[0] == pytest.approx(cosim.voltage_v, abs=1e-9)
+        assert inst.get("voltage")[0] == pytest.approx(whole.voltage_v, abs=1e-9)
+    finally:
+        inst.free()
+
+
 def test_out_of_range_when_the_model_voltage_leaves_its_trained_range(quick_model, tmp_path,
                                                                      capfd) -> None:
     """Current, SoC and temperature inside their trained ranges, the model's voltage beyond

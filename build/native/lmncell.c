@@ -1090,7 +1090,10 @@ static fmi2Status cosim_advance(Instance *in, double h) {
             s->d_current = s->d_charge / TS;
             s->d_covered = s->d_charge = 0.0;
         }
-        if (s->covered >= TS * (1.0 - STEP_TOL)) model_step(in);
+        if (s->covered >= TS * (1.0 - STEP_TOL)) {
+            model_step(in);
+            if (remaining < STEP_TOL * TS) remaining = 0.0;  /* rounding of the step's end */
+        }
     }
     preview(s);
     s->time += h;
