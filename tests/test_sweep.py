@@ -110,7 +110,6 @@ def test_step_means_keep_the_cycles_energy_at_any_step() -> None:
     """A step inside one 1-s sample holds that sample; a coarser or uneven step takes the mean
     over what it covers (it used to take the sample at its start: UDDS at 100 s steps ended
     the cycle at SoC 85.7 % where 1 s steps end at 87.1 %)."""
-    import numpy as np
     from lmncell.scenarios.drive import step_means
 
     values = np.array([1.0, 3.0, -2.0, 6.0, 0.5])

@@ -15,6 +15,7 @@ from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
 from lmncell.runtime.model import ModelFileError
+from lmncell.scenarios.drive import CUTOFF_EXPECTED, is_cutoff
 
 USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
                IsADirectoryError, PermissionError)
@@ -56,8 +57,7 @@ def output_file_argument(text: str) -> str:
 _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
-_cutoff = number_argument(float, lambda v: 0.0 <= v < 10.0,
-                          "a cell voltage in V, ≥ 0 and below 10 (0: no cut-off voltage)")
+_cutoff = number_argument(float, is_cutoff, CUTOFF_EXPECTED)
 _temperature = number_argument(
     float, is_cell_temperature,
     "a cell temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))

@@ -158,11 +158,18 @@ def cell_cutoff_v(cell: Mapping[str, Any] | None) -> float:
     return volts if math.isfinite(volts) and volts > 0.0 else 0.0
 
 
+CUTOFF_EXPECTED = "a cell voltage in V, ≥ 0 and below 10 (0: no cut-off voltage)"
+
+
+def is_cutoff(cutoff_v: float) -> bool:
+    """Whether a value is a cut-off voltage (CUTOFF_EXPECTED); the CLI's and the API's check."""
+    return math.isfinite(cutoff_v) and 0.0 <= cutoff_v < 10.0
+
+
 def check_cutoff(cutoff_v: float, option: str = "--cutoff") -> float:
     """The cut-off voltage as given, or a DataError naming the option."""
-    if not (math.isfinite(cutoff_v) and 0.0 <= cutoff_v < 10.0):
-        raise DataError(f"{option} {cutoff_v!r}: expected a cell voltage in V, ≥ 0 and below "
-                        "10 (0: no cut-off voltage)")
+    if not is_cutoff(cutoff_v):
+        raise DataError(f"{option} {cutoff_v!r}: expected {CUTOFF_EXPECTED}")
     return float(cutoff_v)
 
 

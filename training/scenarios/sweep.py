@@ -34,6 +34,7 @@ from lmncell.scenarios.drive import (
     load_vehicle,
     pack_power,
     run_cycle,
+    step_means,
 )
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
 
@@ -148,10 +149,10 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     power = np.tile(pack_power(sc.vehicle, speed, grade, dt), sc.repeat) * sc.pack.power_share
     ts = model.sample_time_s
     steps = math.floor(power.size * dt / ts + 1e-9)
-    idx = np.minimum((np.arange(steps) * ts / dt + 1e-9).astype(int), power.size - 1)
     cutoff = cell_cutoff_v(model.cell) if sc.cutoff_v is None else sc.cutoff_v
-    f = drive_pack(model, sc.pack, power[idx], sc.ambient_c, sc.soc0, cutoff)
-    driven = np.tile(speed, sc.repeat)[idx][: f["steps"]]
+    f = drive_pack(model, sc.pack, step_means(power, dt, ts, steps), sc.ambient_c, sc.soc0,
+                   cutoff)
+    driven = step_means(np.tile(speed, sc.repeat), dt, ts, steps)[: f["steps"]]
     return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
             "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
             "distance_km": float(np.sum(driven) * ts / 1000.0),
