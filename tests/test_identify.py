@@ -10,6 +10,7 @@ import pytest
 from lmncell.config import ConfigError, load_config
 from lmncell.data.dataset import record_to_segments
 from lmncell.data.readers import read_record
+from lmncell.data.records import Record, RecordMeta
 from lmncell.identification.construction import validation_masks
 from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.refinement import (
@@ -21,7 +22,7 @@ from lmncell.identification.refinement import (
     refines_ocv,
 )
 from lmncell.identification.splitting import optimise_split
-from lmncell.identification.train import train_files
+from lmncell.identification.train import round_step, sampling_note, train_files
 from lmncell.identification.tree import build_design, poles, skeleton, stabilise, wls
 from lmncell.runtime.model import load_model
 
@@ -879,3 +880,20 @@ def test_a_record_given_as_full_counts_for_the_estimated_capacity() -> None:
     assert estimate_capacity([late], [1.0]) == pytest.approx(discharged_ah(late))
     with pytest.raises(DataError, match="no record starts full"):
         estimate_capacity([late])
+
+
+def _logged_every(step_s: float, name: str) -> Record:
+    t = np.arange(0.0, 600.0, step_s)
+    return Record(t, np.where(t % 60 < 30, -1.0, 0.0), np.full(t.size, 3.3),
+                  RecordMeta(f"/logs/{name}", "test"))
+
+
+def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> None:
+    fast, slow = _logged_every(0.1, "fast.csv"), _logged_every(1.0, "slow.csv")
+    note = sampling_note([slow, fast], 1.0)
+    assert note is not None
+    assert "fast.csv" in note and "every 0.1 s" in note and "sample_time_s=0.1" in note
+    assert sampling_note([slow, fast], 0.1) is None          # trained at the log's rate
+    assert sampling_note([slow], 1.0) is None
+    assert sampling_note([_logged_every(0.5, "half.csv")], 1.0) is not None
+    assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02

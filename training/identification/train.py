@@ -4,6 +4,7 @@ The library function behind `lmncell train` and `lmncell.train`."""
 from __future__ import annotations
 
 import copy
+import math
 import platform
 import time
 from collections.abc import Mapping, Sequence
@@ -86,6 +87,31 @@ def current_delay(cfg: TrainConfig, records: list[Record], progress: Progress = 
         progress(f"current delay {delay:.3f} s: the lag of the voltage channel behind the "
                  "current (lmncell.data.lag)")
     return float(delay)
+
+
+FAST_LOG_RATIO = 1.5   # sampling_note speaks from a log this many times faster than Ts
+
+
+def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
+    """A note where the records are logged faster than the model's sample time (the fastest
+    record's median sample interval at least FAST_LOG_RATIO times below Ts): the model then
+    follows each Ts-mean of the voltage, not every sample, and a host that scores the FMU at
+    the log's samples sees the fast part of each current pulse missing. None otherwise."""
+    intervals = [float(np.median(np.diff(r.time_s))) for r in records if len(r) > 1]
+    if not intervals or min(intervals) * FAST_LOG_RATIO > sample_time_s:
+        return None
+    fastest = min(intervals)
+    name = records[intervals.index(fastest)].name
+    return (f"note: {name} is logged every {fastest:.3g} s (median), faster than the model's "
+            f"Ts = {sample_time_s:g} s: the model follows the voltage's {sample_time_s:g}-s "
+            "means, not every sample; where the voltage at each sample matters, train at the "
+            f"log's rate (--set sample_time_s={round_step(fastest):g}, which takes longer)")
+
+
+def round_step(interval_s: float) -> float:
+    """The largest of 1, 2 or 5 × 10^k s within 5 % above an interval (0.101 s → 0.1 s)."""
+    exponent = math.floor(math.log10(interval_s * 1.05))
+    return max(m * 10.0**exponent for m in (1, 2, 5) if m * 10.0**exponent <= interval_s * 1.05)
 
 
 def training_segments(records: list[Record], cfg: TrainConfig, capacity_ah: float,
@@ -239,6 +265,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     if problem:
         raise ConfigError(f"{out}: {problem}")
     records = read_training_records(paths, cfg, progress, read_options)
+    note = sampling_note(records, cfg.sample_time_s)
+    if note:
+        progress(note)
     if capacity_ah is None and cfg.ocv_tests:
         delay = current_delay(cfg, records, progress)
         cap, segs, result = fit_capacity(records, cfg, soc0, delay, progress)
