@@ -148,8 +148,8 @@ sample time Ts = {model.sample_time_s} s, {model.n_local_models} local models ov
 <li><b>voltage_measured</b> (input, V): mean measured voltage over the step (observer).</li>
 <li><b>temperature</b> (input, degC): {thermal_text}</li>
 <li><b>voltage</b> (output, V): model terminal voltage of the last completed model step; between
-model steps (communication steps shorter than Ts, no observer) the step in progress previewed with
-the inputs' means so far, so that it follows each input at once.</li>
+model steps (communication steps shorter than Ts, no observer) the step in progress previewed as if
+the latest current had been held over all of it, so that it follows each input at once.</li>
 <li><b>soc</b> (output): state of charge, coulomb-counted or the observer's estimate;
 <b>soc_std</b> (output): the observer's standard deviation; <b>out_of_range</b> (output): true
 while the inputs leave the trained region or the model's voltage its trained range by more than

@@ -6,10 +6,12 @@ means over that Ts (a communication step that is a multiple of Ts gives that man
 the held input; a shorter or uneven step is accumulated exactly across calls). Outputs are those
 of the last completed model step. This is the resampling rule of training (step means), so the FMU
 and the pipeline see the same inputs. Between model steps (a communication step shorter than Ts
-ended inside one) the voltage is the step in progress previewed: taken on a copy with the inputs'
-means so far, and not kept (CellCosim._preview). A host that steps at a record's 10 Hz samples
-then sees the ohmic response to each sample, not the last second's (tests/test_fmu.py,
-test_between_model_steps_the_voltage_follows_the_latest_input).
+ended inside one) the voltage is the step in progress previewed: taken on a copy, and not kept,
+as if the latest current input had been held over the whole step (with a current delay δ and a
+communication step shorter than δ, the mean current of the open delayed window instead), the
+temperature input's mean so far (CellCosim._preview). A host that steps at a record's 10 Hz
+samples then sees the cell's response to each sample's current, not to the mean current so far
+(tests/test_fmu.py, test_between_model_steps_the_voltage_follows_the_latest_input).
 """
 
 from __future__ import annotations
@@ -33,7 +35,8 @@ MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
 MAX_STEPS_PER_CALL = 10_000_000   # model steps one communication step may span (116 days at
 # Ts = 1 s, about 2.5 min of this engine): a longer step is refused, where it would hold the
 # host for hours, or for ever once Ts no longer changes the remaining time (h ≳ 1e16·Ts)
-ACCUMULATORS = 8   # get_state's "acc": the step's five, the current delay's three
+ACCUMULATORS = 9   # get_state's "acc": the step's five, the current delay's three, the preview's
+#                   current
 
 
 def held_delayed_currents(current_a: list[float], ts: float, delay_s: float) -> list[float]:
@@ -104,6 +107,7 @@ class CellCosim:
         self.range_message = ""
         self.steps = 0
         self.preview_v: float | None = None
+        self.preview_current_a = 0.0     # the current the preview takes (A)
         self._start_temperature_c = t_cell
         self._bounds = self._range_bounds()
         self._i_max = MAX_C_RATE * p.capacity_ah
@@ -115,22 +119,28 @@ class CellCosim:
         step's preview (preview_v)."""
         return self.stepper.voltage_v if self.preview_v is None else self.preview_v
 
+    def _preview_current(self, step_s: float, current_a: float) -> float:
+        """The current the preview takes after a communication step (A): the current input now
+        (held over the step), the current the cell sees now unless the model's current delay δ
+        exceeds the step; then the mean current of the open delayed window (the latest closed
+        one's where it is empty)."""
+        delay = self.model.current_delay_s
+        if not delay or step_s >= delay:
+            return current_a
+        return (self.delay_charge_as / self.delay_covered_s if self.delay_covered_s > 0.0
+                else self.delayed_current_a)
+
     def _preview(self) -> float | None:
-        """The model step in progress taken, but not kept, with the means of the inputs over
-        the part of it covered so far (with a current delay: over the open delayed window):
-        the voltage now, whose ohmic part follows the latest input instead of lagging it by
-        up to Ts. None at a model-step boundary and with an observer (its outputs are the
-        model steps')."""
+        """The model step in progress taken, but not kept, as if the preview's current
+        (_preview_current) had been held over the whole step, at the temperature input's mean
+        over the part covered so far: the voltage now, which follows the current now instead
+        of the mean current since the step began. None at a model-step boundary and with an
+        observer (its outputs are the model steps')."""
         if self.covered_s <= 0.0 or self.observer:
             return None
-        if self.model.current_delay_s:
-            i = (self.delay_charge_as / self.delay_covered_s if self.delay_covered_s > 0.0
-                 else self.delayed_current_a)
-        else:
-            i = self.charge_as / self.covered_s
         temp = self.thermal.next_temperature(self.temp_int / self.covered_s)
         saved = self.stepper.get_state()
-        v = self.stepper.step(i, temp)
+        v = self.stepper.step(self.preview_current_a, temp)
         self.stepper.set_state(saved)
         return v
 
@@ -243,6 +253,7 @@ class CellCosim:
                 taken += 1
                 if remaining < STEP_TOL * ts:   # the rest is rounding of the step's end
                     remaining = 0.0
+        self.preview_current_a = self._preview_current(step_s, current_a)
         self.preview_v = self._preview()
         return taken
 
@@ -293,7 +304,7 @@ class CellCosim:
                 "observer": self.observer.get_state() if self.observer else None,
                 "acc": [self.covered_s, self.charge_as, self.temp_int, self.volt_int,
                         self.volt_time, self.delay_covered_s, self.delay_charge_as,
-                        self.delayed_current_a],
+                        self.delayed_current_a, self.preview_current_a],
                 "flags": [self.out_of_range, self.range_message, self.steps],
                 "thermal": [self.thermal.temperature_c, self._start_temperature_c],
                 "params": [self.params.soc0, self.params.capacity_ah, self.params.observer,
@@ -317,7 +328,8 @@ class CellCosim:
         else:
             self.stepper.set_state(list(state["stepper"]))
         (self.covered_s, self.charge_as, self.temp_int, self.volt_int, self.volt_time,
-         self.delay_covered_s, self.delay_charge_as, self.delayed_current_a) = acc
+         self.delay_covered_s, self.delay_charge_as, self.delayed_current_a,
+         self.preview_current_a) = acc
         self.out_of_range, self.range_message, self.steps = (
             bool(state["flags"][0]), str(state["flags"][1]), int(state["flags"][2]))
         self.preview_v = self._preview()

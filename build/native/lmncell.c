@@ -1016,15 +1016,16 @@ static void model_step(Instance *in) {
 }
 
 /* cosim.CellCosim._preview: while a model step is partly covered and no observer runs, the
-   voltage now is that step taken on a copy with the inputs' means over the covered part (with a
-   current delay: over the open delayed window) */
-static void preview(State *s) {
+   voltage now is that step taken on a copy as if the current input had been held over all of it
+   (with a current delay longer than the communication step h: the open delayed window's mean,
+   cosim.CellCosim._preview_current), at the temperature input's mean over the covered part */
+static void preview(State *s, double h) {
     State copy;
     double i;
     s->preview_on = s->covered > 0.0 && !s->observer;
     if (!s->preview_on) return;
-    i = DELAY_S > 0 ? (s->d_covered > 0.0 ? s->d_charge / s->d_covered : s->d_current)
-                    : s->charge / s->covered;
+    i = DELAY_S <= 0 || h >= DELAY_S ? s->current
+        : (s->d_covered > 0.0 ? s->d_charge / s->d_covered : s->d_current);
     copy = *s;           /* cell_temperature may fix the copy's start temperature, not s's */
     stepper_step(&copy, i, cell_temperature(&copy, s->temp_int / s->covered));
     s->preview = copy.voltage;
@@ -1095,7 +1096,7 @@ static fmi2Status cosim_advance(Instance *in, double h) {
             if (remaining < STEP_TOL * TS) remaining = 0.0;  /* rounding of the step's end */
         }
     }
-    preview(s);
+    preview(s, h);
     s->time += h;
     return fmi2OK;
 }
