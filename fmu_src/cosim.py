@@ -120,10 +120,10 @@ class CellCosim:
         return self.stepper.voltage_v if self.preview_v is None else self.preview_v
 
     def _preview_current(self, step_s: float, current_a: float) -> float:
-        """The current the preview takes after a communication step (A): the current input now
-        (held over the step), the current the cell sees now unless the model's current delay δ
-        exceeds the step; then the mean current of the open delayed window (the latest closed
-        one's where it is empty)."""
+        """The current the preview takes after a communication step of step_s with the input
+        current_a (A): that input, which the cell sees now unless the model's current delay δ
+        is longer than the step; then the open delayed window's mean current (the last closed
+        window's where it is empty)."""
         delay = self.model.current_delay_s
         if not delay or step_s >= delay:
             return current_a
