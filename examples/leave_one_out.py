@@ -28,7 +28,9 @@ time column: pauses that only the wall clock shows (Panasonic 25 °C Cycle 1:
 splits there). --fmu native|pythonfmu also builds each fold's model into that FMU and scores
 the held-out record through it, driven by fmpy as `lmncell evaluate CELL.fmu` drives it (through
 the record's own samples; with --at-model-steps in steps of Ts with the mean current over each):
-the "fmu" figures, which equal the lmn ones unless --at-model-steps. --plot FILE.png draws the
+the "fmu" figures, which equal the lmn ones unless --at-model-steps; for a record sampled
+faster than Ts also "fmu_samples", the FMU's voltage at each of the record's own samples
+against the voltage logged then (lmncell evaluate CELL.fmu's row). --plot FILE.png draws the
 same figures as bars per held-out record, with a caption naming the split and the settings.
 """
 
@@ -54,7 +56,7 @@ from lmncell.evaluation.metrics import ENDS, pooled
 from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
 
-MODELS = ("lmn", "fmu", "arx", "ecm2rc", "ecm2rc_hyst")
+MODELS = ("lmn", "fmu", "fmu_samples", "arx", "ecm2rc", "ecm2rc_hyst")
 
 
 _capacity_ah = number_argument(float, lambda v: v > 0, "Ah > 0 or 'auto'")
@@ -120,6 +122,8 @@ def main() -> None:
                                            progress=lambda _m: None)
                 for row, fmu_row in zip(rows, fmu_rows, strict=True):
                     row["fmu"] = fmu_row["fmu"]
+                    if "fmu_samples" in fmu_row:      # a record sampled faster than Ts
+                        row["fmu_samples"] = fmu_row["fmu_samples"]
             names = [m for m in MODELS if m in rows[0]]
             cells = []
             mode = "ambient" if ambient else "cell"
@@ -160,9 +164,12 @@ def fmu_clause(a: argparse.Namespace) -> str:
     """The caption's words for the fmu bars (none without --fmu)."""
     if not a.fmu:
         return ""
-    how = ("in steps of Ts with the mean current over each" if a.at_model_steps
-           else "through the record's own samples")
-    return f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy {how}"
+    if a.at_model_steps:
+        return (f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy in steps of Ts with "
+                "the mean current over each")
+    return (f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy through the record's own "
+            "samples, scored at its model steps (fmu_samples, for a record sampled faster than "
+            "Ts: at each sample)")
 
 
 if __name__ == "__main__":
