@@ -885,7 +885,7 @@ def test_a_record_given_as_full_counts_for_the_estimated_capacity() -> None:
 def _logged_every(step_s: float, name: str) -> Record:
     t = np.arange(0.0, 600.0, step_s)
     return Record(t, np.where(t % 60 < 30, -1.0, 0.0), np.full(t.size, 3.3),
-                  RecordMeta(f"/logs/{name}", "test"))
+                  RecordMeta(f"/logs/{name}", "test", sample_time_s=step_s))   # as readers do
 
 
 def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> None:
@@ -895,5 +895,6 @@ def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> 
     assert "fast.csv" in note and "every 0.1 s" in note and "sample_time_s=0.1" in note
     assert sampling_note([slow, fast], 0.1) is None          # trained at the log's rate
     assert sampling_note([slow], 1.0) is None
+    assert sampling_note([_logged_every(1.0, "one.csv").slice(0, 1), fast], 1.0) == note
     assert sampling_note([_logged_every(0.5, "half.csv")], 1.0) is not None
     assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02
