@@ -293,7 +293,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                        else drive_at_samples(info, unzipped, part, seg, ambient))
                 traces.append(Trace(seg, {"fmu": run.voltage_v}, run.soc,
                                     np.zeros((len(seg), 0))))
-                raw = None if at_model_steps else sample_metrics(part, seg, run, info.step_s)
+                raw = sample_metrics(part, seg, run, info.step_s)   # None at model steps
                 rows.append({"record": seg.name,
                              "temperature_input": "ambient" if ambient else "cell",
                              "fmu": record_metrics(seg.voltage_v, run.voltage_v, seg.soc_ref),
