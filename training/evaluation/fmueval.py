@@ -173,6 +173,10 @@ class _Slave:
         """current (A), temperature (°C) and, for an observer, voltage_measured (V)."""
         self.slave.setReal(self.inputs, [float(v) for v in values])
 
+    def voltage(self) -> float:
+        """The voltage output alone (V): all a sample between model-step ends needs."""
+        return self.slave.getReal(self.out[:1])[0]
+
     def outputs(self) -> tuple[float, float, float, bool]:
         voltage, soc, std = self.slave.getReal(self.out)
         return voltage, soc, std, bool(self.slave.getBoolean([self.vr["out_of_range"]])[0])
@@ -216,11 +220,12 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
             slave.slave.doStep(currentCommunicationPoint=t - start_s,
                                communicationStepSize=point - t)
             t = point
-            now = slave.outputs()
-            every[j] = now[0]
             if end:
-                out[k] = now
+                out[k] = slave.outputs()
+                every[j] = out[k, 0]
                 k += 1
+            else:
+                every[j] = slave.voltage()
     except Exception as exc:          # fmpy raises where a call returns an error status
         raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
                           f"{exc}") from None
