@@ -95,9 +95,9 @@ FAST_LOG_RATIO = 1.5   # sampling_note speaks from a log this many times faster 
 def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
     """A note where the records are logged faster than the model's sample time (the fastest
     record's median sample interval, its meta.sample_time_s, at least FAST_LOG_RATIO times
-    below Ts): the model then
-    follows each Ts-mean of the voltage, not every sample, and a host that scores the FMU at
-    the log's samples sees the fast part of each current pulse missing. None otherwise."""
+    below Ts): the model then follows each Ts-mean of the voltage, not every sample, and a host
+    that scores the FMU at the log's samples sees the fast part of each current pulse missing.
+    None otherwise."""
     logged = [(r.meta.sample_time_s, r.name) for r in records
               if math.isfinite(r.meta.sample_time_s)]
     if not logged or min(logged)[0] * FAST_LOG_RATIO > sample_time_s:
