@@ -7,8 +7,11 @@ process each run their own code. The model file travels as resources/model.json.
 
 from __future__ import annotations
 
+import atexit
+import ctypes
 import json
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -33,6 +36,40 @@ def keep_module_dict(namespace: dict) -> None:
     _MODULE_DICT_REFS.append(namespace)
 
 
+# pythonfmu 0.7.0's own wrapper keeps its interpreter state in a static shared_ptr. When a host
+# exits with the FMU's library still loaded, the C++ runtime destroys that pointer first and the
+# library's destructor then assigns to it (finalizePythonInterpreter): the state is released
+# twice and the heap corrupted, so that the host may abort at exit ("corrupted double-linked
+# list"). In a Python host, calling finalizePythonInterpreter at interpreter exit, before the C++
+# runtime's turn, empties the pointer and the later calls find nothing to release. LMNCell's
+# build of the wrapper keeps the pointer on the heap and needs no help; the call is harmless.
+_EXIT_HOOKED: set[str] = set()
+
+
+def release_wrapper_state_at_exit(binary: Path) -> bool:
+    """Register (once per library) a call of `binary`'s finalizePythonInterpreter at interpreter
+    exit, in a Python host (sys.orig_argv is empty where the wrapper started the interpreter
+    itself). True if registered now."""
+    key = str(binary)
+    if os.name != "posix" or not sys.orig_argv or key in _EXIT_HOOKED or not binary.is_file():
+        return False
+    _EXIT_HOOKED.add(key)
+    atexit.register(_finalize_wrapper_state, key)
+    return True
+
+
+def _finalize_wrapper_state(binary: str) -> None:
+    """Call the wrapper library's finalizePythonInterpreter if it is still loaded (RTLD_NOLOAD:
+    never loads it again)."""
+    try:
+        lib = ctypes.CDLL(binary, mode=os.RTLD_NOLOAD | os.RTLD_NOW)
+        finalize = lib.finalizePythonInterpreter
+    except (OSError, AttributeError):
+        return
+    finalize.restype = None
+    finalize()
+
+
 class CallError(RuntimeError):
     """An ordinary FMI call error (unknown reference, wrong type, refused step, …)."""
 
@@ -50,6 +87,9 @@ class LmnCellSlave(Fmi2Slave):
         super().__init__(**kwargs)
         self._dedupe_sys_path()
         res = Path(self.resources) if self.resources else Path(__file__).resolve().parent.parent
+        if self.resources:
+            release_wrapper_state_at_exit(res.parent / "binaries" / "linux64" /
+                                          f"{type(self).__name__}.so")
         self._model = load_model(res / "model.json")
         m = self._model
         self.current = 0.0

@@ -4,6 +4,7 @@ fails the test), the model description's InitialUnknowns, the documentation per 
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -21,6 +22,30 @@ def _run(fmu, sequence: str) -> dict:
                            sequence], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, f"the host died ({proc.returncode}): {proc.stderr[-2000:]}"
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _memory_errors_in_the_fmu(fmu, sequence: str) -> list[str]:
+    """Valgrind's reports (memcheck) whose stack passes through the FMU's binary, for one call
+    sequence and the host's exit; glibc's own false positives (dl-load) are left out."""
+    proc = subprocess.run(["valgrind", "--num-callers=40", sys.executable, "-m",
+                           "tests.conformance_sequences", str(fmu), sequence], cwd=ROOT,
+                          capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, f"the host died ({proc.returncode}): {proc.stderr[-2000:]}"
+    return [r for r in _valgrind_reports(proc.stderr) if "binaries/linux64" in r or
+            "finalizePythonInterpreter" in r]
+
+
+def _valgrind_reports(stderr: str) -> list[str]:
+    """Valgrind's stderr split into its reports (a report ends at a line with only the pid)."""
+    reports, current = [], []
+    for line in stderr.splitlines():
+        body = line.split("== ", 1)[1] if line.startswith("==") and "== " in line else ""
+        if body.strip():
+            current.append(body)
+        elif current:
+            reports.append("\n".join(current))
+            current = []
+    return reports + (["\n".join(current)] if current else [])
 
 
 @pytest.fixture(params=["pythonfmu", "native"])
@@ -58,24 +83,41 @@ def test_pythonfmu_fmu_carries_the_patched_wrapper(quick_fmu) -> None:
     assert PATCHED in root.get("generationTool") and "returns fmi2Error" in doc
 
 
-def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(quick_model, tmp_path,
-                                                                  monkeypatch) -> None:
-    """No C++ compiler where the FMU is built: a warning, pythonfmu's own binary (named in the
-    model description), and the slave's fallback: ordinary errors logged and ignored, no crash."""
-    import shutil
-
+@pytest.fixture(scope="module")
+def stock_fmu(quick_model, tmp_path_factory):
+    """The pythonfmu FMU built where no C++ compiler is found: it keeps pythonfmu's wrapper."""
     from lmncell.fmu import pythonfmu_build as pb
 
     which = shutil.which
-    monkeypatch.setattr(pb.shutil, "which",
-                        lambda name: None if name in ("g++", "c++") else which(name))
-    with pytest.warns(RuntimeWarning, match="no C\\+\\+ compiler"):
-        fmu = pb.build_fmu(quick_model, tmp_path / "stock.fmu")
-    with zipfile.ZipFile(fmu) as z:
-        assert pb.STOCK in ET.fromstring(z.read("modelDescription.xml")).get("generationTool")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(pb.shutil, "which", lambda name: None if name in ("g++", "c++") else which(name))
+        with pytest.warns(RuntimeWarning, match="no C\\+\\+ compiler"):
+            return pb.build_fmu(quick_model, tmp_path_factory.mktemp("stock") / "stock.fmu")
+
+
+def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(stock_fmu) -> None:
+    """No C++ compiler where the FMU is built: a warning, pythonfmu's own binary (named in the
+    model description), and the slave's fallback: ordinary errors logged and ignored, no crash."""
+    from lmncell.fmu.pythonfmu_build import STOCK
+
+    with zipfile.ZipFile(stock_fmu) as z:
+        assert STOCK in ET.fromstring(z.read("modelDescription.xml")).get("generationTool")
+    fmu = stock_fmu
     res = _run(fmu, "ordinary_errors")
     assert res["soc0_after"] == 0.8 and res["steps_after"] == 0 and res["finite"]
     assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+def test_pythonfmus_own_wrapper_leaves_the_heap_intact_at_exit(stock_fmu) -> None:
+    """pythonfmu 0.7.0's wrapper releases its interpreter state twice when the host exits with the
+    library loaded (heap corruption, now and then an abort); the slave's exit hook prevents it."""
+    assert _memory_errors_in_the_fmu(stock_fmu, "ordinary_errors") == []
+
+
+@pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
+def test_no_memory_errors_in_either_fmu(fmu) -> None:
+    assert _memory_errors_in_the_fmu(fmu, "ordinary_errors") == []
 
 
 def test_the_patched_wrapper_is_only_built_for_linux64(monkeypatch, tmp_path) -> None:
