@@ -164,12 +164,10 @@ def fmu_clause(a: argparse.Namespace) -> str:
     """The caption's words for the fmu bars (none without --fmu)."""
     if not a.fmu:
         return ""
-    if a.at_model_steps:
-        return (f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy in steps of Ts with "
-                "the mean current over each")
-    return (f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy through the record's own "
-            "samples, scored at its model steps (fmu_samples, for a record sampled faster than "
-            "Ts: at each sample)")
+    how = ("in steps of Ts with the mean current over each" if a.at_model_steps
+           else "through the record's own samples, scored at its model steps (fmu_samples, for "
+                "a record sampled faster than Ts: at each sample)")
+    return f"; fmu: the fold's model as a {a.fmu} FMU, driven by fmpy {how}"
 
 
 if __name__ == "__main__":

@@ -102,8 +102,7 @@ def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(stock_fmu) -> N
 
     with zipfile.ZipFile(stock_fmu) as z:
         assert STOCK in ET.fromstring(z.read("modelDescription.xml")).get("generationTool")
-    fmu = stock_fmu
-    res = _run(fmu, "ordinary_errors")
+    res = _run(stock_fmu, "ordinary_errors")
     assert res["soc0_after"] == 0.8 and res["steps_after"] == 0 and res["finite"]
     assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
 

@@ -100,9 +100,11 @@ def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
     None otherwise."""
     logged = [(r.meta.sample_time_s, r.name) for r in records
               if math.isfinite(r.meta.sample_time_s)]
-    if not logged or min(logged)[0] * FAST_LOG_RATIO > sample_time_s:
+    if not logged:
         return None
     fastest, name = min(logged)
+    if fastest * FAST_LOG_RATIO > sample_time_s:
+        return None
     return (f"note: {name} is logged every {fastest:.3g} s (median), faster than the model's "
             f"Ts = {sample_time_s:g} s: the model follows the voltage's {sample_time_s:g}-s "
             "means, not every sample; where the voltage at each sample matters, train at the "
