@@ -122,3 +122,24 @@ def refuse_bad_current(inst: Instance, bad: float, capfd) -> tuple[int, str]:
         inst.step(bad)
     assert inst.get("voltage", "soc") == before   # nothing advanced
     return err.value.status, capfd.readouterr().out
+
+
+def valgrind_reports(stderr: str) -> list[str]:
+    """Valgrind's stderr split into its reports (a report ends at a line with only the pid)."""
+    reports, current = [], []
+    for line in stderr.splitlines():
+        body = line.split("== ", 1)[1] if line.startswith("==") and "== " in line else ""
+        if body.strip():
+            current.append(body)
+        elif current:
+            reports.append("\n".join(current))
+            current = []
+    return reports + (["\n".join(current)] if current else [])
+
+
+def fmu_reports(stderr: str) -> list[str]:
+    """Valgrind's reports whose stack passes through an FMU binary or pythonfmu's exit-time
+    finalizePythonInterpreter; glibc's own false positives (dl-load) and valgrind's banner (with
+    the host's command line) are left out."""
+    return [r for r in valgrind_reports(stderr) if "by 0x" in r or "at 0x" in r
+            if "binaries/linux64" in r or "finalizePythonInterpreter" in r]

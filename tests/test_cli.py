@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 from lmncell.cli import main
 from lmncell.evaluation.metrics import pooled, record_metrics
+from lmncell.fmu.pythonfmu_build import native_host_environment
 
 from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
 
@@ -64,6 +65,7 @@ def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
     assert (tmp_path / "plots" / "validity.png").exists()
     fmu = tmp_path / "c.fmu"
     assert main(["build-fmu", str(model), "--out", str(fmu)]) == 0
+    assert ("LD_PRELOAD=" in capsys.readouterr().out) == (native_host_environment() is not None)
     for cycle in ("wltc", "udds", "us06", "hwfet"):
         assert main(["simulate", str(fmu), "--cycle", cycle, "--json",
                      "--plot", str(tmp_path / f"{cycle}.png")]) == 0

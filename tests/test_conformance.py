@@ -4,15 +4,19 @@ fails the test), the model description's InitialUnknowns, the documentation per 
 from __future__ import annotations
 
 import json
+import math
+import os
 import shutil
 import subprocess
 import sys
 import zipfile
 from xml.etree import ElementTree as ET
 
+import numpy as np
 import pytest
 
 from tests.conftest import ROOT
+from tests.fmu_helpers import fmu_reports
 
 ERROR, DISCARD = 3, 2
 
@@ -31,21 +35,7 @@ def _memory_errors_in_the_fmu(fmu, sequence: str) -> list[str]:
                            "tests.conformance_sequences", str(fmu), sequence], cwd=ROOT,
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, f"the host died ({proc.returncode}): {proc.stderr[-2000:]}"
-    return [r for r in _valgrind_reports(proc.stderr) if "binaries/linux64" in r or
-            "finalizePythonInterpreter" in r]
-
-
-def _valgrind_reports(stderr: str) -> list[str]:
-    """Valgrind's stderr split into its reports (a report ends at a line with only the pid)."""
-    reports, current = [], []
-    for line in stderr.splitlines():
-        body = line.split("== ", 1)[1] if line.startswith("==") and "== " in line else ""
-        if body.strip():
-            current.append(body)
-        elif current:
-            reports.append("\n".join(current))
-            current = []
-    return reports + (["\n".join(current)] if current else [])
+    return fmu_reports(proc.stderr)
 
 
 @pytest.fixture(params=["pythonfmu", "native"])
@@ -98,10 +88,11 @@ def stock_fmu(quick_model, tmp_path_factory):
 def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(stock_fmu) -> None:
     """No C++ compiler where the FMU is built: a warning, pythonfmu's own binary (named in the
     model description), and the slave's fallback: ordinary errors logged and ignored, no crash."""
-    from lmncell.fmu.pythonfmu_build import STOCK
+    from lmncell.fmu.pythonfmu_build import STOCK, native_host_hint
 
     with zipfile.ZipFile(stock_fmu) as z:
         assert STOCK in ET.fromstring(z.read("modelDescription.xml")).get("generationTool")
+    assert "Python hosts only" in native_host_hint(stock_fmu)
     res = _run(stock_fmu, "ordinary_errors")
     assert res["soc0_after"] == 0.8 and res["steps_after"] == 0 and res["finite"]
     assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
@@ -184,7 +175,8 @@ def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> No
         with zipfile.ZipFile(path) as z:
             return z.read("documentation/index.html").decode()
 
-    assert "needs Python 3 with numpy" in doc(quick_fmu)
+    assert "needs Python 3 with numpy and pythonfmu" in doc(quick_fmu)
+    assert "LD_PRELOAD" in doc(quick_fmu)
     assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
     for path in (quick_fmu, native_fmu):       # the step-size limit both refuse beyond
         assert "more than 10,000,000 model steps" in " ".join(doc(path).split())
@@ -201,3 +193,36 @@ def test_many_random_call_sequences(fmu) -> None:
     res = _run(fmu, "random_calls_long")
     assert res["calls"] > 5000
     assert res["findings"] == []
+
+
+FMUCHECK = os.environ.get("LMNCELL_FMUCHECK") or shutil.which("fmuCheck.linux64")
+
+
+def _fmu_check(fmu, tmp_path, name: str) -> list[list[float]]:
+    """Run the FMI Compliance Checker on an FMU through 600 s of a varying current and ambient
+    temperature (its own input file); returns the output rows after asserting a clean log."""
+    from lmncell.fmu.pythonfmu_build import native_host_environment
+
+    inp = tmp_path / "input.csv"
+    inp.write_text('"time","current","temperature"\n' + "".join(
+        f"{k},{-2.0 * math.sin(k / 30) - 0.5},{25 + 5 * math.sin(k / 200)}\n"
+        for k in range(0, 601, 5)))
+    out, log = tmp_path / f"{name}.csv", tmp_path / f"{name}.log"
+    proc = subprocess.run([FMUCHECK, "-h", "1", "-s", "600", "-i", str(inp), "-o", str(out),
+                           "-e", str(log), str(fmu)], capture_output=True, text=True,
+                          timeout=600, env={**os.environ, **(native_host_environment() or {})})
+    text = log.read_text()
+    assert proc.returncode == 0 and "0 Warning(s)" in text and "\t0 Error(s)" in text, text
+    return [[float(x) for x in line.split(",")] for line in out.read_text().splitlines()[1:]]
+
+
+@pytest.mark.skipif(FMUCHECK is None, reason="the FMI Compliance Checker is not installed "
+                    "(fmuCheck.linux64 on PATH, or LMNCELL_FMUCHECK=its path)")
+def test_the_fmi_compliance_checker_passes_both_fmus_alike(quick_fmu, native_fmu,
+                                                           tmp_path) -> None:
+    """modelica-tools/FMUComplianceChecker (a C host on FMI Library) checks the model description
+    and runs each FMU; the pythonfmu one started with `lmncell build-fmu`'s environment. Both
+    give the same outputs."""
+    py, native = (_fmu_check(f, tmp_path, n) for f, n in ((quick_fmu, "py"), (native_fmu, "c")))
+    assert len(py) == len(native) > 500
+    assert abs(np.array(py) - np.array(native)).max() < 1e-9

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
 import shutil
 import subprocess
@@ -27,6 +28,7 @@ from tests.fmu_helpers import (
     Instance,
     assert_state_round_trips,
     fmpy_run,
+    fmu_reports,
     libcosim_run,
     refuse_bad_current,
 )
@@ -176,7 +178,8 @@ def host(tmp_path_factory) -> Path:
 
 def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: float,
               observer: int = 0, volts: np.ndarray | None = None,
-              prefix: list[str] | None = None) -> subprocess.CompletedProcess:
+              prefix: list[str] | None = None,
+              env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
     d = tmp / "fmu"
     with zipfile.ZipFile(fmu) as z:
         z.extractall(d)
@@ -189,7 +192,8 @@ def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: floa
     cmd = [*(prefix or []), str(host), str(d / "binaries/linux64/LMNCell.so"),
            (d / "resources").as_uri(), guid, str(tmp / "cur.txt"), "1.0", str(soc0),
            str(observer), vfile]
-    return subprocess.run(cmd, capture_output=True, text=True, timeout=600)
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=600,
+                          env={**os.environ, **env} if env else None)
 
 
 def _parse(out: str) -> dict:
@@ -215,6 +219,33 @@ def test_c_host_runs_a_drive_cycle_without_python(host, native_fmu, us06, tmp_pa
     ldd = subprocess.run(["ldd", str(tmp_path / "ldd/binaries/linux64/LMNCell.so")],
                          capture_output=True, text=True).stdout
     assert "python" not in ldd.lower()
+
+
+def test_pythonfmu_fmu_runs_in_a_c_host_started_as_advised(host, quick_fmu, us06,
+                                                          tmp_path) -> None:
+    """pythonfmu's wrapper leaves Python's symbols to the host: a C host without Python cannot
+    load the FMU (a dlopen error, not a crash). Started as `lmncell build-fmu` advises (libpython
+    preloaded, numpy and pythonfmu on PYTHONPATH) it runs a drive cycle as the pipeline does, and
+    valgrind (where installed) finds nothing in the FMU or at the host's exit."""
+    from lmncell.fmu.pythonfmu_build import native_host_environment, native_host_hint
+
+    env = native_host_environment()
+    if env is None:
+        pytest.skip("this Python has no shared libpython to preload")
+    assert native_host_hint(quick_fmu).endswith(" ".join(f"{k}={v}" for k, v in env.items()))
+    model, seg = us06
+    cur = seg.current_a[:600]
+    bare = _run_host(host, quick_fmu, cur, tmp_path, 1.0)
+    assert bare.returncode == 2 and "undefined symbol" in bare.stderr
+    valgrind = ["valgrind", "--num-callers=40"] if shutil.which("valgrind") else []
+    out = _run_host(host, quick_fmu, cur, tmp_path, 1.0, prefix=valgrind, env=env)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = _parse(out.stdout)
+    taken = held_delayed_currents(cur.tolist(), 1.0, model.current_delay_s)
+    sim, _ = simulate_ambient(model, np.array(taken), 25.0, 1.0)
+    assert res["steps"] == len(cur) and res["errors"] == 0 and res["libpython"] == 1
+    assert res["voltage"] == pytest.approx(sim.voltage_v[-1], abs=1e-9)
+    assert fmu_reports(out.stderr) == []
 
 
 def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:

@@ -196,9 +196,11 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
 
         path = build_native_fmu(a.model, a.out)
     else:
-        from lmncell.fmu.pythonfmu_build import build_fmu
+        from lmncell.fmu.pythonfmu_build import build_fmu, native_host_hint
 
         path = build_fmu(a.model, a.out)
+        if hint := native_host_hint(path):
+            print(hint)
     print(f"wrote {path}")
     return 0
 
