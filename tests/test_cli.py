@@ -65,7 +65,8 @@ def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
     assert (tmp_path / "plots" / "validity.png").exists()
     fmu = tmp_path / "c.fmu"
     assert main(["build-fmu", str(model), "--out", str(fmu)]) == 0
-    assert ("LD_PRELOAD=" in capsys.readouterr().out) == (native_host_environment() is not None)
+    assert ("a native (C/C++) host on Linux runs it" in capsys.readouterr().out) == (
+        native_host_environment() is not None)
     for cycle in ("wltc", "udds", "us06", "hwfet"):
         assert main(["simulate", str(fmu), "--cycle", cycle, "--json",
                      "--plot", str(tmp_path / f"{cycle}.png")]) == 0

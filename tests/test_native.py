@@ -221,24 +221,22 @@ def test_c_host_runs_a_drive_cycle_without_python(host, native_fmu, us06, tmp_pa
     assert "python" not in ldd.lower()
 
 
-def test_pythonfmu_fmu_runs_in_a_c_host_started_as_advised(host, quick_fmu, us06,
-                                                          tmp_path) -> None:
-    """pythonfmu's wrapper leaves Python's symbols to the host: a C host without Python cannot
-    load the FMU (a dlopen error, not a crash). Started as `lmncell build-fmu` advises (libpython
-    preloaded, numpy and pythonfmu on PYTHONPATH) it runs a drive cycle as the pipeline does, and
-    valgrind (where installed) finds nothing in the FMU or at the host's exit."""
+def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None:
+    """pythonfmu's wrapper leaves Python's symbols to the host; the FMU's entry library loads the
+    building Python into a C host without one, so the FMU runs a drive cycle there as the
+    pipeline does, and valgrind (where installed) finds nothing in the FMU or at the host's
+    exit. With no Python to load, fmi2Instantiate logs what to set and returns NULL."""
     from lmncell.fmu.pythonfmu_build import native_host_environment, native_host_hint
 
     env = native_host_environment()
     if env is None:
-        pytest.skip("this Python has no shared libpython to preload")
-    assert native_host_hint(quick_fmu).endswith(" ".join(f"{k}={v}" for k, v in env.items()))
+        pytest.skip("this Python has no shared libpython for a C host to load")
+    assert env["LD_PRELOAD"] in native_host_hint(quick_fmu)
     model, seg = us06
     cur = seg.current_a[:600]
-    bare = _run_host(host, quick_fmu, cur, tmp_path, 1.0)
-    assert bare.returncode == 2 and "undefined symbol" in bare.stderr
     valgrind = ["valgrind", "--num-callers=40"] if shutil.which("valgrind") else []
-    out = _run_host(host, quick_fmu, cur, tmp_path, 1.0, prefix=valgrind, env=env)
+    out = _run_host(host, quick_fmu, cur, tmp_path, 1.0, prefix=valgrind,
+                    env={"PYTHONPATH": "", "LD_PRELOAD": ""})
     assert out.returncode == 0, out.stderr[-2000:]
     res = _parse(out.stdout)
     taken = held_delayed_currents(cur.tolist(), 1.0, model.current_delay_s)
@@ -246,6 +244,11 @@ def test_pythonfmu_fmu_runs_in_a_c_host_started_as_advised(host, quick_fmu, us06
     assert res["steps"] == len(cur) and res["errors"] == 0 and res["libpython"] == 1
     assert res["voltage"] == pytest.approx(sim.voltage_v[-1], abs=1e-9)
     assert fmu_reports(out.stderr) == []
+    missing = _run_host(host, quick_fmu, cur, tmp_path, 1.0,
+                        env={"LMNCELL_LIBPYTHON": str(tmp_path / "libpython3.so")})
+    assert missing.returncode == 2 and "instantiate failed" in missing.stderr
+    assert re.search(r"LOG \[host\] 3 \w+: LMNCELL_LIBPYTHON=\S+ cannot be loaded.*native FMU",
+                     missing.stdout)
 
 
 def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:
@@ -268,8 +271,11 @@ def test_native_loads_in_libcosim(native_fmu) -> None:
                                                               abs=1e-12)
 
 
-def test_native_runs_in_the_ecos_host(native_fmu, quick_model, tmp_path) -> None:
-    """DNV's `ecos` command-line host (from the ecospy wheel; needs Debian's libtbb12)."""
+@pytest.mark.parametrize("flavour", ["native", "pythonfmu"])
+def test_both_fmus_run_in_the_ecos_host(flavour, request, quick_model, tmp_path) -> None:
+    """DNV's `ecos` command-line host (from the ecospy wheel; needs Debian's libtbb12), a C++
+    host without Python: the pythonfmu FMU's entry library loads one."""
+    fmu = request.getfixturevalue("native_fmu" if flavour == "native" else "quick_fmu")
     ecospy = import_or_skip("ecospy", "ecospy cannot be loaded (needs Debian libtbb12)")
     # pip may install the wheel's binaries without the executable bit: run a private copy
     bins = tmp_path / "ecos_bin"
@@ -280,11 +286,11 @@ def test_native_runs_in_the_ecos_host(native_fmu, quick_model, tmp_path) -> None
     if probe.returncode != 0:
         pytest.skip(f"the ecos host cannot start here (Debian's libtbb12 missing?): "
                     f"{probe.stderr.strip()[:200]}")
-    out = subprocess.run([str(exe), "simulate", "--path", str(native_fmu), "--stopTime", "30",
+    out = subprocess.run([str(exe), "simulate", "--path", str(fmu), "--stopTime", "30",
                           "--stepSize", "1", "-l", "err"], cwd=tmp_path, capture_output=True,
                          text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    rows = (tmp_path / f"{native_fmu.stem}.csv").read_text().splitlines()
+    rows = (tmp_path / f"{fmu.stem}.csv").read_text().splitlines()
     head = [h.strip() for h in rows[0].split(",")]
     last = [float(x) for x in rows[-1].split(",")]
     volt = last[head.index("instance::voltage[REAL]")]

@@ -151,6 +151,23 @@ public:
                 handle_py_exception("[ctor] PyObject_GetAttrString", gilState);
             }
             int success = PyList_Insert(sys_path, 0, PyUnicode_FromString(resourceLocation().c_str()));
+#ifdef LMNCELL_SITE_PATHS
+            // LMNCell: an interpreter this wrapper started (a host without Python) knows only its
+            // own installation; append the building Python's site directories (numpy, pythonfmu)
+            if (success == 0 && pythonfmu::lmncellOwnsInterpreter) {
+                std::string paths = LMNCELL_SITE_PATHS;
+                for (std::size_t a = 0; success == 0 && a <= paths.size();) {
+                    std::size_t b = paths.find(':', a);
+                    if (b == std::string::npos) b = paths.size();
+                    if (b > a) {
+                        PyObject* dir = PyUnicode_FromString(paths.substr(a, b - a).c_str());
+                        success = dir ? PyList_Append(sys_path, dir) : -1;
+                        Py_XDECREF(dir);
+                    }
+                    a = b + 1;
+                }
+            }
+#endif
 
             Py_DECREF(sys_path);
             if (success != 0) {

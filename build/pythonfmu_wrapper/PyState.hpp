@@ -11,6 +11,9 @@
 
 namespace pythonfmu
 {
+    // LMNCell: true once this wrapper has started the interpreter itself (a host without Python)
+    inline bool lmncellOwnsInterpreter = false;
+
     class PyState : public IPyState
     {
     public:
@@ -49,6 +52,7 @@ namespace pythonfmu
                 auto const justInitialized = !Py_IsInitialized();
                 if (justInitialized) {
                     Py_Initialize();
+                    lmncellOwnsInterpreter = true;
 #if PY_VERSION_HEX < 0x03070000
                     PyEval_InitThreads();
 #endif
