@@ -244,6 +244,11 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     assert res["steps"] == len(cur) and res["errors"] == 0 and res["libpython"] == 1
     assert res["voltage"] == pytest.approx(sim.voltage_v[-1], abs=1e-9)
     assert fmu_reports(out.stderr) == []
+    # a host that maps libpython for itself (RTLD_LOCAL): that one is used, no other is loaded
+    private = _run_host(host, quick_fmu, cur[:60], tmp_path, 1.0,
+                        env={"HOST_PRIVATE_LIB": env["LD_PRELOAD"],
+                             "LMNCELL_LIBPYTHON": str(tmp_path / "libpython3.so")})
+    assert _parse(private.stdout)["steps"] == 60, private.stderr[-2000:]
     missing = _run_host(host, quick_fmu, cur, tmp_path, 1.0,
                         env={"LMNCELL_LIBPYTHON": str(tmp_path / "libpython3.so")})
     assert missing.returncode == 2 and "instantiate failed" in missing.stderr

@@ -1,7 +1,9 @@
 /* A minimal native FMI 2.0 co-simulation host for the tests: dlopen the FMU binary, run a
  * drive cycle read from a text file (one current in A per line, held for one step of h s),
  * print the final voltage and SoC, and whether libpython is mapped into this process.
- * Usage: host BINARY.so RESOURCE_URI GUID CURRENTS.txt STEP_S SOC0 OBSERVER VOLTAGES.txt|- */
+ * Usage: host BINARY.so RESOURCE_URI GUID CURRENTS.txt STEP_S SOC0 OBSERVER VOLTAGES.txt|-
+ * With HOST_PRIVATE_LIB=path set it first maps that library RTLD_LOCAL (as a host that embeds
+ * Python for itself). */
 #define _POSIX_C_SOURCE 199309L
 #include <dlfcn.h>
 #include <stdarg.h>
@@ -46,6 +48,12 @@ int main(int argc, char **argv) {
     FILE *fc, *fv = NULL;
     fmi2Component c;
     if (argc < 9) { fprintf(stderr, "usage: see source\n"); return 2; }
+    if (getenv("HOST_PRIVATE_LIB")) {   /* a library the host maps for itself, not global */
+        if (!dlopen(getenv("HOST_PRIVATE_LIB"), RTLD_NOW | RTLD_LOCAL)) {
+            fprintf(stderr, "dlopen: %s\n", dlerror());
+            return 2;
+        }
+    }
     lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
     if (!lib) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 2; }
     LOAD(Instantiate) LOAD(SetupExperiment) LOAD(EnterInitializationMode)
