@@ -276,11 +276,11 @@ def _rewrite_members(fmu: Path, members: dict[str, bytes]) -> None:
 
 
 def native_host_environment() -> dict[str, str] | None:
-    """The environment under which a native (C/C++) host on Linux can load this Python's
-    pythonfmu FMU: {"LD_PRELOAD": its shared libpython, "PYTHONPATH": the directories holding
-    numpy and pythonfmu}; None where this Python has no shared library (a static build) or
-    this is not Linux. The wrapper leaves Python's symbols to the host process (pythonfmu's
-    choice since 0.7), so a host without Python fails to load it."""
+    """This Python's shared library and the directories holding numpy and pythonfmu, as the
+    environment {"LD_PRELOAD": ..., "PYTHONPATH": ...} under which a native (C/C++) host on
+    Linux runs a pythonfmu FMU (pythonfmu's wrapper leaves Python's symbols to the host). The
+    entry library of LMNCell's pythonfmu FMU has both built in. None where this Python has no
+    shared library (a static build) or this is not Linux."""
     import numpy
     import pythonfmu
 
