@@ -45,7 +45,7 @@
 static struct { FMI2_FUNCTIONS(FIELD) } inner;
 static pthread_once_t load_once = PTHREAD_ONCE_INIT;
 static int loaded;
-static char why[2048];
+static char why[8192];
 
 static int find_mapped_libpython(struct dl_phdr_info *info, size_t size, void *data) {
     const char *base = strrchr(info->dlpi_name, '/');
@@ -153,25 +153,16 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                  stopTime);
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-    GUARD(c);
-    return inner.EnterInitializationMode(c);
-}
-
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    GUARD(c);
-    return inner.ExitInitializationMode(c);
-}
-
-fmi2Status fmi2Terminate(fmi2Component c) {
-    GUARD(c);
-    return inner.Terminate(c);
-}
-
-fmi2Status fmi2Reset(fmi2Component c) {
-    GUARD(c);
-    return inner.Reset(c);
-}
+#define FORWARD(name)                                                                        \
+    fmi2Status fmi2##name(fmi2Component c) {                                                 \
+        GUARD(c);                                                                            \
+        return inner.name(c);                                                                \
+    }
+FORWARD(EnterInitializationMode)
+FORWARD(ExitInitializationMode)
+FORWARD(Terminate)
+FORWARD(Reset)
+FORWARD(CancelStep)
 
 #define GET_SET(Kind, Type)                                                                  \
     fmi2Status fmi2Get##Kind(fmi2Component c, const fmi2ValueReference vr[], size_t n,      \
@@ -246,11 +237,6 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     GUARD(c);
     return inner.DoStep(c, t, h, noSetPrior);
-}
-
-fmi2Status fmi2CancelStep(fmi2Component c) {
-    GUARD(c);
-    return inner.CancelStep(c);
 }
 
 #define STATUS(Kind, Type)                                                                   \
