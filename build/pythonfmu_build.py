@@ -43,7 +43,8 @@ PATCHED, STOCK = "LMNCell's build of the PythonFMU 0.7.0 wrapper", "PythonFMU 0.
 
 
 class WrapperBuildError(RuntimeError):
-    """The patched wrapper cannot be compiled here (no C++ compiler or Python headers)."""
+    """The patched wrapper cannot be compiled here (no C or C++ compiler, or no Python
+    headers)."""
 
 
 def compile_wrapper(guid: str, out: Path, model_identifier: str = "LMNCell") -> list[Path]:
@@ -257,20 +258,13 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
 
 
 def _rewrite_members(fmu: Path, members: dict[str, bytes]) -> None:
-    """Replace the contents of the named zip members (same names, same order); members the
-    FMU does not have yet are added after the last one of their folder."""
+    """Replace the contents of the named zip members (same names, same order) and add, at the
+    end, those the FMU does not have yet."""
     tmp = fmu.with_suffix(".tmp")
     with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
-        items = zin.infolist()
-        new = [n for n in members if n not in {i.filename for i in items}]
-        for k, item in enumerate(items):
+        for item in zin.infolist():
             zout.writestr(item, members.get(item.filename, zin.read(item.filename)))
-            folder = item.filename.rpartition("/")[0]
-            if k + 1 == len(items) or items[k + 1].filename.rpartition("/")[0] != folder:
-                for name in [n for n in new if n.rpartition("/")[0] == folder]:
-                    zout.writestr(name, members[name])
-                    new.remove(name)
-        for name in new:
+        for name in sorted(members.keys() - set(zin.namelist())):
             zout.writestr(name, members[name])
     tmp.replace(fmu)
 
@@ -295,16 +289,17 @@ def native_host_environment() -> dict[str, str] | None:
 
 def native_host_hint(fmu: str | Path) -> str:
     """One line for the user of a pythonfmu FMU built here: what a native (C/C++) host on Linux
-    needs to run it ('' where this Python has no shared library to name)."""
+    needs to run it ('' for LMNCell's wrapper where this Python has no shared library to
+    name)."""
     with zipfile.ZipFile(fmu) as z:
         tool = ET.fromstring(z.read("modelDescription.xml")).get("generationTool", "")
+    if PATCHED not in tool:
+        return (f"it carries {STOCK}, which needs the host's Python and frees memory twice as a "
+                "native host exits: use it in Python hosts only (or build it where gcc and g++ "
+                "are installed)")
     env = native_host_environment()
     if env is None:
         return ""
-    if PATCHED not in tool:
-        return (f"it carries {STOCK}, which needs the host's Python and frees memory twice as a "
-                "native host exits: use it in Python hosts only (or build it where g++ is "
-                "installed)")
     return (f"a native (C/C++) host on Linux runs it as is on this machine (it loads "
             f"{env['LD_PRELOAD']} and finds numpy and pythonfmu in {env['PYTHONPATH']}); "
             "elsewhere set LMNCELL_LIBPYTHON to a libpython3.x.so (3.8 or later) and PYTHONPATH "
