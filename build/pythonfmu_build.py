@@ -80,6 +80,7 @@ def compile_wrapper(guid: str, out: Path, model_identifier: str = "LMNCell") -> 
     _compile([cc, "-std=c99", "-O2", "-fPIC", "-shared", f"-I{fmi}",
               f'-DLMNCELL_LIBPYTHON_PATH="{env.get("LD_PRELOAD", "")}"',
               f'-DLMNCELL_LIBPYTHON_SONAME="{sysconfig.get_config_var("INSTSONAME") or ""}"',
+              f'-DLMNCELL_PYTHON_HOME="{python_home() if env else ""}"',
               f'-DLMNCELL_INNER="{wrapper.name}"', str(WRAPPER_DIR / "shim.c"), "-o", str(entry),
               "-ldl", "-lpthread"])
     return [entry, wrapper]
@@ -285,6 +286,12 @@ def native_host_environment() -> dict[str, str] | None:
     paths = dict.fromkeys(str(Path(m.__file__).resolve().parent.parent)
                           for m in (numpy, pythonfmu))
     return {"LD_PRELOAD": str(Path(libdir) / ldlib), "PYTHONPATH": ":".join(paths)}
+
+
+def python_home() -> str:
+    """This Python's installation as PYTHONHOME reads it: base_prefix[:base_exec_prefix]."""
+    return (sys.base_prefix if sys.base_exec_prefix == sys.base_prefix
+            else f"{sys.base_prefix}:{sys.base_exec_prefix}")
 
 
 def native_host_hint(fmu: str | Path) -> str:

@@ -179,7 +179,8 @@ def host(tmp_path_factory) -> Path:
 def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: float,
               observer: int = 0, volts: np.ndarray | None = None,
               prefix: list[str] | None = None,
-              env: dict[str, str] | None = None) -> subprocess.CompletedProcess:
+              env: dict[str, str] | None = None,
+              resources: str | None = None) -> subprocess.CompletedProcess:
     d = tmp / "fmu"
     with zipfile.ZipFile(fmu) as z:
         z.extractall(d)
@@ -190,7 +191,7 @@ def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: floa
         (tmp / "volt.txt").write_text("\n".join(repr(float(x)) for x in volts))
         vfile = str(tmp / "volt.txt")
     cmd = [*(prefix or []), str(host), str(d / "binaries/linux64/LMNCell.so"),
-           (d / "resources").as_uri(), guid, str(tmp / "cur.txt"), "1.0", str(soc0),
+           resources or (d / "resources").as_uri(), guid, str(tmp / "cur.txt"), "1.0", str(soc0),
            str(observer), vfile]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=600,
                           env={**os.environ, **env} if env else None)
@@ -235,8 +236,9 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     model, seg = us06
     cur = seg.current_a[:600]
     valgrind = ["valgrind", "--num-callers=40"] if shutil.which("valgrind") else []
+    # a desktop PATH whose first python3 (if any) is the system's, not the building Python
     out = _run_host(host, quick_fmu, cur, tmp_path, 1.0, prefix=valgrind,
-                    env={"PYTHONPATH": "", "LD_PRELOAD": ""})
+                    env={"PYTHONPATH": "", "LD_PRELOAD": "", "PATH": "/usr/bin:/bin"})
     assert out.returncode == 0, out.stderr[-2000:]
     res = _parse(out.stdout)
     taken = held_delayed_currents(cur.tolist(), 1.0, model.current_delay_s)
@@ -254,6 +256,11 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     assert missing.returncode == 2 and "instantiate failed" in missing.stderr
     assert re.search(r"LOG \[host\] 3 \w+: LMNCELL_LIBPYTHON=\S+ cannot be loaded.*native FMU",
                      missing.stdout)
+    # a message with '%' in it (here the resource path) reaches the host's logger as text
+    odd = _run_host(host, quick_fmu, cur, tmp_path, 1.0, resources="file:///nowhere%s%s%s%n/res")
+    assert odd.returncode == 2
+    assert "LOG [host] 4 logStatusFatal: [ctor] no slave class found in the resources folder " \
+           "'/nowhere%s%s%s%n/res'" in odd.stdout
 
 
 def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:

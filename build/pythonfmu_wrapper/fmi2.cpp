@@ -26,8 +26,22 @@ protected:
     void debugLog(fmi2Status s, const std::string& category, const std::string& message) override
     {
         if (f_ == nullptr || f_->logger == nullptr) return;   // LMNCell: no logger, no call
-        f_->logger(f_->componentEnvironment, instanceName_.c_str(),
-            s, category.empty() ? nullptr : category.c_str(), message.c_str());
+        // LMNCell: the message is an argument, never the format (a '%' in it, say from a path or
+        // a Python exception, would be read as a conversion by the host's printf-style logger),
+        // and an empty category becomes the declared logStatus… category of the status
+        f_->logger(f_->componentEnvironment, instanceName_.c_str(), s,
+            category.empty() ? statusCategory(s) : category.c_str(), "%s", message.c_str());
+    }
+
+    static const char* statusCategory(fmi2Status s)
+    {
+        switch (s) {
+            case fmi2Warning: return "logStatusWarning";
+            case fmi2Discard: return "logStatusDiscard";
+            case fmi2Error: return "logStatusError";
+            case fmi2Fatal: return "logStatusFatal";
+            default: return "logAll";
+        }
     }
 
 private:
@@ -87,7 +101,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName,
     const auto refuse = [&](const std::string& why) -> fmi2Component {
         if (functions != nullptr && functions->logger != nullptr) {
             functions->logger(functions->componentEnvironment,
-                instanceName ? instanceName : "", fmi2Error, "error", "%s", why.c_str());
+                instanceName ? instanceName : "", fmi2Error, "logStatusError", "%s", why.c_str());
         }
         return nullptr;
     };

@@ -7,8 +7,9 @@
  * next to it as <id>_python.so, and forwards every FMI call to it:
  *   - a Python host (fmpy, libcosimpy, ...) already has one: nothing is loaded;
  *   - a libpython mapped but not global (a host that embeds Python privately) is made global;
- *   - otherwise $LMNCELL_LIBPYTHON if set (then only it), else the building Python's library
- *     (LMNCELL_LIBPYTHON_PATH), else its soname (LMNCELL_LIBPYTHON_SONAME) on the default search
+ *   - otherwise $LMNCELL_LIBPYTHON if set (then only it; $PYTHONHOME as that Python needs),
+ *     else the building Python's library (LMNCELL_LIBPYTHON_PATH, told its home
+ *     LMNCELL_PYTHON_HOME), else its soname (LMNCELL_LIBPYTHON_SONAME) on the default search
  *     path, loaded RTLD_GLOBAL.
  * Where none can be loaded, fmi2Instantiate logs why (with what to do) and returns NULL.
  * fmi2GetVersion and fmi2GetTypesPlatform answer without Python. */
@@ -19,6 +20,7 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <wchar.h>
 
 #include "fmi2Functions.h"
 
@@ -28,6 +30,11 @@
 #ifndef LMNCELL_LIBPYTHON_SONAME
 #define LMNCELL_LIBPYTHON_SONAME ""
 #endif
+#ifndef LMNCELL_PYTHON_HOME /* the building Python's sys.base_prefix[:base_exec_prefix] */
+#define LMNCELL_PYTHON_HOME ""
+#endif
+#define WIDE_(s) L##s
+#define WIDE(s) WIDE_(s)
 #ifndef LMNCELL_INNER
 #define LMNCELL_INNER "LMNCell_python.so"
 #endif
@@ -58,6 +65,15 @@ static int find_mapped_libpython(struct dl_phdr_info *info, size_t size, void *d
     return 0;
 }
 
+/* The building Python's library, loaded here: tell it its home, which it would otherwise
+ * derive from the first python3 on the host's PATH (perhaps another installation, whose standard
+ * library then does not match: "No module named '_struct'"). $PYTHONHOME, where set, wins. */
+static void set_home(void *lib) {
+    static const wchar_t home[] = WIDE(LMNCELL_PYTHON_HOME);
+    void (*set)(const wchar_t *) = (void (*)(const wchar_t *))dlsym(lib, "Py_SetPythonHome");
+    if (home[0] && set && !getenv("PYTHONHOME")) set(home);
+}
+
 /* 1 when the process can resolve Python's symbols globally (loading libpython if needed). */
 static int ensure_python(void) {
     char mapped[1024] = "";
@@ -73,8 +89,12 @@ static int ensure_python(void) {
                              dlerror());
     } else {
         for (int k = 0; k < 2; k++) {
+            void *lib;
             if (!candidates[k][0]) continue;
-            if (dlopen(candidates[k], RTLD_NOW | RTLD_GLOBAL)) return 1;
+            if ((lib = dlopen(candidates[k], RTLD_NOW | RTLD_GLOBAL))) {
+                if (k == 0) set_home(lib);
+                return 1;
+            }
             n += (size_t)snprintf(why + n, n < sizeof why ? sizeof why - n : 0, "%s%s", n ? "; " : "",
                                   dlerror());
         }
