@@ -34,6 +34,7 @@ from tests.fmu_helpers import (
 )
 
 HOST_C = Path(__file__).parent / "native" / "host.c"
+THREADS_C = Path(__file__).parent / "native" / "threads.c"
 
 
 @pytest.fixture(scope="module")
@@ -261,6 +262,36 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     assert odd.returncode == 2
     assert "LOG [host] 4 logStatusFatal: [ctor] no slave class found in the resources folder " \
            "'/nowhere%s%s%s%n/res'" in odd.stdout
+
+
+@pytest.mark.parametrize("flavour", ["native", "pythonfmu"])
+def test_instances_in_parallel_threads_of_a_c_host(flavour, request, quick_model,
+                                                   tmp_path) -> None:
+    """Four instances of one FMU stepped at once from four threads of a C host (FMI 2.0 allows
+    it): each ends where the pipeline does with its own current, no call fails."""
+    from lmncell.fmu.native_build import fmi_headers
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    fmu = request.getfixturevalue("native_fmu" if flavour == "native" else "quick_fmu")
+    exe, d = tmp_path / "threads", tmp_path / "fmu"
+    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(THREADS_C), "-o",
+                    str(exe), "-ldl", "-lpthread"], check=True)
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(d)
+        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    out = subprocess.run([str(exe), str(d / "binaries/linux64/LMNCell.so"),
+                          (d / "resources").as_uri(), guid, "4"], capture_output=True,
+                         text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-2000:]
+    rows = {int(m[1]): (float(m[2]), int(m[3])) for m in re.finditer(
+        r"instance (\d+) voltage (\S+) failed (\d+)", out.stdout)}
+    assert sorted(rows) == [0, 1, 2, 3], out.stdout[-2000:]
+    model = load_model(quick_model)
+    for k, (volt, failed) in rows.items():
+        taken = held_delayed_currents([-1.0 - 0.5 * k] * 2000, 1.0, model.current_delay_s)
+        sim, _ = simulate_ambient(model, np.array(taken), 25.0, 1.0)
+        assert failed == 0 and volt == pytest.approx(sim.voltage_v[-1], abs=1e-9)
 
 
 def test_valgrind_memcheck_100k_steps(host, native_fmu, us06, tmp_path) -> None:
