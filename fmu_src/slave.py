@@ -42,7 +42,8 @@ def keep_module_dict(namespace: dict) -> None:
 # twice and the heap corrupted, so that the host may abort at exit ("corrupted double-linked
 # list"). In a Python host, calling finalizePythonInterpreter at interpreter exit, before the C++
 # runtime's turn, empties the pointer and the later calls find nothing to release. LMNCell's
-# build of the wrapper keeps the pointer on the heap and needs no help; the call is harmless.
+# build keeps the pointer on the heap and needs no help: its binaries/linux64/<id>.so is the
+# entry library (shim.c), which exports no finalizePythonInterpreter, so the call is skipped.
 _EXIT_HOOKED: set[str] = set()
 
 

@@ -87,6 +87,12 @@ def native_fmu(quick_model, tmp_path_factory) -> Path:
     return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
 
 
+@pytest.fixture(params=["pythonfmu", "native"])
+def fmu(request) -> Path:
+    """Each FMU flavour of the quick model in turn (only the one in use is built)."""
+    return request.getfixturevalue("quick_fmu" if request.param == "pythonfmu" else "native_fmu")
+
+
 @pytest.fixture(scope="session")
 def fast_depletion_model(tmp_path_factory) -> Path:
     """A small LMN with the second, fast depletion regressor d2(k) (τ2 = 5 s), trained on the

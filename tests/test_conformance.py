@@ -38,11 +38,6 @@ def _memory_errors_in_the_fmu(fmu, sequence: str) -> list[str]:
     return fmu_reports(proc.stderr)
 
 
-@pytest.fixture(params=["pythonfmu", "native"])
-def fmu(request, quick_fmu, native_fmu):
-    return quick_fmu if request.param == "pythonfmu" else native_fmu
-
-
 def test_outputs_in_initialization_mode_are_the_initial_outputs(fmu) -> None:
     res = _run(fmu, "init_mode_outputs")
     assert res["before"] == pytest.approx(res["after"], abs=1e-12)

@@ -297,10 +297,10 @@ def test_between_model_steps_the_voltage_follows_the_latest_input(quick_model) -
     taken on a copy as if the latest current had been held over all of it (the preview), so it
     follows the current now, not the mean since the step began; the committed steps are those
     of whole-Ts steps with the mean input, to rounding. With a current delay, a step shorter
-    than the delay previews the open delayed window's mean. Driven as fmpy drives a 10 Hz record (each sample held
-    until the next) and scored against the raw samples of the unseen US06 record, the preview
-    cuts the error of holding the last model step to a third, and beats a preview with the
-    mean current so far (the rule before)."""
+    than the delay previews the open delayed window's mean. Driven as fmpy drives a 10 Hz
+    record (each sample held until the next) and scored against the raw samples of the unseen
+    US06 record, the preview cuts the error of holding the last model step to a third, and
+    beats a preview with the mean current so far (the rule before)."""
     from lmncell.runtime.cosim import CellCosim, Parameters
 
     model = load_model(quick_model)

@@ -165,16 +165,32 @@ def test_many_instances_are_independent(native_fmu) -> None:
         shutil.rmtree(d, ignore_errors=True)
 
 
-@pytest.fixture(scope="module")
-def host(tmp_path_factory) -> Path:
+def _compile_host(source: Path, exe: Path, *libs: str) -> Path:
+    """A test host from tests/native/ compiled with gcc (skip without it)."""
     from lmncell.fmu.native_build import fmi_headers
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed")
-    exe = tmp_path_factory.mktemp("host") / "host"
-    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(HOST_C), "-o", str(exe),
-                    "-ldl"], check=True)
+    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(source), "-o", str(exe),
+                    "-ldl", *libs], check=True)
     return exe
+
+
+@pytest.fixture(scope="module")
+def host(tmp_path_factory) -> Path:
+    return _compile_host(HOST_C, tmp_path_factory.mktemp("host") / "host")
+
+
+@pytest.fixture(scope="module")
+def threads_host(tmp_path_factory) -> Path:
+    return _compile_host(THREADS_C, tmp_path_factory.mktemp("threads") / "threads", "-lpthread")
+
+
+def _unzip(fmu: Path, d: Path) -> str:
+    """Extract an FMU into d; returns its GUID."""
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(d)
+        return re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
 
 
 def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: float,
@@ -183,9 +199,7 @@ def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: floa
               env: dict[str, str] | None = None,
               resources: str | None = None) -> subprocess.CompletedProcess:
     d = tmp / "fmu"
-    with zipfile.ZipFile(fmu) as z:
-        z.extractall(d)
-        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    guid = _unzip(fmu, d)
     (tmp / "cur.txt").write_text("\n".join(repr(float(x)) for x in currents))
     vfile = "-"
     if volts is not None:
@@ -264,23 +278,13 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
            "'/nowhere%s%s%s%n/res'" in odd.stdout
 
 
-@pytest.mark.parametrize("flavour", ["native", "pythonfmu"])
-def test_instances_in_parallel_threads_of_a_c_host(flavour, request, quick_model,
+def test_instances_in_parallel_threads_of_a_c_host(threads_host, fmu, quick_model,
                                                    tmp_path) -> None:
     """Four instances of one FMU stepped at once from four threads of a C host (FMI 2.0 allows
     it): each ends where the pipeline does with its own current, no call fails."""
-    from lmncell.fmu.native_build import fmi_headers
-
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed")
-    fmu = request.getfixturevalue("native_fmu" if flavour == "native" else "quick_fmu")
-    exe, d = tmp_path / "threads", tmp_path / "fmu"
-    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(THREADS_C), "-o",
-                    str(exe), "-ldl", "-lpthread"], check=True)
-    with zipfile.ZipFile(fmu) as z:
-        z.extractall(d)
-        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
-    out = subprocess.run([str(exe), str(d / "binaries/linux64/LMNCell.so"),
+    d = tmp_path / "fmu"
+    guid = _unzip(fmu, d)
+    out = subprocess.run([str(threads_host), str(d / "binaries/linux64/LMNCell.so"),
                           (d / "resources").as_uri(), guid, "4"], capture_output=True,
                          text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
@@ -314,11 +318,9 @@ def test_native_loads_in_libcosim(native_fmu) -> None:
                                                               abs=1e-12)
 
 
-@pytest.mark.parametrize("flavour", ["native", "pythonfmu"])
-def test_both_fmus_run_in_the_ecos_host(flavour, request, quick_model, tmp_path) -> None:
+def test_both_fmus_run_in_the_ecos_host(fmu, quick_model, tmp_path) -> None:
     """DNV's `ecos` command-line host (from the ecospy wheel; needs Debian's libtbb12), a C++
     host without Python: the pythonfmu FMU's entry library loads one."""
-    fmu = request.getfixturevalue("native_fmu" if flavour == "native" else "quick_fmu")
     ecospy = import_or_skip("ecospy", "ecospy cannot be loaded (needs Debian libtbb12)")
     # pip may install the wheel's binaries without the executable bit: run a private copy
     bins = tmp_path / "ecos_bin"

@@ -6,24 +6,13 @@
  * Python for itself). */
 #define _POSIX_C_SOURCE 199309L
 #include <dlfcn.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "fmi2Functions.h"
-
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status st, fmi2String cat,
-                   fmi2String msg, ...) {
-    va_list ap;
-    (void)env;
-    va_start(ap, msg);
-    printf("LOG [%s] %d %s: ", name, (int)st, cat);
-    vprintf(msg, ap);
-    printf("\n");
-    va_end(ap);
-}
+#include "test_logger.h"
 
 #define LOAD(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)dlsym(lib, "fmi2" #name); \
     if (!name) { fprintf(stderr, "missing fmi2" #name "\n"); return 2; }

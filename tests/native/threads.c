@@ -6,27 +6,16 @@
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <pthread.h>
-#include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
 
 #include "fmi2Functions.h"
+#include "test_logger.h"
 
 #define STEPS 2000
 
 static void *lib;
 static const char *resources, *guid;
-
-static void logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status st, fmi2String cat,
-                   fmi2String msg, ...) {
-    va_list ap;
-    (void)env;
-    va_start(ap, msg);
-    printf("LOG [%s] %d %s: ", name, (int)st, cat);
-    vprintf(msg, ap);
-    printf("\n");
-    va_end(ap);
-}
 
 #define LOAD(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)dlsym(lib, "fmi2" #name)
 
