@@ -105,8 +105,10 @@ def _dimension_defines(m: LmnModel, n_slots: int) -> list[str]:
 
 
 def _temperature_defines(m: LmnModel) -> list[str]:
-    """Hysteresis, the Arrhenius gain, Eτ, temperature terms and the thermal model."""
+    """Hysteresis, the Arrhenius gain, Eτ, temperature terms (TSRC_IN_DA: which go in dA) and
+    the thermal model."""
     tsrc = m.temperature_source_indices()
+    in_da = [int(m.in_activation_step(c)) for c in m.temperature_term_sources()]
     return [
         f"#define HAS_HYSTERESIS {int(m.hysteresis_gamma is not None)}",
         f"#define HYSTERESIS_GAMMA {float(m.hysteresis_gamma or 0.0)!r}",
@@ -122,7 +124,10 @@ def _temperature_defines(m: LmnModel) -> list[str]:
         f"#define THERMAL_OFFSET_K {(m.thermal.offset_k if m.thermal else 0.0)!r}",
         f"#define TEMPERATURE_STEP_K {TEMPERATURE_STEP_K!r}",
         f"#define NTSRC {len(tsrc)}",
-        f"static const int TSRC_COL[NTSRC + 1] = {{{', '.join(map(str, [*tsrc, 0]))}}};"]
+        f"static const int TSRC_COL[NTSRC + 1] = {{{', '.join(map(str, [*tsrc, 0]))}}};",
+        f"#define HYSTERESIS_ARRHENIUS {int(m.hysteresis_terms == 'arrhenius')}",
+        "static const int TSRC_IN_DA[NTSRC + 1] = {"
+        + ", ".join(map(str, [*in_da, 0])) + "};"]
 
 
 def _regressor_defines(m: LmnModel, state_of: list[int]) -> list[str]:

@@ -1,8 +1,8 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 6 (versions 1 to 5, which have no ``thermal``, no
-``regressors.depletion``, no ``current_delay_s``, no ``regressors.time_constant_activation_k``
-or no ``depletion.fast_tau_s`` key, are read too).
+Format ``lmncell-model``, version 7 (versions 1 to 6, which have no ``thermal``, no
+``regressors.depletion``, no ``current_delay_s``, no ``regressors.time_constant_activation_k``,
+no ``depletion.fast_tau_s`` or no ``regressors.hysteresis_terms`` key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts.
@@ -28,6 +28,12 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   relaxation slower when cold; the file's time constants are those at T_ref),
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
   regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K),
+  ``hysteresis_terms`` (version 7; absent: ``"polynomial"``): the hysteresis regressor's
+  temperature terms are h·dTᵖ (``"polynomial"``) or h·dAᵖ (``"arrhenius"``, needs
+  ``arrhenius_k`` E > 0), dA = (1 − g(T))·T_ref²/(E·10 K) with T_ref in K: the Arrhenius gain
+  in the scale of dT (dA = dT to first order at T_ref), so that the hysteresis voltage H(T)
+  grows towards the cold as resistances do, which a polynomial in dT between a few training
+  temperatures does not follow,
   ``depletion`` (version 3; null or absent: none, or {``tau_s``, ``power``, ``soc_scale``,
   ``soc_min``, ``fast_tau_s``}: the regressor d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC,
   soc_min))^power, LP_τ the filters' low-pass state of time constant τ = ``tau_s``: a
@@ -37,8 +43,8 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   low-pass state LP_τ2(i) of that faster time constant: a collapse that follows the load within
   seconds and recovers as fast at rest).
   The local-model columns are, in order: y(k−1)…y(k−na), i(k)…i(k−nb+1), v_1…v_F, h, d, d2,
-  OCV, SoC, 1, then those of the temperature terms ``<column>*dT^1`` …, (absent ones left
-  out); ``columns`` lists their names.
+  OCV, SoC, 1, then those of the temperature terms ``<column>*dT^1`` … (``h(k)*dA^1`` … for
+  ``"arrhenius"`` hysteresis terms; absent ones left out); ``columns`` lists their names.
 - ``partition``: ``variables`` (subset of soc, current, filtered_current, temperature),
   ``center`` and ``scale`` (z = (raw − center)/scale).
 - ``gating``: ``mode`` ``"none"`` or ``"current_sign"`` (separate charge and discharge trees;
@@ -83,10 +89,11 @@ from .thermal import ThermalModel, is_real_number
 
 FORMAT = "lmncell-model"
 DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
-VERSION = 6
+VERSION = 7
 MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
 MAX_ARRHENIUS_K = 20000.0    # E beyond it (≈ 166 kJ/mol): above any Li-ion activation energy
-READABLE_VERSIONS = (1, 2, 3, 4, 5, 6)
+READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7)
+HYSTERESIS_TERMS = ("polynomial", "arrhenius")   # the basis of h's temperature terms
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -189,6 +196,7 @@ class LmnModel:
     tau_activation_k: float | None = None       # Eτ (K) of the filter time constants
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
+    hysteresis_terms: str = "polynomial"        # h·dTᵖ or h·dAᵖ (HYSTERESIS_TERMS)
     depletion: Depletion | None = None
     thermal: ThermalModel | None = None
     current_delay_s: float = 0.0
@@ -261,8 +269,28 @@ class LmnModel:
         """Names of the local-model regressor columns, in order."""
         cols = self._plain_columns()
         for power in range(1, self.temperature_terms + 1):
-            cols += [f"{c}*dT^{power}" for c in self.temperature_term_sources()]
+            cols += [self.temperature_term_name(c, power) for c in self.temperature_term_sources()]
         return cols
+
+    def temperature_term_name(self, source: str, power: int) -> str:
+        """The column of a temperature term: ``<source>*dT^p``, or ``h(k)*dA^p`` where the
+        hysteresis terms are "arrhenius"."""
+        return f"{source}*{'dA' if self.in_activation_step(source) else 'dT'}^{power}"
+
+    def in_activation_step(self, source: str) -> bool:
+        """Whether a temperature-term source column enters times powers of dA (the hysteresis
+        regressor of "arrhenius" hysteresis terms) rather than of dT."""
+        return source == "h(k)" and self.hysteresis_terms == "arrhenius"
+
+    def activation_step(self, temperature_c: np.ndarray | float,
+                        gain: np.ndarray | float) -> np.ndarray | float:
+        """dA = (1 − g)·T_ref²/(E·TEMPERATURE_STEP_K) (T_ref in K) of "arrhenius" hysteresis
+        terms, from the Arrhenius gain g = g(T) at the temperature (°C) the caller has; dT
+        (temperature_step) for "polynomial" ones."""
+        if self.hysteresis_terms != "arrhenius":
+            return self.temperature_step(temperature_c)
+        t_ref = self.reference_temperature_c + 273.15
+        return (1.0 - gain) * (t_ref * t_ref / (self.arrhenius_k * TEMPERATURE_STEP_K))
 
     def _plain_columns(self) -> list[str]:
         """The columns without the temperature terms."""
@@ -291,7 +319,8 @@ class LmnModel:
 
     def temperature_step(self, temperature_c: np.ndarray | float) -> np.ndarray | float:
         """dT = (T − T_ref)/TEMPERATURE_STEP_K of the temperature terms at T (°C), one
-        temperature or an array of them."""
+        temperature or an array of them (activation_step: that of "arrhenius" hysteresis
+        terms)."""
         return (temperature_c - self.reference_temperature_c) / TEMPERATURE_STEP_K
 
     def temperature_source_indices(self) -> list[int]:
@@ -481,6 +510,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         tau_activation_k=None if tau_activation is None else float(tau_activation),
         reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
         temperature_terms=temperature_terms,
+        hysteresis_terms=_read_hysteresis_terms(reg, w, arrhenius, ver),
         depletion=_depletion(reg.get("depletion"), filters, w, ver),
         thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
         limits=dict(doc.get("limits", {})), cell=dict(cell),
@@ -570,6 +600,22 @@ def _read_temperature(reg: dict, where: str) -> tuple[float | None, float | None
     return arrhenius, tau_activation, temperature_terms
 
 
+def _read_hysteresis_terms(reg: dict, where: str, arrhenius: float | None, version: int
+                           ) -> str:
+    """The basis of the hysteresis regressor's temperature terms (HYSTERESIS_TERMS)."""
+    basis = reg.get("hysteresis_terms", "polynomial")
+    if version < 7 and basis != "polynomial":
+        raise ModelFileError(f"{where}: 'hysteresis_terms' {basis!r} exists from version 7 on; "
+                             f"this file says version {version}")
+    if basis not in HYSTERESIS_TERMS:
+        raise ModelFileError(f"{where}: 'hysteresis_terms' is {basis!r}, expected one of "
+                             f"{', '.join(map(repr, HYSTERESIS_TERMS))}")
+    if basis == "arrhenius" and not (arrhenius is not None and arrhenius > 0):
+        raise ModelFileError(f"{where}: 'hysteresis_terms' is 'arrhenius' but 'arrhenius_k' is "
+                             f"{arrhenius!r}, expected a number of K > 0 (its E)")
+    return str(basis)
+
+
 def _read_partition(doc: dict, source: str) -> tuple[list[str], np.ndarray, np.ndarray]:
     """Partition variables and their normalisation (centre, scale > 0)."""
     part = _get(doc, "partition", source, dict)
@@ -651,6 +697,7 @@ def model_to_dict(model: LmnModel) -> dict:
                        "time_constant_activation_k": model.tau_activation_k,
                        "reference_temperature_c": model.reference_temperature_c,
                        "temperature_terms": model.temperature_terms,
+                       "hysteresis_terms": model.hysteresis_terms,
                        "depletion": (None if model.depletion is None
                                      else model.depletion.to_dict())},
         "partition": {"variables": model.partition_variables,

@@ -367,7 +367,8 @@ class SocObserver:
         gain = exo.gain_at(temperature)
         per_validity = np.dot(validity, self._gradient).tolist()
         out = state_gradient(per_validity, len(self.state_columns), self._gradient_powers, gain,
-                             self.model.temperature_step(temperature))
+                             self.model.temperature_step(temperature),
+                             self.model.activation_step(temperature, gain))
         if self._depletion:    # d = g·LP_τ·factor(SoC): ∂d/∂LP_τ = g·factor
             factor = gain * exo.depletion_factor(soc)
             tail = per_validity[len(per_validity) - len(self._depletion):]
@@ -653,7 +654,7 @@ def state_columns(model: LmnModel) -> list[list[tuple[int, int, bool, float]]]:
     powers = range(model.temperature_terms + 1)
 
     def with_terms(col: str, scaled: bool, sign: float) -> list[tuple[int, int, bool, float]]:
-        names = [col] + [f"{col}*dT^{p}" for p in powers if p > 0]
+        names = [col] + [model.temperature_term_name(col, p) for p in powers if p > 0]
         return [(exo.index(name), p, scaled, sign) for p, name in zip(powers, names,
                                                                        strict=True)
                 if name in exo]
@@ -691,19 +692,22 @@ def local_gradients(matrices: list[tuple[np.ndarray, np.ndarray]], theta_exo: np
 
 
 def state_gradient(per_validity: list[float], n: int, powers: int, gain: float,
-                   dt: float) -> list[float]:
-    """∂u/∂state for the n states of state_columns: Σ_p dTᵖ·(A_p + g·B_p)·∂u/∂x, p < powers,
-    from per_validity = Φ·local_gradients (Φ: the validities; blocks of n: A_0·θᵀΦ, B_0·θᵀΦ, …;
-    θᵀΦ the network's coefficients of the regressors at the operating point), g the
-    temperature gain of the scaled columns."""
+                   dt: float, da: float) -> list[float]:
+    """∂u/∂state for the n states of state_columns: Σ_p (dAᵖ·A_p + dTᵖ·g·B_p)·∂u/∂x,
+    p < powers, from per_validity = Φ·local_gradients (Φ: the validities; blocks of n:
+    A_0·θᵀΦ, B_0·θᵀΦ, …; θᵀΦ the network's coefficients of the regressors at the operating
+    point), g the temperature gain of the scaled (filter) columns; the unscaled columns are the
+    hysteresis regressor's, whose terms go in dA (LmnModel.activation_step; dA = dT for
+    "polynomial" hysteresis terms)."""
     out = [a + gain * b for a, b in zip(per_validity[:n], per_validity[n:2 * n], strict=True)]
-    power = dt
+    power, power_a = dt, da
     for p in range(1, powers):
         start = 2 * n * p
         unscaled, scaled = per_validity[start:start + n], per_validity[start + n:start + 2 * n]
-        out = [o + power * (a + gain * b) for o, a, b in zip(out, unscaled, scaled,
-                                                              strict=True)]
+        out = [o + power_a * a + power * gain * b for o, a, b in zip(out, unscaled, scaled,
+                                                                     strict=True)]
         power *= dt
+        power_a *= da
     return out
 
 

@@ -3,7 +3,8 @@
 Step k covers (t_{k−1}, t_k] with t_k − t_{k−1} = Ts. Its input is the current held over the step
 (A, > 0 charges) and the temperature (°C); its output the terminal voltage (V) for that step.
 Current and filter regressors are multiplied by the Arrhenius gain g(T) where the model has one;
-temperature terms repeat the current, filter, hysteresis and offset columns times dT, dT², ….
+temperature terms repeat the current, filter, hysteresis and offset columns times dT, dT², …
+(the hysteresis column times dA, dA², … where the model's hysteresis terms are "arrhenius").
 Within a step, in this order: SoC(k) = SoC(k−1) + Ts·η(i)·i/(3600·Cn); the zero-DC-gain filters
 v = LP_fast(i) − LP_slow(i) (exact discretisation a = exp(−Ts/τ)); the hysteresis state
 h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ·|i|·Ts/(3600·Cn)) (→ +1 after charge, −1 after
@@ -101,6 +102,8 @@ class ExoStepper:
         self._z_index = tuple(pv.index(name) if name in pv else None for name in
                               ("soc", "current", "filtered_current", "temperature"))
         self._temperature_source_cols = model.temperature_source_indices()
+        self._in_activation = [model.in_activation_step(c)
+                               for c in model.temperature_term_sources()]
         dep = model.depletion
         # the low-pass states of the depletion regressors d (and d2), in column order
         self.depletion_states = [] if dep is None else dep.state_indices(model.filters)
@@ -212,14 +215,17 @@ class ExoStepper:
         return sources
 
     def _temperature_terms(self, x: np.ndarray, col: int, temperature_c: float) -> None:
-        """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources)."""
+        """x[col:] = the source columns times dT, dT², … (model.temperature_term_sources; the
+        hysteresis regressor times dA, dA², … where its terms are "arrhenius")."""
         m = self.model
         dt = m.temperature_step(temperature_c)
-        power = 1.0
+        da = m.activation_step(temperature_c, self.gain_at(temperature_c))
+        power = power_a = 1.0
         for _ in range(m.temperature_terms):
             power *= dt
-            for c in self._temperature_source_cols:
-                x[col] = power * x[c]
+            power_a *= da
+            for c, in_a in zip(self._temperature_source_cols, self._in_activation, strict=True):
+                x[col] = (power_a if in_a else power) * x[c]
                 col += 1
 
     def shift(self, s: ExoState, current_a: float) -> None:

@@ -61,6 +61,8 @@ class VectorCells:
         ocv0 = m.ocv(self.soc) if m.relative_ocv else 0.0
         self.voltage_v = ocv0 + self.r * y0
         self._src = m.temperature_source_indices()
+        self._in_activation = np.array([m.in_activation_step(c)
+                                        for c in m.temperature_term_sources()], dtype=bool)
         self._depletion_states = ([] if m.depletion is None
                                   else m.depletion.state_indices(m.filters))
 
@@ -84,11 +86,13 @@ class VectorCells:
             cols.append(np.ones(n))
         x = np.column_stack(cols)
         if m.temperature_terms:
-            dt = m.temperature_step(t)
-            terms, power = [], np.ones(n)
+            dt, da = m.temperature_step(t), m.activation_step(t, g)
+            terms, power, power_a = [], np.ones(n), np.ones(n)
             for _ in range(m.temperature_terms):
-                power = power * dt
-                terms.append(power[:, None] * x[:, self._src])
+                power, power_a = power * dt, power_a * da
+                factor = np.where(self._in_activation[None, :], power_a[:, None],
+                                  power[:, None])
+                terms.append(factor * x[:, self._src])
             x = np.hstack([x, *terms])
         z = np.zeros((n, len(m.partition_variables)))
         for k, name in enumerate(m.partition_variables):

@@ -898,3 +898,30 @@ def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> 
     assert sampling_note([_logged_every(1.0, "one.csv").slice(0, 1), fast], 1.0) == note
     assert sampling_note([_logged_every(0.5, "half.csv")], 1.0) is not None
     assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02
+
+
+def test_hysteresis_terms_go_in_da_where_the_model_has_what_they_need() -> None:
+    """'auto' puts the hysteresis column's temperature terms in dA where the model has
+    temperature terms, hysteresis and an Arrhenius E; otherwise (and when asked for
+    'polynomial') in dT; 'arrhenius' without E says it has no effect."""
+    from lmncell.identification.construction import hysteresis_terms
+    from lmncell.identification.tree import skeleton
+
+    def base(terms: int, gamma: float | None, e_k: float | None):
+        m = skeleton(load_config(), 2.0, np.array([0.0, 1.0]), np.array([3.0, 3.4]), gamma,
+                     np.zeros(3), np.ones(3), terms)
+        m.arrhenius_k = e_k
+        return m
+
+    said: list[str] = []
+    auto, poly, arr = (load_config(hysteresis_terms=v) for v in ("auto", "polynomial",
+                                                                 "arrhenius"))
+    assert hysteresis_terms(auto, base(2, 30.0, 4000.0), said.append) == "arrhenius"
+    assert hysteresis_terms(poly, base(2, 30.0, 4000.0), said.append) == "polynomial"
+    assert hysteresis_terms(auto, base(0, 30.0, 4000.0), said.append) == "polynomial"
+    assert hysteresis_terms(auto, base(2, None, 4000.0), said.append) == "polynomial"
+    assert not any("no effect" in s for s in said)
+    assert hysteresis_terms(arr, base(2, 30.0, None), said.append) == "polynomial"
+    assert "no effect" in said[-1]
+    with pytest.raises(ConfigError, match="hysteresis_terms"):
+        load_config(hysteresis_terms="cubic")

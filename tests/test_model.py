@@ -22,10 +22,11 @@ from lmncell.runtime.vector import VectorCells
 
 def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
                       temperature_terms: int = 0, output_lags: int = 0,
-                      fast_depletion: bool = False):
+                      fast_depletion: bool = False, hysteresis_terms: str = "polynomial"):
     """A model with a tree of n_splits random oblique splits and random stable local models
     (ARX with output_lags > 0); fast_depletion: with the second depletion regressor d2(k)
-    (τ2 = 5 s)."""
+    (τ2 = 5 s); hysteresis_terms "arrhenius": with E = 3000 K, the hysteresis column's
+    temperature terms in dA."""
     rng = np.random.default_rng(0)
     cfg = load_config(partition=["soc", "current", "temperature"][:d], pre_partition=gating,
                       output_lags=output_lags,
@@ -33,6 +34,8 @@ def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
                       depletion_fast_tau_s=5.0 if fast_depletion else 0)
     base = skeleton(cfg, 2.0, np.linspace(0, 1, 5), np.linspace(3.0, 3.4, 5), 50.0,
                     np.zeros(d), np.ones(d), temperature_terms)
+    if hysteresis_terms == "arrhenius":
+        base.arrhenius_k, base.hysteresis_terms = 3000.0, "arrhenius"
     p = len(base.columns())
     theta = rng.normal(0, 0.01, (len(base.roots), p))
     theta[:, :3] = [0.5, 0.2, 0.1]
@@ -57,10 +60,13 @@ def test_validities_sum_to_one(gating: str) -> None:
     assert np.allclose(Phi.sum(axis=1), 1.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("temperature_terms, fast", [(0, False), (2, False), (0, True)])
-def test_batch_and_step_paths_agree(temperature_terms: int, fast: bool) -> None:
+@pytest.mark.parametrize("temperature_terms, fast, hysteresis_terms", [
+    (0, False, "polynomial"), (2, False, "polynomial"), (0, True, "polynomial"),
+    (2, False, "arrhenius")])
+def test_batch_and_step_paths_agree(temperature_terms: int, fast: bool,
+                                    hysteresis_terms: str) -> None:
     m = random_tree_model("current_sign", temperature_terms=temperature_terms,
-                          fast_depletion=fast)
+                          fast_depletion=fast, hysteresis_terms=hysteresis_terms)
     rng = np.random.default_rng(2)
     cur = np.repeat(rng.normal(0, 2, 300), 5)
     temp = 20.0 + 10.0 * np.sin(np.arange(cur.size) / 200.0)
@@ -151,6 +157,40 @@ def test_temperature_terms_are_the_source_columns_times_powers_of_dt() -> None:
         assert x[exo.index(f"{c}*dT^2")] == pytest.approx(4.0 * x[exo.index(c)])
 
 
+def test_arrhenius_hysteresis_terms_are_h_times_powers_of_da(tmp_path) -> None:
+    """h(k)·dA, h(k)·dA² with dA = (1 − g(T))·T_ref²/(E·10 K); the other sources in dT; the
+    basis survives a round trip and is refused in a version 6 file or without E."""
+    m = random_tree_model(temperature_terms=2, hysteresis_terms="arrhenius")
+    exo = m.columns()[m.output_lags:]
+    assert "h(k)*dA^1" in exo and "h(k)*dA^2" in exo and "h(k)*dT^1" not in exo
+    st = CellStepper(m, 0.5, temperature_c=5.0)
+    st.step(-2.0, 5.0)
+    x = st._x
+    g = math.exp(3000.0 * (1.0 / 278.15 - 1.0 / 298.15))
+    da = (1.0 - g) * 298.15 ** 2 / 30000.0           # −3.15: further out than dT = −2 when cold
+    assert da == pytest.approx(-3.146, abs=1e-3)
+    assert x[exo.index("h(k)*dA^1")] == pytest.approx(da * x[exo.index("h(k)")], rel=1e-12)
+    assert x[exo.index("h(k)*dA^2")] == pytest.approx(da * da * x[exo.index("h(k)")],
+                                                      rel=1e-12)
+    assert x[exo.index("1*dT^2")] == pytest.approx(4.0, rel=1e-12)
+    path = tmp_path / "a.json"
+    save_model(m, path)
+    assert load_model(path).hysteresis_terms == "arrhenius"
+    doc = json.loads(path.read_text())
+    doc["version"] = 6
+    with pytest.raises(ModelFileError, match="'hysteresis_terms' 'arrhenius' exists from "
+                                             "version 7 on"):
+        model_from_dict(doc, "v6")
+    doc["version"] = 7
+    doc["regressors"]["arrhenius_k"] = None
+    with pytest.raises(ModelFileError, match="'arrhenius_k' is None, expected a number of K > 0"):
+        model_from_dict(doc, "v7")
+    doc["regressors"].update(arrhenius_k=3000.0, hysteresis_terms="cubic")
+    with pytest.raises(ModelFileError, match="'hysteresis_terms' is 'cubic', expected one of "
+                                             "'polynomial', 'arrhenius'"):
+        model_from_dict(doc, "v7")
+
+
 def test_model_round_trip_is_bit_identical(tmp_path) -> None:
     m = random_tree_model(temperature_terms=2)
     p1, p2 = tmp_path / "a.json", tmp_path / "b.json"
@@ -165,7 +205,8 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=7), r"version 7; this LMNCell reads versions \[1, 2, 3, 4, 5, 6\]"),
+    (lambda d: d.update(version=8),
+     r"version 8; this LMNCell reads versions \[1, 2, 3, 4, 5, 6, 7\]"),
     (lambda d: d["regressors"].update(time_constant_activation_k=-5.0),
      r"'time_constant_activation_k' is -5.0, expected null or a number of K within 0…10000"),
     (lambda d: d["regressors"].update(time_constant_activation_k="1500"),

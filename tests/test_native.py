@@ -360,9 +360,13 @@ def test_fmpy_compile_rebuilds_from_the_shipped_sources(native_fmu, quick_model,
     assert res["max_dv_v"] <= 1e-9
 
 
-def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
+@pytest.mark.parametrize("hysteresis, hysteresis_terms", [("off", "polynomial"),
+                                                          (30.0, "arrhenius")])
+def test_native_equals_pipeline_with_temperature_terms(tmp_path, hysteresis,
+                                                       hysteresis_terms) -> None:
     # a model with quadratic temperature terms (forced: the shipped records are all near 25 °C;
-    # the cell warms by several kelvin under load, so dT varies along the record)
+    # the cell warms by several kelvin under load, so dT varies along the record); with
+    # hysteresis, its terms in dA, and the EKF's gradient through them
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
     from lmncell.fmu.native_build import build_native_fmu
@@ -373,13 +377,21 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path) -> None:
     path = tmp_path / "t.json"
     train_files([PAN_HWFET, PAN_HPPC], path, capacity_ah=2.85, soc0=1.0,
                 progress=lambda _m: None, max_local_models=2, oe_max_iterations=2,
-                hysteresis="off", temperature_terms=2)
+                hysteresis=hysteresis, temperature_terms=2, temperature_scaling=3000.0,
+                hysteresis_terms=hysteresis_terms)
     model = load_model(path)
     assert model.temperature_terms == 2 and "i(k)*dT^2" in model.columns()
+    assert model.hysteresis_terms == hysteresis_terms
     fmu = build_native_fmu(path, tmp_path / "t.fmu")
     res = compare_fmu_with_pipeline(path, fmu, PAN_US06)
     assert res["steps"] > 4000
     assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+    if hysteresis_terms == "arrhenius":
+        assert "h(k)*dA^2" in model.columns()
+        seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
+        worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 1500, 0.7,
+                                                      temperature_c=12.0)   # dA ≠ 0
+        assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
 
 
 def test_native_with_the_fast_depletion_regressor_equals_the_runtime(

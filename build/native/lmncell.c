@@ -214,6 +214,19 @@ static void exo_update(State *s, double i, double t, double cap) {
     else if (i < -REST_CURRENT_A) s->direction = DISCHARGE;
 }
 
+/* LmnModel.activation_step: dA of "arrhenius" hysteresis terms from the gain g = g(t), else
+   dT (t in degC) */
+static double activation_step(double t, double g) {
+#if HYSTERESIS_ARRHENIUS
+    double t_ref = REF_TEMPERATURE_C + 273.15;
+    (void)t;
+    return (1.0 - g) * (t_ref * t_ref / (ARRHENIUS_K * TEMPERATURE_STEP_K));
+#else
+    (void)g;
+    return (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
+#endif
+}
+
 static void features(const State *s, double i, double t, double *x, double *z,
                      double *dep_source) {
     int col = 0, k;
@@ -251,10 +264,13 @@ static void features(const State *s, double i, double t, double *x, double *z,
 #if TEMPERATURE_TERMS > 0
     {
         double dt = (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K, power = 1.0;
+        double da = activation_step(t, g), power_a = 1.0;
         int n, c;
         for (n = 0; n < TEMPERATURE_TERMS; n++) {
             power *= dt;
-            for (c = 0; c < NTSRC; c++) x[col++] = power * x[TSRC_COL[c]];
+            power_a *= da;
+            for (c = 0; c < NTSRC; c++)
+                x[col++] = (TSRC_IN_DA[c] ? power_a : power) * x[TSRC_COL[c]];
         }
     }
 #endif
@@ -576,6 +592,7 @@ static double output_moved(const State *s, const double *xi, int a, double delta
 static void regressor_gradient(const State *s, const double *phi, double soc, double *hv) {
     double blended[NEXO + 1], g = temperature_gain(s->ob_t);
     double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
+    double da = activation_step(s->ob_t, g);   /* the unscaled columns are h's */
     int a, c, j, m, p;
     for (m = 0; m < NGRADCOL; m++) {       /* only the columns read below */
         c = GRAD_COL[m];
@@ -586,7 +603,7 @@ static void regressor_gradient(const State *s, const double *phi, double soc, do
         double acc = 0.0;
         for (m = 0; m < STATE_NCOL[a]; m++) {
             double power = 1.0;
-            for (p = 0; p < STATE_POW[a][m]; p++) power *= dt;
+            for (p = 0; p < STATE_POW[a][m]; p++) power *= STATE_SCALED[a][m] ? dt : da;
             acc += STATE_SIGN[a][m] * (STATE_SCALED[a][m] ? g : 1.0) * power
                    * blended[STATE_COL[a][m]];
         }

@@ -191,6 +191,22 @@ def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_
     return dataclasses.replace(cfg, max_local_models=m)
 
 
+def hysteresis_terms(cfg: TrainConfig, base: LmnModel, progress: Progress) -> str:
+    """The basis of the hysteresis column's temperature terms (TrainConfig.hysteresis_terms):
+    "arrhenius" where set or "auto" and the model has temperature terms, hysteresis and an
+    Arrhenius E, else "polynomial" (where there is nothing to put in dA: said)."""
+    usable = bool(base.temperature_terms and base.hysteresis_gamma is not None
+                  and base.arrhenius_k)
+    if cfg.hysteresis_terms == "polynomial" or not usable:
+        if cfg.hysteresis_terms == "arrhenius":
+            progress("  hysteresis_terms 'arrhenius' has no effect: the model has no "
+                     "temperature terms, hysteresis or Arrhenius E")
+        return "polynomial"
+    progress("  hysteresis temperature terms in the Arrhenius variable dA "
+             f"(E = {base.arrhenius_k:g} K)")
+    return "arrhenius"
+
+
 @one_blas_thread
 def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
               progress: Progress = _quiet) -> TrainResult:
@@ -210,6 +226,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
     hold_depletion_below_the_data(base, socs, progress)
     base.arrhenius_k = e_k
+    base.hysteresis_terms = hysteresis_terms(cfg, base, progress)
     base.tau_activation_k = choose_time_constant_scaling(cfg, segs, progress)
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "

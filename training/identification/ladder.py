@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from lmncell.runtime.model import LmnModel
+from lmncell.runtime.step import arrhenius_factor
 from scipy.linalg import cho_factor, solve_triangular
 from scipy.optimize import nnls
 
@@ -64,13 +65,17 @@ def coefficient_row(model: LmnModel, source: str, temperature_c: float) -> np.nd
     """Row vector over the model's columns: the coefficient of a plain column at a
     temperature, its temperature terms summed in (row @ θ gives the value)."""
     cols = model.columns()
-    dt = model.temperature_step(temperature_c)
+    if model.in_activation_step(source):
+        gain = arrhenius_factor(temperature_c, model.arrhenius_k, model.reference_temperature_c)
+        step = model.activation_step(temperature_c, gain)
+    else:
+        step = model.temperature_step(temperature_c)
     v = np.zeros(len(cols))
     v[cols.index(source)] = 1.0
     for power in range(1, model.temperature_terms + 1):
-        name = f"{source}*dT^{power}"
+        name = model.temperature_term_name(source, power)
         if name in cols:
-            v[cols.index(name)] = dt ** power
+            v[cols.index(name)] = step ** power
     return v
 
 
