@@ -925,3 +925,25 @@ def test_hysteresis_terms_go_in_da_where_the_model_has_what_they_need() -> None:
     assert "no effect" in said[-1]
     with pytest.raises(ConfigError, match="hysteresis_terms"):
         load_config(hysteresis_terms="cubic")
+
+
+def test_auto_hysteresis_is_kept_from_a_one_per_cent_pre_fit_gain() -> None:
+    """γ is kept where the best candidate cuts the pre-fit RMSE by HYSTERESIS_MIN_GAIN (1 %:
+    the A123 LFP cell of −5…45 °C gains 2.2 %, the Panasonic NCA cell 0.3–0.4 %)."""
+    from types import SimpleNamespace
+
+    from lmncell.identification.prefit import _choose_hysteresis
+
+    def prefit_with(gain: float):
+        def prefit(gamma, _e_k):
+            rmse = 0.02695 if gamma is None else 0.02695 * (1 - gain) * (1 + 1e-3 / gamma)
+            return SimpleNamespace(rmse_v=rmse)
+        return prefit
+
+    auto = load_config()
+    said: list[str] = []
+    assert _choose_hysteresis(auto, 2000.0, prefit_with(0.022), said.append) == 300.0
+    assert _choose_hysteresis(auto, 2000.0, prefit_with(0.004), said.append) is None
+    assert len(said) == 8 and "γ=300" in said[-1]
+    assert _choose_hysteresis(load_config(hysteresis="off"), 2000.0, prefit_with(0.5),
+                              said.append) is None
