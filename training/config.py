@@ -93,7 +93,8 @@ class TrainConfig:
     gain); the default ladder spans relaxation from seconds to about an hour. Same split: a
     sixth filter [3000, 10000] 6.13 / 10.26; six filters 0.01, 2, 10, 50, 250, 1200, 5000 s
     5.80 / 11.62 (the default 5.31 / 8.57).
-    hysteresis: "auto" (chosen by the OCV pre-fit), "off", or a γ value.
+    hysteresis: "auto" (γ chosen by the OCV pre-fit, kept where it lowers the pre-fit's RMSE
+    by 1 % or more: prefit.HYSTERESIS_MIN_GAIN), "off", or a γ value.
     temperature_scaling: "auto" (an Arrhenius gain on the current regressors once the training
     temperatures span more than 5 K; E chosen by the OCV pre-fit, or with temperature terms by
     the root model's free-run error with those terms), "off", or E in K. At one chamber
