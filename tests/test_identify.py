@@ -900,10 +900,10 @@ def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> 
     assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02
 
 
-def test_hysteresis_terms_go_in_da_where_the_model_has_what_they_need() -> None:
-    """'auto' puts the hysteresis column's temperature terms in dA where the model has
-    temperature terms, hysteresis and an Arrhenius E; otherwise (and when asked for
-    'polynomial') in dT; 'arrhenius' without E says it has no effect."""
+def test_hysteresis_terms_go_in_da_where_asked_and_the_model_has_what_they_need() -> None:
+    """'arrhenius' puts the hysteresis column's temperature terms in dA where the model has
+    temperature terms, hysteresis and an Arrhenius E, and otherwise says it has no effect;
+    the default is 'polynomial'."""
     from lmncell.identification.construction import hysteresis_terms
     from lmncell.identification.tree import skeleton
 
@@ -914,17 +914,15 @@ def test_hysteresis_terms_go_in_da_where_the_model_has_what_they_need() -> None:
         return m
 
     said: list[str] = []
-    auto, poly, arr = (load_config(hysteresis_terms=v) for v in ("auto", "polynomial",
-                                                                 "arrhenius"))
-    assert hysteresis_terms(auto, base(2, 30.0, 4000.0), said.append) == "arrhenius"
-    assert hysteresis_terms(poly, base(2, 30.0, 4000.0), said.append) == "polynomial"
-    assert hysteresis_terms(auto, base(0, 30.0, 4000.0), said.append) == "polynomial"
-    assert hysteresis_terms(auto, base(2, None, 4000.0), said.append) == "polynomial"
+    default, arr = load_config(), load_config(hysteresis_terms="arrhenius")
+    assert hysteresis_terms(default, base(2, 30.0, 4000.0), said.append) == "polynomial"
+    assert hysteresis_terms(arr, base(2, 30.0, 4000.0), said.append) == "arrhenius"
     assert not any("no effect" in s for s in said)
-    assert hysteresis_terms(arr, base(2, 30.0, None), said.append) == "polynomial"
-    assert "no effect" in said[-1]
+    for terms, gamma, e_k in ((0, 30.0, 4000.0), (2, None, 4000.0), (2, 30.0, None)):
+        assert hysteresis_terms(arr, base(terms, gamma, e_k), said.append) == "polynomial"
+        assert "no effect" in said[-1]
     with pytest.raises(ConfigError, match="hysteresis_terms"):
-        load_config(hysteresis_terms="cubic")
+        load_config(hysteresis_terms="auto")
 
 
 def test_auto_hysteresis_is_kept_from_a_one_per_cent_pre_fit_gain() -> None:

@@ -193,14 +193,13 @@ def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_
 
 def hysteresis_terms(cfg: TrainConfig, base: LmnModel, progress: Progress) -> str:
     """The basis of the hysteresis column's temperature terms (TrainConfig.hysteresis_terms):
-    "arrhenius" where set or "auto" and the model has temperature terms, hysteresis and an
-    Arrhenius E, else "polynomial" (where there is nothing to put in dA: said)."""
-    usable = bool(base.temperature_terms and base.hysteresis_gamma is not None
-                  and base.arrhenius_k)
-    if cfg.hysteresis_terms == "polynomial" or not usable:
-        if cfg.hysteresis_terms == "arrhenius":
-            progress("  hysteresis_terms 'arrhenius' has no effect: the model has no "
-                     "temperature terms, hysteresis or Arrhenius E")
+    "arrhenius" where set and the model has temperature terms, hysteresis and an Arrhenius E,
+    else "polynomial" (said where "arrhenius" was set)."""
+    if cfg.hysteresis_terms != "arrhenius":
+        return "polynomial"
+    if not (base.temperature_terms and base.hysteresis_gamma is not None and base.arrhenius_k):
+        progress("  hysteresis_terms 'arrhenius' has no effect: the model has no temperature "
+                 "terms, hysteresis or Arrhenius E")
         return "polynomial"
     progress("  hysteresis temperature terms in the Arrhenius variable dA "
              f"(E = {base.arrhenius_k:g} K)")
