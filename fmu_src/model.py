@@ -27,13 +27,14 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   time constant is τ·exp(Eτ·(1/(T+273.15) − 1/(T_ref+273.15))) at the step's temperature T, the
   relaxation slower when cold; the file's time constants are those at T_ref),
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
-  regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K),
+  regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K; the
+  hysteresis regressor as ``hysteresis_terms`` says),
   ``hysteresis_terms`` (version 7; absent: ``"polynomial"``): the hysteresis regressor's
-  temperature terms are h·dTᵖ (``"polynomial"``) or h·dAᵖ (``"arrhenius"``, needs
-  ``arrhenius_k`` E > 0), dA = (1 − g(T))·T_ref²/(E·10 K) with T_ref in K: the Arrhenius gain
-  in the scale of dT (dA = dT to first order at T_ref), so that the hysteresis voltage H(T)
-  grows towards the cold as resistances do, which a polynomial in dT between a few training
-  temperatures does not follow,
+  temperature terms: none (``"constant"``: each local model's hysteresis voltage H is one
+  number), h·dTᵖ (``"polynomial"``) or h·dAᵖ (``"arrhenius"``, needs ``arrhenius_k`` E > 0),
+  dA = (1 − g(T))·T_ref²/(E·10 K) with T_ref in K: the Arrhenius gain in the scale of dT
+  (dA = dT to first order at T_ref), a hysteresis voltage H(T) that grows towards the cold as
+  resistances do,
   ``depletion`` (version 3; null or absent: none, or {``tau_s``, ``power``, ``soc_scale``,
   ``soc_min``, ``fast_tau_s``}: the regressor d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC,
   soc_min))^power, LP_τ the filters' low-pass state of time constant τ = ``tau_s``: a
@@ -93,7 +94,7 @@ VERSION = 7
 MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
 MAX_ARRHENIUS_K = 20000.0    # E beyond it (≈ 166 kJ/mol): above any Li-ion activation energy
 READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7)
-HYSTERESIS_TERMS = ("polynomial", "arrhenius")   # the basis of h's temperature terms
+HYSTERESIS_TERMS = ("constant", "polynomial", "arrhenius")   # h's temperature terms, if any
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
@@ -196,7 +197,7 @@ class LmnModel:
     tau_activation_k: float | None = None       # Eτ (K) of the filter time constants
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
-    hysteresis_terms: str = "polynomial"        # h·dTᵖ or h·dAᵖ (HYSTERESIS_TERMS)
+    hysteresis_terms: str = "polynomial"        # none, h·dTᵖ or h·dAᵖ (HYSTERESIS_TERMS)
     depletion: Depletion | None = None
     thermal: ThermalModel | None = None
     current_delay_s: float = 0.0
@@ -313,9 +314,11 @@ class LmnModel:
         """Columns that also enter multiplied by dT, dT², … up to ``temperature_terms``
         (dT = (T − T_ref)/TEMPERATURE_STEP_K): the current, filter and hysteresis regressors and
         the offset (resistances, time-constant gains and the OCV offset varying smoothly with
-        temperature beyond the Arrhenius gain); not the depletion, OCV and SoC columns."""
-        return [c for c in self._plain_columns()[self.output_lags:]
-                if c not in (*DEPLETION_COLUMNS, "ocv(k)", "soc(k)")]
+        temperature beyond the Arrhenius gain); not the depletion, OCV and SoC columns, nor the
+        hysteresis regressor where its terms are "constant"."""
+        left_out = (*DEPLETION_COLUMNS, "ocv(k)", "soc(k)",
+                    *(("h(k)",) if self.hysteresis_terms == "constant" else ()))
+        return [c for c in self._plain_columns()[self.output_lags:] if c not in left_out]
 
     def temperature_step(self, temperature_c: np.ndarray | float) -> np.ndarray | float:
         """dT = (T − T_ref)/TEMPERATURE_STEP_K of the temperature terms at T (°C), one

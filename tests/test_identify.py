@@ -900,10 +900,10 @@ def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> 
     assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02
 
 
-def test_hysteresis_terms_go_in_da_where_asked_and_the_model_has_what_they_need() -> None:
-    """'arrhenius' puts the hysteresis column's temperature terms in dA where the model has
-    temperature terms, hysteresis and an Arrhenius E, and otherwise says it has no effect;
-    the default is 'polynomial'."""
+def test_hysteresis_terms_apply_where_the_model_has_temperature_terms_and_hysteresis() -> None:
+    """The setting (default "constant") where the model has temperature terms and hysteresis;
+    "arrhenius" needs an Arrhenius E too and otherwise says it has no effect; without
+    temperature terms or hysteresis the file's default "polynomial", which adds nothing."""
     from lmncell.identification.construction import hysteresis_terms
     from lmncell.identification.tree import skeleton
 
@@ -915,12 +915,16 @@ def test_hysteresis_terms_go_in_da_where_asked_and_the_model_has_what_they_need(
 
     said: list[str] = []
     default, arr = load_config(), load_config(hysteresis_terms="arrhenius")
-    assert hysteresis_terms(default, base(2, 30.0, 4000.0), said.append) == "polynomial"
+    assert default.hysteresis_terms == "constant"
+    assert hysteresis_terms(default, base(2, 30.0, 4000.0), said.append) == "constant"
     assert hysteresis_terms(arr, base(2, 30.0, 4000.0), said.append) == "arrhenius"
+    assert hysteresis_terms(load_config(hysteresis_terms="polynomial"), base(2, 30.0, None),
+                            said.append) == "polynomial"
     assert not any("no effect" in s for s in said)
-    for terms, gamma, e_k in ((0, 30.0, 4000.0), (2, None, 4000.0), (2, 30.0, None)):
-        assert hysteresis_terms(arr, base(terms, gamma, e_k), said.append) == "polynomial"
-        assert "no effect" in said[-1]
+    for terms, gamma in ((0, 30.0), (2, None)):
+        assert hysteresis_terms(default, base(terms, gamma, 4000.0), said.append) == "polynomial"
+    assert hysteresis_terms(arr, base(2, 30.0, None), said.append) == "polynomial"
+    assert "no effect" in said[-1]
     with pytest.raises(ConfigError, match="hysteresis_terms"):
         load_config(hysteresis_terms="auto")
 

@@ -35,7 +35,8 @@ def random_tree_model(gating: str = "none", n_splits: int = 5, d: int = 3,
     base = skeleton(cfg, 2.0, np.linspace(0, 1, 5), np.linspace(3.0, 3.4, 5), 50.0,
                     np.zeros(d), np.ones(d), temperature_terms)
     if hysteresis_terms == "arrhenius":
-        base.arrhenius_k, base.hysteresis_terms = 3000.0, "arrhenius"
+        base.arrhenius_k = 3000.0
+    base.hysteresis_terms = hysteresis_terms
     p = len(base.columns())
     theta = rng.normal(0, 0.01, (len(base.roots), p))
     theta[:, :3] = [0.5, 0.2, 0.1]
@@ -62,7 +63,7 @@ def test_validities_sum_to_one(gating: str) -> None:
 
 @pytest.mark.parametrize("temperature_terms, fast, hysteresis_terms", [
     (0, False, "polynomial"), (2, False, "polynomial"), (0, True, "polynomial"),
-    (2, False, "arrhenius")])
+    (2, False, "arrhenius"), (2, False, "constant")])
 def test_batch_and_step_paths_agree(temperature_terms: int, fast: bool,
                                     hysteresis_terms: str) -> None:
     m = random_tree_model("current_sign", temperature_terms=temperature_terms,
@@ -187,8 +188,20 @@ def test_arrhenius_hysteresis_terms_are_h_times_powers_of_da(tmp_path) -> None:
         model_from_dict(doc, "v7")
     doc["regressors"].update(arrhenius_k=3000.0, hysteresis_terms="cubic")
     with pytest.raises(ModelFileError, match="'hysteresis_terms' is 'cubic', expected one of "
-                                             "'polynomial', 'arrhenius'"):
+                                             "'constant', 'polynomial', 'arrhenius'"):
         model_from_dict(doc, "v7")
+
+
+def test_constant_hysteresis_terms_leave_the_hysteresis_column_out_of_the_terms(tmp_path
+                                                                                 ) -> None:
+    m = random_tree_model(temperature_terms=2, hysteresis_terms="constant")
+    assert "h(k)" in m.columns() and "h(k)" not in m.temperature_term_sources()
+    assert not any(c.startswith("h(k)*") for c in m.columns())
+    assert "1*dT^2" in m.columns()
+    path = tmp_path / "c.json"
+    save_model(m, path)
+    again = load_model(path)
+    assert again.hysteresis_terms == "constant" and again.columns() == m.columns()
 
 
 def test_model_round_trip_is_bit_identical(tmp_path) -> None:

@@ -360,8 +360,8 @@ def test_fmpy_compile_rebuilds_from_the_shipped_sources(native_fmu, quick_model,
     assert res["max_dv_v"] <= 1e-9
 
 
-@pytest.mark.parametrize("hysteresis, hysteresis_terms", [("off", "polynomial"),
-                                                          (30.0, "arrhenius")])
+@pytest.mark.parametrize("hysteresis, hysteresis_terms", [
+    ("off", "polynomial"), (30.0, "arrhenius"), (30.0, "constant"), (30.0, "polynomial")])
 def test_native_equals_pipeline_with_temperature_terms(tmp_path, hysteresis,
                                                        hysteresis_terms) -> None:
     # a model with quadratic temperature terms (forced: the shipped records are all near 25 °C;
@@ -386,11 +386,17 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path, hysteresis,
     res = compare_fmu_with_pipeline(path, fmu, PAN_US06)
     assert res["steps"] > 4000
     assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
-    if hysteresis_terms == "arrhenius":
-        assert "h(k)*dA^2" in model.columns()
+    if hysteresis != "off":
+        assert ("h(k)*dA^2" in model.columns()) == (hysteresis_terms == "arrhenius")
         seg = record_to_segments(read_record(PAN_HWFET), 1.0, 1.0, 2.85)[0]
-        worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", 0, 1500, 0.7,
-                                                      temperature_c=12.0)   # dA ≠ 0
+        # at 30 °C, inside the training records' 25.6 … 33 °C (dT, dA ≠ 0 there), from mid
+        # record (this two-model fit drives the EKF to SoC 1 from the full start, where the
+        # round-off of C and numpy grows past 1e-9 in 1500 steps; at 12 °C, far below the
+        # records, it diverged)
+        start = 2000
+        worst_v, worst_s, worst_sd, _ = _observer_gap(model, fmu, seg, 1, "ekf", start, 1500,
+                                                      float(seg.soc_ref[start]) - 0.05,
+                                                      temperature_c=30.0)
         assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
 
 

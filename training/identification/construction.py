@@ -192,18 +192,19 @@ def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_
 
 
 def hysteresis_terms(cfg: TrainConfig, base: LmnModel, progress: Progress) -> str:
-    """The basis of the hysteresis column's temperature terms (TrainConfig.hysteresis_terms):
-    "arrhenius" where set and the model has temperature terms, hysteresis and an Arrhenius E,
-    else "polynomial" (said where "arrhenius" was set)."""
-    if cfg.hysteresis_terms != "arrhenius":
+    """The hysteresis column's temperature terms (TrainConfig.hysteresis_terms) where the model
+    has temperature terms and hysteresis ("arrhenius" also needs an Arrhenius E: without one
+    it is said to have no effect), else "polynomial", the model file's default, which then
+    adds nothing."""
+    if not (base.temperature_terms and base.hysteresis_gamma is not None):
         return "polynomial"
-    if not (base.temperature_terms and base.hysteresis_gamma is not None and base.arrhenius_k):
-        progress("  hysteresis_terms 'arrhenius' has no effect: the model has no temperature "
-                 "terms, hysteresis or Arrhenius E")
+    if cfg.hysteresis_terms == "arrhenius" and not base.arrhenius_k:
+        progress("  hysteresis_terms 'arrhenius' has no effect: the model has no Arrhenius E")
         return "polynomial"
-    progress("  hysteresis temperature terms in the Arrhenius variable dA "
-             f"(E = {base.arrhenius_k:g} K)")
-    return "arrhenius"
+    progress(f"  hysteresis temperature terms: {cfg.hysteresis_terms}"
+             + (f" (in dA, E = {base.arrhenius_k:g} K)" if cfg.hysteresis_terms == "arrhenius"
+                else ""))
+    return cfg.hysteresis_terms
 
 
 @one_blas_thread
@@ -226,6 +227,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     hold_depletion_below_the_data(base, socs, progress)
     base.arrhenius_k = e_k
     base.hysteresis_terms = hysteresis_terms(cfg, base, progress)
+    base.theta = np.zeros((len(base.roots), len(base.columns())))   # the columns it implies
     base.tau_activation_k = choose_time_constant_scaling(cfg, segs, progress)
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "
