@@ -8,7 +8,7 @@ from lmncell.config import ConfigError, load_config
 from lmncell.data.dataset import Segment
 from lmncell.evaluation.interpret import explain_text, ladder_parameters, local_model_table
 from lmncell.identification.construction import train_lmn
-from lmncell.identification.ladder import is_ladder, ladder_for
+from lmncell.identification.ladder import constraint_temperatures_c, is_ladder, ladder_for
 from lmncell.identification.ocvfit import lowpass
 from lmncell.identification.tree import skeleton, wls
 
@@ -149,6 +149,29 @@ def test_ladder_is_positive_at_every_training_temperature_with_temperature_terms
     cfg = load_config(max_local_models=2, hysteresis="off", oe_max_iterations=2)
     model = train_lmn(segs, cfg, cap).model
     assert model.temperature_terms >= 1
+    for t in (-5.0, 5.0, 25.0, 45.0):
+        assert all(r["rc_positive"] for r in local_model_table(model, t)), t
+
+
+@pytest.mark.parametrize("hysteresis_terms", ["constant", "polynomial", "arrhenius"])
+def test_hysteresis_voltage_is_constrained_for_every_basis(hysteresis_terms: str) -> None:
+    """H ≥ 0 is a ladder row for every basis of the hysteresis column's temperature terms: one
+    row where H is one number ("constant"), one per constraint temperature otherwise; and the
+    trained local models keep it."""
+    from tests.conftest import chamber_cell_segments
+
+    segs = chamber_cell_segments(5000, 30.0)
+    cfg = load_config(max_local_models=2, hysteresis=30.0, oe_max_iterations=2,
+                      hysteresis_terms=hysteresis_terms)
+    model = train_lmn(segs, cfg, 2.0).model
+    assert model.temperature_terms >= 1 and model.hysteresis_terms == hysteresis_terms
+    ladder = ladder_for(model, -5.0, 45.0)
+    h_rows = [k for k, name in enumerate(ladder.names) if name.startswith("H")]
+    assert len(h_rows) == (1 if hysteresis_terms == "constant" else
+                           len(constraint_temperatures_c(-5.0, 45.0, model.temperature_terms,
+                                                         25.0)))
+    h_col = model.columns().index("h(k)")
+    assert all(ladder.C[k, h_col] == 1.0 for k in h_rows)
     for t in (-5.0, 5.0, 25.0, 45.0):
         assert all(r["rc_positive"] for r in local_model_table(model, t)), t
 

@@ -148,15 +148,15 @@ class TrainConfig:
     record mV, and SoC RMSE of the observers started at 0.3 for a true 0.6 (EKF / fuzzy / IMM,
     examples/observer_leave_one_out.py, same folds):
     "polynomial" 3.33 / 7.6, 2.17 / 8.4, 2.65 / 19.3, mean 2.72 / 11.77; 3.64 / 3.50 / 3.32 %;
-    "constant" 3.35 / 8.8, 1.97 / 8.4, 2.10 / 19.2, mean 2.47 / 12.12; 3.94 / 3.16 / 2.79 %;
+    "constant" 3.35 / 7.9, 2.02 / 8.4, 2.08 / 19.2, mean 2.49 / 11.85; 3.92 / 3.20 / 2.84 %;
     "arrhenius" 3.75 / 10.0, 1.93 / 8.5, 1.82 / 20.4, mean 2.50 / 12.95; 5.43 / 4.27 / 4.02 %.
     The whole record driven by the current scaled to meet the tester's Ah counters
     (lmncell.data.soc.current_scaled_to_counters; the logged current drifts −0.34 / −0.51 /
-    +1.17 % of capacity on these records): 7.78 / 13.21 / 12.16, 7.17 / 13.75 / 12.00,
+    +1.17 % of capacity on these records): 7.78 / 13.21 / 12.16, 7.36 / 13.75 / 12.00,
     7.44 / 12.53 / 10.58 mV. The model of −5 / 5 / 25 / 45 °C (N05, P05, P25, P45 s1) in
     sample, 20–80 % and whole record mV, EKF / fuzzy / IMM %: "polynomial" 2.30 / 1.90 / 1.66 /
-    1.63, 5.89 / 8.16 / 17.65 / 11.00, 4.52 / 4.94 / 4.51 %; "constant" 2.13 / 1.83 / 1.59 /
-    1.51, 5.22 / 8.46 / 10.17 / 10.23, 3.16 / 3.60 / 3.28 %. Why "arrhenius" was tried: the
+    1.63, 5.89 / 8.16 / 17.65 / 11.00, 4.52 / 4.94 / 4.51 %; "constant" 2.14 / 1.83 / 1.59 /
+    1.51, 5.31 / 8.39 / 10.86 / 10.60, 3.17 / 3.64 / 3.31 %. Why "arrhenius" was tried: the
     voltage at rest after discharge, 20–80 % SoC, lies below the 25 °C OCV by −41.2 / −30.2 /
     −24.6 / −19.0 / −15.8 mV at −15 / −5 / 5 / 25 / 45 °C; left out one at a time, a quadratic
     in dT through the other four misses −5 / 5 / 25 °C by −2.3 / −1.1 / +3.4 mV, a + b·g(T)

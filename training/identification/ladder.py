@@ -174,6 +174,9 @@ def ladder_for(model: LmnModel, t_min_c: float = 25.0, t_max_c: float = 25.0,
         if "h(k)" in sources:
             rows.append(coefficient_row(model, "h(k)", t))
             names.append(f"H{tag}")
+    if "h(k)" in model.columns() and "h(k)" not in sources:   # "constant" hysteresis terms
+        rows.append(coefficient_row(model, "h(k)", model.reference_temperature_c))
+        names.append("H")
     if model.depletion is not None:       # no temperature terms: one row each
         for col, name in zip(model.depletion.columns(), ("R_depletion", "R_depletion_fast"),
                              strict=False):
