@@ -929,9 +929,9 @@ def test_hysteresis_terms_apply_where_the_model_has_temperature_terms_and_hyster
         load_config(hysteresis_terms="auto")
 
 
-def test_auto_hysteresis_is_kept_from_a_one_per_cent_pre_fit_gain() -> None:
-    """γ is kept where the best candidate cuts the pre-fit RMSE by HYSTERESIS_MIN_GAIN (1 %:
-    the A123 LFP cell of −5…45 °C gains 2.2 %, the Panasonic NCA cell 0.3–0.4 %)."""
+def test_auto_hysteresis_is_kept_from_a_three_per_cent_pre_fit_gain() -> None:
+    """γ is kept where the best candidate cuts the pre-fit RMSE by HYSTERESIS_MIN_GAIN (3 %:
+    an NCA fold gained 2.0 % and its held-out record was worse with hysteresis)."""
     from types import SimpleNamespace
 
     from lmncell.identification.prefit import _choose_hysteresis
@@ -944,8 +944,8 @@ def test_auto_hysteresis_is_kept_from_a_one_per_cent_pre_fit_gain() -> None:
 
     auto = load_config()
     said: list[str] = []
-    assert _choose_hysteresis(auto, 2000.0, prefit_with(0.022), said.append) == 300.0
-    assert _choose_hysteresis(auto, 2000.0, prefit_with(0.004), said.append) is None
+    assert _choose_hysteresis(auto, 2000.0, prefit_with(0.044), said.append) == 300.0
+    assert _choose_hysteresis(auto, 2000.0, prefit_with(0.02), said.append) is None
     assert len(said) == 8 and "γ=300" in said[-1]
     assert _choose_hysteresis(load_config(hysteresis="off"), 2000.0, prefit_with(0.5),
                               said.append) is None
