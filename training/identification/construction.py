@@ -30,6 +30,7 @@ from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ladder import Ladder, ladder_for, ladder_keys
 from lmncell.identification.prefit import (
     CHAMBER_SPAN_K,
+    HYSTERESIS_MIN_GAIN,
     _within_record_span,
     choose_arrhenius_with_temperature_terms,
     choose_prefit,
@@ -220,7 +221,9 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
                     np.zeros(d), np.ones(d), n_temp)
     center, scale, socs = partition_normalisation(base, segs)
     masks = validation_masks(segs, cfg)
-    gamma, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs)
+    gamma, trial, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs)
+    if trial is not None:
+        return train_with_and_without_hysteresis(segs, cfg, capacity_ah, trial, progress)
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
@@ -279,8 +282,41 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             1e3 * freerun_rmse(model, segs, design))
         info["refined_train_freerun_rmse_mv"] = finite_or_none(
             1e3 * freerun_rmse(model, segs, design, "fit"))
+    info["final_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error(model, segs,
+                                                                             design))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
+
+
+def _mv(value: float | None) -> str:
+    return "–" if value is None else f"{value:.2f}"
+
+
+def final_error(model: LmnModel, segs: list[Segment], design: Design) -> float:
+    """The model's free-run RMSE (V) over the validation samples, or over the fit samples
+    where there are none (validation "none")."""
+    return freerun_rmse(model, segs, design, "val" if design.w_val.sum() > 0 else "fit")
+
+
+def train_with_and_without_hysteresis(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
+                                      gamma: float, progress: Progress) -> TrainResult:
+    """Where the pre-fit's gain from hysteresis is in doubt (prefit.HYSTERESIS_TRY_GAIN …
+    HYSTERESIS_MIN_GAIN): the network trained with γ and without, the one with the lower
+    final_validation_freerun_rmse_mv kept (the first of equals: without)."""
+    progress(f"  hysteresis γ = {gamma:g} lowers the pre-fit's error by less than "
+             f"{100 * HYSTERESIS_MIN_GAIN:g} %: training with it and without, the lower "
+             "validation error decides")
+    runs = [(g, train_lmn(segs, dataclasses.replace(cfg, hysteresis=h), capacity_ah, progress))
+            for g, h in ((None, "off"), (gamma, gamma))]
+    errors = [r.info["final_validation_freerun_rmse_mv"] for _, r in runs]
+    keep = 1 if errors[1] is not None and (errors[0] is None or errors[1] < errors[0]) else 0
+    kept = runs[keep][1]
+    progress(f"  hysteresis: {'off' if keep == 0 else f'γ = {gamma:g}'} kept (validation "
+             f"{_mv(errors[1])} mV with γ = {gamma:g}, {_mv(errors[0])} mV without)")
+    kept.info["hysteresis_trial"] = {"gamma": gamma, "validation_mv_without": errors[0],
+                                     "validation_mv_with": errors[1]}
+    kept.info["seconds"] = sum(r.info["seconds"] for _, r in runs)
+    return kept
 
 
 STOP_TOLERANCE = 1.02    # M: the fewest local models within 2 % of the best validation error
