@@ -104,6 +104,7 @@ class ExoStepper:
         self._temperature_source_cols = model.temperature_source_indices()
         self._in_activation = [model.in_activation_step(c)
                                for c in model.temperature_term_sources()]
+        self._any_activation = any(self._in_activation)
         dep = model.depletion
         # the low-pass states of the depletion regressors d (and d2), in column order
         self.depletion_states = [] if dep is None else dep.state_indices(model.filters)
@@ -219,7 +220,8 @@ class ExoStepper:
         hysteresis regressor times dA, dA², … where its terms are "arrhenius")."""
         m = self.model
         dt = m.temperature_step(temperature_c)
-        da = m.activation_step(temperature_c, self.gain_at(temperature_c))
+        da = (m.activation_step(temperature_c, self.gain_at(temperature_c))
+              if self._any_activation else dt)
         power = power_a = 1.0
         for _ in range(m.temperature_terms):
             power *= dt

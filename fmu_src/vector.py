@@ -60,9 +60,10 @@ class VectorCells:
         self.lags = np.repeat(y0[:, None], m.output_lags, axis=1)
         ocv0 = m.ocv(self.soc) if m.relative_ocv else 0.0
         self.voltage_v = ocv0 + self.r * y0
-        self._src = m.temperature_source_indices()
+        self._src = np.array(m.temperature_source_indices(), dtype=np.intp)
         self._in_activation = np.array([m.in_activation_step(c)
                                         for c in m.temperature_term_sources()], dtype=bool)
+        self._any_activation = bool(self._in_activation.any())
         self._depletion_states = ([] if m.depletion is None
                                   else m.depletion.state_indices(m.filters))
 
@@ -86,13 +87,16 @@ class VectorCells:
             cols.append(np.ones(n))
         x = np.column_stack(cols)
         if m.temperature_terms:
-            dt, da = m.temperature_step(t), m.activation_step(t, g)
+            dt = m.temperature_step(t)
+            da = m.activation_step(t, g) if self._any_activation else dt
             terms, power, power_a = [], np.ones(n), np.ones(n)
             for _ in range(m.temperature_terms):
                 power, power_a = power * dt, power_a * da
-                factor = np.where(self._in_activation[None, :], power_a[:, None],
-                                  power[:, None])
-                terms.append(factor * x[:, self._src])
+                term = power[:, None] * x[:, self._src]
+                if self._any_activation:      # those columns in dA instead
+                    term[:, self._in_activation] = (power_a[:, None]
+                                                    * x[:, self._src[self._in_activation]])
+                terms.append(term)
             x = np.hstack([x, *terms])
         z = np.zeros((n, len(m.partition_variables)))
         for k, name in enumerate(m.partition_variables):

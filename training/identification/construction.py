@@ -276,26 +276,27 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             "arrhenius_root_freerun_rmse_mv": e_scores,
             "temperature_terms": n_temp,
             "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
+    errors: dict[str, float] = {}
+
+    def final_error(which: str) -> float:
+        """The final model's free-run RMSE (V) over 'val' or 'fit' samples, simulated once."""
+        if which not in errors:
+            errors[which] = freerun_rmse(model, segs, design, which)
+        return errors[which]
+
     if cfg.oe_refinement:
         model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
-        info["refined_validation_freerun_rmse_mv"] = finite_or_none(
-            1e3 * freerun_rmse(model, segs, design))
-        info["refined_train_freerun_rmse_mv"] = finite_or_none(
-            1e3 * freerun_rmse(model, segs, design, "fit"))
-    info["final_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error(model, segs,
-                                                                             design))
+        info["refined_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error("val"))
+        info["refined_train_freerun_rmse_mv"] = finite_or_none(1e3 * final_error("fit"))
+    # over the fit samples where there are no validation samples (validation "none")
+    info["final_validation_freerun_rmse_mv"] = finite_or_none(
+        1e3 * final_error("val" if design.w_val.sum() > 0 else "fit"))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
 
 
 def _mv(value: float | None) -> str:
     return "–" if value is None else f"{value:.2f}"
-
-
-def final_error(model: LmnModel, segs: list[Segment], design: Design) -> float:
-    """The model's free-run RMSE (V) over the validation samples, or over the fit samples
-    where there are none (validation "none")."""
-    return freerun_rmse(model, segs, design, "val" if design.w_val.sum() > 0 else "fit")
 
 
 def train_with_and_without_hysteresis(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
