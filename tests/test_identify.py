@@ -329,6 +329,20 @@ def test_bad_configuration(kw, message) -> None:
         load_config(**kw)
 
 
+def test_every_setting_is_documented() -> None:
+    """Each TrainConfig field is named in its docstring (`lmncell train --set` takes them all;
+    help(TrainConfig) is where a user looks them up)."""
+    import dataclasses
+    import re
+
+    from lmncell.config import TrainConfig
+
+    doc = TrainConfig.__doc__ or ""
+    missing = [f.name for f in dataclasses.fields(TrainConfig)
+               if not re.search(rf"\b{f.name}\b", doc)]
+    assert not missing, f"settings without a word in TrainConfig's docstring: {missing}"
+
+
 def test_list_settings_may_be_tuples() -> None:
     """From Python, tuples do for the list-valued settings (the kind check asks for a
     sequence of the right shape, not the list type)."""
