@@ -981,7 +981,8 @@ def test_a_hysteresis_in_doubt_is_decided_by_the_validation_error(monkeypatch, w
 
     calls: list[object] = []
 
-    def fake_train(segs, cfg, cap, progress):
+    def fake_train(segs, cfg, cap, progress, e_k_chosen=()):
+        assert e_k_chosen == (2000.0,)       # the E already chosen, not chosen again
         calls.append(cfg.hysteresis)
         gamma = None if cfg.hysteresis == "off" else cfg.hysteresis
         mv = without_mv if gamma is None else with_mv
@@ -991,7 +992,7 @@ def test_a_hysteresis_in_doubt_is_decided_by_the_validation_error(monkeypatch, w
     monkeypatch.setattr(construction, "train_lmn", fake_train)
     said: list[str] = []
     res = construction.train_with_and_without_hysteresis([], load_config(), 2.0, 300.0,
-                                                         said.append)
+                                                         said.append, 2000.0)
     assert calls == ["off", 300.0]
     assert res.model.gamma == kept
     assert res.info["hysteresis_trial"] == {"gamma": 300.0, "validation_mv_without": without_mv,

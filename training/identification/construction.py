@@ -210,7 +210,8 @@ def hysteresis_terms(cfg: TrainConfig, base: LmnModel, progress: Progress) -> st
 
 @one_blas_thread
 def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
-              progress: Progress = _quiet) -> TrainResult:
+              progress: Progress = _quiet, e_k_chosen: tuple[float | None, ...] = ()
+              ) -> TrainResult:
     """Identify an LMN from model-rate segments (see the module docstring)."""
     t_start = time.perf_counter()
     cfg = resolve_partition(cfg, segs, progress)
@@ -221,9 +222,9 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
                     np.zeros(d), np.ones(d), n_temp)
     center, scale, socs = partition_normalisation(base, segs)
     masks = validation_masks(segs, cfg)
-    gamma, trial, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs)
+    gamma, trial, e_k, ocv = choose_prefit(cfg, base, segs, masks, progress, socs, e_k_chosen)
     if trial is not None:
-        return train_with_and_without_hysteresis(segs, cfg, capacity_ah, trial, progress)
+        return train_with_and_without_hysteresis(segs, cfg, capacity_ah, trial, progress, e_k)
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
@@ -300,14 +301,18 @@ def _mv(value: float | None) -> str:
 
 
 def train_with_and_without_hysteresis(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
-                                      gamma: float, progress: Progress) -> TrainResult:
+                                      gamma: float, progress: Progress,
+                                      e_k: float | None = None) -> TrainResult:
     """Where the pre-fit's gain from hysteresis is in doubt (prefit.HYSTERESIS_TRY_GAIN …
     HYSTERESIS_MIN_GAIN): the network trained with γ and without, the one with the lower
-    final_validation_freerun_rmse_mv kept (the first of equals: without)."""
+    final_validation_freerun_rmse_mv kept (the first of equals: without). e_k: the pre-fit's
+    Arrhenius E, already chosen for these records (both runs take it rather than choose it
+    again)."""
     progress(f"  hysteresis γ = {gamma:g} lowers the pre-fit's error by less than "
              f"{100 * HYSTERESIS_MIN_GAIN:g} %: training with it and without, the lower "
              "validation error decides")
-    runs = [(g, train_lmn(segs, dataclasses.replace(cfg, hysteresis=h), capacity_ah, progress))
+    runs = [(g, train_lmn(segs, dataclasses.replace(cfg, hysteresis=h), capacity_ah, progress,
+                          e_k_chosen=(e_k,)))
             for g, h in ((None, "off"), (gamma, gamma))]
     errors = [r.info["final_validation_freerun_rmse_mv"] for _, r in runs]
     keep = 1 if errors[1] is not None and (errors[0] is None or errors[1] < errors[0]) else 0

@@ -80,9 +80,13 @@ def _within_record_span(segs: list[Segment]) -> float:
 
 
 def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
-                  masks: list[np.ndarray], progress: Progress, socs: list[np.ndarray]):
+                  masks: list[np.ndarray], progress: Progress, socs: list[np.ndarray],
+                  e_k_chosen: tuple[float | None, ...] = ()):
     """Hysteresis γ (or None), a γ to try (or None, _choose_hysteresis), Arrhenius E (or None)
     and the OCV pre-fit, per the settings.
+
+    e_k_chosen: (E,) where an earlier call on the same records and settings (the hysteresis
+    setting apart, which E's choice does not read) has chosen E already; () to choose it.
 
     socs: the coulomb-counted SoC of each segment as the runtime computes it. E and γ are
     chosen with the fit weights (SoC window included), as the network will use them; the OCV
@@ -154,7 +158,12 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
         progress(f"  E from pre-fits of each of the {len(groups)} temperature levels on its own "
                  "(the temperature regions carry the differences between levels, E the "
                  "warm-up within each)")
-    e_k = _choose_arrhenius(cfg, segs, prefit_selection, progress)
+    if e_k_chosen:
+        e_k = e_k_chosen[0]
+        progress(f"  temperature scaling: {'off' if e_k is None else f'E = {e_k:g} K'} "
+                 "(chosen above)")
+    else:
+        e_k = _choose_arrhenius(cfg, segs, prefit_selection, progress)
     gamma, trial = _choose_hysteresis(cfg, e_k, prefit, progress)
     return gamma, trial, e_k, prefit(gamma, e_k, weights=ocv_weights)
 
