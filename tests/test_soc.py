@@ -175,3 +175,27 @@ def test_current_scaled_to_the_counters_meets_them_and_refuses_a_round_trip() ->
                                           charge_ah=np.zeros(t.size)))
     with pytest.raises(DataError, match="charge counters"):
         current_scaled_to_counters(Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta))
+
+
+def test_end_of_discharge_example_compares_logged_soc_with_the_charge_left(tmp_path) -> None:
+    """examples/end_of_discharge_soc.py on the bundled 25 °C test: its logged current ends s1
+    at 2.56 % SoC where the counters and the charge s2 still took say 1.39 % (+1.17 points);
+    an s1 without its s2 beside it is a clear error, not a traceback."""
+    import subprocess
+    import sys
+
+    from tests.conftest import ROOT
+
+    script = ROOT / "examples" / "end_of_discharge_soc.py"
+    ocv = [str(DATA / f"a123_plett/ocv/A123_OCV_P25_S{k}.csv.gz") for k in (1, 3)]
+    run = subprocess.run([sys.executable, str(script), "2.0307", str(A123_S1), "--ocv-tests",
+                          *ocv], capture_output=True, text=True, check=True)
+    row = next(line for line in run.stdout.splitlines() if line.startswith("A123_DYN_50_P25"))
+    logged, counters, left, error, slope, error_mv = map(float, row.split()[1:7])
+    assert (logged, counters, left, error) == (2.56, 1.39, 1.39, 1.17)
+    assert 60 < slope < 150 and error_mv == pytest.approx(error * slope, abs=1)
+    lone = tmp_path / "A123_DYN_50_P25_s1.csv.gz"
+    lone.write_bytes(A123_S1.read_bytes())
+    run = subprocess.run([sys.executable, str(script), "2.0307", str(lone)],
+                         capture_output=True, text=True)
+    assert run.returncode == 2 and "A123_DYN_50_P25_s2.csv.gz is not beside it" in run.stderr
