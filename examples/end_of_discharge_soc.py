@@ -95,11 +95,10 @@ def end_of_test(s1_file: Path, capacity_ah: float, rest_s: float) -> EndOfTest:
                      voltage_before_load(s2))
 
 
-def ocv_slope_mv_per_pct(ocv_tests: list[str], capacity_ah: float, soc_pct: float) -> float:
-    """Slope of the OCV tests' mean branch at soc_pct (mV per % SoC)."""
+def ocv_slope_mv_per_pct(ocv_tests: list[str], capacity_ah: float) -> np.ndarray:
+    """Slope of the OCV tests' mean branch (mV per % SoC) on OCV_POINTS SoC from 0 to 1."""
     soc = np.linspace(0.0, 1.0, OCV_POINTS)
-    ocv = measured_ocv(ocv_tests, capacity_ah, soc)
-    return float(np.interp(soc_pct / 100, soc, np.gradient(ocv, soc))) * 10.0
+    return np.gradient(measured_ocv(ocv_tests, capacity_ah, soc), soc) * 10.0
 
 
 def main() -> None:
@@ -110,18 +109,19 @@ def main() -> None:
     ap.add_argument("--rest-s", type=number_argument(float, lambda v: v >= 0, "s ≥ 0"),
                     default=300.0)
     a = ap.parse_args()
+    slope = ocv_slope_mv_per_pct(a.ocv_tests, a.capacity_ah) if a.ocv_tests else None
     ends = [end_of_test(f, a.capacity_ah, a.rest_s) for f in a.s1_files]
     print(f"SoC at the end of s1 (%), from full, capacity {a.capacity_ah:g} Ah; voltage "
           f"{a.rest_s:g} s after s1's cut-off and after s2's soak (V)")
     print(f"{'test':28s} {'logged':>7s} {'counters':>8s} {'left':>6s} {'error':>6s}"
-          + ("  slope mV/%  error mV" if a.ocv_tests else "") + "   V rest   V soaked")
+          + ("  slope mV/%  error mV" if slope is not None else "") + "   V rest   V soaked")
     for e in ends:
         counters = "-" if e.counters_pct is None else f"{e.counters_pct:.2f}"
         cells = (f"{e.name:28s} {e.logged_pct:7.2f} {counters:>8s} {e.left_pct:6.2f} "
                  f"{e.error_pp:+6.2f}")
-        if a.ocv_tests:
-            slope = ocv_slope_mv_per_pct(a.ocv_tests, a.capacity_ah, e.left_pct)
-            cells += f"  {slope:10.1f}  {e.error_pp * slope:+8.0f}"
+        if slope is not None:
+            at = float(np.interp(e.left_pct / 100, np.linspace(0.0, 1.0, OCV_POINTS), slope))
+            cells += f"  {at:10.1f}  {e.error_pp * at:+8.0f}"
         print(f"{cells}   {e.v_after_rest:6.3f}   {e.v_soaked:7.3f}")
     errors = np.array([e.error_pp for e in ends])
     print(f"error (logged − left) over {len(ends)} test(s): mean {errors.mean():+.2f}, RMS "
