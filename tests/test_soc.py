@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 from lmncell.data.dataset import starts_rested_full
@@ -17,7 +20,7 @@ from lmncell.data.soc import (
     ocv_from_slow_tests,
 )
 
-from tests.conftest import A123_S1, A123_S2, DATA, PAN_US06
+from tests.conftest import A123_S1, A123_S2, DATA, PAN_US06, ROOT
 
 
 def test_a123_capacity_and_soc_run_from_full_to_empty() -> None:
@@ -181,11 +184,6 @@ def test_end_of_discharge_example_compares_logged_soc_with_the_charge_left(tmp_p
     """examples/end_of_discharge_soc.py on the bundled 25 °C test: its logged current ends s1
     at 2.56 % SoC where the counters and the charge s2 still took say 1.39 % (+1.17 points);
     an s1 without its s2 beside it is a clear error, not a traceback."""
-    import subprocess
-    import sys
-
-    from tests.conftest import ROOT
-
     script = ROOT / "examples" / "end_of_discharge_soc.py"
     ocv = [str(DATA / f"a123_plett/ocv/A123_OCV_P25_S{k}.csv.gz") for k in (1, 3)]
     run = subprocess.run([sys.executable, str(script), "2.0307", str(A123_S1), "--ocv-tests",
