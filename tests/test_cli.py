@@ -266,3 +266,27 @@ def test_a_model_file_where_an_fmu_belongs_is_named_not_a_traceback(quick_model,
                                              for c in command[1:]]
     assert main(argv) == 2
     assert f"{quick_model}: not a readable FMU" in capsys.readouterr().err
+
+
+def test_cli_prints_a_users_warning_as_a_message_not_python_source(quick_model, capsys) -> None:
+    """A record beyond the trained range: the command line says so as "lmncell evaluate:
+    warning: …" on stderr, without Python's file, line and source; the library still raises the
+    UserWarning itself (test_package), and other warnings keep Python's format."""
+    import warnings
+
+    from lmncell.cli import user_warnings_as
+
+    assert main(["evaluate", str(quick_model), str(PAN_US06), "--soc0", "1"]) == 0
+    err = capsys.readouterr().err
+    assert re.search(r"^lmncell evaluate: warning: 03-20-17_01\.43_25degC_US06_Pan18650PF\.mat: "
+                     r"current -\d+\.\d\d…\d+\.\d\d A exceeds the trained range", err, re.M)
+    assert "UserWarning" not in err and "check_range" not in err and ".py:" not in err
+    seen = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        warnings.showwarning = lambda message, category, *_a, **_k: seen.append(category)
+        with user_warnings_as("prog"):
+            warnings.warn("deprecated thing", DeprecationWarning, stacklevel=1)
+            warnings.warn("user thing", UserWarning, stacklevel=1)
+    assert seen == [DeprecationWarning]
+    assert capsys.readouterr().err == "prog: warning: user thing\n"

@@ -5,6 +5,9 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -499,13 +502,34 @@ def _add_demo_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.set_defaults(func=cmd_demo)
 
 
-def run_script(main_function, script: str) -> None:
+@contextmanager
+def user_warnings_as(prog: str) -> Iterator[None]:
+    """Within the block, a UserWarning (the messages about the user's data and runs: a record
+    outside the trained range, values that look like mA) is printed as "PROG: warning: …" on
+    stderr, like the errors, without Python's file, line and source; other warnings as usual."""
+    default = warnings.showwarning
+
+    def show(message, category, filename, lineno, file=None, line=None) -> None:
+        if issubclass(category, UserWarning):
+            print(f"{prog}: warning: {message}", file=sys.stderr if file is None else file)
+        else:
+            default(message, category, filename, lineno, file, line)
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
+
+
+def run_script(main_function: Callable[[], None], script: str) -> None:
     """Run an example script's main(): a user's mistake (USER_ERRORS) ends it with the message
-    on stderr and exit status 2, as on the command line, not with a traceback."""
+    on stderr and exit status 2, as on the command line, not with a traceback; its warnings are
+    printed as the command line's are (user_warnings_as)."""
+    name = Path(script).name
     try:
-        main_function()
+        with user_warnings_as(name):
+            main_function()
     except USER_ERRORS as exc:
-        print(f"{Path(script).name}: error: {exc}", file=sys.stderr)
+        print(f"{name}: error: {exc}", file=sys.stderr)
         sys.exit(2)
 
 
@@ -516,7 +540,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 0
     try:
-        return int(args.func(args) or 0)
+        with user_warnings_as(f"lmncell {args.command}"):
+            return int(args.func(args) or 0)
     except USER_ERRORS as exc:
         print(f"lmncell {args.command}: error: {exc}", file=sys.stderr)
         return 2
