@@ -133,10 +133,11 @@ class TrainConfig:
     °C, degree 2 set) 2000 / 3000 / 4000 K give 3.78 / 20.06, 3.99 / 21.26, 5.04 / 22.29: the E
     that interpolates best depends on the temperatures trained on, and the −5 / 5 / 25 / 45 °C
     model's root-model choice is 2000 K, 0.01 mV below 3000 K. Tried, not kept (patched runs):
-    the pre-fit's E refined between the grid's neighbours to 50 K (Panasonic 25 °C 4.29 / 8.19);
-    E by the pre-fit's error on each record left out (6.10 / 10.06: it pushes E up); with
-    temperature terms, E by the root model's error on each inner temperature level left out
-    (A123 folds 3.28 / 14.50, 2000 K for the −5 °C fold).
+    the pre-fit's E refined between the grid's neighbours to 50 K (Panasonic 25 °C 4.29 / 8.19,
+    E 2100–3800 K by fold; 25 + 10 °C, 25 °C held out 5.15 / 9.34, 10 °C 6.89 / 9.93; the four
+    25 °C records 3650 K instead of 4000 K); E by the pre-fit's error on each record left out
+    (6.10 / 10.06: it pushes E up); with temperature terms, E by the root model's error on each
+    inner temperature level left out (A123 folds 3.28 / 14.50, 2000 K for the −5 °C fold).
     time_constant_scaling: "auto" (filter time constants τ·exp(Eτ(1/T − 1/T_ref)) with
     Eτ = TIME_CONSTANT_ACTIVATION_K where the records' measured temperature varies inside
     records, i.e. the cells warm up under load, by more than 2 K; off for records at a constant
