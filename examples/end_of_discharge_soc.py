@@ -34,8 +34,9 @@ import numpy as np
 from lmncell.cli import number_argument, run_script
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
-from lmncell.data.soc import REST_CURRENT_A, charge_throughput_ah, discharged_ah
+from lmncell.data.soc import REST_CURRENT_A, coulomb_count, discharged_ah
 from lmncell.identification.ocvfit import measured_ocv
+from lmncell.identification.prefit import ocv_slope
 
 OCV_POINTS = 2001       # SoC grid of the OCV's slope (0.05 % steps)
 
@@ -87,18 +88,17 @@ def voltage_before_load(rec: Record) -> float:
 def end_of_test(s1_file: Path, capacity_ah: float, rest_s: float) -> EndOfTest:
     """The end of one s1 test, from it and its s2."""
     s1, s2 = read_record(s1_file), read_record(s2_path(s1_file))
-    logged = 1.0 + charge_throughput_ah(s1, use_counters=False)[-1] / capacity_ah
-    counters = (1.0 + charge_throughput_ah(s1)[-1] / capacity_ah
-                if s1.charge_ah is not None else None)
+    logged = coulomb_count(s1, 1.0, capacity_ah, use_counters=False)[-1]
+    counters = coulomb_count(s1, 1.0, capacity_ah)[-1] if s1.charge_ah is not None else None
     return EndOfTest(s1.name, 100 * logged, None if counters is None else 100 * counters,
                      100 * discharged_ah(s2) / capacity_ah, voltage_after_load(s1, rest_s),
                      voltage_before_load(s2))
 
 
-def ocv_slope_mv_per_pct(ocv_tests: list[str], capacity_ah: float) -> np.ndarray:
-    """Slope of the OCV tests' mean branch (mV per % SoC) on OCV_POINTS SoC from 0 to 1."""
+def mean_ocv(ocv_tests: list[str], capacity_ah: float) -> tuple[np.ndarray, np.ndarray]:
+    """The OCV tests' mean branch (V) on OCV_POINTS SoC from 0 to 1: (SoC, OCV)."""
     soc = np.linspace(0.0, 1.0, OCV_POINTS)
-    return np.gradient(measured_ocv(ocv_tests, capacity_ah, soc), soc) * 10.0
+    return soc, measured_ocv(ocv_tests, capacity_ah, soc)
 
 
 def main() -> None:
@@ -109,19 +109,19 @@ def main() -> None:
     ap.add_argument("--rest-s", type=number_argument(float, lambda v: v >= 0, "s ≥ 0"),
                     default=300.0)
     a = ap.parse_args()
-    slope = ocv_slope_mv_per_pct(a.ocv_tests, a.capacity_ah) if a.ocv_tests else None
+    ocv = mean_ocv(a.ocv_tests, a.capacity_ah) if a.ocv_tests else None
     ends = [end_of_test(f, a.capacity_ah, a.rest_s) for f in a.s1_files]
     print(f"SoC at the end of s1 (%), from full, capacity {a.capacity_ah:g} Ah; voltage "
           f"{a.rest_s:g} s after s1's cut-off and after s2's soak (V)")
     print(f"{'test':28s} {'logged':>7s} {'counters':>8s} {'left':>6s} {'error':>6s}"
-          + ("  slope mV/%  error mV" if slope is not None else "") + "   V rest   V soaked")
+          + ("  slope mV/%  error mV" if ocv is not None else "") + "   V rest   V soaked")
     for e in ends:
         counters = "-" if e.counters_pct is None else f"{e.counters_pct:.2f}"
         cells = (f"{e.name:28s} {e.logged_pct:7.2f} {counters:>8s} {e.left_pct:6.2f} "
                  f"{e.error_pp:+6.2f}")
-        if slope is not None:
-            at = float(np.interp(e.left_pct / 100, np.linspace(0.0, 1.0, OCV_POINTS), slope))
-            cells += f"  {at:10.1f}  {e.error_pp * at:+8.0f}"
+        if ocv is not None:        # V per unit SoC = 10 mV per % SoC
+            slope = 10.0 * float(ocv_slope(*ocv, np.array([e.left_pct / 100]))[0])
+            cells += f"  {slope:10.1f}  {e.error_pp * slope:+8.0f}"
         print(f"{cells}   {e.v_after_rest:6.3f}   {e.v_soaked:7.3f}")
     errors = np.array([e.error_pp for e in ends])
     print(f"error (logged − left) over {len(ends)} test(s): mean {errors.mean():+.2f}, RMS "
