@@ -12,7 +12,7 @@ from lmncell.data.dataset import starts_rested_full
 from lmncell.data.lag import channel_lag_samples
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record
-from lmncell.data.soc import charge_throughput_ah
+from lmncell.data.soc import charge_throughput_ah, coulomb_count
 
 NOMINAL_AH = {"A123": 2.3, "Pan18650PF": 2.9}
 
@@ -112,7 +112,7 @@ def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
         out.append(s)
         soc = None
         if s.get("soc_range"):
-            soc = 1.0 + charge_throughput_ah(rec) / s["capacity_ah_assumed"]
+            soc = coulomb_count(rec, 1.0, s["capacity_ah_assumed"])
         shown.append((rec, soc))
     if plot is not None:
         from lmncell.report.plots import records_figure
