@@ -562,6 +562,26 @@ def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature
     assert scores["1000"] > 1.5 * best
 
 
+def test_arrhenius_energy_weighs_each_temperature_level_alike() -> None:
+    """E with temperature terms is scored by the geometric mean of the root model's free-run
+    RMSE per temperature level. Per-level RMSEs (mV) of the A123 −25/−15/5/25 °C root models
+    (this project's run, stop 62): the −25 °C level's errors are four times the others', and
+    an RMS over the levels follows it alone to 8000 K; the geometric mean picks 3000 K, which
+    interpolates to the held-out −5 °C record at 3.52 mV against 9.14 mV for 8000 K."""
+    from lmncell.identification.prefit import level_score
+
+    by_e = {1000: [60.04, 14.83, 11.29, 14.19], 2000: [59.63, 12.21, 9.49, 13.90],
+            3000: [59.23, 12.24, 9.32, 13.58], 4000: [58.71, 13.09, 9.09, 13.69],
+            5000: [58.09, 14.25, 8.76, 13.90], 6000: [57.41, 15.40, 8.50, 14.30],
+            8000: [55.95, 16.99, 8.35, 16.21]}
+    assert min(by_e, key=lambda e: np.sqrt(np.mean(np.square(by_e[e])))) == 8000
+    assert min(by_e, key=lambda e: level_score(1e-3 * np.array(by_e[e]))) == 3000
+    assert level_score(np.array([0.004, 0.009])) == pytest.approx(0.006)
+    assert level_score(np.array([0.004, np.nan, 0.009])) == pytest.approx(0.006)   # no samples
+    assert level_score(np.array([0.004, np.inf])) == np.inf                      # diverged
+    assert level_score(np.array([np.nan])) == np.inf
+
+
 @pytest.mark.slow
 def test_charge_records_teach_the_charge_branch(tmp_path) -> None:
     """LFP (shipped A123 data): a model trained on discharges alone misses the charge branch of

@@ -99,7 +99,8 @@ class TrainConfig:
     there), "off", or a γ value.
     temperature_scaling: "auto" (an Arrhenius gain on the current regressors once the training
     temperatures span more than 5 K; E chosen by the OCV pre-fit, or with temperature terms by
-    the root model's free-run error with those terms), "off", or E in K. At one chamber
+    the root model's free-run error with those terms, per temperature level, their geometric
+    mean: prefit.level_score), "off", or E in K. At one chamber
     temperature only a record that heats the cell strongly pins E down: the pre-fit over the
     Panasonic 25 °C Cycle 1, Cycle 2 and HWFET records is flat within 0.1 mV over 1000–4000 K
     (10.61–10.71 mV), with US06 added it falls from 12.29 mV (no E) to 10.89 mV (4000 K).
@@ -132,7 +133,8 @@ class TrainConfig:
     against 2.49 / 11.85. Without the −15 °C record (5 and 25 °C held out from −5 / 5 / 25 / 45
     °C, degree 2 set) 2000 / 3000 / 4000 K give 3.78 / 20.06, 3.99 / 21.26, 5.04 / 22.29: the E
     that interpolates best depends on the temperatures trained on, and the −5 / 5 / 25 / 45 °C
-    model's root-model choice is 2000 K, 0.01 mV below 3000 K. Tried, not kept (patched runs):
+    model's root-model choice is 3000 K, by 0.01 mV (8.83 against 8.84 mV at 2000 K; the RMSE
+    pooled over the levels had chosen 2000 K by 0.01 mV). Tried, not kept (patched runs):
     the pre-fit's E refined between the grid's neighbours to 50 K (Panasonic 25 °C 4.29 / 8.19,
     E 2100–3800 K by fold; 25 + 10 °C, 25 °C held out 5.15 / 9.34, 10 °C 6.89 / 9.93; the four
     25 °C records 3650 K instead of 4000 K); E by the pre-fit's error on each record left out
