@@ -582,6 +582,38 @@ def test_arrhenius_energy_weighs_each_temperature_level_alike() -> None:
     assert level_score(np.array([np.nan])) == np.inf
 
 
+def test_local_models_are_chosen_on_each_temperature_level_alike() -> None:
+    """With records at several temperature levels the score that picks M is level_score of
+    each level's validation free-run RMSE, not the pooled RMSE (which the level with the
+    largest errors decides); the curve keeps both."""
+    from lmncell.identification.construction import Grower
+    from lmncell.identification.prefit import level_score
+    from lmncell.identification.tree import freerun_rmse, root_tree
+
+    from tests.conftest import chamber_cell_segments
+
+    segs = chamber_cell_segments(2000, 60.0)          # one segment per level, −5 … 45 °C
+    cfg = load_config(partition=["soc"], hysteresis="off")
+    base = skeleton(cfg, 2.0, np.array([0.0, 1.0]), np.array([3.3, 4.1]), None,
+                    np.array([0.5]), np.array([0.5]))
+    design = build_design(base, segs, validation_masks(segs, cfg))
+    tree = root_tree(base, design, cfg)
+    grower = Grower(base, segs, design, cfg, frozenset(), lambda _: None, 0.0)
+    score, _, _ = grower.record(tree, "validation")
+    model = tree.apply(base)
+    per_level = np.array([freerun_rmse(model, segs, design, "val", [k]) for k in range(4)])
+    pooled = freerun_rmse(model, segs, design, "val")
+    assert per_level.max() > 2 * per_level.min()            # the cold level's error is larger
+    assert score == pytest.approx(level_score(per_level), rel=1e-12)
+    assert score < 0.9 * pooled
+    entry = grower.curve[-1]
+    assert entry["validation_freerun_rmse_mv"] == pytest.approx(1e3 * pooled, rel=1e-12)
+    assert entry["validation_level_score_mv"] == pytest.approx(1e3 * score, rel=1e-12)
+    one = grower.record(tree, "validation", only=[0])[0]    # one region's records: its RMSE
+    assert one == pytest.approx(per_level[0], rel=1e-12)
+    assert "validation_level_score_mv" not in grower.curve[-1]
+
+
 @pytest.mark.slow
 def test_charge_records_teach_the_charge_branch(tmp_path) -> None:
     """LFP (shipped A123 data): a model trained on discharges alone misses the charge branch of

@@ -8,8 +8,9 @@
    Levenberg–Marquardt on the global loss (eq. 10) with the Jacobian of eq. 14–18, the two
    children's parameters re-estimated by locally weighted least squares at every step. All other
    nodes and local models stay as they are.
-4. After every split: one-step loss, AICc and free-run RMSE on the validation data are recorded;
-   the number of local models M is chosen from that curve.
+4. After every split: one-step loss, AICc and free-run RMSE on the validation data are recorded
+   (with several temperature levels also the geometric mean of each level's, which then
+   decides); the number of local models M is chosen from that curve.
 5. Final output-error refinement: all local models (and the OCV knots) by Levenberg–Marquardt on
    the free-run simulation error, with sensitivities propagated through the output feedback.
 Local models with a pole outside max_pole are repaired (poles pulled in radially, the rest refit).
@@ -35,6 +36,8 @@ from lmncell.identification.prefit import (
     choose_arrhenius_with_temperature_terms,
     choose_prefit,
     choose_time_constant_scaling,
+    level_score,
+    rmse_by_level,
     segment_levels,
     temperature_degree,
     temperature_levels,
@@ -49,7 +52,9 @@ from lmncell.identification.tree import (
     Tree,
     build_design,
     freerun_rmse,
+    freerun_squares,
     one_step,
+    rmse_of_squares,
     root_tree,
     skeleton,
 )
@@ -268,7 +273,8 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         tree = grow_regions_separately(grower, tree, segment_levels(segs))
     else:
         tree = grower.grow(tree, stop_stage)
-    key = "validation_freerun_rmse_mv" if stop_stage == "validation" else "aicc"
+    key = ("aicc" if stop_stage != "validation" else "validation_level_score_mv"
+           if "validation_level_score_mv" in grower.curve[-1] else "validation_freerun_rmse_mv")
     curve = grower.curve
     model = tree.apply(base)
     progress(f"  chosen M={model.n_local_models} by {key}")
@@ -338,6 +344,7 @@ class Grower:
         self.fixed_axes, self.progress, self.t_start = fixed_axes, progress, t_start
         self.curve: list[dict] = []
         self.n_eff = float(design.w_fit.sum())
+        self.levels = segment_levels(segs)
 
     def record(self, tree: Tree, stop_stage: str, only: list[int] | None = None,
                label: dict | None = None) -> tuple[float, np.ndarray, np.ndarray]:
@@ -348,8 +355,12 @@ class Grower:
         e = design.y - yhat
         loss = float(np.sum(design.w_fit * e * e))
         n_par = model.theta.size + (len(self.cfg.partition) + 1) * len(tree.weights)
-        val = (freerun_rmse(model, self.segs, design, "val", only)
-               if stop_stage == "validation" else float("nan"))
+        val = by_levels = float("nan")
+        if stop_stage == "validation":
+            squares = freerun_squares(model, self.segs, design, "val", only)
+            val = rmse_of_squares(squares)
+            if only is None and len(set(self.levels)) > 1:
+                by_levels = level_score(rmse_by_level(squares, self.levels))
         fit_fr = freerun_rmse(model, self.segs, design, "fit")
         crit = aicc(loss, self.n_eff, n_par)
         self.curve.append({"local_models": model.n_local_models,
@@ -357,13 +368,17 @@ class Grower:
                            "aicc": finite_or_none(crit),
                            "train_freerun_rmse_mv": finite_or_none(1e3 * fit_fr),
                            "validation_freerun_rmse_mv": finite_or_none(1e3 * val),
+                           **({"validation_level_score_mv": finite_or_none(1e3 * by_levels)}
+                              if not np.isnan(by_levels) else {}),
                            **(label or {})})
         where = "" if not label else f" ({label['validation_records']})"
         self.progress(f"  M={model.n_local_models}: one-step "
                       f"{self.curve[-1]['one_step_rmse_mv']:.2f} mV, free-run train "
-                      f"{1e3 * fit_fr:.2f} mV, validation{where} {1e3 * val:.2f} mV "
-                      f"({time.perf_counter() - self.t_start:.1f} s)")
-        score = val if stop_stage == "validation" else crit
+                      f"{1e3 * fit_fr:.2f} mV, validation{where} {1e3 * val:.2f} mV"
+                      + ("" if np.isnan(by_levels) else
+                         f" (by temperature level, geometric mean {1e3 * by_levels:.2f} mV)")
+                      + f" ({time.perf_counter() - self.t_start:.1f} s)")
+        score = crit if stop_stage != "validation" else val if np.isnan(by_levels) else by_levels
         return (score if np.isfinite(score) else np.inf), phi, yhat
 
     def split_worst(self, tree: Tree, phi: np.ndarray, yhat: np.ndarray,
@@ -388,7 +403,9 @@ class Grower:
 
     def grow(self, tree: Tree, stop_stage: str) -> Tree:
         """Split the worst leaf of the whole tree up to max_local_models; the stage M by the
-        validation error over all records (or AICc)."""
+        validation error over all records (or AICc). With records at two or more temperature
+        levels that error is level_score of each level's validation RMSE, so that the coldest
+        level, whose errors are the largest, does not decide M alone."""
         stages, scores = [], []
         while True:
             score, phi, yhat = self.record(tree, stop_stage)

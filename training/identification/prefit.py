@@ -13,7 +13,13 @@ from lmncell.data.dataset import Segment
 from lmncell.identification.baselines import hysteresis
 from lmncell.identification.ladder import Ladder
 from lmncell.identification.ocvfit import OcvFit, fit_ocv, measured_ocv
-from lmncell.identification.tree import Design, build_design, freerun_rmse, root_tree
+from lmncell.identification.tree import (
+    Design,
+    build_design,
+    freerun_squares,
+    rmse_of_squares,
+    root_tree,
+)
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.step import arrhenius_gain, initial_hysteresis
 
@@ -304,14 +310,11 @@ def level_score(rmse_by_level: np.ndarray) -> float:
     return float(np.exp(np.mean(np.log(np.maximum(r, 1e-12)))))
 
 
-def level_freerun_rmse(model: LmnModel, segs: list[Segment], design: Design
-                       ) -> np.ndarray:
-    """The free-run RMSE (V) over the fit samples of each temperature level (segment_levels),
-    coldest first."""
-    levels = segment_levels(segs)
-    return np.array([freerun_rmse(model, segs, design, "fit",
-                                  [k for k, lv in enumerate(levels) if lv == level])
-                     for level in sorted(set(levels))])
+def rmse_by_level(squares: np.ndarray, levels: list[int]) -> np.ndarray:
+    """The RMSE (V) of each temperature level's segments (levels: segment_levels), coldest
+    first, from freerun_squares rows."""
+    lv = np.asarray(levels)
+    return np.array([rmse_of_squares(squares[lv == level]) for level in sorted(set(levels))])
 
 
 def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
@@ -337,10 +340,12 @@ def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
     resistances separate E from the SoC trend and its choice stays."""
     scores: dict[float, float] = {}
     e_k, best = ARRHENIUS_CANDIDATES_K[0], None
+    levels = segment_levels(segs)
     for cand in ARRHENIUS_CANDIDATES_K:
         trial = dataclasses.replace(base, arrhenius_k=cand)
         design = build_design(trial, segs, masks, ladder)
-        by_level = level_freerun_rmse(root_tree(trial, design, cfg).apply(trial), segs, design)
+        model = root_tree(trial, design, cfg).apply(trial)
+        by_level = rmse_by_level(freerun_squares(model, segs, design, "fit"), levels)
         scores[cand] = level_score(by_level)
         progress(f"  root model with temperature terms, E = {cand:g} K: free-run "
                  + ", ".join(f"{1e3 * r:.2f}" for r in by_level)

@@ -163,11 +163,13 @@ def stabilise(theta: np.ndarray, na: int, max_pole: float, X: np.ndarray | None 
     return out
 
 
-def freerun_rmse(model: LmnModel, segs: list[Segment], design: Design,
-                 which: str = "val", only: list[int] | None = None) -> float:
-    """Weighted free-run RMSE (V) over validation ('val') or fit ('fit') samples, of the
-    segments whose indices are in `only` (all by default)."""
-    num = den = 0.0
+def freerun_squares(model: LmnModel, segs: list[Segment], design: Design,
+                    which: str = "val", only: list[int] | None = None) -> np.ndarray:
+    """Per segment, the weighted sum of squared free-run errors (V²) and the sum of the weights
+    over validation ('val') or fit ('fit') samples, shape (len(segs), 2): zeros for segments
+    not in `only` (all by default) or without such samples; the first segment whose simulation
+    is not finite gets inf and the rest are not simulated."""
+    out = np.zeros((len(segs), 2))
     for k, (seg, ex, (a, b)) in enumerate(zip(segs, design.exo, design.bounds, strict=True)):
         if only is not None and k not in only:
             continue
@@ -178,10 +180,25 @@ def freerun_rmse(model: LmnModel, segs: list[Segment], design: Design,
         sim = simulate_exo(model, ex, seg.soc0, initial_hysteresis(seg.soc0), t0)
         err = seg.voltage_v - sim.voltage_v
         if not np.isfinite(err).all():
-            return float("inf")
-        num += float(np.sum(w * err * err))
-        den += float(w.sum())
+            out[k] = np.inf
+            return out
+        out[k] = float(np.sum(w * err * err)), float(w.sum())
+    return out
+
+
+def rmse_of_squares(squares: np.ndarray) -> float:
+    """The RMSE (V) of freerun_squares rows: inf where one is not finite, NaN without samples."""
+    num, den = np.asarray(squares, dtype=float).reshape(-1, 2).sum(axis=0)
+    if not np.isfinite(num + den):
+        return float("inf")
     return float(np.sqrt(num / den)) if den else float("nan")
+
+
+def freerun_rmse(model: LmnModel, segs: list[Segment], design: Design,
+                 which: str = "val", only: list[int] | None = None) -> float:
+    """Weighted free-run RMSE (V) over validation ('val') or fit ('fit') samples, of the
+    segments whose indices are in `only` (all by default)."""
+    return rmse_of_squares(freerun_squares(model, segs, design, which, only))
 
 
 def one_step(model: LmnModel, design: Design) -> tuple[np.ndarray, np.ndarray]:

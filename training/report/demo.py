@@ -162,8 +162,11 @@ def _identification_section(rep: Report, model: LmnModel, out: Path) -> None:
     rep.figure(plots.curve_figure(tr["curve"], out / "fig_local_models_curve.png",
                                   model.n_local_models),
                "Error against the number of local models (the 20–80 % SoC window weighted "
-               f"fully, the rest at {OUTSIDE_WEIGHT}): the free-run validation error chose "
-               f"M = {model.n_local_models}. {_refinement_text(info.get('output_error'))}")
+               f"fully, the rest at {OUTSIDE_WEIGHT}): the free-run validation error"
+               + (", the geometric mean of each training temperature's,"
+                  if info.get("stop") == "validation_level_score_mv" else "")
+               + f" chose M = {model.n_local_models}. "
+               + _refinement_text(info.get("output_error")))
     rep.figure(plots.validity_figure(model, out / "fig_validity.png"),
                "Validity functions over SoC (temperature at the middle of the trained range): "
                "where each local linear model is in charge.")

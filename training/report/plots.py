@@ -128,7 +128,7 @@ def _curve_lines(ax: plt.Axes, curve: list[dict], prefix: str, n: int) -> None:
     ls = ("-", "--", ":", "-.")[n % 4]
 
     def values(key: str) -> np.ndarray:
-        return np.array([np.nan if c[key] is None else c[key] for c in curve], dtype=float)
+        return np.array([np.nan if c.get(key) is None else c[key] for c in curve], dtype=float)
 
     one, free = values("one_step_rmse_mv"), values("train_freerun_rmse_mv")
     if np.allclose(one, free, rtol=1e-6, equal_nan=True):
@@ -141,6 +141,10 @@ def _curve_lines(ax: plt.Axes, curve: list[dict], prefix: str, n: int) -> None:
     if np.isfinite(val).any():
         ax.plot(m, val, "^" + ls, color="C2",
                 label=f"{prefix}free-run (validation{', its own records' if prefix else ''})")
+    by_level = values("validation_level_score_mv")
+    if np.isfinite(by_level).any():
+        ax.plot(m, by_level, "v" + ls, color="C3", label=f"{prefix}free-run (validation), "
+                "geometric mean over the temperature levels: picks M")
 
 
 def record_figure(rec: Record, path: Path, soc: np.ndarray | None = None) -> Path:
