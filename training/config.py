@@ -322,8 +322,8 @@ class TrainConfig:
     training temperatures the extra splits along temperature can extrapolate worse (A123 trained
     at −5 and 5 °C, its 25 °C record: 5.94 / 30.1 mV with 8, 6.56 / 31.3 mV with 16).
     stop: "validation" (free-run error; for records at two or more temperature levels the
-    geometric mean of each level's, where the network grows as one: the coldest level's errors,
-    the largest, no longer decide M alone; A123 s1 records, 20–80 % / whole record mV held out:
+    geometric mean of each level's, where the network grows as one: the level with the largest
+    errors no longer decides M alone; A123 s1 records, 20–80 % / whole record mV held out:
     −25/−15/5/25 °C → −5 °C 3.52 / 12.88 → 3.58 / 11.64, −25/−5/5/25 °C → −15 °C 4.38 / 10.56
     → 2.97 / 9.97, the −5/5/25 °C folds of −15 … 45 °C unchanged) or "aicc".
     validation: "block" (the middle validation_fraction of every record's time), "record"

@@ -404,8 +404,8 @@ class Grower:
     def grow(self, tree: Tree, stop_stage: str) -> Tree:
         """Split the worst leaf of the whole tree up to max_local_models; the stage M by the
         validation error over all records (or AICc). With records at two or more temperature
-        levels that error is level_score of each level's validation RMSE, so that the coldest
-        level, whose errors are the largest, does not decide M alone."""
+        levels that error is level_score of each level's validation RMSE, so that the level
+        with the largest errors (A123's −25 °C, say) does not decide M alone."""
         stages, scores = [], []
         while True:
             score, phi, yhat = self.record(tree, stop_stage)

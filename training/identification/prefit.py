@@ -331,7 +331,7 @@ def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
     it works with, which the pre-fit (`_choose_arrhenius`) lacks: on the A123
     leave-one-temperature-out folds the pre-fit picked 2000–6000 K where 4000–5000 K
     interpolated best (held-out 20–80 % RMSE 4.15 → 2.77, 9.32 → 4.60, 6.20 → 3.14 mV).
-    Per level, not pooled: the coldest level's errors are the largest (A123 −25 °C 56–60 mV
+    Per level, not pooled: one level's errors can be far the largest (A123 −25 °C 56–60 mV
     against 9–17 mV at −15 … 25 °C) and a pooled RMSE followed that level alone, to 8000 K,
     where 3000–4000 K interpolated best (−25/−15/5/25 °C, −5 °C held out, 20–80 % / whole
     record: 9.14 / 27.70 → 3.52 / 12.88 mV; −25/−5/5/25 °C, −15 °C held out: 15.69 / 37.99 →
