@@ -348,7 +348,7 @@ def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
         by_level = rmse_by_level(freerun_squares(model, segs, design, "fit"), levels)
         scores[cand] = level_score(by_level)
         progress(f"  root model with temperature terms, E = {cand:g} K: free-run "
-                 + ", ".join(f"{1e3 * r:.2f}" for r in by_level)
+                 + ", ".join("–" if np.isnan(r) else f"{1e3 * r:.2f}" for r in by_level)
                  + f" mV by level, geometric mean {1e3 * scores[cand]:.2f} mV")
         if best is None or scores[cand] < scores[e_k]:      # the first of equal minima
             e_k, best = cand, design
