@@ -270,7 +270,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     grower = Grower(base, segs, design, cfg, fixed_axes, progress, t_start)
     if (boundaries and cfg.region_growth == "separate" and stop_stage == "validation"
             and cfg.validation == "block"):
-        tree = grow_regions_separately(grower, tree, segment_levels(segs))
+        tree = grow_regions_separately(grower, tree)
     else:
         tree = grower.grow(tree, stop_stage)
     key = ("aicc" if stop_stage != "validation" else "validation_level_score_mv"
@@ -430,12 +430,13 @@ def chosen_stage(scores: list[float], stop_stage: str) -> int:
     return int(np.flatnonzero(s <= STOP_TOLERANCE * s.min())[0])
 
 
-def grow_regions_separately(grower: Grower, tree: Tree, levels: list[int]) -> Tree:
+def grow_regions_separately(grower: Grower, tree: Tree) -> Tree:
     """Grow the local models of each temperature region in turn, coldest first: split only
     that region's leaves (the worst by its records' error), up to its share of
     max_local_models, and keep the stage whose validation error over that region's records is
     best (chosen_stage); the next region grows from there. A leaf belongs to the region whose
-    records hold most of its validity."""
+    records hold most of its validity (regions: the grower's temperature levels)."""
+    levels = grower.levels
     design, n_regions = grower.design, max(levels) + 1
     sample_region = np.concatenate([np.full(b - a, levels[k])
                                     for k, (a, b) in enumerate(design.bounds)])
