@@ -553,13 +553,18 @@ def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature
     cap = 2.0
     segs = chamber_cell_segments(6000, 60.0, ocv_per_k=1e-4)
     cfg = load_config(max_local_models=1, oe_refinement=False, hysteresis="off")
-    info = train_lmn(segs, cfg, cap).info
+    res = train_lmn(segs, cfg, cap)
+    info = res.info
     scores = info["arrhenius_root_freerun_rmse_mv"]
     assert sorted(float(e) for e in scores) == sorted(ARRHENIUS_CANDIDATES_K)
     best = min(scores.values())
     assert scores[f"{info['arrhenius_k']:g}"] == best
     assert scores["4000"] <= 1.01 * best
     assert scores["1000"] > 1.5 * best
+    # four levels growing one tree: M by the per-level score, and the final figure alike
+    assert info["stop"] == "validation_level_score_mv"
+    assert info["final_validation_level_score_mv"] == pytest.approx(
+        res.curve[-1]["validation_level_score_mv"], rel=1e-9)
 
 
 def test_arrhenius_energy_weighs_each_temperature_level_alike() -> None:
@@ -1048,5 +1053,31 @@ def test_a_hysteresis_in_doubt_is_decided_by_the_validation_error(monkeypatch, w
     assert calls == ["off", 300.0]
     assert res.model.gamma == kept
     assert res.info["hysteresis_trial"] == {"gamma": 300.0, "validation_mv_without": without_mv,
-                                            "validation_mv_with": with_mv}
+                                            "validation_mv_with": with_mv,
+                                            "by": "final_validation_freerun_rmse_mv"}
     assert res.info["seconds"] == 2.0 and "kept" in said[-1]
+
+
+def test_a_hysteresis_in_doubt_is_decided_per_temperature_level_where_m_was(monkeypatch
+                                                                             ) -> None:
+    """Where both runs chose M by the per-level score, the trial compares that score, not the
+    pooled RMSE (which here points the other way); the info names the criterion."""
+    from types import SimpleNamespace
+
+    from lmncell.identification import construction
+
+    def fake_train(segs, cfg, cap, progress, e_k_chosen=()):
+        gamma = None if cfg.hysteresis == "off" else cfg.hysteresis
+        pooled, by_level = (3.0, 2.9) if gamma is None else (2.8, 3.1)
+        return construction.TrainResult(SimpleNamespace(gamma=gamma), [], 1,
+                                        {"final_validation_freerun_rmse_mv": pooled,
+                                         "final_validation_level_score_mv": by_level,
+                                         "seconds": 1.0})
+
+    monkeypatch.setattr(construction, "train_lmn", fake_train)
+    res = construction.train_with_and_without_hysteresis([], load_config(), 2.0, 300.0,
+                                                         lambda _m: None, 2000.0)
+    assert res.model.gamma is None
+    assert res.info["hysteresis_trial"] == {"gamma": 300.0, "validation_mv_without": 2.9,
+                                            "validation_mv_with": 3.1,
+                                            "by": "final_validation_level_score_mv"}

@@ -95,8 +95,9 @@ class TrainConfig:
     5.80 / 11.62 (the default 5.31 / 8.57).
     hysteresis: "auto" (γ chosen by the OCV pre-fit, kept where it lowers the pre-fit's RMSE
     by 3 % or more, prefit.HYSTERESIS_MIN_GAIN; where by 1 … 3 % the network is trained with
-    and without it and the lower validation error decides, which doubles the training time
-    there), "off", or a γ value.
+    and without it and the lower validation error decides, the one that chose M: per
+    temperature level, as stop says, where the network grows as one over several levels;
+    this doubles the training time there), "off", or a γ value.
     temperature_scaling: "auto" (an Arrhenius gain on the current regressors once the training
     temperatures span more than 5 K; E chosen by the OCV pre-fit, or with temperature terms by
     the root model's free-run error with those terms, per temperature level, their geometric

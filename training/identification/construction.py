@@ -283,21 +283,28 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             "arrhenius_root_freerun_rmse_mv": e_scores,
             "temperature_terms": n_temp,
             "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
-    errors: dict[str, float] = {}
+    squares: dict[str, np.ndarray] = {}
+
+    def final_squares(which: str) -> np.ndarray:
+        """The final model's freerun_squares over 'val' or 'fit' samples, simulated once."""
+        if which not in squares:
+            squares[which] = freerun_squares(model, segs, design, which)
+        return squares[which]
 
     def final_error(which: str) -> float:
-        """The final model's free-run RMSE (V) over 'val' or 'fit' samples, simulated once."""
-        if which not in errors:
-            errors[which] = freerun_rmse(model, segs, design, which)
-        return errors[which]
+        """The final model's free-run RMSE (V) over 'val' or 'fit' samples."""
+        return rmse_of_squares(final_squares(which))
 
     if cfg.oe_refinement:
         model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
         info["refined_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error("val"))
         info["refined_train_freerun_rmse_mv"] = finite_or_none(1e3 * final_error("fit"))
     # over the fit samples where there are no validation samples (validation "none")
-    info["final_validation_freerun_rmse_mv"] = finite_or_none(
-        1e3 * final_error("val" if design.w_val.sum() > 0 else "fit"))
+    final = "val" if design.w_val.sum() > 0 else "fit"
+    info["final_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error(final))
+    if key == "validation_level_score_mv":     # M was chosen per level: so is the final figure
+        info["final_validation_level_score_mv"] = finite_or_none(
+            1e3 * level_score(rmse_by_level(final_squares(final), grower.levels)))
     info["seconds"] = time.perf_counter() - t_start
     return TrainResult(model, curve, model.n_local_models, info)
 
@@ -311,22 +318,27 @@ def train_with_and_without_hysteresis(segs: list[Segment], cfg: TrainConfig, cap
                                       e_k: float | None = None) -> TrainResult:
     """Where the pre-fit's gain from hysteresis is in doubt (prefit.HYSTERESIS_TRY_GAIN …
     HYSTERESIS_MIN_GAIN): the network trained with γ and without, the one with the lower
-    final_validation_freerun_rmse_mv kept (the first of equals: without). e_k: the pre-fit's
-    Arrhenius E, already chosen for these records (both runs take it rather than choose it
-    again)."""
+    final validation error kept (the first of equals: without). That error is the one that
+    chose M: final_validation_level_score_mv where both runs chose M per temperature level,
+    else final_validation_freerun_rmse_mv. e_k: the pre-fit's Arrhenius E, already chosen for
+    these records (both runs take it rather than choose it again)."""
     progress(f"  hysteresis γ = {gamma:g} lowers the pre-fit's error by less than "
              f"{100 * HYSTERESIS_MIN_GAIN:g} %: training with it and without, the lower "
              "validation error decides")
     runs = [(g, train_lmn(segs, dataclasses.replace(cfg, hysteresis=h), capacity_ah, progress,
                           e_k_chosen=(e_k,)))
             for g, h in ((None, "off"), (gamma, gamma))]
-    errors = [r.info["final_validation_freerun_rmse_mv"] for _, r in runs]
+    key = ("final_validation_level_score_mv"
+           if all("final_validation_level_score_mv" in r.info for _, r in runs)
+           else "final_validation_freerun_rmse_mv")
+    errors = [r.info[key] for _, r in runs]
     keep = 1 if errors[1] is not None and (errors[0] is None or errors[1] < errors[0]) else 0
     kept = runs[keep][1]
-    progress(f"  hysteresis: {'off' if keep == 0 else f'γ = {gamma:g}'} kept (validation "
+    by = " (by temperature level, geometric mean)" if key.endswith("level_score_mv") else ""
+    progress(f"  hysteresis: {'off' if keep == 0 else f'γ = {gamma:g}'} kept (validation{by} "
              f"{_mv(errors[1])} mV with γ = {gamma:g}, {_mv(errors[0])} mV without)")
     kept.info["hysteresis_trial"] = {"gamma": gamma, "validation_mv_without": errors[0],
-                                     "validation_mv_with": errors[1]}
+                                     "validation_mv_with": errors[1], "by": key}
     kept.info["seconds"] = sum(r.info["seconds"] for _, r in runs)
     return kept
 
