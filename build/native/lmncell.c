@@ -264,7 +264,7 @@ static void features(const State *s, double i, double t, double *x, double *z,
 #if TEMPERATURE_TERMS > 0
     {
         double dt = (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K, power = 1.0;
-        double da = activation_step(t, g), power_a = 1.0;
+        double da = HYSTERESIS_ARRHENIUS ? activation_step(t, g) : dt, power_a = 1.0;
         int n, c;
         for (n = 0; n < TEMPERATURE_TERMS; n++) {
             power *= dt;
@@ -592,7 +592,7 @@ static double output_moved(const State *s, const double *xi, int a, double delta
 static void regressor_gradient(const State *s, const double *phi, double soc, double *hv) {
     double blended[NEXO + 1], g = temperature_gain(s->ob_t);
     double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
-    double da = activation_step(s->ob_t, g);   /* the unscaled columns are h's */
+    double da = HYSTERESIS_ARRHENIUS ? activation_step(s->ob_t, g) : dt;   /* h's columns */
     int a, c, j, m, p;
     for (m = 0; m < NGRADCOL; m++) {       /* only the columns read below */
         c = GRAD_COL[m];
