@@ -140,7 +140,12 @@ class TrainConfig:
     E 2100–3800 K by fold; 25 + 10 °C, 25 °C held out 5.15 / 9.34, 10 °C 6.89 / 9.93; the four
     25 °C records 3650 K instead of 4000 K); E by the pre-fit's error on each record left out
     (6.10 / 10.06: it pushes E up); with temperature terms, E by the root model's error on each
-    inner temperature level left out (A123 folds 3.28 / 14.50, 2000 K for the −5 °C fold).
+    inner temperature level left out (A123 folds 3.28 / 14.50, 2000 K for the −5 °C fold);
+    one E per temperature region, each level's own pre-fit choosing it (the gain's E blended
+    across the region boundary): Panasonic 25 + 10 °C, 25 °C held out 4.72 / 9.21 (without
+    the fast depletion regressor 4.49 / 8.44), but 10 °C held out, where the 10 °C level
+    without its US06 record pins nothing down and chose 1000 K, US06 27.3 mV and Cycle 1
+    10.0 mV against 9.25 and 7.12 mV with the pooled 3000 K (patched runs).
     time_constant_scaling: "auto" (filter time constants τ·exp(Eτ(1/T − 1/T_ref)) with
     Eτ = TIME_CONSTANT_ACTIVATION_K where the records' measured temperature varies inside
     records, i.e. the cells warm up under load, by more than 2 K; off for records at a constant
