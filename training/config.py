@@ -142,7 +142,7 @@ class TrainConfig:
     (6.10 / 10.06: it pushes E up); with temperature terms, E by the root model's error on each
     inner temperature level left out (A123 folds 3.28 / 14.50, 2000 K for the −5 °C fold);
     one E per temperature region, each level's own pre-fit choosing it (the gain's E blended
-    across the region boundary): Panasonic 25 + 10 °C, 25 °C held out 4.72 / 9.21 (without
+    across the region boundary): Panasonic 25 + 10 °C, 25 °C held out 4.50 / 9.72 (without
     the fast depletion regressor 4.49 / 8.44), but 10 °C held out, where the 10 °C level
     without its US06 record pins nothing down and chose 1000 K, US06 27.3 mV and Cycle 1
     10.0 mV against 9.25 and 7.12 mV with the pooled 3000 K (patched runs).
