@@ -215,15 +215,15 @@ static void exo_update(State *s, double i, double t, double cap) {
 }
 
 /* LmnModel.activation_step: dA of "arrhenius" hysteresis terms from the gain g = g(t), else
-   dT (t in degC) */
-static double activation_step(double t, double g) {
+   the step's dT as given */
+static double activation_step(double dt, double g) {
 #if HYSTERESIS_ARRHENIUS
     double t_ref = REF_TEMPERATURE_C + 273.15;
-    (void)t;
+    (void)dt;
     return (1.0 - g) * (t_ref * t_ref / (ARRHENIUS_K * TEMPERATURE_STEP_K));
 #else
     (void)g;
-    return (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
+    return dt;
 #endif
 }
 
@@ -264,7 +264,7 @@ static void features(const State *s, double i, double t, double *x, double *z,
 #if TEMPERATURE_TERMS > 0
     {
         double dt = (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K, power = 1.0;
-        double da = HYSTERESIS_ARRHENIUS ? activation_step(t, g) : dt, power_a = 1.0;
+        double da = activation_step(dt, g), power_a = 1.0;
         int n, c;
         for (n = 0; n < TEMPERATURE_TERMS; n++) {
             power *= dt;
@@ -592,7 +592,7 @@ static double output_moved(const State *s, const double *xi, int a, double delta
 static void regressor_gradient(const State *s, const double *phi, double soc, double *hv) {
     double blended[NEXO + 1], g = temperature_gain(s->ob_t);
     double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
-    double da = HYSTERESIS_ARRHENIUS ? activation_step(s->ob_t, g) : dt;   /* h's columns */
+    double da = activation_step(dt, g);   /* the unscaled columns are h's */
     int a, c, j, m, p;
     for (m = 0; m < NGRADCOL; m++) {       /* only the columns read below */
         c = GRAD_COL[m];
