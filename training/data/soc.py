@@ -34,13 +34,26 @@ def _held_charge_as(rec: Record) -> np.ndarray:
 
 
 def logged_current_drift_ah(rec: Record) -> float | None:
-    """Net charge of the logged current minus the tester's counters' at the record's end (Ah,
-    > 0: the current counts more charge in), or None without counters: the SoC drift of a model
-    driven by the logged current, as an FMU is, against the counters' SoC."""
+    """Net charge of the logged current minus the tester's counters' inside the record's
+    segments, summed (Ah, > 0: the current counts more charge in), or None without counters:
+    the SoC drift of a model driven by the logged current, as an FMU is, from each segment's
+    start at the counters' SoC (as evaluation starts them), against the counters' SoC. The
+    charge the counters count across a gap between segments is not in it (gap_charge_ah)."""
     if rec.charge_ah is None:
         return None
-    return float(charge_throughput_ah(rec, use_counters=False)[-1]
-                 - charge_throughput_ah(rec)[-1])
+    return float(sum(charge_throughput_ah(seg, use_counters=False)[-1]
+                     - charge_throughput_ah(seg)[-1] for seg in rec.segments()))
+
+
+def gap_charge_ah(rec: Record) -> float | None:
+    """Net charge (Ah, > 0 charged) the tester's counters count across the record's segment
+    boundaries, where the log has no samples (a gap) or only the wall clock runs on (a hidden
+    pause), or None without counters. A model restarted at each segment's counted SoC is given
+    it; a host that drives one FMU through the whole record is not."""
+    if rec.charge_ah is None:
+        return None
+    starts = sorted(set(rec.meta.segment_starts) - {0})
+    return float(sum(rec.charge_ah[k] - rec.charge_ah[k - 1] for k in starts))
 
 
 def current_scaled_to_counters(rec: Record) -> tuple[Record, float]:

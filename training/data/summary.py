@@ -12,7 +12,12 @@ from lmncell.data.dataset import starts_rested_full
 from lmncell.data.lag import channel_lag_samples
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record
-from lmncell.data.soc import charge_throughput_ah, coulomb_count
+from lmncell.data.soc import (
+    charge_throughput_ah,
+    coulomb_count,
+    gap_charge_ah,
+    logged_current_drift_ah,
+)
 
 NOMINAL_AH = {"A123": 2.3, "Pan18650PF": 2.9}
 
@@ -40,6 +45,8 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
     }
     if rec.charge_ah is not None:      # q came from the tester's counters
         out["current_integral_ah"] = float(charge_throughput_ah(rec, use_counters=False)[-1])
+        out["logged_drift_ah"] = logged_current_drift_ah(rec)
+        out["gap_charge_ah"] = gap_charge_ah(rec)
     if cap:
         out["capacity_ah_assumed"] = cap
         out["c_rate"] = [out["current_a"][0] / cap, out["current_a"][1] / cap]
@@ -86,15 +93,31 @@ def format_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
+GAP_CHARGE_NOTE_AH = 1e-3   # current_integral_line names the charge across gaps from this (Ah)
+
+
 def current_integral_line(s: dict) -> str:
     """The net charge of the logged current beside the tester's counters: a model driven by
-    the current, as an FMU is, integrates it and drifts from the counters' SoC by the gap."""
-    gap = s["current_integral_ah"] - s["net_charge_ah"]
-    share = (f", {100 * gap / s['capacity_ah_assumed']:+.2f} % of {s['capacity_ah_assumed']} Ah"
-             if "capacity_ah_assumed" in s else "")
-    return (f"  the net charge is the tester's counters'; the logged current integrates to "
-            f"{s['current_integral_ah']:+.4f} Ah\n    ({gap:+.4f} Ah{share}: the SoC drift "
-            "of a model driven by the current, as an FMU is)")
+    the current, as an FMU is, integrates it and drifts from the counters' SoC by the gap
+    inside the segments; the charge the counters count across the gaps between segments is
+    named apart (evaluation starts each segment at the counters' SoC)."""
+    cap = s.get("capacity_ah_assumed")
+
+    def share(ah: float) -> str:
+        return f", {100 * ah / cap:+.2f} % of {cap} Ah" if cap else ""
+
+    drift = s["logged_drift_ah"]
+    inside = " inside its segments" if s["segments"] > 1 else ""
+    line = (f"  the net charge is the tester's counters'; the logged current integrates to "
+            f"{s['current_integral_ah']:+.4f} Ah\n    ({drift:+.4f} Ah{share(drift)}{inside}: "
+            "the SoC drift of a model driven by the current, as an FMU is)")
+    gap = s["gap_charge_ah"]
+    if abs(gap) >= GAP_CHARGE_NOTE_AH:
+        line += (f"\n  the counters count {gap:+.4f} Ah{share(gap)} across the gaps between "
+                 "segments, where the log has no samples: evaluation starts each segment at "
+                 "the counters' SoC; a host that drives one FMU through the whole record must "
+                 "set its SoC there")
+    return line
 
 
 def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
@@ -111,7 +134,7 @@ def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
         print(format_summary(s), flush=True)
         out.append(s)
         soc = None
-        if s.get("soc_range"):
+        if plot is not None and s.get("soc_range"):
             soc = coulomb_count(rec, 1.0, s["capacity_ah_assumed"])
         shown.append((rec, soc))
     if plot is not None:
