@@ -259,7 +259,8 @@ class TrainConfig:
     5, 25, 45 °C) 5 °C held out 2.75 / 14.29 → 2.83 / 12.47, 25 °C 3.18 / 24.53 → 3.17 / 23.44.
     Measured and not kept: d replaced by a surface-SoC regressor OCV(SoC + κ·g·LP_τ(i)) −
     OCV(SoC) (the depleted surface read through the OCV, extrapolated linearly beyond its end
-    knots), A123 folds 2.49 / 11.85 → 3.01 / 13.66 (κ = 0.01 per A), 4.39 / 12.37 (0.03): it
+    knots), A123 folds 2.49 / 11.85 → 3.01 / 13.66 (κ = 0.01 per A), 4.39 / 12.37 (0.03), and
+    beside d (κ = 0.01, from LP_τ2 at τ2 = 30 / 800 s) 3.43 / 12.28, 3.39 / 16.97: it
     acts in the window too, and the 5 % OCV knots make it almost linear in LP_τ(i) near empty;
     the recovery after the cut-off stays as it was (P25 fold 2.69 V against the cell's 2.57 V).
     depletion_fast_tau_s: a second depletion regressor d2 = g(T)·LP_τ2(i)·(0.1/SoC)^p with this
