@@ -293,7 +293,13 @@ class TrainConfig:
     record mV, soc → soc, current with 16 local models at most: 25 °C 6.74 / 13.60 →
     6.93 / 10.89, chamber temperature only 6.95 / 13.79 → 7.14 / 10.97; 10 °C 17.68 / 28.99 →
     14.56 / 23.51; soc, current at 25 °C with 12: 7.04 / 11.05; soc, filtered_current with 16:
-    7.80 / 13.25). At two chamber temperatures see temperature_regions.
+    7.80 / 13.25). At two chamber temperatures see temperature_regions. Measured on the A123
+    folds (partition soc, temperature, temperature terms: 2.49 / 11.85) and not kept: a
+    filtered current of τ = 150 s added (patched in place of the 5 s one) 3.29 / 12.42; a
+    surface SoC, SoC + κ·g·LP_τ(i), added so that a split can follow the depleted surface and
+    its recovery after the cut-off: τ = 150 s, κ = 0.005 / 0.01 / 0.03 per A: 2.64 / 11.94,
+    2.63 / 11.25, 2.81 / 12.37; τ = 800 s, κ = 0.01: 2.76 / 11.69; instead of the SoC (κ =
+    0.01): 2.57 / 12.32. The spread is that of the other changes tried (±0.5 mV per fold).
     pre_partition: "none" or "current_sign" (separate charge and discharge trees).
     temperature_regions: "auto" (where temperature is in the partition and no temperature
     terms carry it: one set of local models per chamber-temperature level, split apart by fixed
