@@ -257,6 +257,7 @@ class TrainConfig:
     Panasonic 25 °C 6.68 / 15.69 → 6.74 / 13.65; Panasonic 25 + 10 °C, 10 °C held out
     11.77 / 24.48 → 11.32 / 24.19, 25 °C held out 7.21 / 16.45 → 7.61 / 13.55; A123 (−15, −5,
     5, 25, 45 °C) 5 °C held out 2.75 / 14.29 → 2.83 / 12.47, 25 °C 3.18 / 24.53 → 3.17 / 23.44.
+    A123 folds, p = 2 / 4 / 6: 2.85 / 11.88, 2.49 / 11.85, 2.80 / 11.75.
     Measured and not kept: d replaced by a surface-SoC regressor OCV(SoC + κ·g·LP_τ(i)) −
     OCV(SoC) (the depleted surface read through the OCV, extrapolated linearly beyond its end
     knots), A123 folds 2.49 / 11.85 → 3.01 / 13.66 (κ = 0.01 per A), 4.39 / 12.37 (0.03), and
