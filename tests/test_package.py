@@ -93,7 +93,7 @@ def test_reader_options_without_columns_and_bad_settings_are_refused(user_data, 
     assert main(["inspect", str(csv_path), "--columns", "time=Zeit [s],current=Strom [mA],"
                  "voltage=Spannung [V]", "--delimiter", ";"]) == 2
     err = capsys.readouterr().err
-    assert "'Zeit [s]' row 2: '0,0' is not a number" in err   # the decimal comma not given
+    assert "'Zeit [s]' line 2: '0,0' is not a number" in err   # the decimal comma not given
 
 
 def test_files_that_are_not_data_give_clear_errors(tmp_path, capsys) -> None:

@@ -107,17 +107,30 @@ GOOD = [f"{k}, 1, 1.0, 3.3, 0, {k / 3600:.6f}" for k in range(10)]
 
 
 @pytest.mark.parametrize("case, rows, expected", [
-    ("nan", GOOD[:3] + ["3, 1, nan, 3.3, 0, 0"] + GOOD[4:], "'current_a' has 1 NaN"),
-    ("inf", GOOD[:3] + ["3, 1, 1.0, inf, 0, 0"] + GOOD[4:], "'voltage_v' has 1 NaN or infinite"),
-    ("repeated", GOOD[:3] + [GOOD[2]] + GOOD[4:], "repeated at row 3"),
-    ("reset", GOOD[:5] + ["0.5, 1, 1.0, 3.3, 0, 0"] + GOOD[6:], "decreasing (a time reset?)"),
-    ("text", GOOD[:3] + ["3, 1, abc, 3.3, 0, 0"], "'current' row 5: 'abc' is not a number"),
+    ("nan", GOOD[:3] + ["3, 1, nan, 3.3, 0, 0"] + GOOD[4:],
+     "column 'current' (current_a) has 1 NaN or infinite value(s), first at line 5"),
+    ("inf", GOOD[:3] + ["3, 1, 1.0, inf, 0, 0"] + GOOD[4:], "column 'voltage' (voltage_v) has 1 NaN or infinite"),
+    ("repeated", GOOD[:3] + [GOOD[2]] + GOOD[4:], "column 'time' (time_s) is repeated at line 5: 2.0 s then 2.0 s"),
+    ("reset", GOOD[:5] + ["0.5, 1, 1.0, 3.3, 0, 0"] + GOOD[6:],
+     "decreasing (a time reset?) at line 7: 4.0 s then 0.5 s"),
+    ("text", GOOD[:3] + ["3, 1, abc, 3.3, 0, 0"], "'current' line 5: 'abc' is not a number"),
 ])
 def test_bad_plett_input(tmp_path, case, rows, expected) -> None:
     p = _plett(tmp_path, rows, f"{case}.csv")
     with pytest.raises(DataError) as err:
         read_record(p)
     assert str(p) in str(err.value) and expected in str(err.value)
+
+
+def test_errors_quote_the_files_own_times_and_lines(tmp_path) -> None:
+    """A time column that starts at 100 s is quoted as the file has it (not from 0), at its
+    line; where blank lines break the row-to-line count the sample is named instead."""
+    later = [f"{100 + k}, 1, 1.0, 3.3, 0, 0" for k in range(4)] + ["101.5, 1, 1.0, 3.3, 0, 0"]
+    with pytest.raises(DataError, match=r"at line 6: 103.0 s then 101.5 s"):
+        read_record(_plett(tmp_path, later, "later.csv"))
+    blank = GOOD[:3] + [""] + GOOD[3:5] + ["5, 1, 1.0, 33, 0, 0"]
+    with pytest.raises(DataError, match=r"column 'voltage' \(voltage_v\) is 33 V at sample 5 "):
+        read_record(_plett(tmp_path, blank, "blank.csv"))
 
 
 def test_missing_column(tmp_path) -> None:
@@ -239,10 +252,10 @@ def test_evaluation_through_hidden_pauses_runs_the_model_state_on(tmp_path, quic
 
 
 @pytest.mark.parametrize("columns, rows, message", [
-    ("t,i,v", ["0,1,3650", "1,1,3640"], r"'voltage_v' is 3650 V at row 0 \(2 sample\(s\) outside "
+    ("t,i,v", ["0,1,3650", "1,1,3640"], r"column 'v' \(voltage_v\) is 3650 V at line 2 \(2 sample\(s\) outside "
                                         r"0…6 V\); expected a cell's terminal voltage in V"),
-    ("t,i,v", ["0,1,3.6", "1,1,-0.2"], r"'voltage_v' is -0.2 V at row 1"),
-    ("t,i,v,T", ["0,1,3.6,298.15", "1,1,3.6,298.2"], r"'temperature_c' is 298.15 °C at row 0 "
+    ("t,i,v", ["0,1,3.6", "1,1,-0.2"], r"column 'v' \(voltage_v\) is -0.2 V at line 3"),
+    ("t,i,v,T", ["0,1,3.6,298.15", "1,1,3.6,298.2"], r"column 'T' \(temperature_c\) is 298.15 °C at line 2 "
                                                       r".*expected a cell temperature in °C"),
 ])
 def test_voltages_and_temperatures_outside_a_cells_range_are_refused(tmp_path, columns, rows,

@@ -126,10 +126,17 @@ def _format_of(path: Path) -> str:
                     "in Python read_record(path, columns={...})")
 
 
+class CsvColumns(dict):
+    """A CSV file's columns by header name (float arrays), and the file line of the first data
+    row where the data rows follow each other without blank lines (else None)."""
+
+    first_line: int | None = None
+
+
 def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                       required: frozenset[str] | set[str] | None = None
-                      ) -> dict[str, np.ndarray]:
-    """Every column of a CSV file as float arrays, with row numbers in errors.
+                      ) -> CsvColumns:
+    """Every column of a CSV file as float arrays, with the file's line numbers in errors.
 
     sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
     every cell must be a number (default: the known formats' numeric columns)."""
@@ -139,14 +146,16 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     if decimal not in (".", ","):
         raise DataError(f"{path}: decimal mark {decimal!r}; expected '.' or ','")
     required = _NUMERIC_REQUIRED if required is None else required
-    lines = [ln for ln in _read_text(path).splitlines() if ln.strip()]
-    if not lines:
+    numbered = [(k + 1, ln) for k, ln in enumerate(_read_text(path).splitlines()) if ln.strip()]
+    if not numbered:
         raise DataError(f"{path}: the file is empty; expected a header line and data rows")
-    header = [c.strip() for c in next(csv.reader([lines[0]], delimiter=sep))]
-    if len(lines) < 2:
+    header = [c.strip() for c in next(csv.reader([numbered[0][1]], delimiter=sep))]
+    if len(numbered) < 2:
         raise DataError(f"{path}: the file has a header but no data rows")
-    rows = list(csv.reader(lines[1:], delimiter=sep, skipinitialspace=True))
-    out: dict[str, np.ndarray] = {}
+    line_of = [k for k, _ in numbered[1:]]
+    rows = list(csv.reader([ln for _, ln in numbered[1:]], delimiter=sep,
+                           skipinitialspace=True))
+    out = CsvColumns()
     for j, name in enumerate(header):
         col = np.empty(len(rows))
         for r, row in enumerate(rows):
@@ -155,14 +164,25 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                 col[r] = float(cell.replace(",", ".") if decimal == "," else cell)
             except (ValueError, IndexError):
                 if j >= len(row):
-                    raise DataError(f"{path}: row {r + 2} has {len(row)} fields, expected "
-                                    f"{len(header)} (column '{name}' missing)") from None
+                    raise DataError(f"{path}: line {line_of[r]} has {len(row)} fields, "
+                                    f"expected {len(header)} (column '{name}' missing)"
+                                    ) from None
                 col[r] = np.nan  # non-numeric cell (date strings etc.): checked where used
                 if name in required:
-                    raise DataError(f"{path}: column '{name}' row {r + 2}: {row[j]!r} is not "
-                                    "a number") from None
+                    raise DataError(f"{path}: column '{name}' line {line_of[r]}: {row[j]!r} "
+                                    "is not a number") from None
         out[name] = col
+    if line_of[-1] - line_of[0] == len(line_of) - 1:
+        out.first_line = line_of[0]
     return out
+
+
+def _csv_meta(cols: CsvColumns, file_times: np.ndarray, /, **names: str) -> dict:
+    """The RecordMeta fields that let errors name a CSV record's lines and columns: names maps
+    record fields (time_s, current_a, …) to the file's column names; file_times is the file's
+    time column, from whose first value the record's time counts."""
+    return {"file_columns": names, "first_line": cols.first_line,
+            "time_origin_s": float(file_times[0])}
 
 
 _NUMERIC_REQUIRED = {"time", "current", "voltage", "chgAh", "disAh", *ARBIN_COLUMNS, BDF_TIME,
@@ -195,7 +215,9 @@ def read_plett(path: Path) -> Record:
     cur, ah = -cols["current"], cols["chgAh"] - cols["disAh"]
     return Record(t, cur, cols["voltage"],
                   _meta(path, "plett", "current negated (file: discharge > 0)", cols["time"],
-                        segment_starts=_segment_starts_from_gaps(t, cur, ah)),
+                        segment_starts=_segment_starts_from_gaps(t, cur, ah),
+                        **_csv_meta(cols, cols["time"], time_s="time", current_a="current",
+                                    voltage_v="voltage", charge_ah="chgAh − disAh")),
                   charge_ah=ah)
 
 
@@ -207,7 +229,10 @@ def read_arbin(path: Path) -> Record:
     ah = cols["Charge_Capacity(Ah)"] - cols["Discharge_Capacity(Ah)"]
     return Record(t - t[0], cols["Current(A)"], cols["Voltage(V)"],
                   _meta(path, "arbin", "none (file: charge > 0)", t,
-                        segment_starts=_segment_starts_from_gaps(t, cols["Current(A)"], ah)),
+                        segment_starts=_segment_starts_from_gaps(t, cols["Current(A)"], ah),
+                        **_csv_meta(cols, t, time_s="Test_Time(s)", current_a="Current(A)",
+                                    voltage_v="Voltage(V)",
+                                    charge_ah="Charge_Capacity(Ah) − Discharge_Capacity(Ah)")),
                   charge_ah=ah)
 
 
@@ -257,7 +282,7 @@ def read_panasonic(path: Path) -> Record:
     if (~keep).any():
         back = np.flatnonzero(np.diff(t) < 0)
         if back.size:
-            raise DataError(f"{path}: field 'Time' decreases at row {int(back[0]) + 1} "
+            raise DataError(f"{path}: field 'Time' decreases at sample {int(back[0]) + 1} "
                             f"({float(t[back[0]])!r} s then {float(t[back[0] + 1])!r} s); expected "
                             "increasing time")
         notes.append(f"dropped {int((~keep).sum())} sample(s) with a repeated time stamp")
@@ -272,14 +297,17 @@ def read_panasonic(path: Path) -> Record:
         wall = _parse_timestamps(np.ravel(meas["TimeStamp"])[keep])
         hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
         for k in hidden:
-            notes.append(f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at row {k}")
+            notes.append(f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at sample {k}")
         pauses = set(hidden.tolist()) - gaps
     temp = field_("Battery_Temp_degC") if "Battery_Temp_degC" in fields else None
     if temp is not None and not np.isfinite(temp).all():
         notes.append("Battery_Temp_degC has non-finite samples: temperature not used")
         temp = None
     meta = _meta(path, "panasonic", "none (file: charge > 0)", t,
-                 segment_starts=sorted(gaps | pauses), notes=notes, pause_starts=sorted(pauses))
+                 segment_starts=sorted(gaps | pauses), notes=notes, pause_starts=sorted(pauses),
+                 file_columns={"time_s": "Time", "current_a": "Current", "voltage_v": "Voltage",
+                               "temperature_c": "Battery_Temp_degC", "charge_ah": "Ah"},
+                 time_origin_s=float(t[0]) if t.size else 0.0)
     if "Chamber_Temp_degC" in fields:
         chamber = field_("Chamber_Temp_degC")
         if np.isfinite(chamber).any():
@@ -297,11 +325,18 @@ def read_bdf(path: Path) -> Record:
     return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE],
                   _meta(path, "bdf", "none (BDF: charge > 0)", t,
                         segment_starts=_segment_starts_from_gaps(
-                            t, cols[BDF_CURRENT], cols.get(BDF_NET_AH))),
+                            t, cols[BDF_CURRENT], cols.get(BDF_NET_AH)),
+                        file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
+                                      "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
+                                      "charge_ah": BDF_NET_AH,
+                                      "temperature_c": BDF_T1 if BDF_T1 in cols
+                                      else BDF_AMBIENT},
+                        first_line=cols.first_line),
                   temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
 
 
 GENERIC_KEYS = ("time", "current", "voltage", "temperature")
+UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 
 
@@ -337,7 +372,9 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     temp = cols[columns["temperature"]] if "temperature" in columns else None
     return Record(t - t[0], cur, cols[columns["voltage"]],
                   _meta(path, "generic", note, t,
-                        segment_starts=_segment_starts_from_gaps(t, cur)),
+                        segment_starts=_segment_starts_from_gaps(t, cur),
+                        **_csv_meta(cols, t, **{f"{k}{UNIT_SUFFIX[k]}": v
+                                                for k, v in columns.items()})),
                   temperature_c=temp)
 
 

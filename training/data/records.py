@@ -31,6 +31,11 @@ class RecordMeta:
     notes: list[str] = field(default_factory=list)
     pause_starts: list[int] = field(default_factory=list)   # those of segment_starts that
     # begin after a pause which only the wall clock shows (the time column runs on through it)
+    file_columns: dict[str, str] = field(default_factory=dict)   # record field (time_s, …) →
+    # the file's name for its column, for error messages
+    first_line: int | None = None     # the file line of sample 0 where every data row became a
+    # sample in order (CSV), for error messages; None: they name samples
+    time_origin_s: float = 0.0        # the file's time of sample 0 (time_s counts from it)
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -119,13 +124,25 @@ class Record:
         return dataclasses.replace(self, soc_ref=np.asarray(soc, dtype=float))
 
 
-def _check_finite(name: str, values: np.ndarray, source: str) -> None:
+def _column(meta: RecordMeta, name: str) -> str:
+    """How an error names a record field: the file's column with the field beside it."""
+    file_name = meta.file_columns.get(name)
+    return f"column '{name}'" if file_name is None else f"column '{file_name}' ({name})"
+
+
+def _at(meta: RecordMeta, sample: int) -> str:
+    """How an error names a sample: the file's line where samples are its rows, else its
+    index."""
+    return f"sample {sample}" if meta.first_line is None else f"line {meta.first_line + sample}"
+
+
+def _check_finite(name: str, values: np.ndarray, meta: RecordMeta) -> None:
     bad = ~np.isfinite(values)
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
-        raise DataError(f"{source}: column '{name}' has {int(bad.sum())} NaN or infinite "
-                        f"value(s), first at row {row} (value {float(values[row])!r}); expected "
-                        "finite numbers")
+        raise DataError(f"{meta.source}: {_column(meta, name)} has {int(bad.sum())} NaN or "
+                        f"infinite value(s), first at {_at(meta, row)} (value "
+                        f"{float(values[row])!r}); expected finite numbers")
 
 
 CELL_VOLTAGE_RANGE_V = (0.0, 6.0)           # a record's terminal voltage must lie in it
@@ -141,15 +158,15 @@ def is_cell_temperature(values: float | np.ndarray) -> bool:
 
 
 def _check_range(name: str, values: np.ndarray, bounds: tuple[float, float], unit: str,
-                 expected: str, source: str) -> None:
+                 expected: str, meta: RecordMeta) -> None:
     """DataError naming the first sample of `values` outside `bounds` (inclusive)."""
     low, high = bounds
     bad = (values < low) | (values > high)
     if bad.any():
         row = int(np.flatnonzero(bad)[0])
-        raise DataError(f"{source}: column '{name}' is {float(values[row]):g} {unit} at row "
-                        f"{row} ({int(bad.sum())} sample(s) outside {low:g}…{high:g} {unit}); "
-                        f"expected {expected}")
+        raise DataError(f"{meta.source}: {_column(meta, name)} is {float(values[row]):g} {unit} "
+                        f"at {_at(meta, row)} ({int(bad.sum())} sample(s) outside "
+                        f"{low:g}…{high:g} {unit}); expected {expected}")
 
 
 def validate_record(rec: Record) -> None:
@@ -168,19 +185,21 @@ def validate_record(rec: Record) -> None:
         if arr.shape != (n,):
             raise DataError(f"{src}: column '{name}' has shape {arr.shape}, expected ({n},) "
                             "like 'time_s'")
-        _check_finite(name, arr, src)
+        _check_finite(name, arr, rec.meta)
     dt = np.diff(rec.time_s)
     if (dt <= 0).any():
         row = int(np.flatnonzero(dt <= 0)[0]) + 1
         kind = "repeated" if dt[row - 1] == 0 else "decreasing (a time reset?)"
-        raise DataError(f"{src}: column 'time_s' is {kind} at row {row}: "
-                        f"{float(rec.time_s[row - 1])!r} s then {float(rec.time_s[row])!r} s; "
-                        "expected strictly increasing time")
+        origin = rec.meta.time_origin_s
+        raise DataError(f"{src}: {_column(rec.meta, 'time_s')} is {kind} at "
+                        f"{_at(rec.meta, row)}: {round(origin + float(rec.time_s[row - 1]), 9)!r} "
+                        f"s then {round(origin + float(rec.time_s[row]), 9)!r} s; expected "
+                        "strictly increasing time")
     _check_range("voltage_v", rec.voltage_v, CELL_VOLTAGE_RANGE_V, "V",
-                 "a cell's terminal voltage in V (not mV, not a pack's)", src)
+                 "a cell's terminal voltage in V (not mV, not a pack's)", rec.meta)
     if rec.temperature_c is not None:
         _check_range("temperature_c", rec.temperature_c, CELL_TEMPERATURE_RANGE_C, "°C",
-                     "a cell temperature in °C (not K)", src)
+                     "a cell temperature in °C (not K)", rec.meta)
     if rec.soc_ref is not None and ((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05)).any():
         row = int(np.flatnonzero((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05))[0])
         raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected a "
