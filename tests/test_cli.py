@@ -77,6 +77,18 @@ def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
     assert main(["train", str(PAN_US06), "--out", str(model), "--partition", "volts"]) == 2
 
 
+def test_partition_given_by_set_as_the_help_shows(tmp_path, capsys) -> None:
+    """--set 'partition=[…]' (the --set help's own example) reaches the settings like
+    --partition does: a bad name is a settings error, a good one is the model's partition."""
+    model = tmp_path / "m.json"
+    assert main(["train", str(PAN_US06), "--out", str(model), "--soc0", "1",
+                 "--set", 'partition=["soc","volts"]']) == 2
+    assert "setting 'partition'" in capsys.readouterr().err
+    assert main(["train", str(PAN_US06), "--out", str(model), "--soc0", "1", "--capacity",
+                 "2.85", "--max-local-models", "1", "--set", 'partition=["soc"]']) == 0
+    assert json.loads(model.read_text())["partition"]["variables"] == ["soc"]
+
+
 def test_record_metrics_score_each_end_of_the_soc_range_apart() -> None:
     """Whole record, 20–80 % window, below 10 % and above 90 % SoC, each over its own samples;
     an end the record does not reach has no figure (None), and pooling skips it."""

@@ -119,10 +119,11 @@ def cmd_train(a: argparse.Namespace) -> int:
     from lmncell.identification.train import train_files
 
     settings = dict(parse_setting(s) for s in a.set)
-    for key, value in (("max_local_models", a.max_local_models), ("ocv_tests", a.ocv_tests)):
+    for key, value in (("max_local_models", a.max_local_models), ("ocv_tests", a.ocv_tests),
+                       ("partition", a.partition.split(",") if a.partition else None)):
         if value is not None:
             settings[key] = value
-    partition = a.partition.split(",") if a.partition else None
+    partition = settings.pop("partition", None)
     train_files(a.data, a.out, a.capacity, a.soc0, partition, a.baselines, a.config,
                 read_options=read_options(a), **settings)
     return 0
