@@ -277,7 +277,9 @@ def test_a_model_file_where_an_fmu_belongs_is_named_not_a_traceback(quick_model,
     argv = [command[0], str(quick_model)] + [str(tmp_path / "r.csv") if c == "OUT" else c
                                              for c in command[1:]]
     assert main(argv) == 2
-    assert f"{quick_model}: not a readable FMU" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert f"{quick_model}: not a readable FMU" in err
+    assert f"it is a model file; build an FMU of it with `lmncell build-fmu {quick_model}" in err
 
 
 def test_cli_prints_a_users_warning_as_a_message_not_python_source(quick_model, capsys) -> None:

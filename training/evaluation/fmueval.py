@@ -46,6 +46,16 @@ class FmuInfo:
     current_delay_s: float  # the shipped model file's current delay δ (s; 0 without one)
 
 
+def _is_model_file(path: Path) -> bool:
+    """Whether a file is an LMNCell model file (JSON of format 'lmncell-model')."""
+    try:
+        with path.open("rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    return head.lstrip().startswith(b"{") and b'"lmncell-model"' in head
+
+
 def read_fmu_info(fmu: str | Path) -> FmuInfo:
     """The FMU's sample time and capacity; ConfigError naming the file where it cannot be read
     or is not an LMNCell FMU."""
@@ -57,7 +67,10 @@ def read_fmu_info(fmu: str | Path) -> FmuInfo:
     try:
         md = read_model_description(str(path))
     except Exception as exc:          # fmpy raises several kinds for a broken archive
-        raise ConfigError(f"{path}: not a readable FMU ({type(exc).__name__}: {exc})") from None
+        hint = (": it is a model file; build an FMU of it with `lmncell build-fmu "
+                f"{path} --out CELL.fmu`" if _is_model_file(path) else "")
+        raise ConfigError(f"{path}: not a readable FMU ({type(exc).__name__}: {exc}){hint}"
+                          ) from None
     names = {v.name: v for v in md.modelVariables}
     missing = [n for n in REQUIRED_VARIABLES if n not in names]
     if missing:
