@@ -128,6 +128,8 @@ def test_errors_quote_the_files_own_times_and_lines(tmp_path) -> None:
     later = [f"{100 + k}, 1, 1.0, 3.3, 0, 0" for k in range(4)] + ["101.5, 1, 1.0, 3.3, 0, 0"]
     with pytest.raises(DataError, match=r"at line 6: 103.0 s then 101.5 s"):
         read_record(_plett(tmp_path, later, "later.csv"))
+    good = read_record(_plett(tmp_path, GOOD, "good.csv"))
+    assert (good.meta.first_line, good.slice(3, 8).meta.first_line) == (2, 5)
     blank = GOOD[:3] + [""] + GOOD[3:5] + ["5, 1, 1.0, 33, 0, 0"]
     with pytest.raises(DataError, match=r"column 'voltage' \(voltage_v\) is 33 V at sample 5 "):
         read_record(_plett(tmp_path, blank, "blank.csv"))

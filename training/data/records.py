@@ -95,7 +95,8 @@ class Record:
         pauses = [s - start for s in self.meta.pause_starts if start < s < stop]
         meta = dataclasses.replace(
             self.meta, segment_starts=starts, pause_starts=pauses,
-            notes=[*self.meta.notes, note] if note else list(self.meta.notes))
+            notes=[*self.meta.notes, note] if note else list(self.meta.notes),
+            first_line=None if self.meta.first_line is None else self.meta.first_line + start)
         return Record(self.time_s[start:stop].copy(), self.current_a[start:stop].copy(),
                       self.voltage_v[start:stop].copy(), meta, cut(self.temperature_c),
                       cut(self.soc_ref), cut(self.charge_ah))

@@ -53,7 +53,7 @@ def resample_segment(rec: Record, sample_time_s: float, current_delay_s: float =
     def at(a: np.ndarray | None) -> np.ndarray | None:
         return None if a is None else np.interp(grid, t, a)
 
-    meta = dataclasses.replace(rec.meta, sample_time_s=ts, segment_starts=[0],
+    meta = dataclasses.replace(rec.meta, sample_time_s=ts, segment_starts=[0], first_line=None,
                                notes=[*rec.meta.notes, f"resampled to {ts} s (step means)"])
     current = _step_means(t, rec.current_a, grid, ts, current_delay_s)
     return Record(grid, current, mean(rec.voltage_v), meta,
