@@ -345,7 +345,8 @@ class TrainConfig:
     geometric mean of each level's, where the network grows as one: the level with the largest
     errors no longer decides M alone; A123 s1 records, 20–80 % / whole record mV held out:
     −25/−15/5/25 °C → −5 °C 3.52 / 12.88 → 3.58 / 11.64, −25/−5/5/25 °C → −15 °C 4.38 / 10.56
-    → 2.97 / 9.97, the −5/5/25 °C folds of −15 … 45 °C unchanged) or "aicc".
+    → 2.97 / 9.97, the −5/5/25 °C folds of −15 … 45 °C unchanged) or "aicc" (those folds,
+    with validation "none": 2.49 / 11.85 → 3.36 / 11.44).
     validation: "block" (the middle validation_fraction of every record's time), "record"
     (the last record given), or "none" (then stop = "aicc").
     soc_window / outside_weight: samples outside the SoC window get this weight in the fit.
