@@ -59,6 +59,38 @@ def test_bad_options_name_the_option(native_fmu, tmp_path, capsys, args, message
     assert message in capsys.readouterr().err
 
 
+def test_a_table_name_that_cannot_be_written_is_refused_before_any_run(
+        native_fmu, tmp_path, capsys, monkeypatch) -> None:
+    """The table's name is checked before the scenarios run (their results were lost when it
+    was refused at the end)."""
+    import lmncell.scenarios.sweep as sw
+
+    monkeypatch.setattr(sw, "sweep", lambda *_a, **_k: pytest.fail("the sweep ran"))
+    assert main(["sweep", str(native_fmu), "--out", str(tmp_path / "r.txt")]) == 2
+    assert "r.txt: --out must end in .csv or .parquet" in capsys.readouterr().err
+
+
+def test_a_scheduler_address_that_answers_nothing_is_named(native_fmu, tmp_path,
+                                                           capsys) -> None:
+    """(It raised a ValueError or, after dask's timeout, an OSError traceback.)"""
+    assert main(["sweep", str(native_fmu), "--out", str(tmp_path / "r.csv"), "--scheduler",
+                 "nonsense"]) == 2
+    assert ("--scheduler 'nonsense': cannot connect to a Dask scheduler there"
+            in capsys.readouterr().err)
+
+
+def test_parquet_without_an_engine_is_refused_before_the_run(tmp_path, monkeypatch) -> None:
+    import importlib.util
+
+    from lmncell.data.records import DataError
+    from lmncell.scenarios.sweep import check_table_path
+
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
+    with pytest.raises(DataError, match="writing Parquet needs pyarrow or fastparquet"):
+        check_table_path(tmp_path / "r.parquet")
+    assert check_table_path(tmp_path / "r.csv") == tmp_path / "r.csv"
+
+
 def test_cli_writes_table_and_plots(native_fmu, tmp_path, capsys) -> None:
     out = tmp_path / "r.csv"
     assert main(["sweep", str(native_fmu), "--cycles", "us06", "--ambient", "0,25",

@@ -226,8 +226,15 @@ def _floats(option: str):
 
 
 def cmd_sweep(a: argparse.Namespace) -> int:
-    from lmncell.scenarios.sweep import plot_sweep, scenarios, sweep, write_table
+    from lmncell.scenarios.sweep import (
+        check_table_path,
+        plot_sweep,
+        scenarios,
+        sweep,
+        write_table,
+    )
 
+    check_table_path(a.out)
     cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat,
                       a.pack, a.spread, a.seed, a.cells, a.cutoff)
     print(f"sweep: {len(cases)} scenario(s) on "

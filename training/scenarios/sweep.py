@@ -208,7 +208,7 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
                                dashboard_address=None)
         client = Client(cluster)
     elif own:
-        client = Client(scheduler)
+        client = _connect(Client, scheduler)
     try:
         blob = client.scatter(data, broadcast=True, hash=False)   # own key per sweep
         futures = [client.submit(run_scenario, blob, sc, pure=False) for sc in cases]
@@ -224,15 +224,44 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     return pd.DataFrame(rows)
 
 
-def write_table(table, path: str | Path) -> Path:
-    """CSV, or Parquet for a .parquet name (needs pyarrow)."""
+PARQUET_ENGINES = ("pyarrow", "fastparquet")   # pandas writes Parquet with either
+
+
+def check_table_path(path: str | Path) -> Path:
+    """The table's path, checked before a sweep runs (whose results would otherwise be lost
+    when they are written): DataError unless it ends in .csv, or in .parquet with a Parquet
+    engine (PARQUET_ENGINES) installed."""
+    import importlib.util
+
     path = Path(path)
+    if path.suffix not in (".csv", ".parquet"):
+        raise DataError(f"{path}: --out must end in .csv or .parquet")
+    if path.suffix == ".parquet" and not any(importlib.util.find_spec(e)
+                                              for e in PARQUET_ENGINES):
+        raise DataError(f"{path}: writing Parquet needs pyarrow or fastparquet (pip install "
+                        "pyarrow), neither is installed; or give a .csv name")
+    return path
+
+
+def _connect(client_class, scheduler: str):
+    """A Client of the Dask scheduler at that address; DataError naming it where none
+    answers (dask raises OSError or TimeoutError after its connect timeout) or the address
+    is not one."""
+    try:
+        return client_class(scheduler)
+    except (OSError, TimeoutError, ValueError, TypeError) as exc:
+        raise DataError(f"sweep: --scheduler {scheduler!r}: cannot connect to a Dask scheduler "
+                        f"there ({type(exc).__name__}: {exc}); expected the address of a "
+                        "running one, e.g. tcp://host:8786") from None
+
+
+def write_table(table, path: str | Path) -> Path:
+    """CSV, or Parquet for a .parquet name (needs pyarrow or fastparquet): check_table_path."""
+    path = check_table_path(path)
     if path.suffix == ".parquet":
         table.to_parquet(path, index=False)
-    elif path.suffix == ".csv":
-        table.to_csv(path, index=False, float_format="%.17g")
     else:
-        raise DataError(f"{path}: --out must end in .csv or .parquet")
+        table.to_csv(path, index=False, float_format="%.17g")
     return path
 
 
