@@ -87,6 +87,22 @@ def test_bad_design_inputs() -> None:
                          DesignSpec([0.8, 0.2], duration_s=10), progress=lambda _m: None)
 
 
+@pytest.mark.parametrize("cell, cycler, design, message", [
+    # limits swapped: the design fell back to a constant current outside them, unsaid
+    ({"voltage_min_v": 3.6, "voltage_max_v": 2.0}, {}, {},
+     "--voltage-min 3.6 V and --voltage-max 2 V leave no voltage window"),
+    ({"voltage_min_v": 2.0, "voltage_max_v": 3.0}, {}, {},
+     r"predicted voltage 3\.2\d\d … 3\.3\d\d V leaves the limits 2 … 3 V"),
+    # a sequence shorter than the hold: 'needs inf A on average'
+    ({}, {"hold_s": 10.0}, {"sequence_s": 5.0, "duration_s": 600.0},
+     "--sequence 5 s holds fewer than two levels of the cycler's hold time --hold 10 s"),
+])
+def test_limits_no_programme_can_meet_are_refused(cell, cycler, design, message) -> None:
+    with pytest.raises(DataError, match=message):
+        design_programme(CellSpec(capacity_ah=2.3, **cell), CyclerSpec(**cycler),
+                         DesignSpec([0.8, 0.2], **design), progress=lambda _m: None)
+
+
 def test_random_programme_has_the_designs_amplitude_bands_and_limits() -> None:
     cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
     spec = DesignSpec([0.8, 0.2, 0.8], duration_s=7200)

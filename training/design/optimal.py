@@ -409,9 +409,39 @@ def sequence_count(spec: DesignSpec) -> int:
     return n_seq
 
 
+def check_design(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec) -> None:
+    """DataError for limits that no programme can meet: a voltage window that is empty, or a
+    sequence too short for two levels of the cycler's hold time (one level is no
+    excitation)."""
+    if not cell.voltage_min_v + 2 * spec.voltage_margin_v < cell.voltage_max_v:
+        raise DataError(f"--voltage-min {cell.voltage_min_v:g} V and --voltage-max "
+                        f"{cell.voltage_max_v:g} V leave no voltage window (the design keeps "
+                        f"{spec.voltage_margin_v:g} V inside each); expected the minimum well "
+                        "below the maximum")
+    if spec.sequence_s < 2 * cyc.hold_s:
+        raise DataError(f"--sequence {spec.sequence_s:g} s holds fewer than two levels of the "
+                        f"cycler's hold time --hold {cyc.hold_s:g} s; expected a sequence of at "
+                        f"least {2 * cyc.hold_s:g} s (or a shorter --hold)")
+
+
+def check_voltages(prog_voltage_v: np.ndarray, cell: CellSpec) -> None:
+    """DataError where the programme's predicted voltage leaves the cell's limits: no current
+    moves the SoC through the profile within them (the design fell back to each sequence's
+    mean current, which leaves them too)."""
+    lo, hi = float(prog_voltage_v.min()), float(prog_voltage_v.max())
+    if lo < cell.voltage_min_v or hi > cell.voltage_max_v:
+        raise DataError(f"the programme's predicted voltage {lo:.3f} … {hi:.3f} V leaves the "
+                        f"limits {cell.voltage_min_v:g} … {cell.voltage_max_v:g} V "
+                        "(--voltage-min, --voltage-max): even the mean current that moves the "
+                        "SoC through the profile leaves them; expected limits around the "
+                        "cell's OCV over the profile's SoC (with --model: the model's)")
+
+
 def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
                      progress=print) -> Programme:
-    """Chain locally optimal sequences through the SoC profile."""
+    """Chain locally optimal sequences through the SoC profile (DataError where the limits
+    cannot be met: check_design, check_voltages)."""
+    check_design(cell, cyc, spec)
     n_seq = sequence_count(spec)
     i_max = current_limit(cell, cyc)
     cyc = dataclasses.replace(cyc, hold_s=settling_hold(cell, cyc, spec))
@@ -443,6 +473,7 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     for leg_end, target in zip(ends, spec.soc_profile[1:], strict=True):
         k_end = starts[leg_end] + parts[leg_end].current_a.size - 1
         points.append((float(time_s[k_end]), float(target)))
+    check_voltages(u, cell)
     settings = {"cell": dataclasses.asdict(cell), "cycler": dataclasses.asdict(cyc),
                 "design": dataclasses.asdict(spec), "max_current_a": i_max}
     return Programme(time_s, cur, u, socs, starts, points, lds, settings)
