@@ -11,6 +11,7 @@ import pytest
 from lmncell.cli import main
 from lmncell.evaluation.metrics import pooled, record_metrics
 from lmncell.fmu.pythonfmu_build import native_host_environment
+from lmncell.runtime.model import Depletion
 
 from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
 
@@ -131,6 +132,12 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     assert main(["explain", str(quick_model), "--temperature", "10", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert all(r["temperature_c"] == 10.0 and r["rc_positive"] for r in doc)
+    # the depletion resistance also where each local model lies: R_d·(0.1/SoC)^p, what a
+    # steady current sees there (R_d at SoC 0.1 read tens of Ω for a local model near full)
+    factor = Depletion(**json.loads(quick_model.read_text())["regressors"]["depletion"]).factor
+    assert all(r["r_depletion_at_soc_mohm"] == pytest.approx(
+        r["r_depletion_mohm"] * factor(r["soc"]), rel=1e-12, abs=1e-3) for r in doc)
+    assert "R_dep@0.1" in lines[2] and "R_dep@SoC" in lines[2]
     (tmp_path / "bad.json").write_text("{}")
     assert main(["explain", str(tmp_path / "bad.json")]) == 2
     assert "bad.json" in capsys.readouterr().err

@@ -53,10 +53,22 @@ def local_model_table(model: LmnModel, temperature_c: float | None = None) -> li
                 "temperature", model.reference_temperature_c)
             row["temperature_c"] = float(t)
             row.update(ladder_parameters(model, th, float(t)))
+            row.update(_depletion_at_soc(model, row))
         else:
             row.update(_arx_row(model, th, cols))
         rows.append(row)
     return rows
+
+
+def _depletion_at_soc(model: LmnModel, row: dict) -> dict:
+    """The depletion resistances at the local model's own SoC (mΩ; R_d·(0.1/SoC)^p, which a
+    steady current sees there beside R static), where the model has the regressor and the
+    partition the SoC: r_depletion_at_soc_mohm (and r_depletion_fast_at_soc_mohm)."""
+    if model.depletion is None or "soc" not in row:
+        return {}
+    factor = model.depletion.factor(float(row["soc"]))
+    return {f"{key[:-5]}_at_soc_mohm": _clean(row[key] * factor)
+            for key in ("r_depletion_mohm", "r_depletion_fast_mohm") if key in row}
 
 
 def _arx_row(model: LmnModel, th: np.ndarray, cols: list[str]) -> dict:
@@ -127,6 +139,11 @@ def _clean(value: float) -> float:
     return 0.0 if abs(value) < ROUND_OFF else value
 
 
+DEPLETION_HEADS = {   # explain_text's depletion columns: R_d at SoC 0.1, and at the LM's SoC
+    "r_depletion_mohm": "R_dep@0.1", "r_depletion_at_soc_mohm": "R_dep@SoC",
+    "r_depletion_fast_mohm": "R_dep2@0.1", "r_depletion_fast_at_soc_mohm": "R_dep2@SoC"}
+
+
 def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
     """The table of `lmncell explain`: every local model as the cell it describes."""
     rows = local_model_table(model, temperature_c)
@@ -155,8 +172,7 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
         taus = [k for k in rows[0]["rc_mohm_by_tau_s"] if k != "0"]
         head = (["LM", "gate", *part, "T/°C", "R0"] + [f"R@{t}s" for t in taus]
                 + ["R static"] + (["H"] if "hysteresis_mv" in rows[0] else [])
-                + (["R_dep@0.1"] if "r_depletion_mohm" in rows[0] else [])
-                + (["R_dep2@0.1"] if "r_depletion_fast_mohm" in rows[0] else [])
+                + [DEPLETION_HEADS[k] for k in DEPLETION_HEADS if k in rows[0]]
                 + (["U_off"] if "ocv_offset_mv" in rows[0] else []) + ["R ≥ 0"])
         body = []
         for r in rows:
@@ -166,9 +182,7 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
             cells.append(f"{r['r_static_mohm']:.2f}")
             if "hysteresis_mv" in r:
                 cells.append(f"{r['hysteresis_mv']:.1f}")
-            for key in ("r_depletion_mohm", "r_depletion_fast_mohm"):
-                if key in r:
-                    cells.append(f"{r[key]:.2f}")
+            cells += [f"{r[key]:.2f}" for key in DEPLETION_HEADS if key in r]
             if "ocv_offset_mv" in r:
                 cells.append(f"{r['ocv_offset_mv']:.1f}")
             cells.append("yes" if r["rc_positive"] else "NO")

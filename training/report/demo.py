@@ -201,7 +201,9 @@ def _local_model_table(rep: Report, model: LmnModel) -> None:
         cols.append(("time_constants_s", "time constants / s", ".1f"))
     optional = [("hysteresis_mv", "hysteresis H / mV", ".1f"),
                 ("r_depletion_mohm", "depletion R_d at SoC 0.1 / mΩ", ".2f"),
+                ("r_depletion_at_soc_mohm", "R_d at its SoC / mΩ", ".2f"),
                 ("r_depletion_fast_mohm", "fast depletion R_d2 at SoC 0.1 / mΩ", ".2f"),
+                ("r_depletion_fast_at_soc_mohm", "R_d2 at its SoC / mΩ", ".2f"),
                 ("ocv_offset_mv", "OCV offset / mV", ".1f")]
     cols += [c for c in optional if c[0] in table[0]]
     rep.table(table, cols, "Local models (`lmncell explain MODEL` prints the same): operating "
@@ -209,7 +211,9 @@ def _local_model_table(rep: Report, model: LmnModel) -> None:
                            "static resistance (R0 plus all RC elements), the RC elements at the "
                            "model's fixed time constants (the filters of the structure), the "
                            "depletion resistance R_d (its regressor grows as (0.1/SoC)⁴ near "
-                           "empty: the collapse before cut-off) and the local OCV offset, at the "
+                           "empty: the collapse before cut-off; at SoC 0.1 and at the local "
+                           "model's own SoC, which a steady current sees there beside R static) "
+                           "and the local OCV offset, at the "
                            "reference temperature (25 °C)"
               + (" (resistances × the Arrhenius factor elsewhere)" if model.arrhenius_k else "")
               + ". " + ("Identified as RC ladders: every R, R_d and the hysteresis voltage are "
