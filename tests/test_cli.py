@@ -254,18 +254,28 @@ def test_observer_folds_figure_draws_the_folds_and_refuses_none(tmp_path) -> Non
     ["evaluate", "m.json", "DATA", "--trace", "NODIR/t.csv"],
     ["design", "--capacity", "2", "--soc-profile", "0.8,0.2", "--out", "NODIR/p.csv"],
     ["train", "DATA", "--out", "TMP"],
+    # a folder to write into given as an existing file (the demo raised FileExistsError)
+    ["demo", "--out", "FILE"],
+    ["evaluate", "m.json", "DATA", "--plot", "FILE"],
+    ["sweep", "m.fmu", "--out", "TMP/r.csv", "--plot", "FILE"],
+    ["design", "--capacity", "2", "--soc-profile", "0.8,0.2", "--out", "TMP/p.csv",
+     "--plot", "FILE"],
 ])
 def test_output_files_in_missing_folders_are_refused_before_any_work(tmp_path, capsys,
                                                                     argv) -> None:
-    """A file to write whose folder does not exist (or a folder given as the file) is refused
-    when the arguments are read, not after a training or a simulation."""
+    """A file to write whose folder does not exist (or a folder given as the file), or a
+    folder to write into given as a file, is refused when the arguments are read, not after a
+    training or a simulation."""
+    (tmp_path / "file").write_text("")
     argv = [a.replace("NODIR", str(tmp_path / "missing")).replace("DATA", str(PAN_US06))
-            .replace("TMP", str(tmp_path)) for a in argv]
+            .replace("TMP", str(tmp_path)).replace("FILE", str(tmp_path / "file"))
+            for a in argv]
     with pytest.raises(SystemExit) as exit_info:
         main(argv)
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
-    assert ("does not exist" in err or "is a folder" in err) and "argument" in err
+    assert ("does not exist" in err or "is a folder" in err
+            or "is a file; expected a folder" in err) and "argument" in err
 
 
 def test_temperatures_on_the_command_line_are_cell_temperatures_in_celsius(quick_model,

@@ -57,6 +57,16 @@ def output_file_argument(text: str) -> str:
     return text
 
 
+def output_folder_argument(text: str) -> str:
+    """An argparse type for a folder to write into (made where missing, parents too): refused
+    at once (not after the work) where the path exists and is not a folder."""
+    path = Path(text)
+    if path.exists() and not path.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r}: is a file; expected a folder (it is made "
+                                         "where it does not exist)")
+    return text
+
+
 _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
@@ -357,7 +367,8 @@ def _add_evaluate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "record, or a comma list with one per data file in order (default: 1.0 for "
                    "records that start rested at full charge)")
     s.add_argument("--json", action="store_true", help="print the metrics as JSON")
-    s.add_argument("--plot", metavar="DIR", help="write figures and the local-model table "
+    s.add_argument("--plot", metavar="DIR", type=output_folder_argument,
+                   help="write figures and the local-model table "
                    "(an FMU: one fit figure per record)")
     s.add_argument("--trace", type=output_file_argument, metavar="OUT.csv",
                    help="write time, current, measured and model voltage and SoC per model step")
@@ -460,7 +471,8 @@ def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--out", required=True, type=output_file_argument, metavar="RESULTS.csv",
                    help="table to write "
                    "(.csv, or .parquet with pyarrow)")
-    s.add_argument("--plot", metavar="DIR", help="summary figures")
+    s.add_argument("--plot", metavar="DIR", type=output_folder_argument,
+                   help="summary figures")
     s.set_defaults(func=cmd_sweep)
 
 
@@ -484,7 +496,8 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--duration", type=_positive, default=7200.0, help="total, s")
     s.add_argument("--r0", type=_positive, default=0.010, help="design model R0, Ω")
     s.add_argument("--model", help="take the OCV and voltage limits from a model file")
-    s.add_argument("--plot", metavar="DIR", help="write the programme's figures")
+    s.add_argument("--plot", metavar="DIR", type=output_folder_argument,
+                   help="write the programme's figures")
     s.add_argument("--method", choices=DESIGN_METHODS, default="spacefill",
                    help="evenly spaced levels in D-optimal order, or free D-optimal levels")
     s.add_argument("--information", choices=INFORMATION_KINDS, default="lmn",
@@ -506,7 +519,8 @@ def _add_demo_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell demo` subcommand."""
     s = sub.add_parser("demo", help="train, evaluate, build the FMU, drive it, write a report",
                        **fmt)
-    s.add_argument("--out", default="lmncell-demo", help="output folder")
+    s.add_argument("--out", default="lmncell-demo", type=output_folder_argument,
+                   help="output folder")
     s.set_defaults(func=cmd_demo)
 
 
