@@ -1081,3 +1081,36 @@ def test_a_hysteresis_in_doubt_is_decided_per_temperature_level_where_m_was(monk
     assert res.info["hysteresis_trial"] == {"gamma": 300.0, "validation_mv_without": 2.9,
                                             "validation_mv_with": 3.1,
                                             "by": "final_validation_level_score_mv"}
+
+
+def test_records_that_leave_the_refinement_unidentified_give_a_model_not_a_traceback(
+        tmp_path, monkeypatch) -> None:
+    """One current step from full, ten minutes, a 1 mV response: the output-error refinement's
+    constrained least squares had its optimum ~1e8 away and ladder.lsi raised InfeasibleError
+    through `lmncell train`. The refinement now keeps the model before it, and says so."""
+    import lmncell.identification.refinement as refinement
+    from lmncell.identification.ladder import InfeasibleError
+
+    t = np.arange(600.0)
+    on = t > 100
+    rec = tmp_path / "step.csv"
+    rec.write_text("t,i,v\n" + "".join(f"{k:g},{-1.0 * s:g},{3.35 - 0.001 * s:g}\n"
+                                       for k, s in zip(t, on, strict=True)))
+    said: list[str] = []
+    model, _ = train_files([rec], tmp_path / "m.json", capacity_ah=2.0, soc0=1.0,
+                           progress=said.append,
+                           read_options={"columns": {"time": "t", "current": "i",
+                                                     "voltage": "v"}})
+    assert model.n_local_models >= 1 and (tmp_path / "m.json").exists()
+
+    def unsolvable(*_args):
+        raise InfeasibleError("the inequality constraints have no solution")
+
+    monkeypatch.setattr(refinement, "_solve_refinement", unsolvable)
+    said.clear()
+    train_files([rec], tmp_path / "m2.json", capacity_ah=2.0, soc0=1.0, progress=said.append,
+                read_options={"columns": {"time": "t", "current": "i", "voltage": "v"}})
+    assert any("kept the model before refinement" in s and "no usable solution" in s
+               for s in said)
+    info = json.loads((tmp_path / "m2.json").read_text())["training"]
+    assert "unsolved" in json.dumps(info)

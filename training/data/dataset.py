@@ -114,6 +114,9 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
                                            outside_weight, current_delay_s)]
 
 
+MIN_SEGMENT_STEPS = 10   # a segment shorter than this many model steps is left out
+
+
 def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: float,
                  soc_window: tuple[float, float] = (0.0, 1.0), outside_weight: float = 1.0,
                  current_delay_s: float = 0.0) -> list[tuple[Record, Segment]]:
@@ -128,7 +131,7 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         rec.temperature_c = temp
     out = []
     for k, part in enumerate(rec.segments()):
-        if part.duration_s < 10 * sample_time_s:
+        if part.duration_s < MIN_SEGMENT_STEPS * sample_time_s:
             continue
         rs = resample_segment(part, sample_time_s, current_delay_s)
         lo, hi = soc_window
@@ -137,8 +140,11 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
                                   float(part.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient)))
     if not out:
+        longest = max(part.duration_s for part in rec.segments()) if len(rec) > 1 else 0.0
         raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "
-                        f"time {sample_time_s} s")
+                        f"time {sample_time_s:g} s: the longest lasts {longest:g} s, expected "
+                        f"at least {MIN_SEGMENT_STEPS * sample_time_s:g} s ({MIN_SEGMENT_STEPS} "
+                        "model steps)")
     return out
 
 

@@ -94,7 +94,8 @@ def constraint_temperatures_c(t_min_c: float, t_max_c: float, degree: int,
 
 
 class InfeasibleError(ArithmeticError):
-    """No parameters satisfy the constraints (cannot happen for C·θ ≥ 0: θ = 0 does)."""
+    """No usable solution: the constraints have none, or (for C·θ ≥ 0, which θ = 0 meets) the
+    optimum lies so far beyond the data's reach that the least-distance solve loses it."""
 
 
 def lsi(H: np.ndarray, c: np.ndarray, C: np.ndarray, h: np.ndarray) -> np.ndarray:
@@ -118,10 +119,11 @@ def lsi(H: np.ndarray, c: np.ndarray, C: np.ndarray, h: np.ndarray) -> np.ndarra
     # NNLS on unit columns (u = v/‖E_i‖ ≥ 0 is the same problem): with columns whose norms
     # span four decades (a depletion regressor near empty beside the others) the unscaled
     # NNLS stopped at a point that broke constraints by up to 0.14 V/A
-    norms = np.linalg.norm(E, axis=0)
-    norms = np.where(norms > 0.0, norms, 1.0)
-    v, _ = nnls(E / norms[None, :], target, maxiter=50 * E.shape[1])
-    r = E @ (v / norms) - target
+    with np.errstate(over="ignore", invalid="ignore"):   # an optimum far beyond precision
+        norms = np.linalg.norm(E, axis=0)                  # ends in InfeasibleError below
+        norms = np.where(norms > 0.0, norms, 1.0)
+        v, _ = nnls(E / norms[None, :], target, maxiter=50 * E.shape[1])
+        r = E @ (v / norms) - target
     if not abs(r[-1]) > 1e-12:
         raise InfeasibleError("the inequality constraints have no solution")
     z = -r[:p] / r[-1]

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 from lmncell.config import OCV_REFINE_LEVELS, OCV_REFINE_SOC_MIN, OCV_TEST_ANCHOR, TrainConfig
 from lmncell.data.dataset import Segment
-from lmncell.identification.ladder import Ladder, lsi
+from lmncell.identification.ladder import InfeasibleError, Ladder, lsi
 from lmncell.identification.ocvfit import SMOOTHNESS, hat_basis, second_difference
 from lmncell.identification.prefit import temperature_levels
 from lmncell.identification.tree import Design, _lags, freerun_rmse, stabilise
@@ -178,12 +178,26 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
     x0 = prob.start()
     r0 = prob.evaluate(x0)[0]
     t_start = time.perf_counter()
-    sol = _solve_refinement(prob, x0, r0, cfg)
+    before = freerun_rmse(model, segs, design, "fit")
+    try:
+        sol = _solve_refinement(prob, x0, r0, cfg)
+    except InfeasibleError:
+        # the constrained solver (ladder.lsi) finds no usable solution where the records
+        # leave the refinement's parameters unidentified (a record with one current step:
+        # its optimum lay 1e8 away, beyond the solver's precision)
+        progress("  output-error refinement: its constrained least squares has no usable "
+                 "solution on these records (parameters they do not identify); kept the model "
+                 "before refinement")
+        return model, {"initial_cost": float(0.5 * r0 @ r0), "final_cost": None,
+                       "evaluations": 0, "seconds": time.perf_counter() - t_start,
+                       "status": -1, "train_rmse_before_mv": 1e3 * before,
+                       "train_rmse_after_mv": 1e3 * before, "accepted": False,
+                       "offset_ridge": prob.rho if prob.off_col is not None else 0.0,
+                       "ocv_refined": prob.with_ocv, "unsolved": True}
     theta, ocv_v = prob.unpack(sol.x)
     out = copy.copy(model)
     out.theta = np.vstack([stabilise(t, prob.na, cfg.max_pole) for t in theta])
     out.ocv_v = np.array(ocv_v, dtype=float)
-    before = freerun_rmse(model, segs, design, "fit")
     after = freerun_rmse(out, segs, design, "fit")
     accepted = bool(np.isfinite(after) and after < before)
     info = {"initial_cost": float(0.5 * r0 @ r0), "final_cost": float(sol.cost),

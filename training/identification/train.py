@@ -67,6 +67,12 @@ def read_training_records(paths: list[str | Path], cfg: TrainConfig,
     for p in paths:
         progress(f"reading {p}")
         records.append(read_record(p, **(read_options or {})))
+    peak = max(float(np.max(np.abs(r.current_a))) for r in records)
+    if not peak > cfg.rest_current_a:
+        raise DataError(f"no training record carries a current above the rest current "
+                        f"{cfg.rest_current_a:g} A (largest |current| {peak:g} A): a model of "
+                        "the cell's response to current needs one; expected the current column "
+                        "in A (check the column, and --current-unit for mA)")
     return records
 
 
@@ -311,9 +317,14 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     summary = _train_summary(model, train_metrics, result.info, seconds, baseline_docs)
     progress(f"wrote {out}: {model.n_local_models} local models, free-run training RMSE "
              f"{summary['train_rmse_mv']:.2f} mV (20–80 % SoC: "
-             f"{summary['train_window_rmse_mv']:.2f} mV{_ends_text(summary)}), LMN training "
-             f"{result.info['seconds']:.1f} s, total {seconds:.1f} s")
+             f"{_mv_or_none(summary['train_window_rmse_mv'])}{_ends_text(summary)}), LMN "
+             f"training {result.info['seconds']:.1f} s, total {seconds:.1f} s")
     return model, summary
+
+
+def _mv_or_none(value: float) -> str:
+    """'… mV', or '(none)' where no training sample lies in that SoC range (NaN)."""
+    return f"{value:.2f} mV" if np.isfinite(value) else "(none)"
 
 
 def _ends_text(summary: dict) -> str:
