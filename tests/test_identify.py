@@ -1114,3 +1114,23 @@ def test_records_that_leave_the_refinement_unidentified_give_a_model_not_a_trace
                for s in said)
     info = json.loads((tmp_path / "m2.json").read_text())["training"]
     assert "unsolved" in json.dumps(info)
+
+
+@pytest.mark.parametrize("rows, message", [
+    # no current at all (a wrong column): trained a model of nothing, said nothing
+    ([f"{k},0,3.3" for k in range(600)],
+     r"no training record carries a current above the rest current 0\.01 A \(largest "
+     r"\|current\| 0 A\)"),
+    ([f"{k},-1,3.3" for k in range(10)],
+     r"short\.csv: no segment is long enough for the model sample time 1 s: the longest "
+     r"lasts 9 s, expected at least 10 s \(10 model steps\)"),
+])
+def test_records_that_cannot_train_a_model_are_named(tmp_path, rows, message) -> None:
+    from lmncell.data.records import DataError
+
+    path = tmp_path / ("short.csv" if len(rows) < 100 else "rest.csv")
+    path.write_text("t,i,v\n" + "\n".join(rows) + "\n")
+    with pytest.raises(DataError, match=message):
+        train_files([path], tmp_path / "m.json", capacity_ah=2.0, soc0=1.0,
+                    progress=lambda _m: None,
+                    read_options={"columns": {"time": "t", "current": "i", "voltage": "v"}})
