@@ -1102,6 +1102,7 @@ def test_records_that_leave_the_refinement_unidentified_give_a_model_not_a_trace
                            read_options={"columns": {"time": "t", "current": "i",
                                                      "voltage": "v"}})
     assert model.n_local_models >= 1 and (tmp_path / "m.json").exists()
+    assert "(20–80 % SoC: (none), above 90 %: " in said[-1]     # not 'nan mV'
 
     def unsolvable(*_args):
         raise InfeasibleError("the inequality constraints have no solution")
