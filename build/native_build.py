@@ -19,7 +19,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-from lmncell.fmu.interface import dependency_indices
+from lmncell.fmu.interface import dependency_indices, fmu_path
 from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, OUT_OF_RANGE_DESCRIPTION, VOLTAGE_MARGIN_V
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
@@ -444,7 +444,7 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
     trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
 
-    model_path, out = Path(model_path), Path(out)
+    model_path, out = Path(model_path), fmu_path(out)
     model = load_model(model_path)
     version = model_hash(model_path)
     guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"lmncell-native:{version}"))

@@ -32,7 +32,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import lmncell.runtime as runtime_package
-from lmncell.fmu.interface import dependency_indices
+from lmncell.fmu.interface import dependency_indices, fmu_path
 from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, VOLTAGE_MARGIN_V
 from lmncell.runtime.model import LmnModel, load_model
 
@@ -330,7 +330,7 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
     """Write the pythonfmu FMU of a model file; returns its path."""
     from pythonfmu.builder import FmuBuilder
 
-    model_path, out = Path(model_path), Path(out)
+    model_path, out = Path(model_path), fmu_path(out)
     model = load_model(model_path)
     h = model_hash(model_path)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -249,6 +249,9 @@ def test_observer_folds_figure_draws_the_folds_and_refuses_none(tmp_path) -> Non
 @pytest.mark.parametrize("argv", [
     ["train", "DATA", "--out", "NODIR/m.json"],
     ["build-fmu", "m.json", "--out", "NODIR/m.fmu"],
+    # pythonfmu took another name for a folder and wrote LMNCell.fmu into it
+    ["build-fmu", "m.json", "--out", "TMP/m.zip"],
+    ["build-fmu", "m.json", "--out", "TMP/m.FMU"],
     ["simulate", "m.json", "--plot", "NODIR/s.png"],
     ["inspect", "DATA", "--plot", "NODIR/r.png"],
     ["evaluate", "m.json", "DATA", "--trace", "NODIR/t.csv"],
@@ -275,7 +278,9 @@ def test_output_files_in_missing_folders_are_refused_before_any_work(tmp_path, c
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert ("does not exist" in err or "is a folder" in err
-            or "is a file; expected a folder" in err) and "argument" in err
+            or "is a file; expected a folder" in err
+            or "an FMU's file name must end in .fmu" in err) and "argument" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["file"]     # nothing made
 
 
 def test_temperatures_on_the_command_line_are_cell_temperatures_in_celsius(quick_model,

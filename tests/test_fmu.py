@@ -354,3 +354,14 @@ def _mean_preview(cosim) -> float:
     volt = cosim.stepper.step(i, cosim.thermal.next_temperature(cosim.temp_int / cosim.covered_s))
     cosim.stepper.set_state(saved)
     return volt
+
+
+@pytest.mark.parametrize("native", [False, True])
+def test_an_fmu_name_without_the_fmu_extension_is_refused(quick_model, tmp_path,
+                                                           native) -> None:
+    """FMI 2.0's FMU is a .fmu zip; pythonfmu took any other name for a folder."""
+    import lmncell
+
+    with pytest.raises(ValueError, match=r"cell\.zip: an FMU's file name must end in \.fmu"):
+        lmncell.build_fmu(quick_model, tmp_path / "cell.zip", native=native)
+    assert list(tmp_path.iterdir()) == []

@@ -57,6 +57,13 @@ def output_file_argument(text: str) -> str:
     return text
 
 
+def fmu_file_argument(text: str) -> str:
+    """output_file_argument for an FMU, whose name must end in .fmu."""
+    if Path(text).suffix != ".fmu":
+        raise argparse.ArgumentTypeError(f"{text!r}: an FMU's file name must end in .fmu")
+    return output_file_argument(text)
+
+
 def output_folder_argument(text: str) -> str:
     """An argparse type for a folder to write into (made where missing, parents too): refused
     at once (not after the work) where the path exists and is not a folder."""
@@ -407,7 +414,7 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU",
                        **fmt)
     s.add_argument("model", help="model file (JSON)")
-    s.add_argument("--out", required=True, type=output_file_argument, metavar="CELL.fmu",
+    s.add_argument("--out", required=True, type=fmu_file_argument, metavar="CELL.fmu",
                    help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
                    "importer (linux64 binary built here with gcc, sources included)")
