@@ -273,3 +273,19 @@ def test_voltages_and_temperatures_outside_a_cells_range_are_refused(tmp_path, c
                        strict=True))
     with pytest.raises(DataError, match=message):
         read_record(p, columns=mapping)
+
+
+def test_read_records_options_are_read_generics(tmp_path) -> None:
+    """read_record passes its options to read_generic: the two lists agree, and an unknown one
+    (the CLI's --delimiter spelt as a keyword) is named with the ones there are."""
+    import inspect
+
+    from lmncell.data.readers import GENERIC_OPTIONS, read_generic
+
+    assert list(inspect.signature(read_generic).parameters)[1:] == list(GENERIC_OPTIONS)
+    p = tmp_path / "r.csv"
+    p.write_text("t;i;v\n0;1;3.3\n1;1;3.3\n")
+    with pytest.raises(TypeError, match=r"unknown option\(s\) \['delimiter'\].*sep is the "):
+        read_record(p, columns={"time": "t", "current": "i", "voltage": "v"}, delimiter=";")
+    assert read_record(p, columns={"time": "t", "current": "i", "voltage": "v"},
+                       sep=";").voltage_v.tolist() == [3.3, 3.3]

@@ -404,6 +404,10 @@ def check_plausibility(rec: Record) -> None:
                           stacklevel=3)
 
 
+GENERIC_OPTIONS = ("columns", "discharge_positive", "current_scale", "sep", "decimal",
+                   "current_unit")   # read_generic's options, which read_record passes on
+
+
 def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Record:
     """Read one cycler file into a Record (SI units, current > 0 charges).
 
@@ -411,6 +415,10 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
     `columns` is given). generic_kw go to read_generic (columns, discharge_positive,
     current_unit or current_scale, sep, decimal).
     """
+    unknown = sorted(set(generic_kw) - set(GENERIC_OPTIONS))
+    if unknown:
+        raise TypeError(f"read_record() got unknown option(s) {unknown}; expected some of "
+                        f"{list(GENERIC_OPTIONS)} (sep is the CLI's --delimiter)")
     path = check_readable(path)
     if fmt is None and generic_kw.get("columns"):
         fmt = "generic"
