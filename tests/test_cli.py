@@ -326,3 +326,14 @@ def test_cli_prints_a_users_warning_as_a_message_not_python_source(quick_model, 
             warnings.warn("user thing", UserWarning, stacklevel=1)
     assert seen == [DeprecationWarning]
     assert capsys.readouterr().err == "prog: warning: user thing\n"
+
+
+def test_ctrl_c_ends_a_command_with_a_message_and_code_130(monkeypatch, capsys) -> None:
+    import lmncell.cli as cli
+
+    def interrupted(_args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "cmd_inspect", interrupted)
+    assert cli.main(["inspect", "x.csv"]) == 130
+    assert "lmncell inspect: interrupted" in capsys.readouterr().err

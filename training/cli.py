@@ -577,6 +577,9 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:         # the output piped into a reader that stopped (| head)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except KeyboardInterrupt:       # Ctrl-C: a message and the shell's code, no traceback
+        print(f"\nlmncell {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
