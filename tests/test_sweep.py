@@ -204,3 +204,31 @@ def test_a_pack_stops_where_its_weakest_cell_is_empty(quick_model) -> None:
     assert f["steps"] < 4000 and f["stopped_at_s"] == f["steps"] * model.sample_time_s
     longer = drive_pack(model, spec, power[: f["steps"] - 1], 25.0, 0.5, cutoff_v=3.0)
     assert longer["stop"] == "" and longer["voltage_min_v"] >= 3.0
+
+
+@pytest.mark.parametrize("change, message", [
+    (("mass_kg = 1600.0 ", 'mass_kg = "heavy"'), "'mass_kg' = 'heavy'; expected a finite number"),
+    (("n_series = 100", "n_series = 100.5"), "'n_series' = 100.5; expected a whole number"),
+    (("rolling_resistance = 0.009", "rolling_resistance = nan"),
+     "'rolling_resistance' = nan; expected a finite number"),
+    (("mass_kg = 1600.0 ", "mass_g = 1600.0 "),
+     "unknown key(s) ['mass_g']; missing key(s) ['mass_kg']"),
+    (("[pack]", "[battery]"), "no [pack] table"),
+    (("[vehicle]", "[vehicle"), "not a TOML file"),
+])
+def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None:
+    """A string mass raised a TypeError traceback, a string coefficient a numpy one, and a
+    pack of 100.5 cells in series was simulated."""
+    from importlib import resources
+
+    from lmncell.data.records import DataError
+    from lmncell.scenarios.drive import load_vehicle
+
+    text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
+    assert change[0] in text
+    path = tmp_path / "v.toml"
+    path.write_text(text.replace(change[0], change[1], 1))
+    with pytest.raises(DataError) as err:
+        load_vehicle(path)
+    assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
+    assert load_vehicle(None).n_series == 100

@@ -12,6 +12,7 @@ was never trained on, discharged beyond its capacity.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 import shutil
@@ -52,6 +53,30 @@ class Vehicle:
     n_parallel: int
 
 
+def _check_vehicle_values(values: dict, where: str) -> None:
+    """DataError naming the key where a vehicle file's keys are not Vehicle's, or a value is
+    not of its type: a finite number (the cell counts whole numbers), the name a string."""
+    fields = {f.name: f.type for f in dataclasses.fields(Vehicle)}
+    unknown, absent = sorted(set(values) - set(fields)), sorted(set(fields) - set(values))
+    if unknown or absent:
+        raise DataError(f"{where}: " + "; ".join(
+            ([f"unknown key(s) {unknown}"] if unknown else [])
+            + ([f"missing key(s) {absent}"] if absent else []))
+            + "; expected the keys of the shipped compact_ev.toml")
+    for key, kind in fields.items():
+        value = values[key]
+        if kind == "str":
+            ok, expected = isinstance(value, str), "a string"
+        elif kind == "int":
+            ok, expected = isinstance(value, int) and not isinstance(value, bool), "a whole number"
+        else:
+            ok = (isinstance(value, (int, float)) and not isinstance(value, bool)
+                  and math.isfinite(value))
+            expected = "a finite number"
+        if not ok:
+            raise DataError(f"{where}: '{key}' = {value!r}; expected {expected}")
+
+
 def load_vehicle(path: str | Path | None = None) -> Vehicle:
     """A vehicle TOML file ([vehicle] and [pack] tables); None gives the default compact EV."""
     if path is None:
@@ -65,11 +90,15 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
             raise DataError(f"{path}: cannot read the vehicle file ({exc.strerror})") from exc
     try:
         doc = tomllib.loads(text)
-        values = {**doc["vehicle"], **doc["pack"]}
-        veh = Vehicle(**values)
-    except (tomllib.TOMLDecodeError, KeyError, TypeError) as exc:
-        raise DataError(f"{where}: not a vehicle file with [vehicle] and [pack] tables of the "
-                        f"documented keys ({exc})") from exc
+    except tomllib.TOMLDecodeError as exc:
+        raise DataError(f"{where}: not a TOML file ({exc})") from exc
+    missing = [t for t in ("vehicle", "pack") if not isinstance(doc.get(t), dict)]
+    if missing:
+        raise DataError(f"{where}: no {' or '.join(f'[{t}]' for t in missing)} table; expected "
+                        "[vehicle] and [pack] tables as in the shipped compact_ev.toml")
+    values = {**doc["vehicle"], **doc["pack"]}
+    _check_vehicle_values(values, where)
+    veh = Vehicle(**values)
     for key in ("mass_kg", "drag_coefficient", "frontal_area_m2", "n_series", "n_parallel"):
         if not getattr(veh, key) > 0:
             raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected > 0")
