@@ -163,6 +163,10 @@ def test_coarse_steps_drive_the_same_charge_and_a_step_longer_than_the_cycle_is_
     assert main(["simulate", str(native_fmu), "--cycle", "udds", "--step", "1400"]) == 2
     assert ("communication step 1400 s: longer than the UDDS cycle (1370 s); expected at most "
             "1370 s") in capsys.readouterr().err
+    # a step so short that the run would take hours (it ran silently, allocating gigabytes)
+    assert main(["simulate", str(native_fmu), "--cycle", "udds", "--step", "1e-6"]) == 2
+    assert ("communication step 1e-06 s: 1370000000 steps over the UDDS run (1370 s), more than "
+            "2000000") in capsys.readouterr().err
 
 
 def test_a_run_stops_where_the_cell_is_empty(native_fmu) -> None:

@@ -212,6 +212,10 @@ def empty_reason(voltage_v: float, soc: float, cutoff_v: float) -> str:
     return ""
 
 
+MAX_CYCLE_STEPS = 2_000_000   # communication steps of one run_cycle (1 ms over the WLTC's
+# 1800 s: 18 s of fmpy calls with the native FMU); more is refused, not left running for hours
+
+
 def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = None,
               repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
               temperature_c: float = 25.0, cutoff_v: float | None = None) -> CycleResult:
@@ -240,6 +244,12 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
         copies = f"{repeat} × " if repeat > 1 else ""
         raise DataError(f"communication step {h:g} s: longer than {copies}the {cycle.upper()} "
                         f"cycle ({power.size * dt:g} s); expected at most {power.size * dt:g} s")
+    if n > MAX_CYCLE_STEPS:
+        span = power.size * dt
+        raise DataError(f"communication step {h:g} s: {n} steps over the {cycle.upper()} "
+                        f"run ({span:g} s), more than {MAX_CYCLE_STEPS}, which would take hours "
+                        "and gigabytes; expected a step of at least "
+                        f"{span / MAX_CYCLE_STEPS:.3g} s")
     cell_power, speed = step_means(cell_power, dt, h, n), step_means(speed, dt, h, n)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipped = extract(str(fmu))
