@@ -233,3 +233,20 @@ def test_end_of_discharge_example_compares_logged_soc_with_the_charge_left(tmp_p
     run = subprocess.run([sys.executable, str(script), "2.0307", str(lone)],
                          capture_output=True, text=True)
     assert run.returncode == 2 and "A123_DYN_50_P25_s2.csv.gz is not beside it" in run.stderr
+
+
+def test_ocv_tests_in_either_order_and_a_dynamic_record_is_no_ocv_test() -> None:
+    """The discharge and charge tests may come in either order (S3 before S1 was refused with
+    'fewer than 10 samples with discharge current'); two discharges, or a drive cycle given
+    as the OCV test (it was taken as one, its voltage far from the OCV), are refused."""
+    from lmncell.identification.ocvfit import measured_ocv
+
+    s1, s3 = (str(DATA / f"a123_plett/ocv/A123_OCV_P25_S{k}.csv.gz") for k in (1, 3))
+    knots = np.linspace(0.0, 1.0, 21)
+    assert np.array_equal(measured_ocv([s3, s1], 2.0307, knots),
+                          measured_ocv([s1, s3], 2.0307, knots))
+    with pytest.raises(DataError, match=r"A123_OCV_P25_S1\.csv\.gz both discharge"):
+        measured_ocv([s1, s1], 2.0307, knots)
+    with pytest.raises(DataError, match=r"A123_DYN_50_P25_s1\.csv\.gz: its discharge current is "
+                                        r"0\.\d\d C .*expected a slow OCV test, C/5 or slower"):
+        measured_ocv([str(A123_S1)], 2.0307, knots)

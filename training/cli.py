@@ -357,8 +357,9 @@ def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "'partition=[\"soc\",\"current\"]'")
     s.add_argument("--max-local-models", type=_positive_int, help="upper limit of M "
                    "(default: 8 per training temperature the tree splits along, else 8)")
-    s.add_argument("--ocv-tests", nargs="+", metavar="FILE", help="slow OCV tests (discharge "
-                   "from full, charge from empty; or one file with both): fixes the OCV")
+    s.add_argument("--ocv-tests", nargs="+", metavar="FILE", help="slow OCV tests, C/5 or "
+                   "slower (a discharge from full and a charge from empty, in either order; or "
+                   "one file with both): fixes the OCV")
     _add_reader_options(s)
     s.set_defaults(func=cmd_train)
 

@@ -401,8 +401,9 @@ class TrainConfig:
     rest_current_a: a current of at most this magnitude (A) is a rest: the charge/discharge
     direction (pre-partition, gating) stays that of the last current above it.
     max_pole: largest allowed local pole magnitude (stability repair).
-    ocv_tests: slow OCV tests ([discharge from full, charge from empty] or one file with both);
-    their mean branch becomes the model's OCV, fixed (empty: the OCV is estimated from the data).
+    ocv_tests: slow OCV tests (a discharge from full and a charge from empty, in either order, or
+    one file with both; C/5 or slower); their mean branch becomes the model's OCV, fixed (empty:
+    the OCV is estimated from the data).
     Two files are put on the model's SoC scale with its capacity. A123 s1 records, the folds
     between the training temperatures (−5, 5, 25 °C held out of −15…45 °C), 20–80 % / whole
     record mV: estimated OCV 3.03 / 16.27 → the 25 °C C/30 test (A123_OCV_P25_S1 + S3)

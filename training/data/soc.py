@@ -12,6 +12,7 @@ import numpy as np
 from lmncell.data.records import DataError, Record
 
 REST_CURRENT_A = 0.02
+SLOW_TEST_MAX_C_RATE = 0.2   # an OCV test's loaded samples run at C/5 or slower (median)
 
 
 def charge_throughput_ah(rec: Record, use_counters: bool = True) -> np.ndarray:
@@ -129,9 +130,16 @@ def _branch(rec: Record, capacity_ah: float, soc0: float, grid: np.ndarray,
     """Voltage over the SoC grid for the part of a slow test with current of the given sign."""
     soc = coulomb_count(rec, soc0, capacity_ah)
     sel = sign * rec.current_a > REST_CURRENT_A
+    what = "charge" if sign > 0 else "discharge"
     if sel.sum() < 10:
-        raise DataError(f"{rec.meta.source}: fewer than 10 samples with "
-                        f"{'charge' if sign > 0 else 'discharge'} current; expected a slow test")
+        raise DataError(f"{rec.meta.source}: fewer than 10 samples with {what} current; "
+                        "expected a slow test")
+    rate = float(np.median(np.abs(rec.current_a[sel]))) / capacity_ah
+    if rate > SLOW_TEST_MAX_C_RATE:
+        raise DataError(f"{rec.meta.source}: its {what} current is {rate:.2f} C (median over "
+                        f"its {what} samples, at {capacity_ah:g} Ah); expected a slow OCV test, "
+                        f"C/{1 / SLOW_TEST_MAX_C_RATE:g} or slower (C/20, C/30), whose voltage "
+                        "is near the OCV")
     s, v = soc[sel], rec.voltage_v[sel]
     order = np.argsort(s, kind="stable")
     s, v = s[order], v[order]

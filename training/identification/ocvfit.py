@@ -137,19 +137,25 @@ def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, 
 def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarray:
     """Mean of the charge and discharge branches of slow tests at the knots (V).
 
-    paths: [discharge test (starts full), charge test (starts empty)], or one file that holds
-    both (full → empty → full; its current offset is balanced out and its SoC is a fraction of
-    its own capacity, see lmncell.data.soc.ocv_from_round_trip)."""
+    paths: a discharge test (starts full) and a charge test (starts empty), in either order,
+    or one file that holds both (full → empty → full; its current offset is balanced out and
+    its SoC is a fraction of its own capacity, see lmncell.data.soc.ocv_from_round_trip)."""
     from lmncell.data.readers import read_record
-    from lmncell.data.soc import ocv_from_round_trip, ocv_from_slow_tests
+    from lmncell.data.records import DataError
+    from lmncell.data.soc import charge_throughput_ah, ocv_from_round_trip, ocv_from_slow_tests
 
     recs = [read_record(p) for p in paths]
     if len(recs) == 1:
         curve = ocv_from_round_trip(recs[0]).curve
     elif len(recs) == 2:
-        curve = ocv_from_slow_tests(recs[0], recs[1], capacity_ah)
+        net = [float(charge_throughput_ah(r)[-1]) for r in recs]
+        if (net[0] < 0) == (net[1] < 0):
+            raise DataError(f"ocv_tests: {recs[0].name} and {recs[1].name} both "
+                            f"{'discharge' if net[0] < 0 else 'charge'} (net {net[0]:+.3f} and "
+                            f"{net[1]:+.3f} Ah); expected a discharge from full and a charge "
+                            "from empty")
+        discharge, charge = sorted(recs, key=lambda r: float(charge_throughput_ah(r)[-1]))
+        curve = ocv_from_slow_tests(discharge, charge, capacity_ah)
     else:
-        from lmncell.data.records import DataError
-
         raise DataError(f"ocv_tests: expected one or two files, got {len(recs)}")
     return np.interp(knots, curve.soc, curve.mean_v)
