@@ -1135,3 +1135,15 @@ def test_records_that_cannot_train_a_model_are_named(tmp_path, rows, message) ->
         train_files([path], tmp_path / "m.json", capacity_ah=2.0, soc0=1.0,
                     progress=lambda _m: None,
                     read_options={"columns": {"time": "t", "current": "i", "voltage": "v"}})
+
+
+def test_a_record_of_one_sample_segments_names_its_length() -> None:
+    """Two samples split by a gap: no segment of two samples, and the message still says how
+    long the longest is (max over no segments raised a ValueError)."""
+    from lmncell.data.dataset import record_parts
+    from lmncell.data.records import DataError
+
+    rec = Record(np.array([0.0, 100.0]), np.ones(2), np.full(2, 3.3),
+                 RecordMeta("two.csv", "generic", segment_starts=[0, 1]))
+    with pytest.raises(DataError, match="the longest lasts 0 s, expected at least 10 s"):
+        record_parts(rec, 1.0, 1.0, 2.0)

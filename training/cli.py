@@ -58,9 +58,15 @@ def output_file_argument(text: str) -> str:
 
 
 def fmu_file_argument(text: str) -> str:
-    """output_file_argument for an FMU, whose name must end in .fmu."""
-    if Path(text).suffix != ".fmu":
-        raise argparse.ArgumentTypeError(f"{text!r}: an FMU's file name must end in .fmu")
+    """output_file_argument for an FMU, whose name the builders accept (fmu.interface.fmu_path:
+    it must end in .fmu)."""
+    from lmncell.fmu.interface import fmu_path
+
+    try:
+        fmu_path(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: an FMU's file name must end in .fmu"
+                                         ) from None
     return output_file_argument(text)
 
 

@@ -140,7 +140,7 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
                                   float(part.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient)))
     if not out:
-        longest = max(part.duration_s for part in rec.segments()) if len(rec) > 1 else 0.0
+        longest = max((part.duration_s for part in rec.segments()), default=0.0)
         raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "
                         f"time {sample_time_s:g} s: the longest lasts {longest:g} s, expected "
                         f"at least {MIN_SEGMENT_STEPS * sample_time_s:g} s ({MIN_SEGMENT_STEPS} "

@@ -154,7 +154,7 @@ def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarr
                             f"{'discharge' if net[0] < 0 else 'charge'} (net {net[0]:+.3f} and "
                             f"{net[1]:+.3f} Ah); expected a discharge from full and a charge "
                             "from empty")
-        discharge, charge = sorted(recs, key=lambda r: float(charge_throughput_ah(r)[-1]))
+        discharge, charge = recs if net[0] < 0 else recs[::-1]
         curve = ocv_from_slow_tests(discharge, charge, capacity_ah)
     else:
         raise DataError(f"ocv_tests: expected one or two files, got {len(recs)}")
