@@ -38,7 +38,8 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--cycles", "wltc,nedc"], "--cycles ['nedc'] unknown"),
+    (["--cycles", "wltc,nedc"], "--cycles 'nedc': neither one of ['udds', 'us06', 'hwfet', "
+                                "'wltc'] nor a speed-trace file"),
     (["--soc0", "0.5,1.5"], "--soc0 1.5"),
     (["--ambient", "-300"], "--ambient -300.0"),
     (["--ambient", "298.15"], "--ambient 298.15: expected temperatures in °C within -60…100"),
@@ -236,3 +237,77 @@ def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None
         load_vehicle(path)
     assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
     assert load_vehicle(None).n_series == 100
+
+
+def _write_us06_as(path, header: str, delimiter: str = ",", factor: float = 1.0) -> None:
+    """The shipped US06 written as a user's trace: time_s, speed × factor, grade."""
+    from lmncell.scenarios.drive import load_cycle
+
+    trace = load_cycle("us06")
+    rows = [delimiter.join(header.split(","))]
+    rows += [delimiter.join((f"{t + 100.0:g}", repr(float(v) * factor), f"{g:g}"))
+             for t, v, g in zip(trace.time_s, trace.speed_mps, trace.grade, strict=True)]
+    path.write_text("\n".join(rows) + "\n")
+
+
+def test_a_speed_trace_file_drives_the_fmu_as_the_shipped_cycle(native_fmu, tmp_path,
+                                                                 capsys) -> None:
+    """`--cycle FILE.csv` (and `--cycles` of a sweep): the shipped US06 written in km/h with ';'
+    between the columns, starting at 100 s, drives the FMU as `--cycle us06` does."""
+    shipped = run_cycle(native_fmu, "us06").figures
+    path = tmp_path / "my_us06.csv"
+    _write_us06_as(path, "Time_s,speed_kmh,grade", ";", 3.6)
+    mine = run_cycle(native_fmu, str(path)).figures
+    assert mine.pop("cycle") == "my_us06.csv"
+    shipped.pop("cycle")
+    assert mine.keys() == shipped.keys()
+    for key, value in shipped.items():          # km/h to m/s: the last digit may differ
+        if isinstance(value, float):
+            assert mine[key] == pytest.approx(value, rel=1e-12), key
+        else:
+            assert mine[key] == value, key
+    assert main(["simulate", str(native_fmu), "--cycle", str(path)]) == 0
+    assert capsys.readouterr().out.startswith("my_us06.csv x1 at 1.0 s steps: 12.9 km")
+    cases = scenarios([str(path), "us06"], [25.0], [0.9])
+    table = sweep(native_fmu, cases, workers=1, progress=False)
+    assert list(table["cycle"]) == ["my_us06.csv", "us06"]
+    assert table.loc[0, "soc_end"] == pytest.approx(table.loc[1, "soc_end"], rel=1e-12)
+
+
+@pytest.mark.parametrize("text, message", [
+    ("time_s,speed_kmh\n0,0\n\n1,abc\n", "column 'speed_kmh' at line 4: 'abc'; expected a number"),
+    ("time_s,speed_kmh\n0,0\n1,1\n3,2\n4,3\n",
+     "column 'time_s' at line 4: 1 s then 3 s; expected times rising in even steps"),
+    ("time_s,speed_kmh\n0,0\n1,1\n0,2\n", "column 'time_s' at line 4: 1 s then 0 s"),
+    ("time_s,speed_mps\n0,0\n1,-1\n", "column 'speed_mps' at line 3: -1; expected 0…100 m/s"),
+    ("time_s,speed_kmh\n0,0\n1,400\n", "column 'speed_kmh' at line 3: 400; expected 0…360 km/h"),
+    ("time_s,speed_mps,grade\n0,0,0\n1,1,5\n",
+     "column 'grade' at line 3: 5; expected -0.5…0.5 (rise over run, not % or degrees)"),
+    ("time_s,speed_mph\n0,0\n1,nan\n", "column 'speed_mph' at line 3: nan; expected a finite"),
+    ("t,v\n0,0\n1,1\n", "no time and no speed column in the header ['t', 'v']"),
+    ("time_s,speed_kmh,speed_mps\n0,0,0\n1,1,1\n", "2 speed columns ['speed_kmh', 'speed_mps']"),
+    ("time_s,speed_kmh\n0,0\n", "1 sample(s); expected at least two"),
+    ("", "empty; expected a CSV with a header"),
+])
+def test_a_bad_speed_trace_file_is_named_with_line_column_and_value(
+        native_fmu, tmp_path, capsys, text, message) -> None:
+    path = tmp_path / "trace.csv"
+    path.write_text(text)
+    assert main(["simulate", str(native_fmu), "--cycle", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: {message}" in err and "Traceback" not in err
+    assert main(["sweep", str(native_fmu), "--cycles", f"us06,{path}", "--out",
+                 str(tmp_path / "r.csv")]) == 2
+    assert f"{path}: {message}" in capsys.readouterr().err
+
+
+def test_a_cycle_that_is_neither_a_name_nor_a_file_is_refused(native_fmu, tmp_path,
+                                                              capsys) -> None:
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", str(native_fmu), "--cycle", "nedc"])
+    assert exc.value.code == 2
+    assert ("--cycle: 'nedc': neither one of ['udds', 'us06', 'hwfet', 'wltc'] nor a "
+            "speed-trace file; expected a cycle name or a CSV") in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["simulate", str(native_fmu), "--cycle", str(tmp_path)])
+    assert "nor a speed-trace file (it is a folder)" in capsys.readouterr().err

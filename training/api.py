@@ -156,11 +156,13 @@ def build_fmu(model_path: str | Path, out: str | Path, native: bool = False) -> 
     return _build(model_path, out)
 
 
-def sweep(fmu: str | Path, cycles: Sequence[str] = ("wltc",), ambient_c: Sequence[float] = (25.0,),
-          soc0: Sequence[float] = (0.9,), vehicles: Sequence[str | Path | None] = (None,),
+def sweep(fmu: str | Path, cycles: Sequence[str | Path] = ("wltc",),
+          ambient_c: Sequence[float] = (25.0,), soc0: Sequence[float] = (0.9,),
+          vehicles: Sequence[str | Path | None] = (None,),
           repeat: int = 1, workers: int | None = None, scheduler: str | None = None,
           progress: bool = True, cutoff_v: float | None = None):
-    """Drive an FMU through every combination of cycles × vehicles × ambient temperatures (°C)
+    """Drive an FMU through every combination of cycles (shipped cycles' names or speed-trace
+    CSV files, as `lmncell simulate --cycle` takes them) × vehicles × ambient temperatures (°C)
     × start SoC on Dask (a LocalCluster of `workers` processes, or the cluster behind
     `scheduler`); returns a pandas DataFrame, one row per scenario (distance driven, minimum and
     maximum cell voltage, end SoC, Ah throughput, energy, maximum cell temperature,

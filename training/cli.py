@@ -18,7 +18,7 @@ from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
 from lmncell.runtime.model import ModelFileError
-from lmncell.scenarios.drive import CUTOFF_EXPECTED, is_cutoff
+from lmncell.scenarios.drive import CUTOFF_EXPECTED, cycle_problem, is_cutoff
 
 USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
                IsADirectoryError, PermissionError)
@@ -68,6 +68,15 @@ def fmu_file_argument(text: str) -> str:
         raise argparse.ArgumentTypeError(f"{text!r}: an FMU's file name must end in .fmu"
                                          ) from None
     return output_file_argument(text)
+
+
+def cycle_argument(text: str) -> str:
+    """An argparse type for a drive cycle: a shipped cycle's name or a speed-trace file (its
+    content is checked when it is read)."""
+    problem = cycle_problem(text)
+    if problem:
+        raise argparse.ArgumentTypeError(f"{text!r}: {problem}")
+    return text
 
 
 def output_folder_argument(text: str) -> str:
@@ -433,8 +442,10 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy",
                        **fmt)
     s.add_argument("fmu", help="an LMNCell FMU")
-    s.add_argument("--cycle", choices=["wltc", "udds", "us06", "hwfet"], default="wltc",
-                   help="speed trace")
+    s.add_argument("--cycle", type=cycle_argument, default="wltc", metavar="NAME|FILE.csv",
+                   help="speed trace: wltc, udds, us06, hwfet, or a CSV file with a time column "
+                   "(time_s or cycSecs), a speed column (speed_mps, speed_kmh, speed_mph or "
+                   "cycMps) and optionally the road grade as rise over run (grade or cycGrade)")
     s.add_argument("--vehicle", metavar="FILE.toml", help="vehicle and pack (default: the "
                    "built-in compact EV)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
@@ -442,7 +453,7 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
-                   "a step longer than the cycle's 1 s samples holds their mean power")
+                   "a step longer than the cycle's samples holds their mean power")
     s.add_argument("--cutoff", type=_cutoff, metavar="V", help="discharge cut-off cell voltage: "
                    "the run stops where the voltage falls below it or the SoC below 0 (default: "
                    "the lowest voltage of the model's training records; 0: none, the run stops "
@@ -457,7 +468,8 @@ def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell sweep` subcommand."""
     s = sub.add_parser("sweep", help="many drive-cycle scenarios of an FMU on Dask", **fmt)
     s.add_argument("fmu", help="an LMNCell FMU (pythonfmu or native)")
-    s.add_argument("--cycles", default="wltc", help="comma list of wltc, udds, us06, hwfet")
+    s.add_argument("--cycles", default="wltc", help="comma list of wltc, udds, us06, hwfet "
+                   "and speed-trace CSV files (as simulate --cycle takes them)")
     s.add_argument("--ambient", type=_floats("--ambient"), default=[25.0],
                    help="comma list of ambient temperatures, °C (default: 25)")
     s.add_argument("--soc0", type=_floats("--soc0"), default=[0.9],

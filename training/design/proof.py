@@ -147,8 +147,8 @@ def drive_profile_current(capacity_ah: float, cycle: str = "udds", repeat: int =
     from lmncell.scenarios.drive import load_cycle, load_vehicle, pack_power
 
     veh = load_vehicle()
-    _, speed, grade = load_cycle(cycle)
-    p = np.tile(pack_power(veh, speed, grade, 1.0), repeat)
+    trace = load_cycle(cycle)
+    p = np.tile(pack_power(veh, trace.speed_mps, trace.grade, trace.step_s), repeat)
     cur = -p / (3.3 * veh.n_series * veh.n_parallel)
     return cur * c_rate_peak * capacity_ah / np.abs(cur).max()
 

@@ -108,24 +108,168 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
     return veh
 
 
-def load_cycle(name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Time (s), speed (m/s) and grade of a shipped speed trace."""
-    if name not in CYCLES:
-        raise DataError(f"unknown cycle {name!r}; expected one of {sorted(CYCLES)}")
-    path = data_dir() / "drive_cycles" / CYCLES[name]
-    with open(path, encoding="utf-8-sig") as fh:
-        header = fh.readline().strip().split(",")
-    arr = np.loadtxt(path, delimiter=",", skiprows=1, encoding="utf-8-sig")
-    cols = {h: arr[:, k] for k, h in enumerate(header)}
-    for c in ("cycSecs", "cycMps"):
-        if c not in cols:
-            raise DataError(f"{path}: missing column '{c}'")
-    grade = cols.get("cycGrade", np.zeros_like(cols["cycSecs"]))
-    return cols["cycSecs"], cols["cycMps"], grade
+MAX_SPEED_MPS = 100.0   # 360 km/h: a faster speed in a trace is a unit mix-up
+MAX_GRADE = 0.5         # rise over run: a steeper road in a trace is a unit mix-up (%, degrees)
+# a trace file's columns: each quantity's accepted names (case-insensitive; FASTSim's first),
+# the factor to SI units (s, m/s, rise/run) and the column's unit
+TRACE_COLUMNS = {
+    "time": {"cycsecs": (1.0, "s"), "time_s": (1.0, "s"), "time": (1.0, "s")},
+    "speed": {"cycmps": (1.0, "m/s"), "speed_mps": (1.0, "m/s"), "speed_kmh": (1 / 3.6, "km/h"),
+              "speed_mph": (0.44704, "mph")},
+    "grade": {"cycgrade": (1.0, ""), "grade": (1.0, "")},
+}
+TRACE_DELIMITERS = ",;\t"   # the header's first of these that splits it is the delimiter
+TRACE_EXPECTED = ("a CSV with a header: a time column (time_s, or FASTSim's cycSecs), a speed "
+                  "column (speed_mps, speed_kmh, speed_mph, or cycMps) and optionally the road "
+                  "grade as rise over run (grade, or cycGrade)")
+
+
+@dataclass(frozen=True)
+class TraceColumn:
+    """Where a quantity is in a trace file: column index and name, factor to SI, unit."""
+
+    index: int
+    name: str
+    factor: float
+    unit: str
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedTrace:
+    """A vehicle speed trace: time (s, even steps), speed (m/s, ≥ 0) and road grade (rise over
+    run); name is how figures and tables call it (a shipped cycle's key in CYCLES, or the trace
+    file's name)."""
+
+    name: str
+    time_s: np.ndarray
+    speed_mps: np.ndarray
+    grade: np.ndarray
+
+    @property
+    def step_s(self) -> float:
+        """The trace's sample step (s)."""
+        return float(np.median(np.diff(self.time_s)))
+
+    @property
+    def title(self) -> str:
+        """The name in messages and plots: a shipped cycle's upper-case, a file's as it is."""
+        return _title(self.name)
+
+
+def load_cycle(cycle: str | Path | SpeedTrace) -> SpeedTrace:
+    """A shipped cycle by name (CYCLES), or a speed-trace CSV file (TRACE_EXPECTED); a
+    SpeedTrace is returned as it is. DataError naming the file, line, column and value where a
+    file is not such a trace."""
+    if isinstance(cycle, SpeedTrace):
+        return cycle
+    if str(cycle) in CYCLES:
+        trace = read_speed_trace(data_dir() / "drive_cycles" / CYCLES[str(cycle)])
+        return dataclasses.replace(trace, name=str(cycle))
+    problem = cycle_problem(cycle)
+    if problem:
+        raise DataError(f"cycle {str(cycle)!r}: {problem}")
+    return read_speed_trace(Path(cycle))
+
+
+def cycle_problem(cycle: str | Path) -> str:
+    """Why a cycle argument names neither a shipped cycle nor a file ('' where it does; the
+    file's content is read by load_cycle)."""
+    if str(cycle) in CYCLES or Path(cycle).is_file():
+        return ""
+    folder = " (it is a folder)" if Path(cycle).is_dir() else ""
+    return (f"neither one of {list(CYCLES)} nor a speed-trace file{folder}; expected a cycle "
+            f"name or {TRACE_EXPECTED}")
+
+
+def _trace_columns(header: list[str], path: Path) -> dict[str, TraceColumn]:
+    """Each quantity's column in a trace file's header."""
+    names = [h.strip().lower() for h in header]
+    found: dict[str, TraceColumn] = {}
+    for quantity, accepted in TRACE_COLUMNS.items():
+        hits = [TraceColumn(k, header[k].strip(), *accepted[n]) for k, n in enumerate(names)
+                if n in accepted]
+        if len(hits) > 1:
+            raise DataError(f"{path}: {len(hits)} {quantity} columns "
+                            f"{[h.name for h in hits]}; expected one")
+        if hits:
+            found[quantity] = hits[0]
+    missing = [q for q in ("time", "speed") if q not in found]
+    if missing:
+        raise DataError(f"{path}: no {' and no '.join(missing)} column in the header "
+                        f"{[h.strip() for h in header]}; expected {TRACE_EXPECTED}")
+    return found
+
+
+def read_speed_trace(path: Path) -> SpeedTrace:
+    """A speed-trace CSV file (TRACE_EXPECTED) as a SpeedTrace named after the file."""
+    import csv
+
+    try:
+        with open(path, encoding="utf-8-sig", newline="") as fh:
+            head = fh.readline()
+            fh.seek(0)
+            delimiter = next((d for d in TRACE_DELIMITERS if d in head), ",")
+            rows = [(n, row) for n, row in enumerate(csv.reader(fh, delimiter=delimiter), start=1)
+                    if any(cell.strip() for cell in row)]
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise DataError(f"{path}: cannot read the speed trace ({exc}); expected "
+                        f"{TRACE_EXPECTED}") from exc
+    if not rows:
+        raise DataError(f"{path}: empty; expected {TRACE_EXPECTED}")
+    columns = _trace_columns(rows[0][1], path)
+    values = {q: np.empty(len(rows) - 1) for q in columns}
+    for j, (line, row) in enumerate(rows[1:]):
+        for quantity, col in columns.items():
+            cell = row[col.index].strip() if col.index < len(row) else ""
+            try:
+                values[quantity][j] = float(cell) * col.factor
+            except ValueError:
+                raise DataError(f"{path}: column '{col.name}' at line {line}: {cell!r}; expected "
+                                "a number") from None
+    lines = [line for line, _ in rows[1:]]
+    _check_trace(values, columns, lines, path)
+    grade = values.get("grade", np.zeros_like(values["time"]))
+    return SpeedTrace(path.name, values["time"], values["speed"], grade)
+
+
+def _check_trace(values: dict[str, np.ndarray], columns: dict[str, TraceColumn],
+                 lines: list[int], path: Path) -> None:
+    """DataError naming the column, line and value where a trace is not finite, its time does
+    not rise in even steps, its speed lies outside 0…MAX_SPEED_MPS or its grade beyond
+    ±MAX_GRADE."""
+    t = values["time"]
+    if t.size < 2:
+        raise DataError(f"{path}: {t.size} sample(s); expected at least two")
+    for quantity, col in columns.items():
+        bad = np.flatnonzero(~np.isfinite(values[quantity]))
+        if bad.size:
+            raise DataError(f"{path}: column '{col.name}' at line {lines[bad[0]]}: "
+                            f"{values[quantity][bad[0]]:g}; expected a finite number")
+    step = np.diff(t)
+    even = float(np.median(step))
+    falling = np.flatnonzero(~(step > 0))
+    uneven = falling if falling.size else np.flatnonzero(~(np.abs(step - even) <= 1e-6 * even))
+    if uneven.size:
+        k = int(uneven[0])
+        raise DataError(f"{path}: column '{columns['time'].name}' at line {lines[k + 1]}: "
+                        f"{t[k]:g} s then {t[k + 1]:g} s; expected times rising in even steps"
+                        + ("" if falling.size else f" (most steps are {even:g} s)"))
+    limits = {"speed": (0.0, MAX_SPEED_MPS, ""),
+              "grade": (-MAX_GRADE, MAX_GRADE, " (rise over run, not % or degrees)")}
+    for quantity, (low, high, note) in limits.items():
+        if quantity not in values:
+            continue
+        bad = np.flatnonzero((values[quantity] < low) | (values[quantity] > high))
+        if bad.size:
+            col = columns[quantity]
+            raise DataError(f"{path}: column '{col.name}' at line {lines[bad[0]]}: "
+                            f"{values[quantity][bad[0]] / col.factor:g}; expected "
+                            f"{low / col.factor:g}…{high / col.factor:g} {col.unit}".rstrip()
+                            + note)
 
 
 def pack_power(vehicle: Vehicle, speed: np.ndarray, grade: np.ndarray, dt: float) -> np.ndarray:
-    """Battery power (W, > 0 discharging) for each 1-s interval of the trace."""
+    """Battery power (W, > 0 discharging) for each interval of dt (s) of the trace."""
     v = speed
     a = np.diff(v, append=v[-1]) / dt
     v_mid = v + 0.5 * a * dt
@@ -216,12 +360,14 @@ MAX_CYCLE_STEPS = 2_000_000   # communication steps of one run_cycle (1 ms over 
 # 1800 s: 18 s of fmpy calls with the native FMU); more is refused, not left running for hours
 
 
-def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = None,
+def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
+              vehicle: Vehicle | None = None,
               repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
               temperature_c: float = 25.0, cutoff_v: float | None = None) -> CycleResult:
-    """Drive the FMU through `repeat` copies of a cycle with fmpy; inputs held over each step
-    (the cycle's mean power over a step longer than its 1 s samples, step_means; a step longer
-    than the cycles is refused with a DataError).
+    """Drive the FMU through `repeat` copies of a cycle (a shipped cycle's name, a speed-trace
+    file or a SpeedTrace: load_cycle) with fmpy; inputs held over each step (the cycle's mean
+    power over a step longer than its samples, step_means; a step longer than the cycles is
+    refused with a DataError).
     temperature_c is the ambient temperature (the model computes the cell temperature where it
     has a thermal model). The run stops after the first step that leaves the cell empty
     (empty_reason): cutoff_v in V, None for the FMU's own (shipped_cutoff_v), 0 for none (a
@@ -230,10 +376,10 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     from fmpy.fmi2 import FMU2Slave
 
     vehicle = vehicle or load_vehicle()
-    t, speed, grade = load_cycle(cycle)
-    dt = float(np.median(np.diff(t)))
-    power = np.tile(pack_power(vehicle, speed, grade, dt), repeat)
-    speed = np.tile(speed, repeat)
+    trace = load_cycle(cycle)
+    dt = trace.step_s
+    power = np.tile(pack_power(vehicle, trace.speed_mps, trace.grade, dt), repeat)
+    speed = np.tile(trace.speed_mps, repeat)
     cell_power = power / (vehicle.n_series * vehicle.n_parallel)
     md = read_model_description(str(fmu))
     default = md.defaultExperiment
@@ -242,11 +388,11 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     n = math.floor(power.size * dt / h + 1e-9)
     if n < 1:
         copies = f"{repeat} × " if repeat > 1 else ""
-        raise DataError(f"communication step {h:g} s: longer than {copies}the {cycle.upper()} "
+        raise DataError(f"communication step {h:g} s: longer than {copies}the {trace.title} "
                         f"cycle ({power.size * dt:g} s); expected at most {power.size * dt:g} s")
     if n > MAX_CYCLE_STEPS:
         span = power.size * dt
-        raise DataError(f"communication step {h:g} s: {n} steps over the {cycle.upper()} "
+        raise DataError(f"communication step {h:g} s: {n} steps over the {trace.title} "
                         f"run ({span:g} s), more than {MAX_CYCLE_STEPS}, which would take hours "
                         "and gigabytes; expected a step of at least "
                         f"{span / MAX_CYCLE_STEPS:.3g} s")
@@ -291,7 +437,7 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
     out = {key: values[:n] for key, values in out.items()}
     cur, volt = out["current"], out["voltage"]
     figures = {
-        "cycle": cycle, "repetitions": repeat, "step_s": h, "duration_s": float(n * h),
+        "cycle": trace.name, "repetitions": repeat, "step_s": h, "duration_s": float(n * h),
         "distance_km": float(np.sum(out["speed"]) * h / 1000.0),
         "cell_energy_wh": float(np.sum(-cur * volt) * h / 3600.0),
         "pack_energy_kwh": float(np.sum(-cur * volt) * h / 3600.0 * vehicle.n_series
@@ -310,6 +456,11 @@ def run_cycle(fmu: str | Path, cycle: str = "wltc", vehicle: Vehicle | None = No
                        figures, out["cell_t"] if has_cell_t else None)
 
 
+def _title(name: str) -> str:
+    """A cycle's name in messages and plots (SpeedTrace.title)."""
+    return name.upper() if name in CYCLES else name
+
+
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     from lmncell.report.plots import plt
 
@@ -318,7 +469,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     ax[0].plot(t, 3.6 * res.speed_mps)
     f = res.figures
     stop = f" — stopped, the cell empty after {f['stopped_at_s']:g} s" if f["stop"] else ""
-    ax[0].set(ylabel="speed / km/h", title=f"{f['cycle'].upper()} through the FMU "
+    ax[0].set(ylabel="speed / km/h", title=f"{_title(f['cycle'])} through the FMU "
               f"({f['vehicle']}){stop}")
     ax[1].plot(t, res.current_a, lw=0.7)
     ax[1].set(ylabel="cell current / A")
@@ -356,7 +507,7 @@ def simulate_cycle_cli(a) -> int:
     if a.json:
         print(json.dumps(f, indent=1))
     else:
-        print(f"{f['cycle'].upper()} x{f['repetitions']} at {f['step_s']} s steps: "
+        print(f"{_title(f['cycle'])} x{f['repetitions']} at {f['step_s']} s steps: "
               f"{f['distance_km']:.1f} km, cell energy {f['cell_energy_wh']:.2f} Wh (pack "
               f"{f['pack_energy_kwh']:.2f} kWh), {f['ah_throughput']:.3f} Ah throughput, "
               f"current {f['current_min_a']:.2f}…{f['current_max_a']:.2f} A, minimum voltage "

@@ -26,10 +26,11 @@ import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
-    CYCLES,
+    SpeedTrace,
     Vehicle,
     cell_cutoff_v,
     check_cutoff,
+    cycle_problem,
     load_cycle,
     load_vehicle,
     pack_power,
@@ -45,9 +46,10 @@ RESULT_COLUMNS = ("distance_km", "voltage_min_v", "voltage_max_v", "soc_end", "a
 
 @dataclass(frozen=True)
 class Scenario:
-    """One run: a cycle (repeated), a vehicle, the ambient temperature (°C), the start SoC."""
+    """One run: a cycle (repeated), a vehicle, the ambient temperature (°C), the start SoC.
+    The cycle's trace travels with the scenario: a worker needs no access to its file."""
 
-    cycle: str
+    cycle: SpeedTrace
     vehicle: Vehicle
     vehicle_file: str
     ambient_c: float
@@ -57,13 +59,14 @@ class Scenario:
     cutoff_v: float | None = None    # discharge cut-off (V); None: the FMU's model's
 
 
-def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[float],
+def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Sequence[float],
               vehicle_files: Sequence[str | None] = (None,), repeat: int = 1,
               pack: str | None = None, spread: str | None = None,
               seed: int = 0, cells: int | None = None,
               cutoff_v: float | None = None) -> list[Scenario]:
     """The Cartesian product, cycle slowest and start SoC fastest; values checked with
-    messages that name the option. pack ('96s3p') or spread ('capacity=0.02,resistance=0.05')
+    messages that name the option. cycles: shipped cycles' names or speed-trace files
+    (load_cycle), each read here once. pack ('96s3p') or spread ('capacity=0.02,resistance=0.05')
     simulate the whole pack with the vectorised runtime (the pack of the vehicle file where
     only a spread is given); cells N without pack: a string of N cells in series (each
     carrying the cell current of the vehicle's pack, spread as given). cutoff_v: every run
@@ -71,9 +74,7 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
     voltage, drive.shipped_cutoff_v) or its SoC below 0."""
     if not cycles or not ambients or not soc0s or not vehicle_files:
         raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
-    bad = [c for c in cycles if c not in CYCLES]
-    if bad:
-        raise DataError(f"sweep: --cycles {bad} unknown; expected some of {list(CYCLES)}")
+    traces = [_sweep_cycle(c) for c in cycles]
     for t in ambients:
         if not is_cell_temperature(t):
             raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C within "
@@ -101,7 +102,15 @@ def scenarios(cycles: Sequence[str], ambients: Sequence[float], soc0s: Sequence[
                         whole if cells is not None else None)
 
     return [Scenario(c, veh, vf, float(t), float(s), int(repeat), spec(veh), cutoff_v)
-            for c, (veh, vf), t, s in itertools.product(cycles, vehicles, ambients, soc0s)]
+            for c, (veh, vf), t, s in itertools.product(traces, vehicles, ambients, soc0s)]
+
+
+def _sweep_cycle(cycle: str | Path) -> SpeedTrace:
+    """A --cycles entry's trace; a DataError naming the option where it is none."""
+    problem = cycle_problem(cycle)
+    if problem:
+        raise DataError(f"sweep: --cycles {str(cycle)!r}: {problem}")
+    return load_cycle(cycle)
 
 
 _UNPACKED: dict[str, Path] = {}
@@ -131,7 +140,7 @@ def _model_of(fmu_bytes: bytes) -> LmnModel:
 
 def _settings(sc: Scenario, pack: str) -> dict:
     """The scenario's columns of a row."""
-    return {"cycle": sc.cycle, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
+    return {"cycle": sc.cycle.name, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
             "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat, "pack": pack}
 
 
@@ -144,15 +153,15 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     """A pack scenario: the vehicle's pack power through the vectorised pack model."""
     t0 = time.perf_counter()
     model = _model_of(fmu_bytes)
-    t, speed, grade = load_cycle(sc.cycle)
-    dt = float(np.median(np.diff(t)))
-    power = np.tile(pack_power(sc.vehicle, speed, grade, dt), sc.repeat) * sc.pack.power_share
+    dt = sc.cycle.step_s
+    power = (np.tile(pack_power(sc.vehicle, sc.cycle.speed_mps, sc.cycle.grade, dt), sc.repeat)
+             * sc.pack.power_share)
     ts = model.sample_time_s
     steps = math.floor(power.size * dt / ts + 1e-9)
     cutoff = cell_cutoff_v(model.cell) if sc.cutoff_v is None else sc.cutoff_v
     f = drive_pack(model, sc.pack, step_means(power, dt, ts, steps), sc.ambient_c, sc.soc0,
                    cutoff)
-    driven = step_means(np.tile(speed, sc.repeat), dt, ts, steps)[: f["steps"]]
+    driven = step_means(np.tile(sc.cycle.speed_mps, sc.repeat), dt, ts, steps)[: f["steps"]]
     return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
             "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
             "distance_km": float(np.sum(driven) * ts / 1000.0),
