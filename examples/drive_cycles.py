@@ -10,7 +10,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from lmncell.scenarios.drive import CYCLES, load_vehicle, plot_cycle, run_cycle
+from lmncell.scenarios.drive import load_vehicle, plot_cycle, run_cycle
+from lmncell.scenarios.traces import CYCLES
 
 
 def main(fmu: str, out_dir: str = "drive_cycles_out") -> None:

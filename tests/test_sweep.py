@@ -241,7 +241,7 @@ def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None
 
 def _write_us06_as(path, header: str, delimiter: str = ",", factor: float = 1.0) -> None:
     """The shipped US06 written as a user's trace: time_s, speed × factor, grade."""
-    from lmncell.scenarios.drive import load_cycle
+    from lmncell.scenarios.traces import load_cycle
 
     trace = load_cycle("us06")
     rows = [delimiter.join(header.split(","))]

@@ -18,7 +18,8 @@ from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
 from lmncell.runtime.model import ModelFileError
-from lmncell.scenarios.drive import CUTOFF_EXPECTED, cycle_problem, is_cutoff
+from lmncell.scenarios.drive import CUTOFF_EXPECTED, is_cutoff
+from lmncell.scenarios.traces import cycle_problem
 
 USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
                IsADirectoryError, PermissionError)

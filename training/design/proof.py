@@ -144,7 +144,8 @@ def characterise(vc: VirtualCellLike, cell: CellSpec, spec: DesignSpec,
 def drive_profile_current(capacity_ah: float, cycle: str = "udds", repeat: int = 3,
                           c_rate_peak: float = 4.0) -> np.ndarray:
     """Cell current (A, 1 s) of a vehicle drive cycle scaled so that its peak is c_rate_peak·C."""
-    from lmncell.scenarios.drive import load_cycle, load_vehicle, pack_power
+    from lmncell.scenarios.drive import load_vehicle, pack_power
+    from lmncell.scenarios.traces import load_cycle
 
     veh = load_vehicle()
     trace = load_cycle(cycle)

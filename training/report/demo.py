@@ -33,7 +33,8 @@ from lmncell.identification.train import train_files
 from lmncell.report.html import Report
 from lmncell.report.readme import drift_sentence
 from lmncell.runtime.model import LmnModel, load_model
-from lmncell.scenarios.drive import data_dir, load_vehicle, plot_cycle, run_cycle
+from lmncell.scenarios.drive import load_vehicle, plot_cycle, run_cycle
+from lmncell.scenarios.traces import data_dir
 
 A123 = "a123_plett"
 TRAIN = ["A123_DYN_30_N05_s1.csv.gz", "A123_DYN_45_P05_s1.csv.gz", "A123_DYN_50_P45_s1.csv.gz"]

@@ -25,15 +25,10 @@ from typing import Any
 
 import numpy as np
 from lmncell.data.records import DataError
+from lmncell.scenarios.traces import SpeedTrace, load_cycle, trace_title
 
 G = 9.81
 CUTOFF_SHOWN_WITHIN_V = 0.3   # the plot draws the cut-off where the voltage comes this near
-CYCLES = {"udds": "udds.csv", "us06": "us06.csv", "hwfet": "hwfet.csv", "wltc": "wltc_3b.csv"}
-
-
-def data_dir() -> Path:
-    """The shipped data folder (repository `data/`, beside the package's source folder)."""
-    return Path(__file__).resolve().parents[2] / "data"
 
 
 @dataclass
@@ -106,166 +101,6 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
         if not 0 < getattr(veh, key) <= 1:
             raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected 0 < η ≤ 1")
     return veh
-
-
-MAX_SPEED_MPS = 100.0   # 360 km/h: a faster speed in a trace is a unit mix-up
-MAX_GRADE = 0.5         # rise over run: a steeper road in a trace is a unit mix-up (%, degrees)
-# a trace file's columns: each quantity's accepted names (case-insensitive; FASTSim's first),
-# the factor to SI units (s, m/s, rise/run) and the column's unit
-TRACE_COLUMNS = {
-    "time": {"cycsecs": (1.0, "s"), "time_s": (1.0, "s"), "time": (1.0, "s")},
-    "speed": {"cycmps": (1.0, "m/s"), "speed_mps": (1.0, "m/s"), "speed_kmh": (1 / 3.6, "km/h"),
-              "speed_mph": (0.44704, "mph")},
-    "grade": {"cycgrade": (1.0, ""), "grade": (1.0, "")},
-}
-TRACE_DELIMITERS = ",;\t"   # the header's first of these that splits it is the delimiter
-TRACE_EXPECTED = ("a CSV with a header: a time column (time_s, or FASTSim's cycSecs), a speed "
-                  "column (speed_mps, speed_kmh, speed_mph, or cycMps) and optionally the road "
-                  "grade as rise over run (grade, or cycGrade)")
-
-
-@dataclass(frozen=True)
-class TraceColumn:
-    """Where a quantity is in a trace file: column index and name, factor to SI, unit."""
-
-    index: int
-    name: str
-    factor: float
-    unit: str
-
-
-@dataclass(frozen=True, eq=False)
-class SpeedTrace:
-    """A vehicle speed trace: time (s, even steps), speed (m/s, ≥ 0) and road grade (rise over
-    run); name is how figures and tables call it (a shipped cycle's key in CYCLES, or the trace
-    file's name)."""
-
-    name: str
-    time_s: np.ndarray
-    speed_mps: np.ndarray
-    grade: np.ndarray
-
-    @property
-    def step_s(self) -> float:
-        """The trace's sample step (s)."""
-        return float(np.median(np.diff(self.time_s)))
-
-    @property
-    def title(self) -> str:
-        """The name in messages and plots: a shipped cycle's upper-case, a file's as it is."""
-        return _title(self.name)
-
-
-def load_cycle(cycle: str | Path | SpeedTrace) -> SpeedTrace:
-    """A shipped cycle by name (CYCLES), or a speed-trace CSV file (TRACE_EXPECTED); a
-    SpeedTrace is returned as it is. DataError naming the file, line, column and value where a
-    file is not such a trace."""
-    if isinstance(cycle, SpeedTrace):
-        return cycle
-    if str(cycle) in CYCLES:
-        trace = read_speed_trace(data_dir() / "drive_cycles" / CYCLES[str(cycle)])
-        return dataclasses.replace(trace, name=str(cycle))
-    problem = cycle_problem(cycle)
-    if problem:
-        raise DataError(f"cycle {str(cycle)!r}: {problem}")
-    return read_speed_trace(Path(cycle))
-
-
-def cycle_problem(cycle: str | Path) -> str:
-    """Why a cycle argument names neither a shipped cycle nor a file ('' where it does; the
-    file's content is read by load_cycle)."""
-    if str(cycle) in CYCLES or Path(cycle).is_file():
-        return ""
-    folder = " (it is a folder)" if Path(cycle).is_dir() else ""
-    return (f"neither one of {list(CYCLES)} nor a speed-trace file{folder}; expected a cycle "
-            f"name or {TRACE_EXPECTED}")
-
-
-def _trace_columns(header: list[str], path: Path) -> dict[str, TraceColumn]:
-    """Each quantity's column in a trace file's header."""
-    names = [h.strip().lower() for h in header]
-    found: dict[str, TraceColumn] = {}
-    for quantity, accepted in TRACE_COLUMNS.items():
-        hits = [TraceColumn(k, header[k].strip(), *accepted[n]) for k, n in enumerate(names)
-                if n in accepted]
-        if len(hits) > 1:
-            raise DataError(f"{path}: {len(hits)} {quantity} columns "
-                            f"{[h.name for h in hits]}; expected one")
-        if hits:
-            found[quantity] = hits[0]
-    missing = [q for q in ("time", "speed") if q not in found]
-    if missing:
-        raise DataError(f"{path}: no {' and no '.join(missing)} column in the header "
-                        f"{[h.strip() for h in header]}; expected {TRACE_EXPECTED}")
-    return found
-
-
-def read_speed_trace(path: Path) -> SpeedTrace:
-    """A speed-trace CSV file (TRACE_EXPECTED) as a SpeedTrace named after the file."""
-    import csv
-
-    try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            head = fh.readline()
-            fh.seek(0)
-            delimiter = next((d for d in TRACE_DELIMITERS if d in head), ",")
-            rows = [(n, row) for n, row in enumerate(csv.reader(fh, delimiter=delimiter), start=1)
-                    if any(cell.strip() for cell in row)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
-        raise DataError(f"{path}: cannot read the speed trace ({exc}); expected "
-                        f"{TRACE_EXPECTED}") from exc
-    if not rows:
-        raise DataError(f"{path}: empty; expected {TRACE_EXPECTED}")
-    columns = _trace_columns(rows[0][1], path)
-    values = {q: np.empty(len(rows) - 1) for q in columns}
-    for j, (line, row) in enumerate(rows[1:]):
-        for quantity, col in columns.items():
-            cell = row[col.index].strip() if col.index < len(row) else ""
-            try:
-                values[quantity][j] = float(cell) * col.factor
-            except ValueError:
-                raise DataError(f"{path}: column '{col.name}' at line {line}: {cell!r}; expected "
-                                "a number") from None
-    lines = [line for line, _ in rows[1:]]
-    _check_trace(values, columns, lines, path)
-    grade = values.get("grade", np.zeros_like(values["time"]))
-    return SpeedTrace(path.name, values["time"], values["speed"], grade)
-
-
-def _check_trace(values: dict[str, np.ndarray], columns: dict[str, TraceColumn],
-                 lines: list[int], path: Path) -> None:
-    """DataError naming the column, line and value where a trace is not finite, its time does
-    not rise in even steps, its speed lies outside 0…MAX_SPEED_MPS or its grade beyond
-    ±MAX_GRADE."""
-    t = values["time"]
-    if t.size < 2:
-        raise DataError(f"{path}: {t.size} sample(s); expected at least two")
-    for quantity, col in columns.items():
-        bad = np.flatnonzero(~np.isfinite(values[quantity]))
-        if bad.size:
-            raise DataError(f"{path}: column '{col.name}' at line {lines[bad[0]]}: "
-                            f"{values[quantity][bad[0]]:g}; expected a finite number")
-    step = np.diff(t)
-    even = float(np.median(step))
-    falling = np.flatnonzero(~(step > 0))
-    uneven = falling if falling.size else np.flatnonzero(~(np.abs(step - even) <= 1e-6 * even))
-    if uneven.size:
-        k = int(uneven[0])
-        raise DataError(f"{path}: column '{columns['time'].name}' at line {lines[k + 1]}: "
-                        f"{t[k]:g} s then {t[k + 1]:g} s; expected times rising in even steps"
-                        + ("" if falling.size else f" (most steps are {even:g} s)"))
-    limits = {"speed": (0.0, MAX_SPEED_MPS, ""),
-              "grade": (-MAX_GRADE, MAX_GRADE, " (rise over run, not % or degrees)")}
-    for quantity, (low, high, note) in limits.items():
-        if quantity not in values:
-            continue
-        bad = np.flatnonzero((values[quantity] < low) | (values[quantity] > high))
-        if bad.size:
-            col = columns[quantity]
-            raise DataError(f"{path}: column '{col.name}' at line {lines[bad[0]]}: "
-                            f"{values[quantity][bad[0]] / col.factor:g}; expected "
-                            f"{low / col.factor:g}…{high / col.factor:g} {col.unit}".rstrip()
-                            + note)
 
 
 def pack_power(vehicle: Vehicle, speed: np.ndarray, grade: np.ndarray, dt: float) -> np.ndarray:
@@ -456,11 +291,6 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
                        figures, out["cell_t"] if has_cell_t else None)
 
 
-def _title(name: str) -> str:
-    """A cycle's name in messages and plots (SpeedTrace.title)."""
-    return name.upper() if name in CYCLES else name
-
-
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     from lmncell.report.plots import plt
 
@@ -469,7 +299,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     ax[0].plot(t, 3.6 * res.speed_mps)
     f = res.figures
     stop = f" — stopped, the cell empty after {f['stopped_at_s']:g} s" if f["stop"] else ""
-    ax[0].set(ylabel="speed / km/h", title=f"{_title(f['cycle'])} through the FMU "
+    ax[0].set(ylabel="speed / km/h", title=f"{trace_title(f['cycle'])} through the FMU "
               f"({f['vehicle']}){stop}")
     ax[1].plot(t, res.current_a, lw=0.7)
     ax[1].set(ylabel="cell current / A")
@@ -507,7 +337,7 @@ def simulate_cycle_cli(a) -> int:
     if a.json:
         print(json.dumps(f, indent=1))
     else:
-        print(f"{_title(f['cycle'])} x{f['repetitions']} at {f['step_s']} s steps: "
+        print(f"{trace_title(f['cycle'])} x{f['repetitions']} at {f['step_s']} s steps: "
               f"{f['distance_km']:.1f} km, cell energy {f['cell_energy_wh']:.2f} Wh (pack "
               f"{f['pack_energy_kwh']:.2f} kWh), {f['ah_throughput']:.3f} Ah throughput, "
               f"current {f['current_min_a']:.2f}…{f['current_max_a']:.2f} A, minimum voltage "

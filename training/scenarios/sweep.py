@@ -26,18 +26,16 @@ import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
-    SpeedTrace,
     Vehicle,
     cell_cutoff_v,
     check_cutoff,
-    cycle_problem,
-    load_cycle,
     load_vehicle,
     pack_power,
     run_cycle,
     step_means,
 )
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
+from lmncell.scenarios.traces import SpeedTrace, cycle_problem, load_cycle
 
 RESULT_COLUMNS = ("distance_km", "voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
                   "cell_energy_wh", "pack_energy_kwh", "cell_temperature_max_c",
