@@ -166,7 +166,7 @@ def test_coarse_steps_drive_the_same_charge_and_a_step_longer_than_the_cycle_is_
             "1370 s") in capsys.readouterr().err
     # a step so short that the run would take hours (it ran silently, allocating gigabytes)
     assert main(["simulate", str(native_fmu), "--cycle", "udds", "--step", "1e-6"]) == 2
-    assert ("communication step 1e-06 s: 1370000000 steps over the UDDS run (1370 s), more than "
+    assert ("communication step 1e-06 s: 1370000000 steps over the UDDS cycle (1370 s), more than "
             "2000000") in capsys.readouterr().err
 
 
@@ -311,3 +311,63 @@ def test_a_cycle_that_is_neither_a_name_nor_a_file_is_refused(native_fmu, tmp_pa
     with pytest.raises(SystemExit):
         main(["simulate", str(native_fmu), "--cycle", str(tmp_path)])
     assert "nor a speed-trace file (it is a folder)" in capsys.readouterr().err
+
+
+def test_a_current_profile_drives_the_fmu_as_the_cycle_that_gave_it(native_fmu, tmp_path,
+                                                                     capsys) -> None:
+    """`lmncell simulate --current FILE.csv`: the cell currents of a US06 run, written as a
+    profile (in A, and in mA with discharge positive and ';'), give that run's voltages and
+    SoC step for step."""
+    from lmncell.scenarios.drive import run_profile
+
+    cycle = run_cycle(native_fmu, "us06", soc0=0.7)
+    amps, milli = tmp_path / "us06_current.csv", tmp_path / "us06_ma.csv"
+    amps.write_text("time_s,current_a\n" + "".join(
+        f"{k},{float(i)!r}\n" for k, i in enumerate(cycle.current_a)))
+    milli.write_text("Time_s;Current_mA\n" + "".join(
+        f"{k};{-1000 * float(i)!r}\n" for k, i in enumerate(cycle.current_a)))
+    for res in (run_profile(native_fmu, amps, soc0=0.7),
+                run_profile(native_fmu, milli, soc0=0.7, discharge_positive=True)):
+        assert res.speed_mps is None
+        assert np.allclose(res.current_a, cycle.current_a, rtol=1e-12, atol=0)
+        assert np.allclose(res.voltage_v, cycle.voltage_v, rtol=1e-9, atol=0)
+        assert np.allclose(res.soc, cycle.soc, rtol=1e-9, atol=0)
+    assert res.figures["ah_throughput"] == pytest.approx(cycle.figures["ah_throughput"])
+    plot = tmp_path / "profile.png"
+    assert main(["simulate", str(native_fmu), "--current", str(amps), "--soc0", "0.7",
+                 "--plot", str(plot)]) == 0
+    assert capsys.readouterr().out.startswith("us06_current.csv x1 at 1.0 s steps: 601 s")
+    assert plot.stat().st_size > 10_000
+
+
+def test_a_charge_profile_stops_at_the_charge_cut_off_or_full(native_fmu, tmp_path,
+                                                               capsys) -> None:
+    """A 1C charge stops after the first step above the charge cut-off (by default the highest
+    voltage of the model's training records) or, without one, with the SoC above 1."""
+    from lmncell.scenarios.drive import run_profile, shipped_cutoff_v
+
+    path = tmp_path / "charge.csv"
+    path.write_text("time_s,current_a\n" + "".join(f"{k},2.85\n" for k in range(3600)))
+    top = shipped_cutoff_v(native_fmu, "voltage_max_v")
+    assert 4.1 < top < 4.3                       # the Panasonic training records' highest
+    res = run_profile(native_fmu, path, soc0=0.5)
+    assert res.figures["stop"].startswith("cell voltage") and res.figures["charge_cutoff_v"] == top
+    assert res.voltage_v[-1] > top and (res.voltage_v[:-1] <= top).all()
+    full = run_profile(native_fmu, path, soc0=0.5, charge_cutoff_v=0.0)
+    assert full.figures["stop"] == "SoC above 100 %"
+    assert full.soc[-1] > 1.0 and (full.soc[:-1] <= 1.0).all()
+    assert main(["simulate", str(native_fmu), "--current", str(path), "--soc0", "0.5"]) == 0
+    assert ("the cell is full (cell voltage" in capsys.readouterr().out)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--current", "p.csv", "--vehicle", "v.toml"], "--vehicle with --current"),
+    (["--discharge-positive"], "--discharge-positive is for a --current profile"),
+    (["--charge-cutoff", "4.2"], "--charge-cutoff is for a --current profile"),
+    (["--current", "nope.csv"], "nope.csv: no such file; expected a CSV with a header: a time "
+                                "column (time_s) and a cell current column"),
+])
+def test_simulate_options_that_do_not_go_together_are_named(native_fmu, capsys, args,
+                                                           message) -> None:
+    assert main(["simulate", str(native_fmu), *args]) == 2
+    assert message in capsys.readouterr().err

@@ -245,6 +245,15 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
 def cmd_simulate(a: argparse.Namespace) -> int:
     from lmncell.scenarios.drive import simulate_cycle_cli
 
+    if a.current and a.vehicle:
+        raise ConfigError("--vehicle with --current: a current profile drives the cell itself, "
+                          "no vehicle; give one or the other")
+    for option, given in (("--discharge-positive", a.discharge_positive),
+                          ("--charge-cutoff", a.charge_cutoff is not None)):
+        if given and not a.current:
+            raise ConfigError(f"{option} is for a --current profile; a drive cycle's current "
+                              "comes from the vehicle model")
+    a.cycle = a.cycle or "wltc"
     return simulate_cycle_cli(a)
 
 
@@ -440,15 +449,26 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
 
 def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell simulate` subcommand."""
-    s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle with fmpy",
-                       **fmt)
+    s = sub.add_parser("simulate", help="drive an FMU through a vehicle drive cycle or a "
+                       "current profile with fmpy", **fmt)
     s.add_argument("fmu", help="an LMNCell FMU")
-    s.add_argument("--cycle", type=cycle_argument, default="wltc", metavar="NAME|FILE.csv",
-                   help="speed trace: wltc, udds, us06, hwfet, or a CSV file with a time column "
-                   "(time_s or cycSecs), a speed column (speed_mps, speed_kmh, speed_mph or "
-                   "cycMps) and optionally the road grade as rise over run (grade or cycGrade)")
+    load = s.add_mutually_exclusive_group()
+    load.add_argument("--cycle", type=cycle_argument, metavar="NAME|FILE.csv",
+                      help="speed trace: wltc, udds, us06, hwfet, or a CSV file with a time "
+                      "column (time_s or cycSecs), a speed column (speed_mps, speed_kmh, "
+                      "speed_mph or cycMps) and optionally the road grade as rise over run "
+                      "(grade or cycGrade) (default: wltc)")
+    load.add_argument("--current", metavar="FILE.csv",
+                      help="a cell current profile instead of a drive cycle: a CSV file with a "
+                      "time column (time_s) and a current column (current_a or current_ma; "
+                      "> 0 charges unless --discharge-positive)")
+    s.add_argument("--discharge-positive", action="store_true",
+                   help="the --current profile counts discharge as positive")
+    s.add_argument("--charge-cutoff", type=_cutoff, metavar="V", help="with --current: the "
+                   "run stops where the voltage rises above it or the SoC above 1 (default: "
+                   "the highest voltage of the model's training records; 0: none)")
     s.add_argument("--vehicle", metavar="FILE.toml", help="vehicle and pack (default: the "
-                   "built-in compact EV)")
+                   "built-in compact EV; not with --current)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
     s.add_argument("--soc0", type=_float01, default=0.9, help="start SoC")
     s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "

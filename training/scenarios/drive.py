@@ -1,13 +1,17 @@
-"""Vehicle drive cycles through the LMNCell FMU with fmpy (`lmncell simulate`).
+"""Vehicle drive cycles, and cell current profiles, through the LMNCell FMU with fmpy
+(`lmncell simulate`).
 
-speed trace (m/s, 1 s) → longitudinal vehicle model → pack power → cell power → cell current
-i = −P_cell / u_cell (current > 0 charges; u_cell is the FMU's voltage of the previous step) →
-FMU. Wheel force F = k_rot·m·a + m·g·(c_r·cos θ + sin θ) + ½·ρ·c_d·A·v²; battery power
-P = F·v/η_drive + P_aux when driving, max(F·v·η_regen, −P_regen,max) + P_aux when braking.
+speed trace (m/s; lmncell.scenarios.traces) → longitudinal vehicle model → pack power → cell
+power → cell current i = −P_cell / u_cell (current > 0 charges; u_cell is the FMU's voltage
+of the previous step) → FMU. Wheel force F = k_rot·m·a + m·g·(c_r·cos θ + sin θ) + ½·ρ·c_d·A·v²;
+battery power P = F·v/η_drive + P_aux when driving, max(F·v·η_regen, −P_regen,max) + P_aux
+when braking.
 A run stops where the cell is empty: its voltage below the discharge cut-off (by default the
 lowest voltage of the model's training records, `cell.voltage_min_v` of the model file every
 LMNCell FMU ships) or its SoC below 0; past that the figures would be those of a cell the model
-was never trained on, discharged beyond its capacity.
+was never trained on, discharged beyond its capacity. It stops too where the cell is full: its
+SoC above 1, or for a current profile (run_profile) its voltage above the charge cut-off (by
+default the highest voltage of the training records, `cell.voltage_max_v`).
 """
 
 from __future__ import annotations
@@ -25,7 +29,13 @@ from typing import Any
 
 import numpy as np
 from lmncell.data.records import DataError
-from lmncell.scenarios.traces import SpeedTrace, load_cycle, trace_title
+from lmncell.scenarios.traces import (
+    CurrentProfile,
+    SpeedTrace,
+    load_current_profile,
+    load_cycle,
+    trace_title,
+)
 
 G = 9.81
 CUTOFF_SHOWN_WITHIN_V = 0.3   # the plot draws the cut-off where the voltage comes this near
@@ -147,18 +157,19 @@ def step_means(values: np.ndarray, dt: float, h: float, n: int) -> np.ndarray:
     return means
 
 
-def shipped_cutoff_v(fmu: str | Path) -> float:
+def shipped_cutoff_v(fmu: str | Path, key: str = "voltage_min_v") -> float:
     """The discharge cut-off (V) of an LMNCell FMU's model file (resources/model.json), as
-    cell_cutoff_v gives it."""
+    cell_cutoff_v gives it (key "voltage_max_v": the charge cut-off)."""
     from lmncell.evaluation.fmueval import shipped_model_doc
 
-    return cell_cutoff_v(shipped_model_doc(fmu).get("cell"))
+    return cell_cutoff_v(shipped_model_doc(fmu).get("cell"), key)
 
 
-def cell_cutoff_v(cell: Mapping[str, Any] | None) -> float:
+def cell_cutoff_v(cell: Mapping[str, Any] | None, key: str = "voltage_min_v") -> float:
     """The discharge cut-off (V) of a model file's `cell` table: its voltage_min_v, the lowest
-    terminal voltage of the training records; 0 (none) where it gives no positive number."""
-    value = cell.get("voltage_min_v") if isinstance(cell, Mapping) else None
+    terminal voltage of the training records (key "voltage_max_v": the charge cut-off, the
+    highest); 0 (none) where it gives no positive number."""
+    value = cell.get(key) if isinstance(cell, Mapping) else None
     try:
         volts = float(value)
     except (TypeError, ValueError):
@@ -195,49 +206,54 @@ MAX_CYCLE_STEPS = 2_000_000   # communication steps of one run_cycle (1 ms over 
 # 1800 s: 18 s of fmpy calls with the native FMU); more is refused, not left running for hours
 
 
-def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
-              vehicle: Vehicle | None = None,
-              repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
-              temperature_c: float = 25.0, cutoff_v: float | None = None) -> CycleResult:
-    """Drive the FMU through `repeat` copies of a cycle (a shipped cycle's name, a speed-trace
-    file or a SpeedTrace: load_cycle) with fmpy; inputs held over each step (the cycle's mean
-    power over a step longer than its samples, step_means; a step longer than the cycles is
-    refused with a DataError).
-    temperature_c is the ambient temperature (the model computes the cell temperature where it
-    has a thermal model). The run stops after the first step that leaves the cell empty
-    (empty_reason): cutoff_v in V, None for the FMU's own (shipped_cutoff_v), 0 for none (a
-    SoC or a voltage below 0 still stops it)."""
+def full_reason(voltage_v: float, soc: float, charge_cutoff_v: float = 0.0) -> str:
+    """Why a charge stops after a step ('' while it does not): its voltage above the charge
+    cut-off (V; 0: none) or its SoC above 1, beyond the capacity the model was trained on."""
+    if 0.0 < charge_cutoff_v < voltage_v:
+        return (f"cell voltage {voltage_v:.4f} V above the charge cut-off "
+                f"{charge_cutoff_v:.4f} V")
+    return "SoC above 100 %" if soc > 1.0 else ""
+
+
+def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
+                         what: str) -> tuple[float, int]:
+    """The communication step (s; step_s, or the FMU's default experiment's, or 1 s) and the
+    number of whole steps over span_s; DataError where there are none or more than
+    MAX_CYCLE_STEPS. what: the run as messages name it ("the UDDS cycle")."""
+    from fmpy import read_model_description
+
+    default = read_model_description(str(fmu)).defaultExperiment
+    h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
+    n = math.floor(span_s / h + 1e-9)
+    if n < 1:
+        raise DataError(f"communication step {h:g} s: longer than {what} ({span_s:g} s); "
+                        f"expected at most {span_s:g} s")
+    if n > MAX_CYCLE_STEPS:
+        raise DataError(f"communication step {h:g} s: {n} steps over {what} ({span_s:g} s), "
+                        f"more than {MAX_CYCLE_STEPS}, which would take hours and gigabytes; "
+                        f"expected a step of at least {span_s / MAX_CYCLE_STEPS:.3g} s")
+    return h, n
+
+
+def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0: float,
+               temperature_c: float, cutoff_v: float, charge_cutoff_v: float = 0.0
+               ) -> tuple[dict[str, np.ndarray], str]:
+    """Step the FMU with fmpy through one load value per communication step h (s): the cell
+    power (W, > 0 discharging; by_power, i = −P/u with u the previous step's voltage) or the
+    cell current (A, > 0 charges). Stops after the first step that leaves the cell empty
+    (empty_reason) or full (full_reason). Returns the steps' time (s, each step's end),
+    current, voltage, SoC, out-of-range flag and cell temperature (NaN without a thermal
+    model), and why it stopped early ('' where it did not)."""
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
-    vehicle = vehicle or load_vehicle()
-    trace = load_cycle(cycle)
-    dt = trace.step_s
-    power = np.tile(pack_power(vehicle, trace.speed_mps, trace.grade, dt), repeat)
-    speed = np.tile(trace.speed_mps, repeat)
-    cell_power = power / (vehicle.n_series * vehicle.n_parallel)
     md = read_model_description(str(fmu))
-    default = md.defaultExperiment
-    h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
-    cutoff = shipped_cutoff_v(fmu) if cutoff_v is None else check_cutoff(cutoff_v)
-    n = math.floor(power.size * dt / h + 1e-9)
-    if n < 1:
-        copies = f"{repeat} × " if repeat > 1 else ""
-        raise DataError(f"communication step {h:g} s: longer than {copies}the {trace.title} "
-                        f"cycle ({power.size * dt:g} s); expected at most {power.size * dt:g} s")
-    if n > MAX_CYCLE_STEPS:
-        span = power.size * dt
-        raise DataError(f"communication step {h:g} s: {n} steps over the {trace.title} "
-                        f"run ({span:g} s), more than {MAX_CYCLE_STEPS}, which would take hours "
-                        "and gigabytes; expected a step of at least "
-                        f"{span / MAX_CYCLE_STEPS:.3g} s")
-    cell_power, speed = step_means(cell_power, dt, h, n), step_means(speed, dt, h, n)
     vr = {v.name: v.valueReference for v in md.modelVariables}
     unzipped = extract(str(fmu))
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cycle")
-    out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "speed",
-                                    "cell_t")}
+    n = load.size
+    out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "cell_t")}
     has_cell_t = "cell_temperature" in vr
     outputs = [vr["voltage"], vr["soc"], *([vr["cell_temperature"]] if has_cell_t else [])]
     stop = ""
@@ -251,7 +267,7 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
         u = slave.getReal([vr["voltage"]])[0]
         for k in range(n):
             t0 = k * h
-            i = -cell_power[k] / u
+            i = -load[k] / u if by_power else float(load[k])
             slave.setReal([vr["current"]], [i])
             status = slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
             if status is not None and status > 1:
@@ -260,8 +276,7 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
             out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
             out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
             out["cell_t"][k] = cell_t[0] if cell_t else math.nan
-            out["speed"][k] = speed[k]
-            stop = empty_reason(u, soc, cutoff)
+            stop = empty_reason(u, soc, cutoff_v) or full_reason(u, soc, charge_cutoff_v)
             if stop:
                 n = k + 1
                 break
@@ -269,87 +284,184 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
     finally:
         slave.freeInstance()
         shutil.rmtree(unzipped, ignore_errors=True)
-    out = {key: values[:n] for key, values in out.items()}
-    cur, volt = out["current"], out["voltage"]
-    figures = {
-        "cycle": trace.name, "repetitions": repeat, "step_s": h, "duration_s": float(n * h),
-        "distance_km": float(np.sum(out["speed"]) * h / 1000.0),
+    return {key: values[:n] for key, values in out.items()}, stop
+
+
+def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,
+                  cutoff_v: float, stop: str) -> dict:
+    """The figures of any run (_drive_fmu's steps): duration, charge, energy, extremes."""
+    cur, volt, n = out["current"], out["voltage"], out["time"].size
+    has_cell_t = not np.isnan(out["cell_t"]).all()
+    return {
+        "step_s": h, "duration_s": float(n * h),
         "cell_energy_wh": float(np.sum(-cur * volt) * h / 3600.0),
-        "pack_energy_kwh": float(np.sum(-cur * volt) * h / 3600.0 * vehicle.n_series
-                                 * vehicle.n_parallel / 1000.0),
         "ah_throughput": float(np.sum(np.abs(cur)) * h / 3600.0),
         "current_min_a": float(cur.min()), "current_max_a": float(cur.max()),
         "voltage_min_v": float(volt.min()), "voltage_max_v": float(volt.max()),
         "soc_start": soc0, "soc_end": float(out["soc"][-1]),
         "soc_swing": float(out["soc"].max() - out["soc"].min()),
-        "out_of_range_steps": int(out["oor"].sum()), "vehicle": vehicle.name,
-        "ambient_c": float(temperature_c),
+        "out_of_range_steps": int(out["oor"].sum()), "ambient_c": float(temperature_c),
         "cell_temperature_max_c": float(np.max(out["cell_t"])) if has_cell_t else None,
-        "cutoff_v": cutoff, "stop": stop, "stopped_at_s": float(n * h) if stop else None,
+        "cutoff_v": cutoff_v, "stop": stop, "stopped_at_s": float(n * h) if stop else None,
     }
-    return CycleResult(out["time"], out["speed"], cur, volt, out["soc"], out["oor"].astype(bool),
-                       figures, out["cell_t"] if has_cell_t else None)
+
+
+def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
+              vehicle: Vehicle | None = None,
+              repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
+              temperature_c: float = 25.0, cutoff_v: float | None = None) -> CycleResult:
+    """Drive the FMU through `repeat` copies of a cycle (a shipped cycle's name, a speed-trace
+    file or a SpeedTrace: load_cycle) with fmpy; inputs held over each step (the cycle's mean
+    power over a step longer than its samples, step_means; a step longer than the cycles is
+    refused with a DataError).
+    temperature_c is the ambient temperature (the model computes the cell temperature where it
+    has a thermal model). The run stops after the first step that leaves the cell empty
+    (empty_reason): cutoff_v in V, None for the FMU's own (shipped_cutoff_v), 0 for none (a
+    SoC or a voltage below 0 still stops it); or over-full (full_reason: SoC above 1)."""
+    vehicle = vehicle or load_vehicle()
+    trace = load_cycle(cycle)
+    dt = trace.step_s
+    power = np.tile(pack_power(vehicle, trace.speed_mps, trace.grade, dt), repeat)
+    cell_power = power / (vehicle.n_series * vehicle.n_parallel)
+    cutoff = shipped_cutoff_v(fmu) if cutoff_v is None else check_cutoff(cutoff_v)
+    copies = f"{repeat} × " if repeat > 1 else ""
+    h, n = _communication_steps(fmu, step_s, power.size * dt,
+                                f"{copies}the {trace.title} cycle")
+    speed = step_means(np.tile(trace.speed_mps, repeat), dt, h, n)
+    out, stop = _drive_fmu(fmu, step_means(cell_power, dt, h, n), True, h, soc0,
+                           temperature_c, cutoff)
+    speed = speed[:out["time"].size]
+    cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop)
+    figures = {"cycle": trace.name, "repetitions": repeat, "step_s": h,
+               "duration_s": cell["duration_s"],
+               "distance_km": float(np.sum(speed) * h / 1000.0),
+               "cell_energy_wh": cell["cell_energy_wh"],
+               "pack_energy_kwh": cell["cell_energy_wh"] * vehicle.n_series
+               * vehicle.n_parallel / 1000.0, **cell, "vehicle": vehicle.name}
+    cell_t = out["cell_t"] if figures["cell_temperature_max_c"] is not None else None
+    return CycleResult(out["time"], speed, out["current"], out["voltage"], out["soc"],
+                       out["oor"].astype(bool), figures, cell_t)
+
+
+def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: int = 1,
+                soc0: float = 0.9, step_s: float | None = None, temperature_c: float = 25.0,
+                cutoff_v: float | None = None, discharge_positive: bool = False,
+                charge_cutoff_v: float | None = None) -> CycleResult:
+    """Drive the FMU through `repeat` copies of a cell current profile (a CSV file or a
+    CurrentProfile: load_current_profile) with fmpy, the current's mean over each
+    communication step held over it; stops as run_cycle does, and also where the voltage
+    rises above charge_cutoff_v (V; None: the highest voltage of the model's training
+    records; 0: none). speed_mps of the result is None."""
+    prof = load_current_profile(profile, discharge_positive)
+    dt = prof.step_s
+    current = np.tile(prof.current_a, repeat)
+    cutoff = shipped_cutoff_v(fmu) if cutoff_v is None else check_cutoff(cutoff_v)
+    charge_cutoff = (shipped_cutoff_v(fmu, "voltage_max_v") if charge_cutoff_v is None
+                     else check_cutoff(charge_cutoff_v, "--charge-cutoff"))
+    copies = f"{repeat} × " if repeat > 1 else ""
+    h, n = _communication_steps(fmu, step_s, current.size * dt,
+                                f"{copies}the profile {prof.name}")
+    out, stop = _drive_fmu(fmu, step_means(current, dt, h, n), False, h, soc0, temperature_c,
+                           cutoff, charge_cutoff)
+    figures = {"profile": prof.name, "repetitions": repeat,
+               **_cell_figures(out, h, soc0, temperature_c, cutoff, stop),
+               "charge_cutoff_v": charge_cutoff}
+    cell_t = out["cell_t"] if figures["cell_temperature_max_c"] is not None else None
+    return CycleResult(out["time"], None, out["current"], out["voltage"], out["soc"],
+                       out["oor"].astype(bool), figures, cell_t)
+
+
+def _stop_state(f: dict) -> str:
+    """How a run that stopped early left the cell: 'full' (full_reason) or 'empty'."""
+    return "full" if " above " in f["stop"] else "empty"
 
 
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
+    """Speed (for a drive cycle), current, voltage, SoC and cell temperature over the run."""
     from lmncell.report.plots import plt
 
     t = res.time_s / 60.0
-    fig, ax = plt.subplots(4, 1, figsize=(10, 8.5), sharex=True, constrained_layout=True)
-    ax[0].plot(t, 3.6 * res.speed_mps)
     f = res.figures
-    stop = f" — stopped, the cell empty after {f['stopped_at_s']:g} s" if f["stop"] else ""
-    ax[0].set(ylabel="speed / km/h", title=f"{trace_title(f['cycle'])} through the FMU "
-              f"({f['vehicle']}){stop}")
-    ax[1].plot(t, res.current_a, lw=0.7)
-    ax[1].set(ylabel="cell current / A")
-    ax[2].plot(t, res.voltage_v, color="k", lw=0.7)
+    panels = 4 if res.speed_mps is not None else 3
+    fig, axes = plt.subplots(panels, 1, figsize=(10, 2.1 * panels + 0.1), sharex=True,
+                             constrained_layout=True)
+    stop = (f" — stopped, the cell {_stop_state(f)} after {f['stopped_at_s']:g} s"
+            if f["stop"] else "")
+    if res.speed_mps is not None:
+        axes[0].plot(t, 3.6 * res.speed_mps)
+        axes[0].set(ylabel="speed / km/h", title=f"{trace_title(f['cycle'])} through the FMU "
+                    f"({f['vehicle']}){stop}")
+    else:
+        axes[0].set_title(f"current profile {f['profile']} through the FMU{stop}")
+    ax = axes[panels - 3:]
+    ax[0].plot(t, res.current_a, lw=0.7)
+    ax[0].set(ylabel="cell current / A")
+    ax[1].plot(t, res.voltage_v, color="k", lw=0.7)
     if res.out_of_range.any():
-        ax[2].plot(t[res.out_of_range], res.voltage_v[res.out_of_range], "r.", ms=2,
+        ax[1].plot(t[res.out_of_range], res.voltage_v[res.out_of_range], "r.", ms=2,
                    label="outside trained range")
-        ax[2].legend()
+        ax[1].legend()
     if f["cutoff_v"] > 0 and res.voltage_v.min() < f["cutoff_v"] + CUTOFF_SHOWN_WITHIN_V:
-        ax[2].axhline(f["cutoff_v"], color="tab:red", lw=0.8, ls="--",
+        ax[1].axhline(f["cutoff_v"], color="tab:red", lw=0.8, ls="--",
                       label=f"cut-off {f['cutoff_v']:.3f} V")
-        ax[2].legend()
-    ax[2].set(ylabel="cell voltage / V")
-    ax[3].plot(t, 100 * res.soc, color="tab:green")
-    ax[3].set(ylabel="SoC / %", xlabel="time / min")
+        ax[1].legend()
+    ax[1].set(ylabel="cell voltage / V")
+    ax[2].plot(t, 100 * res.soc, color="tab:green")
+    ax[2].set(ylabel="SoC / %", xlabel="time / min")
     if res.cell_temperature_c is not None:
-        tx = ax[3].twinx()
+        tx = ax[2].twinx()
         tx.plot(t, res.cell_temperature_c, color="tab:red", lw=0.8)
-        tx.set_ylabel(f"cell temperature / °C (ambient {res.figures['ambient_c']:g})",
-                      color="tab:red")
+        tx.set_ylabel(f"cell temperature / °C (ambient {f['ambient_c']:g})", color="tab:red")
     fig.savefig(path, dpi=90)
     plt.close(fig)
     return Path(path)
 
 
 def simulate_cycle_cli(a) -> int:
+    """`lmncell simulate`: a drive cycle (--cycle) or a current profile (--current)."""
     from lmncell.evaluation.fmueval import read_fmu_info
 
     read_fmu_info(a.fmu)               # ConfigError naming the file unless an LMNCell FMU
-    vehicle = load_vehicle(a.vehicle)
-    res = run_cycle(a.fmu, a.cycle, vehicle, a.repeat, a.soc0, a.step, a.ambient, a.cutoff)
+    if a.current:
+        res = run_profile(a.fmu, a.current, a.repeat, a.soc0, a.step, a.ambient, a.cutoff,
+                          a.discharge_positive, a.charge_cutoff)
+    else:
+        res = run_cycle(a.fmu, a.cycle, load_vehicle(a.vehicle), a.repeat, a.soc0, a.step,
+                        a.ambient, a.cutoff)
     if a.plot:
         plot_cycle(res, a.plot)
     f = res.figures
     if a.json:
         print(json.dumps(f, indent=1))
     else:
-        print(f"{trace_title(f['cycle'])} x{f['repetitions']} at {f['step_s']} s steps: "
-              f"{f['distance_km']:.1f} km, cell energy {f['cell_energy_wh']:.2f} Wh (pack "
-              f"{f['pack_energy_kwh']:.2f} kWh), {f['ah_throughput']:.3f} Ah throughput, "
-              f"current {f['current_min_a']:.2f}…{f['current_max_a']:.2f} A, minimum voltage "
-              f"{f['voltage_min_v']:.3f} V, SoC {100 * f['soc_start']:.1f} → "
-              f"{100 * f['soc_end']:.1f} % (swing {100 * f['soc_swing']:.1f} points)"
-              + ("" if f["cell_temperature_max_c"] is None else
-                 f", cell temperature up to {f['cell_temperature_max_c']:.1f} °C at "
-                 f"{f['ambient_c']:g} °C ambient"))
+        print(_run_line(f))
         if f["stop"]:
-            print(f"stopped after {f['stopped_at_s']:g} s, {f['distance_km']:.1f} km: the cell is "
-                  f"empty ({f['stop']}); --cutoff sets the cut-off voltage")
+            where = f", {f['distance_km']:.1f} km" if "distance_km" in f else ""
+            state = _stop_state(f)
+            hint = ("; --cutoff sets the cut-off voltage" if state == "empty" else
+                    "; --charge-cutoff sets the charge cut-off voltage" if "voltage" in f["stop"]
+                    else "")
+            print(f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} "
+                  f"({f['stop']}){hint}")
     if f["out_of_range_steps"]:
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
               "(current, SoC or temperature); see the FMU log and the plot")
     return 0
+
+
+def _run_line(f: dict) -> str:
+    """One line of a run's figures (run_cycle's or run_profile's)."""
+    if "cycle" in f:
+        head = (f"{trace_title(f['cycle'])} x{f['repetitions']} at {f['step_s']} s steps: "
+                f"{f['distance_km']:.1f} km, cell energy {f['cell_energy_wh']:.2f} Wh (pack "
+                f"{f['pack_energy_kwh']:.2f} kWh)")
+    else:
+        head = (f"{f['profile']} x{f['repetitions']} at {f['step_s']} s steps: "
+                f"{f['duration_s']:g} s, cell energy {f['cell_energy_wh']:.2f} Wh")
+    return (head + f", {f['ah_throughput']:.3f} Ah throughput, current "
+            f"{f['current_min_a']:.2f}…{f['current_max_a']:.2f} A, minimum voltage "
+            f"{f['voltage_min_v']:.3f} V, SoC {100 * f['soc_start']:.1f} → "
+            f"{100 * f['soc_end']:.1f} % (swing {100 * f['soc_swing']:.1f} points)"
+            + ("" if f["cell_temperature_max_c"] is None else
+               f", cell temperature up to {f['cell_temperature_max_c']:.1f} °C at "
+               f"{f['ambient_c']:g} °C ambient"))
