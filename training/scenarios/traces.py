@@ -74,20 +74,25 @@ class TraceColumn:
 
 
 @dataclass(frozen=True, eq=False)
-class SpeedTrace:
-    """A vehicle speed trace: time (s, even steps), speed (m/s, ≥ 0) and road grade (rise over
-    run); name is how figures and tables call it (a shipped cycle's key in CYCLES, or the trace
-    file's name)."""
+class Trace:
+    """A trace's name (how figures, tables and plots call it) and time (s, even steps)."""
 
     name: str
     time_s: np.ndarray
-    speed_mps: np.ndarray
-    grade: np.ndarray
 
     @property
     def step_s(self) -> float:
         """The trace's sample step (s)."""
         return float(np.median(np.diff(self.time_s)))
+
+
+@dataclass(frozen=True, eq=False)
+class SpeedTrace(Trace):
+    """A vehicle speed trace: speed (m/s, ≥ 0) and road grade (rise over run) at its times;
+    named by a shipped cycle's key in CYCLES, or the trace file's name."""
+
+    speed_mps: np.ndarray
+    grade: np.ndarray
 
     @property
     def title(self) -> str:
@@ -96,22 +101,11 @@ class SpeedTrace:
 
 
 @dataclass(frozen=True, eq=False)
-class CurrentProfile:
-    """A cell current profile: time (s, even steps) and current (A, > 0 charges), each value
-    held over its step; name is the file's name."""
+class CurrentProfile(Trace):
+    """A cell current profile: current (A, > 0 charges) at its times, each value held over
+    its step; named by the file's name."""
 
-    name: str
-    time_s: np.ndarray
     current_a: np.ndarray
-
-    @property
-    def step_s(self) -> float:
-        """The profile's sample step (s)."""
-        return float(np.median(np.diff(self.time_s)))
-
-    @property
-    def title(self) -> str:
-        return self.name
 
 
 def trace_title(name: str) -> str:
