@@ -231,3 +231,16 @@ def test_api_simulate_warns_where_it_leaves_the_trained_range(quick_model) -> No
     assert sim.soc[-1] < 0                                 # not clamped
     with pytest.warns(UserWarning, match=r"simulate: current -40\.00…-40\.00 A exceeds"):
         lmncell.simulate(model, np.full(10, -40.0), temperature_c=25.0, soc0=1.0)
+
+
+EXAMPLES = sorted((Path(__file__).resolve().parents[1] / "examples").glob("*.py"))
+
+
+@pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
+def test_every_example_without_its_arguments_prints_its_usage(script: Path) -> None:
+    """An example run without its arguments says what it needs (two used to end in a
+    TypeError traceback from main(*sys.argv[1:]))."""
+    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert out.stderr.startswith("usage: ") and "Traceback" not in out.stderr
