@@ -16,12 +16,14 @@ from __future__ import annotations
 import argparse
 
 import lmncell
+from lmncell.cli import run_script
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("fmu")
-    ap.add_argument("--scheduler", default=None)
+    ap.add_argument("fmu", help="an LMNCell FMU")
+    ap.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                    help="a running Dask scheduler (default: a LocalCluster here)")
     a = ap.parse_args()
     table = lmncell.sweep(a.fmu, cycles=["wltc", "us06"], ambient_c=[0.0, 25.0, 40.0],
                           soc0=[0.9, 0.5], scheduler=a.scheduler)
@@ -30,4 +32,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    run_script(main, __file__)
