@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import gzip
 import json
+import re
 import warnings
 from datetime import datetime, timedelta
 
@@ -94,6 +95,56 @@ def test_generic_csv_with_mapping_and_sign(tmp_path) -> None:
     rec = read_record(p, fmt="generic", columns={"time": "t", "current": "I_mA", "voltage": "U"},
                       current_scale=1e-3, discharge_positive=True)
     assert rec.current_a.tolist() == [0.0, 1.0, 1.0, 0.0]
+
+
+GENERIC = {"time": "Time", "current": "I", "voltage": "U"}
+
+
+def _timed_csv(tmp_path, times: list[str], name: str = "t.csv", sep: str = ","):
+    """A generic CSV whose time column holds the given cells, a 1 A discharge throughout."""
+    p = tmp_path / name
+    p.write_text(f"Time{sep}I{sep}U\n" + "".join(f"{t}{sep}-1{sep}3.{3 + k % 2}\n"
+                                                 for k, t in enumerate(times)))
+    return p
+
+
+@pytest.mark.parametrize("times, seconds, kind", [
+    ([f"2024-03-01 23:59:{s:04.1f}" for s in (58.0, 58.5, 59.0, 59.5)] + ["2024-03-02 00:00:00"],
+     [0.0, 0.5, 1.0, 1.5, 2.0], "ISO 8601"),
+    (["2024-03-31T01:59:59+01:00", "2024-03-31T03:00:00+02:00", "2024-03-31T03:00:01+02:00"],
+     [0.0, 1.0, 2.0], "ISO 8601"),                    # a daylight-saving change, offsets given
+    (["23:59:59", "24:00:00", "24:00:01.5", "100:00:00"], [0.0, 1.0, 2.5, 273601.0],
+     "durations"),
+    (["0-23:59:59", "1-00:00:00", "1.00:00:02"], [0.0, 1.0, 3.0], "durations"),
+])
+def test_a_generic_time_column_written_as_text(tmp_path, times, seconds, kind) -> None:
+    """Cyclers that write the time as durations (h:mm:ss, hours beyond 24, a day count) or as
+    date-times: read to s from the first row, and a note says how (it was refused as 'not a
+    number')."""
+    rec = read_record(_timed_csv(tmp_path, times), columns=GENERIC)
+    assert rec.time_s == pytest.approx(seconds, abs=1e-9)
+    assert any(kind in note for note in rec.meta.notes)
+
+
+def test_a_time_column_as_text_with_a_decimal_comma(tmp_path) -> None:
+    p = _timed_csv(tmp_path, ["0:00:00,0", "0:00:00,5", "0:00:01,0"], sep=";")
+    rec = read_record(p, columns=GENERIC, sep=";", decimal=",")
+    assert rec.time_s.tolist() == [0.0, 0.5, 1.0]
+
+
+@pytest.mark.parametrize("times, message", [
+    (["0", "1", "00:00:02"], "column 'Time' line 4: '00:00:02' is not a number like the first "
+                             "row's '0'"),
+    (["00:00:00", "00:00:01", "2024-01-01 00:00:02"],
+     "line 4: '2024-01-01 00:00:02' is not of the first row's kind ('00:00:00': durations"),
+    (["abc", "def"], "line 2: 'abc' is no time; expected a number of seconds, a duration "
+                     "h:mm:ss[.f]"),
+    (["2024-03-01 10:00:00", "2024-03-01 10:00:01", "2024-03-01 10:00:00"],
+     "column 'Time' (time_s) is decreasing (a time reset?) at line 4: 1.0 s then 0.0 s"),
+])
+def test_a_bad_text_time_column_is_named_with_its_line(tmp_path, times, message) -> None:
+    with pytest.raises(DataError, match=re.escape(message)):
+        read_record(_timed_csv(tmp_path, times), columns=GENERIC)
 
 
 # ----- bad input: each case names the file and the problem -----------------------------

@@ -128,18 +128,23 @@ def _format_of(path: Path) -> str:
 
 class CsvColumns(dict):
     """A CSV file's columns by header name (float arrays), and the file line of the first data
-    row where the data rows follow each other without blank lines (else None)."""
+    row where the data rows follow each other without blank lines (else None); text: the
+    cells as written of the columns asked for (keep_text), and lines: each data row's file
+    line."""
 
     first_line: int | None = None
+    text: dict[str, list[str]]
+    lines: list[int]
 
 
 def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
-                      required: frozenset[str] | set[str] | None = None
-                      ) -> CsvColumns:
+                      required: frozenset[str] | set[str] | None = None,
+                      keep_text: frozenset[str] | set[str] = frozenset()) -> CsvColumns:
     """Every column of a CSV file as float arrays, with the file's line numbers in errors.
 
     sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
-    every cell must be a number (default: the known formats' numeric columns)."""
+    every cell must be a number (default: the known formats' numeric columns); keep_text:
+    columns whose cells are also kept as written (CsvColumns.text)."""
     if len(sep) != 1 or sep in (decimal, '"') or sep.isalnum():
         raise DataError(f"{path}: delimiter {sep!r}; expected one character other than the "
                         f"decimal mark {decimal!r}, a quote, a letter or a digit")
@@ -156,7 +161,10 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     rows = list(csv.reader([ln for _, ln in numbered[1:]], delimiter=sep,
                            skipinitialspace=True))
     out = CsvColumns()
+    out.text, out.lines = {}, line_of
     for j, name in enumerate(header):
+        if name in keep_text:
+            out.text[name] = [row[j].strip() if j < len(row) else "" for row in rows]
         col = np.empty(len(rows))
         for r, row in enumerate(rows):
             try:
@@ -344,8 +352,8 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                  current_scale: float = 1.0, sep: str = ",", decimal: str = ".",
                  current_unit: str | None = None) -> Record:
     """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}
-    of LMNCell's quantities to the file's column names (time in s, voltage in V, temperature
-    in °C).
+    of LMNCell's quantities to the file's column names (time in s, or as text that
+    TIME_TEXT_EXPECTED describes; voltage in V, temperature in °C).
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); discharge_positive: the file
     counts discharge current as positive (it is negated: LMNCell's current > 0 charges);
@@ -364,18 +372,89 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
             raise DataError(f"{path}: current unit {current_unit!r}; expected one of "
                             f"{list(CURRENT_UNITS)}")
         current_scale = CURRENT_UNITS[current_unit]
-    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=set(columns.values()))
+    numeric = set(columns.values()) - {columns["time"]}
+    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
+                             keep_text={columns["time"]})
     _require(path, cols, tuple(columns.values()))
-    t = cols[columns["time"]]
+    t, notes = _generic_times(cols, columns["time"], path, decimal)
     cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
     note = "current negated (file: discharge > 0)" if discharge_positive else "none"
     temp = cols[columns["temperature"]] if "temperature" in columns else None
+    # a text time column's messages count s from its first row
+    file_times = t - t[0] if notes else t
     return Record(t - t[0], cur, cols[columns["voltage"]],
-                  _meta(path, "generic", note, t,
+                  _meta(path, "generic", note, t, notes=notes,
                         segment_starts=_segment_starts_from_gaps(t, cur),
-                        **_csv_meta(cols, t, **{f"{k}{UNIT_SUFFIX[k]}": v
-                                                for k, v in columns.items()})),
+                        **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
+                                                         for k, v in columns.items()})),
                   temperature_c=temp)
+
+
+def _generic_times(cols: CsvColumns, column: str, path: Path, decimal: str
+                   ) -> tuple[np.ndarray, list[str]]:
+    """The time column in s: numbers, or text (_text_times) with a note saying how it was
+    read; DataError where a numeric column has a cell that is not a number."""
+    t = cols[column]
+    if not np.isnan(t).any():
+        return t, []
+    cells = cols.text[column]
+    if not np.isnan(t[0]):
+        k = int(np.flatnonzero(np.isnan(t))[0])
+        raise DataError(f"{path}: column '{column}' line {cols.lines[k]}: {cells[k]!r} is not "
+                        f"a number like the first row's {cells[0]!r}")
+    t, kind = _text_times(cells, cols.lines, path, column, decimal)
+    return t, [f"time column '{column}' read as {kind} (first {cells[0]!r})"]
+
+
+DURATION = re.compile(r"(?:(\d+)[-. ])?(\d+):(\d{1,2}):(\d{1,2}(?:\.\d*)?)")
+TIME_TEXT_EXPECTED = ("a number of seconds, a duration h:mm:ss[.f] (hours may exceed 24; a "
+                      "day count before it as 'd-', 'd.' or 'd ') or an ISO 8601 date and time "
+                      "(2024-03-01 10:00:00[.f], 'T' between them, an offset such as +01:00 "
+                      "allowed)")
+
+
+def _text_times(cells: list[str], lines: list[int], path: Path, column: str,
+                decimal: str = ".") -> tuple[np.ndarray, str]:
+    """A time column written as durations or ISO date-times (TIME_TEXT_EXPECTED), in s from
+    the epoch or the duration's zero (the first cell decides which), and which it was.
+    DataError naming the line and the cell where one is neither, or not of the first cell's
+    kind."""
+    first = cells[0].replace(",", ".") if decimal == "," else cells[0]
+    as_duration = DURATION.fullmatch(first) is not None
+    kind = "durations h:mm:ss" if as_duration else "ISO 8601 dates and times"
+    out = np.empty(len(cells))
+    for k, cell in enumerate(cells):
+        text = cell.replace(",", ".") if decimal == "," else cell
+        value = _duration_s(text) if as_duration else _iso_s(text)
+        if value is None:
+            raise DataError(f"{path}: column '{column}' line {lines[k]}: {cell!r} is not of "
+                            f"the first row's kind ({cells[0]!r}: {kind})"
+                            if k else f"{path}: column '{column}' line {lines[k]}: {cell!r} "
+                            f"is no time; expected {TIME_TEXT_EXPECTED}")
+        out[k] = value
+    return out, kind
+
+
+def _duration_s(text: str) -> float | None:
+    """'[d-]h:mm:ss[.f]' in s, or None."""
+    m = DURATION.fullmatch(text)
+    if m is None:
+        return None
+    days, hours, minutes, seconds = m.groups()
+    return (int(days or 0) * 86400.0 + int(hours) * 3600.0 + int(minutes) * 60.0
+            + float(seconds))
+
+
+def _iso_s(text: str) -> float | None:
+    """An ISO 8601 date and time in s since 1970 (a time without offset is taken as it is:
+    no time zone, no daylight-saving shift), or None."""
+    try:
+        stamp = datetime.fromisoformat(text)
+    except ValueError:
+        return None
+    if stamp.tzinfo is None:
+        return (stamp - datetime(1970, 1, 1)).total_seconds()
+    return stamp.timestamp()
 
 
 _READERS = {"plett": read_plett, "arbin": read_arbin, "panasonic": read_panasonic,
