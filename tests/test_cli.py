@@ -143,6 +143,20 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     assert "bad.json" in capsys.readouterr().err
 
 
+def test_explain_reads_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path,
+                                              capsys) -> None:
+    """What a supplier's FMU holds is explained as its model file is (`explain CELL.fmu` read
+    the archive as JSON: 'not a text (JSON) model file')."""
+    assert main(["explain", str(quick_model), "--json"]) == 0
+    from_model = capsys.readouterr().out
+    assert main(["explain", str(native_fmu), "--json"]) == 0
+    assert capsys.readouterr().out == from_model
+    fake = tmp_path / "fake.fmu"
+    fake.write_text(quick_model.read_text())
+    assert main(["explain", str(fake)]) == 2
+    assert "fake.fmu: not a readable FMU" in capsys.readouterr().err
+
+
 def test_leave_one_out_folds_name_what_is_wrong() -> None:
     """The leave-one-out examples' folds: each held-out record beside all the others, with
     their start SoCs, for one pattern or a comma list; a pattern that matches nothing, or a

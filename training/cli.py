@@ -427,7 +427,7 @@ def _add_explain_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell explain` subcommand."""
     s = sub.add_parser("explain", help="every local model as the cell it describes: R0, RC "
                        "elements, hysteresis and OCV offset per operating regime", **fmt)
-    s.add_argument("model", help="model file (JSON)")
+    s.add_argument("model", help="model file (JSON), or an LMNCell FMU (the model it ships)")
     s.add_argument("--temperature", type=_temperature, metavar="DEGC", help="cell temperature "
                    "at which to state the resistances (default: each local model's centre, or "
                    "the model's reference temperature)")

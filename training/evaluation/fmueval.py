@@ -29,6 +29,7 @@ from lmncell.evaluation.fmucheck import run_fmu_on_segment
 from lmncell.evaluation.metrics import record_metrics
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
+from lmncell.runtime.model import LmnModel, model_from_dict
 
 # the variables evaluate needs; every LMNCell FMU has them
 REQUIRED_VARIABLES = ("current", "temperature", "voltage", "soc", "out_of_range", "soc0",
@@ -108,6 +109,17 @@ def shipped_model_doc(path: str | Path) -> dict:
     except (KeyError, ValueError, OSError, zipfile.BadZipFile):
         return {}
     return doc if isinstance(doc, dict) else {}
+
+
+def shipped_model(path: str | Path) -> LmnModel:
+    """The model an LMNCell FMU ships (resources/model.json), checked as a model file is;
+    ConfigError naming the FMU where it is none or carries no model."""
+    read_fmu_info(path)
+    doc = shipped_model_doc(path)
+    if not doc:
+        raise ConfigError(f"{path}: carries no readable resources/model.json (every LMNCell "
+                          "FMU ships its model there)")
+    return model_from_dict(doc, f"{path}: resources/model.json")
 
 
 def communication_points(sample_times_s: np.ndarray, ts: float, n: int,

@@ -216,8 +216,14 @@ def _training_error_lines(model: LmnModel) -> list[str]:
 
 def explain(model_path: str | Path, temperature_c: float | None = None,
             as_json: bool = False) -> str:
-    """`lmncell explain MODEL`: the table (or JSON rows) of the model's local models."""
-    model = load_model(model_path)
+    """`lmncell explain MODEL`: the table (or JSON rows) of the model's local models; MODEL a
+    model file or an LMNCell FMU (the model it ships: what a supplier's FMU holds)."""
+    if Path(model_path).suffix.lower() == ".fmu":
+        from lmncell.evaluation.fmueval import shipped_model
+
+        model = shipped_model(model_path)
+    else:
+        model = load_model(model_path)
     if as_json:
         return json.dumps(local_model_table(model, temperature_c), indent=1)
     return explain_text(model, temperature_c)
