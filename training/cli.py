@@ -466,7 +466,8 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    help="the --current profile counts discharge as positive")
     s.add_argument("--charge-cutoff", type=_cutoff, metavar="V", help="with --current: the "
                    "run stops where the voltage rises above it or the SoC above 1 (default: "
-                   "the highest voltage of the model's training records; 0: none)")
+                   "the highest voltage of the model's training records; 0: none, the run "
+                   "stops at SoC above 1)")
     s.add_argument("--vehicle", metavar="FILE.toml", help="vehicle and pack (default: the "
                    "built-in compact EV; not with --current)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
@@ -474,7 +475,8 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
-                   "a step longer than the cycle's samples holds their mean power")
+                   "a step longer than the cycle's or profile's samples holds their mean power or "
+                   "current")
     s.add_argument("--cutoff", type=_cutoff, metavar="V", help="discharge cut-off cell voltage: "
                    "the run stops where the voltage falls below it or the SoC below 0 (default: "
                    "the lowest voltage of the model's training records; 0: none, the run stops "
