@@ -130,6 +130,11 @@ def test_a_time_column_as_text_with_a_decimal_comma(tmp_path) -> None:
     p = _timed_csv(tmp_path, ["0:00:00,0", "0:00:00,5", "0:00:01,0"], sep=";")
     rec = read_record(p, columns=GENERIC, sep=";", decimal=",")
     assert rec.time_s.tolist() == [0.0, 0.5, 1.0]
+    p = _timed_csv(tmp_path, ["0,5", "1,0"], "seconds.csv", sep=";")   # no decimal given
+    with pytest.raises(DataError, match=re.escape(
+            "line 2: '0,5' is no time (a decimal comma? give the decimal mark: --decimal ',' "
+            "or decimal=',')")):
+        read_record(p, columns=GENERIC, sep=";")
 
 
 @pytest.mark.parametrize("times, message", [

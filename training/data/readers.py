@@ -178,11 +178,18 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                 col[r] = np.nan  # non-numeric cell (date strings etc.): checked where used
                 if name in required:
                     raise DataError(f"{path}: column '{name}' line {line_of[r]}: {row[j]!r} "
-                                    "is not a number") from None
+                                    f"is not a number{_comma_hint(cell, decimal)}") from None
         out[name] = col
     if line_of[-1] - line_of[0] == len(line_of) - 1:
         out.first_line = line_of[0]
     return out
+
+
+def _comma_hint(cell: str, decimal: str) -> str:
+    """A hint where a cell that is not a number reads as one with a decimal comma."""
+    if decimal == "." and re.fullmatch(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?", cell):
+        return " (a decimal comma? give the decimal mark: --decimal ',' or decimal=',')"
+    return ""
 
 
 def _csv_meta(cols: CsvColumns, file_times: np.ndarray, /, **names: str) -> dict:
@@ -430,7 +437,8 @@ def _text_times(cells: list[str], lines: list[int], path: Path, column: str,
             raise DataError(f"{path}: column '{column}' line {lines[k]}: {cell!r} is not of "
                             f"the first row's kind ({cells[0]!r}: {kind})"
                             if k else f"{path}: column '{column}' line {lines[k]}: {cell!r} "
-                            f"is no time; expected {TIME_TEXT_EXPECTED}")
+                            f"is no time{_comma_hint(cell, decimal)}; expected "
+                            f"{TIME_TEXT_EXPECTED}")
         out[k] = value
     return out, kind
 
