@@ -301,7 +301,10 @@ class TrainConfig:
     surface SoC, SoC + κ·g·LP_τ(i), added so that a split can follow the depleted surface and
     its recovery after the cut-off: τ = 150 s, κ = 0.005 / 0.01 / 0.03 per A: 2.64 / 11.94,
     2.63 / 11.25, 2.81 / 12.37; τ = 800 s, κ = 0.01: 2.76 / 11.69; instead of the SoC (κ =
-    0.01): 2.57 / 12.32. The spread is that of the other changes tried (±0.5 mV per fold).
+    0.01): 2.57 / 12.32; the current added (soc, current, temperature, so that local models
+    per load level can follow the collapse under the last pulses): 2.62 / 12.04 (per fold
+    2.99 / 9.72, 2.15 / 7.25, 2.73 / 19.14). The spread is that of the other changes tried
+    (±0.5 mV per fold).
     pre_partition: "none" or "current_sign" (separate charge and discharge trees).
     temperature_regions: "auto" (where temperature is in the partition and no temperature
     terms carry it: one set of local models per chamber-temperature level, split apart by fixed
