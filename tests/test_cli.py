@@ -111,7 +111,8 @@ def test_missing_soc0_is_explained(tmp_path, capsys) -> None:
     rec = DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz"   # charge from empty: not full
     assert main(["train", str(rec), "--out", str(tmp_path / "m.json"),
                  "--capacity", "2.0"]) == 2
-    assert "give --soc0" in capsys.readouterr().err
+    assert ("give it: --soc0 on the command line, soc0= in Python (1.0 for a record that "
+            "starts fully charged)") in capsys.readouterr().err
 
 
 def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, tmp_path,

@@ -67,7 +67,8 @@ def start_soc(rec: Record, soc0: float | None) -> float:
     if starts_rested_full(rec):
         return 1.0
     raise DataError(f"{rec.meta.source}: cannot tell the start SoC (the record does not start "
-                    "with a rest at its top voltage); give --soc0")
+                    "with a rest at its top voltage); give it: --soc0 on the command line, "
+                    "soc0= in Python (1.0 for a record that starts fully charged)")
 
 
 def start_socs(soc0: float | Sequence[float] | None, n: int) -> list[float | None]:
@@ -98,8 +99,9 @@ def estimate_capacity(records: list[Record],
             if s == 1.0 or (s is None and starts_rested_full(r))]
     if not full or max(full) <= 0:
         raise DataError("cannot estimate the capacity: no record starts full (rested at its "
-                        "top voltage, or given as full by --soc0 1) and discharges; give "
-                        "--capacity, or --soc0 for records that start full")
+                        "top voltage, or given as full by --soc0 1 / soc0=1.0) and discharges; "
+                        "give the capacity (--capacity / capacity_ah=), or the start SoC of "
+                        "records that start full")
     return max(full)
 
 
