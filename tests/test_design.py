@@ -275,3 +275,14 @@ def test_design_beats_the_aprbs_median_on_pybamm_with_other_seeds(tmp_path) -> N
                                   tuple(range(6, 16)), ("aprbs",))
     for key, entry in res["profiles"].items():
         assert entry["beats_aprbs_median"], (key, entry)
+
+
+def test_design_takes_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path) -> None:
+    """--model CELL.fmu designs as --model MODEL.json does (the FMU was read as JSON)."""
+    outs = []
+    for name, model in (("json", quick_model), ("fmu", native_fmu)):
+        out = tmp_path / f"{name}.csv"
+        assert main(["design", "--capacity", "2.85", "--soc-profile", "0.9,0.3", "--duration",
+                     "1200", "--model", str(model), "--out", str(out)]) == 0
+        outs.append(out.read_text())
+    assert outs[0] == outs[1]

@@ -544,7 +544,8 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--sequence", type=_positive, default=300.0, help="sequence length, s")
     s.add_argument("--duration", type=_positive, default=7200.0, help="total, s")
     s.add_argument("--r0", type=_positive, default=0.010, help="design model R0, Ω")
-    s.add_argument("--model", help="take the OCV and voltage limits from a model file")
+    s.add_argument("--model", help="take the OCV and voltage limits from a model file (or "
+                   "the one an LMNCell FMU ships)")
     s.add_argument("--plot", metavar="DIR", type=output_folder_argument,
                    help="write the programme's figures")
     s.add_argument("--method", choices=DESIGN_METHODS, default="spacefill",

@@ -28,9 +28,9 @@ def default_virtual_cell() -> str:
 def _cell(a) -> CellSpec:
     cell = CellSpec(capacity_ah=a.capacity, max_c_rate=a.max_c_rate, r0_ohm=a.r0)
     if a.model:
-        from lmncell.runtime.model import load_model
+        from lmncell.evaluation.fmueval import model_or_shipped
 
-        m = load_model(a.model)
+        m = model_or_shipped(a.model)
         cell.ocv_soc, cell.ocv_v = tuple(m.ocv_soc), tuple(m.ocv_v)
         cell.voltage_min_v = float(m.limits.get("voltage_v", [cell.voltage_min_v])[0])
         cell.voltage_max_v = float(m.limits.get("voltage_v", [0, cell.voltage_max_v])[1])

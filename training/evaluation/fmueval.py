@@ -122,6 +122,13 @@ def shipped_model(path: str | Path) -> LmnModel:
     return model_from_dict(doc, f"{path}: resources/model.json")
 
 
+def model_or_shipped(path: str | Path) -> LmnModel:
+    """A model file, or the model an LMNCell FMU (*.fmu) ships (shipped_model)."""
+    from lmncell.runtime.model import load_model
+
+    return shipped_model(path) if Path(path).suffix.lower() == ".fmu" else load_model(path)
+
+
 def communication_points(sample_times_s: np.ndarray, ts: float, n: int,
                          delay_s: float = 0.0) -> np.ndarray:
     """The times (s from the part's first sample) at which evaluate_fmu ends a communication

@@ -13,7 +13,7 @@ from lmncell.identification.ladder import (
     is_ladder,
     ladder_keys,
 )
-from lmncell.runtime.model import LmnModel, load_model
+from lmncell.runtime.model import LmnModel
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE_BY_SOC,
     MIN_VOLTAGE_SIGMA_V,
@@ -218,12 +218,9 @@ def explain(model_path: str | Path, temperature_c: float | None = None,
             as_json: bool = False) -> str:
     """`lmncell explain MODEL`: the table (or JSON rows) of the model's local models; MODEL a
     model file or an LMNCell FMU (the model it ships: what a supplier's FMU holds)."""
-    if Path(model_path).suffix.lower() == ".fmu":
-        from lmncell.evaluation.fmueval import shipped_model
+    from lmncell.evaluation.fmueval import model_or_shipped
 
-        model = shipped_model(model_path)
-    else:
-        model = load_model(model_path)
+    model = model_or_shipped(model_path)
     if as_json:
         return json.dumps(local_model_table(model, temperature_c), indent=1)
     return explain_text(model, temperature_c)
