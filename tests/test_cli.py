@@ -158,6 +158,23 @@ def test_explain_reads_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path,
     assert "fake.fmu: not a readable FMU" in capsys.readouterr().err
 
 
+def test_build_fmu_builds_the_model_an_fmu_ships_again(quick_fmu, native_fmu, tmp_path,
+                                                      capsys) -> None:
+    """A native FMU built from a pythonfmu FMU is the native FMU of its model file: the same
+    model description (GUID from the model) and model file (the FMU was read as JSON)."""
+    import zipfile
+
+    out = tmp_path / "again.fmu"
+    assert main(["build-fmu", str(quick_fmu), "--out", str(out), "--native"]) == 0
+    with zipfile.ZipFile(out) as again, zipfile.ZipFile(native_fmu) as first:
+        for name in ("modelDescription.xml", "resources/model.json"):
+            assert again.read(name) == first.read(name), name
+    fake = tmp_path / "fake.fmu"
+    fake.write_bytes(b"not a zip")
+    assert main(["build-fmu", str(fake), "--out", str(tmp_path / "x.fmu")]) == 2
+    assert "fake.fmu: not a readable FMU" in capsys.readouterr().err
+
+
 def test_leave_one_out_folds_name_what_is_wrong() -> None:
     """The leave-one-out examples' folds: each held-out record beside all the others, with
     their start SoCs, for one pattern or a comma list; a pattern that matches nothing, or a

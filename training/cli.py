@@ -228,16 +228,19 @@ def cmd_explain(a: argparse.Namespace) -> int:
 
 
 def cmd_build_fmu(a: argparse.Namespace) -> int:
-    if a.native:
-        from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.evaluation.fmueval import model_file_of
 
-        path = build_native_fmu(a.model, a.out)
-    else:
-        from lmncell.fmu.pythonfmu_build import build_fmu, native_host_hint
+    with model_file_of(a.model) as model:
+        if a.native:
+            from lmncell.fmu.native_build import build_native_fmu
 
-        path = build_fmu(a.model, a.out)
-        if hint := native_host_hint(path):
-            print(hint)
+            path = build_native_fmu(model, a.out)
+        else:
+            from lmncell.fmu.pythonfmu_build import build_fmu, native_host_hint
+
+            path = build_fmu(model, a.out)
+            if hint := native_host_hint(path):
+                print(hint)
     print(f"wrote {path}")
     return 0
 
@@ -439,7 +442,8 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell build-fmu` subcommand."""
     s = sub.add_parser("build-fmu", help="package a model as an FMI 2.0 co-simulation FMU",
                        **fmt)
-    s.add_argument("model", help="model file (JSON)")
+    s.add_argument("model", help="model file (JSON), or an LMNCell FMU whose model to build "
+                   "again (e.g. a native FMU of a pythonfmu one)")
     s.add_argument("--out", required=True, type=fmu_file_argument, metavar="CELL.fmu",
                    help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "

@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import json
 import shutil
+import tempfile
 import zipfile
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -127,6 +129,22 @@ def model_or_shipped(path: str | Path) -> LmnModel:
     from lmncell.runtime.model import load_model
 
     return shipped_model(path) if Path(path).suffix.lower() == ".fmu" else load_model(path)
+
+
+@contextmanager
+def model_file_of(path: str | Path) -> Iterator[Path]:
+    """The model file itself, or for an LMNCell FMU (*.fmu) a temporary copy of the model file
+    it ships (resources/model.json, checked by shipped_model), removed afterwards."""
+    path = Path(path)
+    if path.suffix.lower() != ".fmu":
+        yield path
+        return
+    shipped_model(path)
+    with tempfile.TemporaryDirectory(prefix="lmncell-shipped-") as tmp, \
+            zipfile.ZipFile(path) as z:
+        out = Path(tmp) / f"{path.stem}.json"
+        out.write_bytes(z.read("resources/model.json"))
+        yield out
 
 
 def communication_points(sample_times_s: np.ndarray, ts: float, n: int,
