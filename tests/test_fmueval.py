@@ -158,3 +158,34 @@ def test_fmu_is_also_scored_at_the_records_own_samples(native_fmu, tmp_path) -> 
     assert raw["rmse_mv"] != pytest.approx(rows[0]["fmu"]["rmse_mv"], rel=1e-3)
     _, a123_rows = evaluate_fmu(native_fmu, [A123_S1], 1.0, progress=quiet)
     assert "fmu_samples" not in a123_rows[0]
+
+
+def test_rows_and_captions_say_which_temperature_drove_the_run(quick_model, native_fmu, tmp_path,
+                                                               monkeypatch) -> None:
+    """A record without a cell temperature (Plett's A123 files) is driven by its chamber set
+    point: rows say "chamber" and captions name it, where both said "the measured cell
+    temperature"; a record with one says "cell"."""
+    from lmncell.evaluation.evaluate import evaluate_files, temperature_input
+    from lmncell.evaluation.fmueval import evaluate_fmu_files
+    from lmncell.report import plots
+
+    from tests.conftest import A123_S1
+
+    a123 = record_to_segments(read_record(A123_S1), 1.0, 1.0, 2.0307)[0]
+    pan = record_to_segments(read_record(PAN_US06), 1.0, 1.0, 2.85)[0]
+    assert (a123.temperature_kind, pan.temperature_kind) == ("chamber", "measured")
+    assert [temperature_input(s, False) for s in (a123, pan)] == ["chamber", "cell"]
+    assert temperature_input(a123, True) == "ambient"
+    titles: list[str] = []
+    real = plots.fit_figure
+    monkeypatch.setattr(plots, "fit_figure", lambda trace, path, title="", **kw: (
+        titles.append(title), real(trace, path, title, **kw))[1])
+    with pytest.warns(UserWarning):             # the Panasonic model outside its range
+        rows = evaluate_files(quick_model, [A123_S1], 1.0, tmp_path / "m", as_json=True,
+                              progress=lambda _m: None)
+        fmu_rows = evaluate_fmu_files(native_fmu, [A123_S1], 1.0, tmp_path / "f",
+                                      as_json=True, progress=lambda _m: None)
+    assert rows[0]["temperature_input"] == fmu_rows[0]["temperature_input"] == "chamber"
+    assert len(titles) == 2 and all("the chamber temperature 25 °C (the record has no cell "
+                                    "temperature)" in t for t in titles)
+    assert "LMN RMSE whole record" in titles[0] and "in free run from SoC 1" in titles[0]

@@ -22,8 +22,9 @@ class Segment:
     the first step; temperature_c in °C (None if unknown); weight the fit weight of each sample
     (SoC window, record weight and, in training, the SoC-reference weight); record_weight the
     weight of the record it belongs to alone; ambient_c the chamber (ambient) temperature in °C
-    where the record has a measured cell temperature beside it (else None: then temperature_c,
-    if any, is the chamber's).
+    where the record has a measured cell temperature beside it (else None); temperature_kind
+    what temperature_c is: "measured" (the record's cell temperature), "chamber" (the chamber
+    set point, where the record has no cell temperature) or "none" (temperature_c None).
     """
 
     name: str
@@ -36,6 +37,7 @@ class Segment:
     weight: np.ndarray
     record_weight: float = 1.0
     ambient_c: float | None = None
+    temperature_kind: str = "measured"
 
     def __len__(self) -> int:
         return int(self.time_s.size)
@@ -128,9 +130,10 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
     chamber = rec.meta.chamber_temp_c
     ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None
                and np.isfinite(chamber) else None)
+    kind = "measured" if rec.temperature_c is not None else "none"
     temp = rec.temperature_or_chamber()
     if temp is not None and rec.temperature_c is None:
-        rec.temperature_c = temp
+        rec.temperature_c, kind = temp, "chamber"
     out = []
     for k, part in enumerate(rec.segments()):
         if part.duration_s < MIN_SEGMENT_STEPS * sample_time_s:
@@ -140,7 +143,8 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         w = np.where((rs.soc_ref >= lo) & (rs.soc_ref <= hi), 1.0, outside_weight)
         name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"
         out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
-                                  float(part.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient)))
+                                  float(part.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient,
+                                  temperature_kind=kind)))
     if not out:
         longest = max((part.duration_s for part in rec.segments()), default=0.0)
         raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "

@@ -235,7 +235,8 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     def segment(name: str, cur: np.ndarray, s0: float) -> Segment:
         u, soc = vc.run(cur, s0, name=name)
         t = np.arange(1, cur.size + 1, dtype=float)
-        return Segment(name, t, cur, u, None, s0, soc, np.ones(cur.size))
+        return Segment(name, t, cur, u, None, s0, soc, np.ones(cur.size),
+                       temperature_kind="none")
 
     soc0 = float(spec.soc_profile[0])
     profiles = validation_profiles(cell, cyc, spec)

@@ -60,6 +60,27 @@ def ambient_of(seg: Segment) -> np.ndarray:
     return np.full(len(seg), 25.0)
 
 
+def temperature_input(seg: Segment, ambient: bool) -> str:
+    """What temperature drove a segment's evaluation, for its row: "ambient" (--ambient),
+    "cell" (its measured cell temperature), "chamber" (its chamber set point: the record has no
+    cell temperature, so --ambient or not the same) or "none" (no temperature: 25 °C)."""
+    if ambient:
+        return "ambient"
+    return {"measured": "cell", "chamber": "chamber"}.get(seg.temperature_kind, "none")
+
+
+def temperature_words(seg: Segment, ambient: bool) -> str:
+    """temperature_input in words, for a figure's caption."""
+    kind = temperature_input(seg, ambient)
+    if kind == "ambient":
+        return ("the ambient (chamber) temperature, the thermal model computing the cell's "
+                "where the model has one")
+    if kind == "chamber":
+        return (f"the chamber temperature {float(np.median(seg.temperature_c)):g} °C (the "
+                "record has no cell temperature)")
+    return "the measured cell temperature" if kind == "cell" else "25 °C (no temperature given)"
+
+
 def read_records(paths: Sequence[str | Path], soc0: float | Sequence[float] | None = None,
                  read_options: Mapping[str, Any] | None = None,
                  through_hidden_pauses: bool = False
@@ -117,7 +138,7 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
             for name, b in model.extra.get("baselines", {}).items():
                 volts[name] = baseline_voltage(b["kind"], b["model"], driven, sim.soc)
             traces.append(Trace(seg, volts, sim.soc, sim.validity, cell))
-            row = {"record": seg.name, "temperature_input": "ambient" if ambient else "cell"}
+            row = {"record": seg.name, "temperature_input": temperature_input(seg, ambient)}
             for name, v in volts.items():
                 row[name] = record_metrics(seg.voltage_v, v, seg.soc_ref)
             if cell is not None and seg.ambient_c is not None and seg.temperature_c is not None:
@@ -276,7 +297,12 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
         from lmncell.report import plots
 
         Path(plot_dir).mkdir(parents=True, exist_ok=True)
-        files = plots.evaluation_figures(model, traces, Path(plot_dir))
+        titles = [f"{t.segment.name}: {Path(model_path).name} in free run from SoC "
+                  f"{t.segment.soc0:.3g}, driven by the record's current and "
+                  f"{temperature_words(t.segment, ambient)}; LMN RMSE whole record "
+                  f"{_mv(r['lmn']['rmse_mv'])}, SoC 20–80 % {_mv(r['lmn']['window_rmse_mv'])}"
+                  for t, r in zip(traces, rows, strict=True)]
+        files = plots.evaluation_figures(model, traces, Path(plot_dir), titles)
         figures = [f for f in files if f.suffix == ".png"]
         tables = [f for f in files if f.suffix != ".png"]
         progress(f"wrote {len(figures)} figure(s) and {len(tables)} table(s) to {plot_dir}: "

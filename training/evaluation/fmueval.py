@@ -25,6 +25,8 @@ from lmncell.evaluation.evaluate import (
     print_rows,
     read_records,
     record_notes,
+    temperature_input,
+    temperature_words,
     write_traces,
 )
 from lmncell.evaluation.fmucheck import run_fmu_on_segment
@@ -350,7 +352,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                                     np.zeros((len(seg), 0))))
                 raw = sample_metrics(part, seg, run, info.step_s)   # None at model steps
                 rows.append({"record": seg.name,
-                             "temperature_input": "ambient" if ambient else "cell",
+                             "temperature_input": temperature_input(seg, ambient),
                              "fmu": record_metrics(seg.voltage_v, run.voltage_v, seg.soc_ref),
                              **({"fmu_samples": raw} if raw else {}),
                              "out_of_range_steps": int(run.out_of_range.sum()),
@@ -396,14 +398,13 @@ def _plot(fmu: Path, traces: list[Trace], out: Path, ambient: bool, at_model_ste
     from lmncell.report import plots
 
     out.mkdir(parents=True, exist_ok=True)
-    given = ("the ambient (chamber) temperature, its thermal model computing the cell's"
-             if ambient else "the measured cell temperature")
     how = ("in steps of Ts with the mean current over each" if at_model_steps
            else "through the record's own samples")
     files = [plots.fit_figure(t, out / f"fmu_{plots.safe_name(t.segment.name)}.png",
                               title=f"{t.segment.name}: {fmu.name} driven by fmpy {how}, "
-                              f"with {given}; free run from SoC {t.segment.soc0:.3g}, "
-                              "voltage compared with the measured mean over each model step")
+                              f"with {temperature_words(t.segment, ambient)}; free run from "
+                              f"SoC {t.segment.soc0:.3g}, voltage compared with the measured "
+                              "mean over each model step")
              for t in traces]
     progress(f"wrote {len(files)} figure(s) to {out}: " + ", ".join(f.name for f in files))
 

@@ -52,7 +52,7 @@ def fit_figure(trace, path: Path, title: str = "", zoom_s: float = 600.0) -> Pat
     fig, axes = plt.subplots(3, 1, figsize=(10, 8.5), constrained_layout=True)
     ax = axes[0]
     _voltage_lines(ax, t, seg.voltage_v, trace.voltage)
-    ax.set(ylabel="voltage / V")
+    ax.set(ylabel="voltage / V", xlabel="time / h")
     ax.set_title(textwrap.fill(title or seg.name, 110), fontsize=10)
     ax.legend(loc="lower left", ncol=5, fontsize=8)
     k0 = int(np.argmax(np.abs(seg.current_a)))
@@ -195,8 +195,13 @@ def write_local_model_table(model: LmnModel, path: Path) -> Path:
     return path
 
 
-def evaluation_figures(model: LmnModel, traces: list, out: Path) -> list[Path]:
-    files = [fit_figure(t, out / f"fit_{safe_name(t.segment.name)}.png") for t in traces]
+def evaluation_figures(model: LmnModel, traces: list, out: Path,
+                       titles: list[str] | None = None) -> list[Path]:
+    """`lmncell evaluate MODEL --plot`: a fit figure per trace (captioned by titles, default
+    the segment's name), the local-model table, validity and the training curve."""
+    titles = titles or [t.segment.name for t in traces]
+    files = [fit_figure(t, out / f"fit_{safe_name(t.segment.name)}.png", title)
+             for t, title in zip(traces, titles, strict=True)]
     files.append(write_local_model_table(model, out / "local_models.csv"))
     files.append(validity_figure(model, out / "validity.png"))
     training = model.extra.get("training", {})
