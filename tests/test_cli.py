@@ -44,6 +44,22 @@ def test_inspect_plot_and_bad_file(tmp_path, capsys) -> None:
     assert "bad.csv: unknown format" in capsys.readouterr().err
 
 
+def test_inspect_plot_says_which_capacity_its_soc_counts(tmp_path, monkeypatch) -> None:
+    """The SoC panel names the capacity (the nominal 2.3 Ah of the A123 cell unless given),
+    whose SoC read 12.9 % at the end of a record that the measured 2.0307 Ah empties."""
+    from lmncell.report import plots
+
+    notes: list[str] = []
+    real = plots.records_figure
+    monkeypatch.setattr(plots, "records_figure", lambda records, path, soc_note="": (
+        notes.append(soc_note), real(records, path, soc_note))[1])
+    assert main(["inspect", str(A123_S1), "--plot", str(tmp_path / "a.png")]) == 0
+    assert main(["inspect", str(A123_S1), "--capacity", "2.0307", "--plot",
+                 str(tmp_path / "b.png")]) == 0
+    assert notes == ["SoC counted from full with 2.3 Ah (nominal, --capacity to set)",
+                     "SoC counted from full with 2.0307 Ah (given)"]
+
+
 def test_train_evaluate_build_simulate(tmp_path, capsys) -> None:
     model = tmp_path / "m.json"
     assert main(["train", str(PAN_US06), "--out", str(model), "--capacity", "2.85",

@@ -140,6 +140,9 @@ def inspect_files(paths: list[str | Path], plot: str | Path | None = None,
     if plot is not None:
         from lmncell.report.plots import records_figure
 
-        records_figure(shown, Path(plot))
+        caps = sorted({f"{s['capacity_ah_assumed']:g}" for s in out if s.get("soc_range")})
+        given = "given" if capacity_ah else "nominal, --capacity to set"
+        records_figure(shown, Path(plot), f"SoC counted from full with {' or '.join(caps)} Ah "
+                       f"({given})" if caps else "")
         print(f"plot of {len(shown)} record(s): {plot}")
     return out

@@ -152,9 +152,11 @@ def record_figure(rec: Record, path: Path, soc: np.ndarray | None = None) -> Pat
     return records_figure([(rec, soc)], path)
 
 
-def records_figure(records: list[tuple[Record, np.ndarray | None]], path: Path) -> Path:
+def records_figure(records: list[tuple[Record, np.ndarray | None]], path: Path,
+                   soc_note: str = "") -> Path:
     """Current, voltage and (where known) SoC of one or more records over time from each
-    record's start, in one figure; soc: a SoC series per record or None (then soc_ref)."""
+    record's start, in one figure; soc: a SoC series per record or None (then soc_ref);
+    soc_note: the SoC panel's title (which capacity the SoC counts)."""
     socs = [rec.soc_ref if soc is None else soc for rec, soc in records]
     n = 3 if any(s is not None for s in socs) else 2
     fig, axes = plt.subplots(n, 1, figsize=(10, 2.4 * n), sharex=True, constrained_layout=True)
@@ -172,6 +174,7 @@ def records_figure(records: list[tuple[Record, np.ndarray | None]], path: Path) 
     axes[1].set(ylabel="voltage / V")
     if n == 3:
         axes[2].set(ylabel="SoC / %")
+        axes[2].set_title(soc_note, fontsize=9)
     axes[-1].set(xlabel="time from the record's start / h")
     fig.savefig(path, dpi=90)
     plt.close(fig)
