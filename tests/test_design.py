@@ -286,3 +286,25 @@ def test_design_takes_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path) 
                      "1200", "--model", str(model), "--out", str(out)]) == 0
         outs.append(out.read_text())
     assert outs[0] == outs[1]
+
+
+def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_model,
+                                                                        tmp_path) -> None:
+    """--model gives the design model its impedance too (the median R0 and RC elements of its
+    local models): the programme then stays inside the model's voltage limits when the model
+    itself runs it. With the default 10 mΩ R0 a Panasonic programme passed 4.2 V."""
+    import lmncell
+    from lmncell.design.command import design_impedance
+    from lmncell.runtime.model import load_model
+
+    model = load_model(quick_model)
+    r0, rc = design_impedance(model)
+    assert 0.02 < r0 < 0.08 and rc and all(r > 0 and t >= 5 for r, t in rc)
+    out = tmp_path / "p.csv"
+    assert main(["design", "--capacity", "2.85", "--soc-profile", "0.9,0.3", "--duration",
+                 "2400", "--model", str(quick_model), "--out", str(out)]) == 0
+    current = np.loadtxt(out, delimiter=",", skiprows=1)[:, 1]
+    with pytest.warns(UserWarning):               # pulses beyond the trained current
+        sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=0.9)
+    low, high = model.limits["voltage_v"]
+    assert low <= sim.voltage_v.min() and sim.voltage_v.max() <= high

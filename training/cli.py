@@ -547,7 +547,8 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--sample-time", type=_positive, default=1.0, help="s")
     s.add_argument("--sequence", type=_positive, default=300.0, help="sequence length, s")
     s.add_argument("--duration", type=_positive, default=7200.0, help="total, s")
-    s.add_argument("--r0", type=_positive, default=0.010, help="design model R0, Ω")
+    s.add_argument("--r0", type=_positive, help="design model R0, Ω (default: with --model "
+                   "its local models' median R0 and RC elements, else 0.01)")
     s.add_argument("--model", help="take the OCV and voltage limits from a model file (or "
                    "the one an LMNCell FMU ships)")
     s.add_argument("--plot", metavar="DIR", type=output_folder_argument,

@@ -6,6 +6,7 @@ import json
 import sys
 from pathlib import Path
 
+import numpy as np
 from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
@@ -16,6 +17,7 @@ from lmncell.design.optimal import (
     sequence_count,
     write_programme,
 )
+from lmncell.runtime.model import LmnModel
 
 
 def default_virtual_cell() -> str:
@@ -25,8 +27,14 @@ def default_virtual_cell() -> str:
     return "pybamm" if importlib.util.find_spec("pybamm") is not None else "builtin"
 
 
-def _cell(a) -> CellSpec:
-    cell = CellSpec(capacity_ah=a.capacity, max_c_rate=a.max_c_rate, r0_ohm=a.r0)
+DEFAULT_R0_OHM = 0.010   # the design model's R0 without --r0 or a model file
+
+
+def _cell(a, say=print) -> CellSpec:
+    """The design's cell: --model's OCV, voltage limits and (unless --r0) its impedance
+    (design_impedance), or the defaults; --voltage-min/--voltage-max over both."""
+    cell = CellSpec(capacity_ah=a.capacity, max_c_rate=a.max_c_rate,
+                    r0_ohm=DEFAULT_R0_OHM if a.r0 is None else a.r0)
     if a.model:
         from lmncell.evaluation.fmueval import model_or_shipped
 
@@ -34,11 +42,33 @@ def _cell(a) -> CellSpec:
         cell.ocv_soc, cell.ocv_v = tuple(m.ocv_soc), tuple(m.ocv_v)
         cell.voltage_min_v = float(m.limits.get("voltage_v", [cell.voltage_min_v])[0])
         cell.voltage_max_v = float(m.limits.get("voltage_v", [0, cell.voltage_max_v])[1])
+        impedance = design_impedance(m) if a.r0 is None else None
+        if impedance:
+            cell.r0_ohm, cell.rc = impedance
+            say(f"design model from {Path(a.model).name}: R0 {1e3 * cell.r0_ohm:.1f} mΩ, RC "
+                + ", ".join(f"{1e3 * r:.1f} mΩ at {t:g} s" for r, t in cell.rc)
+                + f" (the median of its local models at {m.reference_temperature_c:g} °C)")
     if a.voltage_min is not None:
         cell.voltage_min_v = a.voltage_min
     if a.voltage_max is not None:
         cell.voltage_max_v = a.voltage_max
     return cell
+
+
+def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]] | None:
+    """R0 (Ω) and RC elements [(R Ω, τ s)] of a model's RC-ladder local models at its reference
+    temperature, each the median over the local models (elements whose median is 0 left out);
+    None where its local models are not RC ladders."""
+    from lmncell.evaluation.interpret import local_model_table
+
+    rows = local_model_table(model, model.reference_temperature_c)
+    if not all(r.get("rc_positive") and "rc_mohm_by_tau_s" in r for r in rows):
+        return None
+    taus = list(rows[0]["rc_mohm_by_tau_s"])
+    median = {k: 1e-3 * float(np.median([r["rc_mohm_by_tau_s"][k] for r in rows]))
+              for k in taus}
+    rc = [(median[k], float(k)) for k in taus if k != "0" and median[k] > 0.0]
+    return (median["0"], rc) if median.get("0", 0.0) > 0.0 else None
 
 
 def run_design(a) -> int:
@@ -48,7 +78,7 @@ def run_design(a) -> int:
     def say(msg: str) -> None:
         print(msg, file=out_stream, flush=True)
 
-    cell = _cell(a)
+    cell = _cell(a, say)
     cyc = CyclerSpec(max_current_a=a.max_current, hold_s=a.hold, sample_time_s=a.sample_time)
     spec = DesignSpec(parse_profile(a.soc_profile), a.duration, a.sequence, method=a.method,
                       information=a.information)
