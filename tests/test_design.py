@@ -289,7 +289,8 @@ def test_design_takes_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path) 
 
 
 def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_model,
-                                                                        tmp_path) -> None:
+                                                                        tmp_path,
+                                                                        capsys) -> None:
     """--model gives the design model its impedance too (the median R0 and RC elements of its
     local models): the programme then stays inside the model's voltage limits when the model
     itself runs it. With the default 10 mΩ R0 a Panasonic programme passed 4.2 V."""
@@ -308,3 +309,10 @@ def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_mo
         sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=0.9)
     low, high = model.limits["voltage_v"]
     assert low <= sim.voltage_v.min() and sim.voltage_v.max() <= high
+    said = capsys.readouterr().out
+    assert (f"the model itself runs the programme at {sim.voltage_v.min():.3f} … "
+            f"{sim.voltage_v.max():.3f} V\n") in said
+    # an R0 too small for the cell: the design says that the model leaves the limits
+    assert main(["design", "--capacity", "2.85", "--soc-profile", "0.9,0.3", "--duration",
+                 "2400", "--model", str(quick_model), "--r0", "0.002", "--out", str(out)]) == 0
+    assert "V; warning: outside the limits" in capsys.readouterr().out

@@ -30,11 +30,13 @@ def default_virtual_cell() -> str:
 DEFAULT_R0_OHM = 0.010   # the design model's R0 without --r0 or a model file
 
 
-def _cell(a, say=print) -> CellSpec:
+def _cell(a, say=print) -> tuple[CellSpec, LmnModel | None]:
     """The design's cell: --model's OCV, voltage limits and (unless --r0) its impedance
-    (design_impedance), or the defaults; --voltage-min/--voltage-max over both."""
+    (design_impedance), or the defaults; --voltage-min/--voltage-max over both; and the model
+    (None without --model)."""
     cell = CellSpec(capacity_ah=a.capacity, max_c_rate=a.max_c_rate,
                     r0_ohm=DEFAULT_R0_OHM if a.r0 is None else a.r0)
+    m = None
     if a.model:
         from lmncell.evaluation.fmueval import model_or_shipped
 
@@ -52,7 +54,32 @@ def _cell(a, say=print) -> CellSpec:
         cell.voltage_min_v = a.voltage_min
     if a.voltage_max is not None:
         cell.voltage_max_v = a.voltage_max
-    return cell
+    return cell, m
+
+
+def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, soc0: float,
+                cell: CellSpec) -> str:
+    """The model's own voltage over a programme (current held over samples of sample_time_s,
+    free run from soc0 at the model's reference temperature, at its own sample time), and a
+    warning where it leaves the design's voltage limits."""
+    import math
+    import warnings
+
+    from lmncell.runtime.step import simulate
+    from lmncell.scenarios.drive import step_means
+
+    ts = model.sample_time_s
+    steps = math.floor(current_a.size * sample_time_s / ts + 1e-9)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")          # the pulses may leave the trained current
+        sim = simulate(model, step_means(current_a, sample_time_s, ts, steps), None, soc0,
+                       capacity_ah=cell.capacity_ah)
+    low, high = float(sim.voltage_v.min()), float(sim.voltage_v.max())
+    text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
+    if low < cell.voltage_min_v or high > cell.voltage_max_v:
+        text += (f"; warning: outside the limits {cell.voltage_min_v:.3f} … "
+                 f"{cell.voltage_max_v:.3f} V (a larger --r0, or a lower --max-c-rate)")
+    return text
 
 
 def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]] | None:
@@ -78,7 +105,7 @@ def run_design(a) -> int:
     def say(msg: str) -> None:
         print(msg, file=out_stream, flush=True)
 
-    cell = _cell(a, say)
+    cell, model = _cell(a, say)
     cyc = CyclerSpec(max_current_a=a.max_current, hold_s=a.hold, sample_time_s=a.sample_time)
     spec = DesignSpec(parse_profile(a.soc_profile), a.duration, a.sequence, method=a.method,
                       information=a.information)
@@ -104,6 +131,8 @@ def run_design(a) -> int:
         f"{prog.current_a.max():.2f} A, predicted voltage {prog.voltage_v.min():.3f} … "
         f"{prog.voltage_v.max():.3f} V, SoC reached at the profile points: "
         + ", ".join(f"{p[1]:.3f}" for p in prog.profile_points))
+    if model is not None and result is None:
+        say(model_check(model, prog.current_a, cyc.sample_time_s, spec.soc_profile[0], cell))
     if a.plot:
         plot_programme(prog, Path(a.plot))
     if result is not None:
