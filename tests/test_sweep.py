@@ -93,12 +93,21 @@ def test_parquet_without_an_engine_is_refused_before_the_run(tmp_path, monkeypat
 
 
 def test_cli_writes_table_and_plots(native_fmu, tmp_path, capsys) -> None:
+    import pandas as pd
+
     out = tmp_path / "r.csv"
     assert main(["sweep", str(native_fmu), "--cycles", "us06", "--ambient", "0,25",
                  "--soc0", "0.8", "--workers", "1", "--out", str(out),
                  "--plot", str(tmp_path / "plots")]) == 0
     text = out.read_text().splitlines()
     assert len(text) == 3 and text[0].startswith("cycle,vehicle")
+    # numbers as short as reads back exactly (a fixed 17 digits wrote 0.80000000000000004)
+    assert text[1].split(",")[3:5] == ["0.0", "0.8"]
+    table = sweep(native_fmu, scenarios(["us06"], [0.0, 25.0], [0.8]), workers=1,
+                  progress=False)
+    back = pd.read_csv(out)
+    for column in ("voltage_min_v", "soc_end", "distance_km", "cell_energy_wh"):
+        assert (back[column].to_numpy() == table[column].to_numpy()).all(), column
     assert (tmp_path / "plots" / "sweep_voltage_min_v.png").exists()
     assert (tmp_path / "plots" / "sweep_distance_km.png").exists()
 

@@ -263,12 +263,14 @@ def _connect(client_class, scheduler: str):
 
 
 def write_table(table, path: str | Path) -> Path:
-    """CSV, or Parquet for a .parquet name (needs pyarrow or fastparquet): check_table_path."""
+    """CSV, or Parquet for a .parquet name (needs pyarrow or fastparquet): check_table_path.
+    The CSV's numbers are the shortest that read back to the same floats (0.8, not the
+    0.80000000000000004 of a fixed 17 digits)."""
     path = check_table_path(path)
     if path.suffix == ".parquet":
         table.to_parquet(path, index=False)
     else:
-        table.to_csv(path, index=False, float_format="%.17g")
+        table.to_csv(path, index=False)
     return path
 
 
