@@ -152,6 +152,21 @@ def test_a_bad_text_time_column_is_named_with_its_line(tmp_path, times, message)
         read_record(_timed_csv(tmp_path, times), columns=GENERIC)
 
 
+@pytest.mark.parametrize("encoding", ["utf-8", "utf-8-sig", "utf-16", "cp1252"])
+def test_a_generic_csv_in_the_encodings_cyclers_write(tmp_path, encoding) -> None:
+    """UTF-16 with its BOM (Excel's "Unicode text") and Windows-1252 (µ, ° in older Western
+    exports) were refused as 'not a text file'."""
+    p = tmp_path / f"{encoding}.txt"
+    p.write_text("Zeit [s]\tStrom [µA]\tU [V]\tT [°C]\n0\t0\t3,30\t25\n1\t-1000000\t3,20\t25\n"
+                 "2\t-1000000\t3,19\t26\n", encoding=encoding)
+    rec = read_record(p, columns={"time": "Zeit [s]", "current": "Strom [µA]",
+                                  "voltage": "U [V]", "temperature": "T [°C]"},
+                      sep="\t", decimal=",", current_scale=1e-6)
+    assert rec.current_a.tolist() == [0.0, -1.0, -1.0]
+    assert rec.voltage_v.tolist() == [3.3, 3.2, 3.19]
+    assert rec.temperature_c.tolist() == [25.0, 25.0, 26.0]
+
+
 # ----- bad input: each case names the file and the problem -----------------------------
 def _plett(tmp_path, rows: list[str], name: str = "x.csv"):
     p = tmp_path / name

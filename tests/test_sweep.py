@@ -277,6 +277,9 @@ def test_a_speed_trace_file_drives_the_fmu_as_the_shipped_cycle(native_fmu, tmp_
             assert mine[key] == value, key
     assert main(["simulate", str(native_fmu), "--cycle", str(path)]) == 0
     assert capsys.readouterr().out.startswith("my_us06.csv x1 at 1.0 s steps: 12.9 km")
+    wide = tmp_path / "my_us06_utf16.csv"                 # Excel's "Unicode text"
+    wide.write_text(path.read_text(), encoding="utf-16")
+    assert run_cycle(native_fmu, str(wide)).figures["soc_end"] == mine["soc_end"]
     cases = scenarios([str(path), "us06"], [25.0], [0.9])
     table = sweep(native_fmu, cases, workers=1, progress=False)
     assert list(table["cycle"]) == ["my_us06.csv", "us06"]

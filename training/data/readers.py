@@ -8,6 +8,7 @@ gzip-compressed (``.gz``).
 
 from __future__ import annotations
 
+import codecs
 import csv
 import gzip
 import io
@@ -56,24 +57,51 @@ def chamber_temp_from_name(path: str | Path) -> float | None:
     return float(m.group(1)) if m else None
 
 
-def _open_text(path: Path) -> io.TextIOBase:
-    if path.suffix == ".gz":
-        return io.TextIOWrapper(gzip.open(path, "rb"), encoding="utf-8-sig", newline="")
-    return open(path, encoding="utf-8-sig", newline="")
+TEXT_EXPECTED = "expected a CSV text file, a MATLAB .mat file or either gzip-compressed (.gz)"
+HEAD_BYTES = 1 << 20    # how much of a file detect_format decodes for its first line
 
 
-def _read_text(path: Path, first_line: bool = False) -> str:
-    """The file's text (or its first line), with a DataError for what is not UTF-8 text."""
+def _raw_bytes(path: Path, limit: int | None = None) -> bytes:
+    """The file's bytes (gunzipped for .gz), the first `limit` of them where given."""
+    opener = gzip.open if path.suffix == ".gz" else open
+    with opener(path, "rb") as fh:
+        return fh.read(-1 if limit is None else limit)
+
+
+def text_encoding(raw: bytes) -> str | None:
+    """The encoding of a text file's bytes: UTF-8 (with or without a BOM), UTF-16 (with its
+    BOM: Excel's "Unicode text"), else Windows-1252 (older Western exports, µ and ° in
+    their headers); None for bytes that are none of them (NUL bytes without a UTF-16 BOM:
+    not text)."""
+    if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
+        return "utf-16"
+    if b"\x00" in raw:
+        return None
+    for encoding in ("utf-8-sig", "cp1252"):
+        try:
+            codecs.getincrementaldecoder(encoding)().decode(raw, final=False)
+            return encoding
+        except UnicodeDecodeError:
+            continue
+    return None
+
+
+def read_text(path: Path, first_line: bool = False) -> str:
+    """The file's text (or its first line) in its encoding (text_encoding), with a DataError
+    for what is not text."""
     try:
-        with _open_text(path) as fh:
-            return fh.readline() if first_line else fh.read()
-    except UnicodeDecodeError as exc:
-        raise DataError(f"{path}: not a text file (byte 0x{exc.object[exc.start]:02x} at "
-                        f"offset {exc.start} is not UTF-8); expected a CSV text file, a "
-                        "MATLAB .mat file or either gzip-compressed (.gz)") from None
+        raw = _raw_bytes(path, HEAD_BYTES if first_line else None)
     except (gzip.BadGzipFile, EOFError, OSError) as exc:
-        raise DataError(f"{path}: cannot be read ({exc}); expected a CSV text file, a MATLAB "
-                        ".mat file or either gzip-compressed (.gz)") from None
+        raise DataError(f"{path}: cannot be read ({exc}); {TEXT_EXPECTED}") from None
+    encoding = text_encoding(raw)
+    if encoding is None:
+        where = raw.find(b"\x00")
+        what = (f"a NUL byte at offset {where}" if where >= 0 else
+                "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
+        raise DataError(f"{path}: not a text file ({what}); {TEXT_EXPECTED}")
+    text = codecs.getincrementaldecoder(encoding)().decode(raw, final=not first_line)
+    text = text.replace("\r\n", "\n").replace("\r", "\n")
+    return text.split("\n", 1)[0] if first_line else text
 
 
 def check_readable(path: str | Path) -> Path:
@@ -109,7 +137,7 @@ def _format_of(path: Path) -> str:
     """detect_format for a path already checked by check_readable."""
     if _mat_path(path):
         return "panasonic"
-    header = _read_text(path, first_line=True).strip()
+    header = read_text(path, first_line=True).strip()
     if not header:
         raise DataError(f"{path}: the file is empty; expected a header line")
     cols = [c.strip() for c in header.split(",")]
@@ -151,7 +179,7 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     if decimal not in (".", ","):
         raise DataError(f"{path}: decimal mark {decimal!r}; expected '.' or ','")
     required = _NUMERIC_REQUIRED if required is None else required
-    numbered = [(k + 1, ln) for k, ln in enumerate(_read_text(path).splitlines()) if ln.strip()]
+    numbered = [(k + 1, ln) for k, ln in enumerate(read_text(path).splitlines()) if ln.strip()]
     if not numbered:
         raise DataError(f"{path}: the file is empty; expected a header line and data rows")
     header = [c.strip() for c in next(csv.reader([numbered[0][1]], delimiter=sep))]

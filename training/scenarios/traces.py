@@ -179,14 +179,14 @@ def read_trace(path: Path, fmt: TraceFormat) -> dict[str, np.ndarray]:
 
 def _rows(path: Path, fmt: TraceFormat) -> list[tuple[int, list[str]]]:
     """The file's non-blank rows with their line numbers (from 1), the header first."""
+    from lmncell.data.readers import read_text
+
     try:
-        with open(path, encoding="utf-8-sig", newline="") as fh:
-            head = fh.readline()
-            fh.seek(0)
-            delimiter = next((d for d in DELIMITERS if d in head), ",")
-            rows = [(n, row) for n, row in enumerate(csv.reader(fh, delimiter=delimiter), start=1)
-                    if any(cell.strip() for cell in row)]
-    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        lines = read_text(path).split("\n")
+        delimiter = next((d for d in DELIMITERS if d in lines[0]), ",")
+        rows = [(n, row) for n, row in enumerate(csv.reader(lines, delimiter=delimiter), start=1)
+                if any(cell.strip() for cell in row)]
+    except csv.Error as exc:
         raise DataError(f"{path}: cannot read the {fmt.kind} ({exc}); expected "
                         f"{fmt.expected}") from exc
     if not rows:
