@@ -84,7 +84,9 @@ def test_own_csv_trains_and_evaluates_from_the_cli(user_data, tmp_path, capsys) 
 def test_reader_options_without_columns_and_bad_settings_are_refused(user_data, capsys):
     csv_path, _ = user_data
     assert main(["inspect", str(csv_path), "--decimal", ","]) == 2
-    assert "--decimal need --columns" in capsys.readouterr().err
+    assert "--decimal needs --columns" in capsys.readouterr().err
+    assert main(["inspect", str(csv_path), "--decimal", ",", "--time-unit", "ms"]) == 2
+    assert "--time-unit, --decimal need --columns" in capsys.readouterr().err
     assert main(["inspect", str(csv_path)]) == 2
     assert "--columns time=COL" in capsys.readouterr().err
     assert main(["train", str(csv_path), *CLI_OPTIONS, "--out", "x.json",

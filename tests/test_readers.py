@@ -167,6 +167,24 @@ def test_a_generic_csv_in_the_encodings_cyclers_write(tmp_path, encoding) -> Non
     assert rec.temperature_c.tolist() == [25.0, 25.0, 26.0]
 
 
+@pytest.mark.parametrize("unit, factor", [("ms", 1e-3), ("s", 1.0), ("min", 60.0), ("h", 3600.0)])
+def test_a_numeric_time_column_in_another_unit(tmp_path, unit, factor) -> None:
+    p = tmp_path / "t.csv"
+    p.write_text("t,I,U\n0,0,3.3\n100,-1,3.2\n200,-1,3.19\n300,0,3.25\n")
+    rec = read_record(p, columns={"time": "t", "current": "I", "voltage": "U"}, time_unit=unit)
+    assert rec.time_s == pytest.approx([0.0, 100 * factor, 200 * factor, 300 * factor])
+
+
+def test_a_time_unit_is_refused_for_text_times_and_where_unknown(tmp_path) -> None:
+    p = _timed_csv(tmp_path, ["00:00:00", "00:00:01", "00:00:02"])
+    with pytest.raises(DataError, match="time unit 'ms' for the column 'Time', whose times are "
+                                        "text that carries its own unit"):
+        read_record(p, columns=GENERIC, time_unit="ms")
+    with pytest.raises(DataError, match=re.escape("time unit 'days'; expected one of ['s', "
+                                                  "'ms', 'min', 'h']")):
+        read_record(p, columns=GENERIC, time_unit="days")
+
+
 # ----- bad input: each case names the file and the problem -----------------------------
 def _plett(tmp_path, rows: list[str], name: str = "x.csv"):
     p = tmp_path / name

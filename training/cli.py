@@ -126,15 +126,17 @@ def _delimiter(text: str | None) -> str | None:
 def read_options(a: argparse.Namespace) -> dict[str, Any]:
     """The reader options of the command line, for lmncell.data.readers.read_record."""
     extra = {"discharge_positive": a.discharge_positive or None,
-             "current_unit": a.current_unit, "sep": _delimiter(a.delimiter),
-             "decimal": a.decimal}
+             "current_unit": a.current_unit, "time_unit": a.time_unit,
+             "sep": _delimiter(a.delimiter), "decimal": a.decimal}
     given = {k: v for k, v in extra.items() if v is not None}
     if a.columns is None:
         if given:
             flags = {"discharge_positive": "--discharge-positive",
-                     "current_unit": "--current-unit", "sep": "--delimiter",
+                     "current_unit": "--current-unit", "time_unit": "--time-unit",
+                     "sep": "--delimiter",
                      "decimal": "--decimal"}
-            raise ConfigError(f"{', '.join(flags[k] for k in given)} need --columns "
+            verb = "needs" if len(given) == 1 else "need"
+            raise ConfigError(f"{', '.join(flags[k] for k in given)} {verb} --columns "
                               "time=COL,current=COL,voltage=COL (the generic CSV reader); the "
                               "known formats are read without them")
         return {}
@@ -323,6 +325,8 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
                    "discharge current as positive (LMNCell: current > 0 charges)")
     g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "
                    "(default: A)")
+    g.add_argument("--time-unit", choices=["s", "ms", "min", "h"], help="unit of a numeric "
+                   "time column (default: s)")
     g.add_argument("--delimiter", metavar="CHAR", help="field delimiter, e.g. ';' or tab "
                    "(default: ',')")
     g.add_argument("--decimal", choices=[".", ","], help="decimal mark (default: '.')")

@@ -150,7 +150,8 @@ def _format_of(path: Path) -> str:
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:4])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
-                    "--delimiter, --decimal, --current-unit, --discharge-positive as needed); "
+                    "--delimiter, --decimal, --current-unit, --time-unit, --discharge-positive as "
+                    "needed); "
                     "in Python read_record(path, columns={...})")
 
 
@@ -381,18 +382,20 @@ def read_bdf(path: Path) -> Record:
 GENERIC_KEYS = ("time", "current", "voltage", "temperature")
 UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
 
 
 def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
                  current_scale: float = 1.0, sep: str = ",", decimal: str = ".",
-                 current_unit: str | None = None) -> Record:
+                 current_unit: str | None = None, time_unit: str | None = None) -> Record:
     """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}
     of LMNCell's quantities to the file's column names (time in s, or as text that
     TIME_TEXT_EXPECTED describes; voltage in V, temperature in °C).
 
-    current_unit: "A" or "mA" (or current_scale, a factor to A); discharge_positive: the file
-    counts discharge current as positive (it is negated: LMNCell's current > 0 charges);
-    sep: the delimiter; decimal: "." or "," (decimal comma).
+    current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
+    time column, one of TIME_UNITS (default s); discharge_positive: the file counts discharge
+    current as positive (it is negated: LMNCell's current > 0 charges); sep: the delimiter;
+    decimal: "." or "," (decimal comma).
     """
     for key in ("time", "current", "voltage"):
         if key not in columns:
@@ -407,11 +410,17 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
             raise DataError(f"{path}: current unit {current_unit!r}; expected one of "
                             f"{list(CURRENT_UNITS)}")
         current_scale = CURRENT_UNITS[current_unit]
+    if time_unit is not None and time_unit not in TIME_UNITS:
+        raise DataError(f"{path}: time unit {time_unit!r}; expected one of {list(TIME_UNITS)}")
     numeric = set(columns.values()) - {columns["time"]}
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
                              keep_text={columns["time"]})
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
+    if time_unit is not None and notes:
+        raise DataError(f"{path}: time unit {time_unit!r} for the column '{columns['time']}', "
+                        "whose times are text that carries its own unit; expected no time unit")
+    t = t * TIME_UNITS[time_unit or "s"]
     cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
     note = "current negated (file: discharge > 0)" if discharge_positive else "none"
     temp = cols[columns["temperature"]] if "temperature" in columns else None
@@ -519,8 +528,9 @@ def check_plausibility(rec: Record) -> None:
                           stacklevel=3)
 
 
+# read_generic's options, which read_record passes on
 GENERIC_OPTIONS = ("columns", "discharge_positive", "current_scale", "sep", "decimal",
-                   "current_unit")   # read_generic's options, which read_record passes on
+                   "current_unit", "time_unit")
 
 
 def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Record:
@@ -528,7 +538,7 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
 
     fmt: one of FORMATS, or None to choose by content ("generic" when a column mapping
     `columns` is given). generic_kw go to read_generic (columns, discharge_positive,
-    current_unit or current_scale, sep, decimal).
+    current_unit or current_scale, time_unit, sep, decimal).
     """
     unknown = sorted(set(generic_kw) - set(GENERIC_OPTIONS))
     if unknown:
