@@ -185,6 +185,21 @@ def test_a_time_unit_is_refused_for_text_times_and_where_unknown(tmp_path) -> No
         read_record(p, columns=GENERIC, time_unit="days")
 
 
+def test_voltage_in_mv_and_temperature_in_kelvin(tmp_path) -> None:
+    """Columns in mV and K are read with their units given; without, the range check names
+    the option (an mV column could not be read at all)."""
+    p = tmp_path / "t.csv"
+    p.write_text("t,I,U_mV,T_K\n0,0,3300,298.15\n1,-1,3200,298.65\n2,-1,3190,299.15\n")
+    columns = {"time": "t", "current": "I", "voltage": "U_mV", "temperature": "T_K"}
+    rec = read_record(p, columns=columns, voltage_unit="mV", temperature_unit="K")
+    assert rec.voltage_v == pytest.approx([3.3, 3.2, 3.19])
+    assert rec.temperature_c == pytest.approx([25.0, 25.5, 26.0])
+    with pytest.raises(DataError, match="a column in mV: --voltage-unit mV, voltage_unit='mV'"):
+        read_record(p, columns=columns, temperature_unit="K")
+    with pytest.raises(DataError, match="a column in K: --temperature-unit K"):
+        read_record(p, columns=columns, voltage_unit="mV")
+
+
 # ----- bad input: each case names the file and the problem -----------------------------
 def _plett(tmp_path, rows: list[str], name: str = "x.csv"):
     p = tmp_path / name

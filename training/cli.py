@@ -127,12 +127,14 @@ def read_options(a: argparse.Namespace) -> dict[str, Any]:
     """The reader options of the command line, for lmncell.data.readers.read_record."""
     extra = {"discharge_positive": a.discharge_positive or None,
              "current_unit": a.current_unit, "time_unit": a.time_unit,
+             "voltage_unit": a.voltage_unit, "temperature_unit": a.temperature_unit,
              "sep": _delimiter(a.delimiter), "decimal": a.decimal}
     given = {k: v for k, v in extra.items() if v is not None}
     if a.columns is None:
         if given:
             flags = {"discharge_positive": "--discharge-positive",
                      "current_unit": "--current-unit", "time_unit": "--time-unit",
+                     "voltage_unit": "--voltage-unit", "temperature_unit": "--temperature-unit",
                      "sep": "--delimiter",
                      "decimal": "--decimal"}
             verb = "needs" if len(given) == 1 else "need"
@@ -327,6 +329,10 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
                    "(default: A)")
     g.add_argument("--time-unit", choices=["s", "ms", "min", "h"], help="unit of a numeric "
                    "time column (default: s)")
+    g.add_argument("--voltage-unit", choices=["V", "mV"], help="unit of the voltage column "
+                   "(default: V)")
+    g.add_argument("--temperature-unit", choices=["degC", "K"], help="unit of the temperature "
+                   "column (default: degC)")
     g.add_argument("--delimiter", metavar="CHAR", help="field delimiter, e.g. ';' or tab "
                    "(default: ',')")
     g.add_argument("--decimal", choices=[".", ","], help="decimal mark (default: '.')")

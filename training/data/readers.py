@@ -150,8 +150,8 @@ def _format_of(path: Path) -> str:
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:4])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
-                    "--delimiter, --decimal, --current-unit, --time-unit, --discharge-positive as "
-                    "needed); "
+                    "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
+                    "--temperature-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})")
 
 
@@ -383,17 +383,22 @@ GENERIC_KEYS = ("time", "current", "voltage", "temperature")
 UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
+VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
+TEMPERATURE_UNITS = {"degC": 0.0, "K": -273.15}      # the offset to °C
 
 
 def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
                  current_scale: float = 1.0, sep: str = ",", decimal: str = ".",
-                 current_unit: str | None = None, time_unit: str | None = None) -> Record:
+                 current_unit: str | None = None, time_unit: str | None = None,
+                 voltage_unit: str | None = None, temperature_unit: str | None = None
+                 ) -> Record:
     """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}
     of LMNCell's quantities to the file's column names (time in s, or as text that
     TIME_TEXT_EXPECTED describes; voltage in V, temperature in °C).
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
-    time column, one of TIME_UNITS (default s); discharge_positive: the file counts discharge
+    time column, one of TIME_UNITS (default s); voltage_unit: "V" or "mV"; temperature_unit:
+    "degC" or "K"; discharge_positive: the file counts discharge
     current as positive (it is negated: LMNCell's current > 0 charges); sep: the delimiter;
     decimal: "." or "," (decimal comma).
     """
@@ -410,8 +415,11 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
             raise DataError(f"{path}: current unit {current_unit!r}; expected one of "
                             f"{list(CURRENT_UNITS)}")
         current_scale = CURRENT_UNITS[current_unit]
-    if time_unit is not None and time_unit not in TIME_UNITS:
-        raise DataError(f"{path}: time unit {time_unit!r}; expected one of {list(TIME_UNITS)}")
+    for what, unit, units in (("time", time_unit, TIME_UNITS),
+                              ("voltage", voltage_unit, VOLTAGE_UNITS),
+                              ("temperature", temperature_unit, TEMPERATURE_UNITS)):
+        if unit is not None and unit not in units:
+            raise DataError(f"{path}: {what} unit {unit!r}; expected one of {list(units)}")
     numeric = set(columns.values()) - {columns["time"]}
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
                              keep_text={columns["time"]})
@@ -423,10 +431,12 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     t = t * TIME_UNITS[time_unit or "s"]
     cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
     note = "current negated (file: discharge > 0)" if discharge_positive else "none"
-    temp = cols[columns["temperature"]] if "temperature" in columns else None
+    temp = (cols[columns["temperature"]] + TEMPERATURE_UNITS[temperature_unit or "degC"]
+            if "temperature" in columns else None)
+    volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
     # a text time column's messages count s from its first row
     file_times = t - t[0] if notes else t
-    return Record(t - t[0], cur, cols[columns["voltage"]],
+    return Record(t - t[0], cur, volts,
                   _meta(path, "generic", note, t, notes=notes,
                         segment_starts=_segment_starts_from_gaps(t, cur),
                         **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
@@ -516,7 +526,7 @@ def check_plausibility(rec: Record) -> None:
     imax = float(np.max(np.abs(rec.current_a)))
     if imax > 500:
         warnings.warn(f"{src}: current reaches {imax:.0f}; values look like mA, expected A "
-                      "(use current_scale=0.001)", DataWarning, stacklevel=3)
+                      "(--current-unit mA, current_unit='mA')", DataWarning, stacklevel=3)
     di, dv = np.diff(rec.current_a), np.diff(rec.voltage_v)
     steps = np.abs(di) > 0.2 * max(imax, 1e-9)
     if steps.sum() >= 5:
@@ -530,7 +540,7 @@ def check_plausibility(rec: Record) -> None:
 
 # read_generic's options, which read_record passes on
 GENERIC_OPTIONS = ("columns", "discharge_positive", "current_scale", "sep", "decimal",
-                   "current_unit", "time_unit")
+                   "current_unit", "time_unit", "voltage_unit", "temperature_unit")
 
 
 def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Record:
@@ -538,7 +548,7 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
 
     fmt: one of FORMATS, or None to choose by content ("generic" when a column mapping
     `columns` is given). generic_kw go to read_generic (columns, discharge_positive,
-    current_unit or current_scale, time_unit, sep, decimal).
+    current_unit or current_scale, time_unit, voltage_unit, temperature_unit, sep, decimal).
     """
     unknown = sorted(set(generic_kw) - set(GENERIC_OPTIONS))
     if unknown:

@@ -197,10 +197,12 @@ def validate_record(rec: Record) -> None:
                         f"s then {round(origin + float(rec.time_s[row]), 9)!r} s; expected "
                         "strictly increasing time")
     _check_range("voltage_v", rec.voltage_v, CELL_VOLTAGE_RANGE_V, "V",
-                 "a cell's terminal voltage in V (not mV, not a pack's)", rec.meta)
+                 "a cell's terminal voltage in V, not a pack's (a column in mV: "
+                 "--voltage-unit mV, voltage_unit='mV')", rec.meta)
     if rec.temperature_c is not None:
         _check_range("temperature_c", rec.temperature_c, CELL_TEMPERATURE_RANGE_C, "°C",
-                     "a cell temperature in °C (not K)", rec.meta)
+                     "a cell temperature in °C (a column in K: --temperature-unit K, "
+                     "temperature_unit='K')", rec.meta)
     if rec.soc_ref is not None and ((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05)).any():
         row = int(np.flatnonzero((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05))[0])
         raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected a "
