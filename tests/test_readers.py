@@ -167,6 +167,13 @@ def test_a_generic_csv_in_the_encodings_cyclers_write(tmp_path, encoding) -> Non
     assert rec.temperature_c.tolist() == [25.0, 25.0, 26.0]
 
 
+def test_a_utf16_file_cut_inside_a_character_is_named(tmp_path) -> None:
+    p = tmp_path / "cut.csv"
+    p.write_bytes("t,I,U\n0,0,3.3\n".encode("utf-16") + b"x")
+    with pytest.raises(DataError, match="cut.csv: not a text file .utf-16: truncated data"):
+        read_record(p, columns={"time": "t", "current": "I", "voltage": "U"})
+
+
 @pytest.mark.parametrize("unit, factor", [("ms", 1e-3), ("s", 1.0), ("min", 60.0), ("h", 3600.0)])
 def test_a_numeric_time_column_in_another_unit(tmp_path, unit, factor) -> None:
     p = tmp_path / "t.csv"

@@ -68,18 +68,18 @@ def _raw_bytes(path: Path, limit: int | None = None) -> bytes:
         return fh.read(-1 if limit is None else limit)
 
 
-def text_encoding(raw: bytes) -> str | None:
+def text_encoding(raw: bytes, final: bool = True) -> str | None:
     """The encoding of a text file's bytes: UTF-8 (with or without a BOM), UTF-16 (with its
     BOM: Excel's "Unicode text"), else Windows-1252 (older Western exports, µ and ° in
     their headers); None for bytes that are none of them (NUL bytes without a UTF-16 BOM:
-    not text)."""
+    not text). final: raw is the whole file (else its head, which may end inside a character)."""
     if raw.startswith((b"\xff\xfe", b"\xfe\xff")):
         return "utf-16"
     if b"\x00" in raw:
         return None
     for encoding in ("utf-8-sig", "cp1252"):
         try:
-            codecs.getincrementaldecoder(encoding)().decode(raw, final=False)
+            codecs.getincrementaldecoder(encoding)().decode(raw, final=final)
             return encoding
         except UnicodeDecodeError:
             continue
@@ -93,13 +93,17 @@ def read_text(path: Path, first_line: bool = False) -> str:
         raw = _raw_bytes(path, HEAD_BYTES if first_line else None)
     except (gzip.BadGzipFile, EOFError, OSError) as exc:
         raise DataError(f"{path}: cannot be read ({exc}); {TEXT_EXPECTED}") from None
-    encoding = text_encoding(raw)
+    encoding = text_encoding(raw, final=not first_line)
     if encoding is None:
         where = raw.find(b"\x00")
         what = (f"a NUL byte at offset {where}" if where >= 0 else
                 "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
         raise DataError(f"{path}: not a text file ({what}); {TEXT_EXPECTED}")
-    text = codecs.getincrementaldecoder(encoding)().decode(raw, final=not first_line)
+    try:
+        text = codecs.getincrementaldecoder(encoding)().decode(raw, final=not first_line)
+    except UnicodeDecodeError as exc:             # a UTF-16 file cut in a character
+        raise DataError(f"{path}: not a text file ({encoding}: {exc.reason} at byte "
+                        f"{exc.start}); {TEXT_EXPECTED}") from None
     text = text.replace("\r\n", "\n").replace("\r", "\n")
     return text.split("\n", 1)[0] if first_line else text
 
