@@ -218,6 +218,9 @@ def test_a_pack_stops_where_its_weakest_cell_is_empty(quick_model) -> None:
     assert f["steps"] < 4000 and f["stopped_at_s"] == f["steps"] * model.sample_time_s
     longer = drive_pack(model, spec, power[: f["steps"] - 1], 25.0, 0.5, cutoff_v=3.0)
     assert longer["stop"] == "" and longer["voltage_min_v"] >= 3.0
+    # charging: the run stops where a cell's SoC passes 1, as a single cell's run does
+    full = drive_pack(model, spec, -power, 25.0, 0.5)
+    assert full["stop"] == "SoC above 100 %" and full["steps"] < 4000
 
 
 @pytest.mark.parametrize("change, message", [

@@ -18,7 +18,7 @@ import numpy as np
 from lmncell.data.records import DataError
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.vector import VectorCells
-from lmncell.scenarios.drive import empty_reason
+from lmncell.scenarios.drive import empty_reason, full_reason
 
 DELTA_A = 1e-3     # current step of the linearisation (A)
 
@@ -131,7 +131,8 @@ def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambien
     """Drive a pack through a power profile (one value per model step); the figures a sweep
     reports: the weakest cell's minimum voltage and SoC, the hottest cell, the string's Ah.
     The run stops after the first step that leaves a cell empty (drive.empty_reason: its
-    voltage below cutoff_v (V) or its SoC below 0): "stop" says why, "stopped_at_s" when."""
+    voltage below cutoff_v (V) or its SoC below 0) or full (drive.full_reason: its SoC above
+    1, as a single cell's run stops): "stop" says why, "stopped_at_s" when."""
     pack = Pack(model, spec, soc0, ambient_c)
     ts = model.sample_time_s
     v_min, v_max, t_max = np.inf, -np.inf, -np.inf
@@ -145,7 +146,8 @@ def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambien
         i_string = float(pack.current_a[: spec.n_parallel].sum())
         string_ah += abs(i_string) * ts / 3600.0
         energy_wh += -i_string * pack.voltage_v * ts / 3600.0
-        stop = empty_reason(float(u.min()), float(pack.cells.soc.min()), cutoff_v)
+        stop = (empty_reason(float(u.min()), float(pack.cells.soc.min()), cutoff_v)
+                or full_reason(float(u.max()), float(pack.cells.soc.max())))
         if stop:
             break
     soc = pack.cells.soc
