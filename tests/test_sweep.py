@@ -386,3 +386,17 @@ def test_simulate_options_that_do_not_go_together_are_named(native_fmu, capsys, 
                                                            message) -> None:
     assert main(["simulate", str(native_fmu), *args]) == 2
     assert message in capsys.readouterr().err
+
+
+def test_a_sweep_says_which_runs_stopped_with_a_cell_full(native_fmu, tmp_path,
+                                                          capsys) -> None:
+    """Downhill from SoC 0.999 the regeneration fills the cell: that run stops, and the
+    summary tells it apart from runs that ended empty."""
+    trace = tmp_path / "downhill.csv"
+    trace.write_text("time_s,speed_kmh,grade\n" + "".join(f"{k},50,-0.2\n" for k in range(600)))
+    out = tmp_path / "r.csv"
+    assert main(["sweep", str(native_fmu), "--cycles", str(trace), "--soc0", "0.999,0.5",
+                 "--workers", "1", "--out", str(out)]) == 0
+    assert ("1 scenario(s) stopped early: 1 with a cell full (columns stop, stopped_at_s)"
+            in capsys.readouterr().out)
+    assert out.read_text().splitlines()[1].split(",")[16] == "SoC above 100 %"

@@ -294,10 +294,13 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     print(f"wrote {a.out}: {len(table)} rows; minimum cell voltage "
           f"{table['voltage_min_v'].min():.3f} V, end SoC {table['soc_end'].min():.3f}…"
           f"{table['soc_end'].max():.3f}, {table['wall_s'].sum():.1f} s of FMU runs")
-    empty = int((table["stop"] != "").sum())
-    if empty:
-        print(f"{empty} scenario(s) stopped early, a cell empty (columns stop, stopped_at_s); "
-              "--cutoff sets the cut-off voltage")
+    stopped = table["stop"] != ""
+    full = int(table["stop"].str.contains(" above ").sum())
+    if stopped.any():
+        kinds = [f"{int(stopped.sum()) - full} with a cell empty"] * (int(stopped.sum()) > full)
+        kinds += [f"{full} with a cell full"] * (full > 0)
+        print(f"{int(stopped.sum())} scenario(s) stopped early: {', '.join(kinds)} (columns "
+              "stop, stopped_at_s); --cutoff sets the cut-off voltage")
     if a.plot:
         for f in plot_sweep(table, a.plot):
             print(f"plot: {f}")
