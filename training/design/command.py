@@ -105,7 +105,8 @@ def run_design(a) -> int:
     def say(msg: str) -> None:
         print(msg, file=out_stream, flush=True)
 
-    cell, model = _cell(a, say)
+    # with --compare-virtual the design model comes from the virtual cell, not from --model
+    cell, model = _cell(a, (lambda _m: None) if a.compare_virtual else say)
     cyc = CyclerSpec(max_current_a=a.max_current, hold_s=a.hold, sample_time_s=a.sample_time)
     spec = DesignSpec(parse_profile(a.soc_profile), a.duration, a.sequence, method=a.method,
                       information=a.information)
