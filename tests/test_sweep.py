@@ -3,6 +3,8 @@ number of workers, bad option values are refused with the option's name."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from lmncell.cli import main
@@ -400,3 +402,35 @@ def test_a_sweep_says_which_runs_stopped_with_a_cell_full(native_fmu, tmp_path,
     assert ("1 scenario(s) stopped early: 1 with a cell full (columns stop, stopped_at_s)"
             in capsys.readouterr().out)
     assert out.read_text().splitlines()[1].split(",")[16] == "SoC above 100 %"
+
+
+def test_a_step_the_fmu_refuses_is_named_and_a_sweep_keeps_its_other_rows(native_fmu, quick_fmu,
+                                                                          tmp_path,
+                                                                          capsys) -> None:
+    """A current no cell carries (a pack of one cell in the vehicle) makes the FMU return
+    fmi2Error with a logged reason. `simulate` ended in fmpy's FMICallException traceback;
+    it now says what the FMU logged. A sweep marks that row and keeps the others."""
+    from lmncell.scenarios.drive import FmuStepError, run_profile
+
+    profile = tmp_path / "huge.csv"
+    profile.write_text("time_s,current_a\n0,-1e4\n1,-1e4\n2,0\n")
+    for fmu in (native_fmu, quick_fmu):
+        with pytest.raises(FmuStepError, match=r"the FMU refused the step at t = 0 s with the "
+                                               r"cell current -10000 A: .*input 'current' = "
+                                               r"-10000(\.0)? A: beyond 1000 C") as err:
+            run_profile(fmu, profile)
+        assert err.value.t_s == 0.0 and "PyObject_CallMethod" not in str(err.value)
+    assert main(["simulate", str(native_fmu), "--current", str(profile)]) == 2
+    assert "Traceback" not in capsys.readouterr().err
+    tiny = tmp_path / "tiny.toml"
+    shipped = (Path(__file__).resolve().parents[1] / "training/scenarios/vehicles/compact_ev.toml")
+    tiny.write_text(shipped.read_text().replace("n_series = 100", "n_series = 1")
+                    .replace("n_parallel = 40", "n_parallel = 1"))
+    downhill = tmp_path / "downhill.csv"        # regeneration of kilowatts into one cell
+    downhill.write_text("time_s,speed_kmh,grade\n"
+                        + "".join(f"{k},50,-0.2\n" for k in range(60)))
+    table = sweep(native_fmu, scenarios([str(downhill)], [25.0], [0.5], [str(tiny), None]),
+                  workers=1, progress=False)
+    assert table.loc[0, "stop"].startswith("error: the FMU refused the step at t = ")
+    assert np.isnan(table.loc[0, "voltage_min_v"]) and table.loc[1, "stop"] == ""
+    assert table.loc[1, "voltage_max_v"] > 3.5

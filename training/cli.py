@@ -249,6 +249,22 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
     return 0
 
 
+def _stops_summary(stops) -> str:
+    """The sweep's line on runs that stopped early (its column `stop`): how many with a cell
+    empty, full, or refused by the FMU ("error: …"); '' where none did."""
+    error = stops.str.startswith("error: ")
+    full = stops.str.contains(" above ") & ~error
+    empty = (stops != "") & ~full & ~error
+    counts = [(int(empty.sum()), "with a cell empty"), (int(full.sum()), "with a cell full"),
+              (int(error.sum()), "refused by the FMU (its message in stop)")]
+    total = sum(n for n, _ in counts)
+    if not total:
+        return ""
+    return (f"{total} scenario(s) stopped early: "
+            + ", ".join(f"{n} {what}" for n, what in counts if n)
+            + " (columns stop, stopped_at_s); --cutoff sets the cut-off voltage\n")
+
+
 def cmd_simulate(a: argparse.Namespace) -> int:
     from lmncell.scenarios.drive import simulate_cycle_cli
 
@@ -294,13 +310,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     print(f"wrote {a.out}: {len(table)} rows; minimum cell voltage "
           f"{table['voltage_min_v'].min():.3f} V, end SoC {table['soc_end'].min():.3f}…"
           f"{table['soc_end'].max():.3f}, {table['wall_s'].sum():.1f} s of FMU runs")
-    stopped = table["stop"] != ""
-    full = int(table["stop"].str.contains(" above ").sum())
-    if stopped.any():
-        kinds = [f"{int(stopped.sum()) - full} with a cell empty"] * (int(stopped.sum()) > full)
-        kinds += [f"{full} with a cell full"] * (full > 0)
-        print(f"{int(stopped.sum())} scenario(s) stopped early: {', '.join(kinds)} (columns "
-              "stop, stopped_at_s); --cutoff sets the cut-off voltage")
+    print(_stops_summary(table["stop"]), end="")
     if a.plot:
         for f in plot_sweep(table, a.plot):
             print(f"plot: {f}")

@@ -19,6 +19,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+import re
 import shutil
 import tomllib
 from collections.abc import Mapping
@@ -202,6 +203,14 @@ def empty_reason(voltage_v: float, soc: float, cutoff_v: float) -> str:
     return ""
 
 
+class FmuStepError(DataError):
+    """The FMU refused a step (fmi2Error) of a run: what it logged, and when (t_s, s)."""
+
+    def __init__(self, message: str, t_s: float) -> None:
+        super().__init__(message)
+        self.t_s = t_s
+
+
 MAX_CYCLE_STEPS = 2_000_000   # communication steps of one run_cycle (1 ms over the WLTC's
 # 1800 s: 18 s of fmpy calls with the native FMU); more is refused, not left running for hours
 
@@ -245,6 +254,7 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
     current, voltage, SoC, out-of-range flag and cell temperature (NaN without a thermal
     model), and why it stopped early ('' where it did not)."""
     from fmpy import extract, read_model_description
+    from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
 
     md = read_model_description(str(fmu))
@@ -258,7 +268,8 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
     outputs = [vr["voltage"], vr["soc"], *([vr["cell_temperature"]] if has_cell_t else [])]
     stop = ""
     try:
-        slave.instantiate()
+        callbacks, log = fmu_log_callbacks()
+        slave.instantiate(callbacks=callbacks)
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
         slave.setReal([vr["soc0"]], [soc0])
@@ -269,9 +280,12 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
             t0 = k * h
             i = -load[k] / u if by_power else float(load[k])
             slave.setReal([vr["current"]], [i])
-            status = slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
-            if status is not None and status > 1:
-                raise RuntimeError(f"FMU doStep failed at t = {t0} s (status {status})")
+            try:
+                slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
+            except FMICallException:
+                said = log[-1] if log else "nothing in its log"
+                raise FmuStepError(f"the FMU refused the step at t = {t0:g} s with the cell "
+                                   f"current {i:g} A: {said}", t0) from None
             u, soc, *cell_t = slave.getReal(outputs)
             out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
             out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
@@ -285,6 +299,38 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
         slave.freeInstance()
         shutil.rmtree(unzipped, ignore_errors=True)
     return {key: values[:n] for key, values in out.items()}, stop
+
+
+def fmu_log_callbacks() -> tuple[Any, list[str]]:
+    """FMI 2.0 callbacks whose logger keeps the FMU's messages (formatted by fmpy's native
+    logger proxy, which applies the printf-style arguments ctypes cannot pass) in a list,
+    and that list. Keep the callbacks alive as long as the instance."""
+    import ctypes
+
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
+    from fmpy.logging import addLoggerProxy
+
+    log: list[str] = []
+
+    def keep(_env, _name, status, category, message) -> None:
+        text = (message or b"").decode("utf-8", "replace")
+        # the pythonfmu wrapper logs "[doStep] PyObject_CallMethod\nCallError('…')"
+        inner = re.search(r"\w+Error\((['\"])(.*)\1\)\s*$", text, re.DOTALL)
+        log.append(f"{inner.group(2) if inner else text} "
+                   f"[{(category or b'').decode('utf-8', 'replace')}, status {status}]")
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(keep)
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)   # fmpy's, as its own
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(ctypes.byref(callbacks))
+    return callbacks, log
 
 
 def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,

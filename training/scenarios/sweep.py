@@ -26,6 +26,7 @@ import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
+    FmuStepError,
     Vehicle,
     cell_cutoff_v,
     check_cutoff,
@@ -178,10 +179,16 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     if sc.pack is not None:
         return run_pack_scenario(fmu_bytes, sc)
     t0 = time.perf_counter()
-    res = run_cycle(_fmu_file(fmu_bytes), sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
-                    temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v)
+    pack = f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p"
+    try:
+        res = run_cycle(_fmu_file(fmu_bytes), sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
+                        temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v)
+    except FmuStepError as exc:        # the row says so; the other scenarios' rows stand
+        return {**_settings(sc, pack), **dict.fromkeys(RESULT_COLUMNS, math.nan),
+                "out_of_range_steps": 0, "stop": f"error: {exc}", "stopped_at_s": exc.t_s,
+                "steps": 0, "wall_s": time.perf_counter() - t0}
     f = res.figures
-    return {**_settings(sc, f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p"),
+    return {**_settings(sc, pack),
            "distance_km": f["distance_km"],
            "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
            "soc_end": f["soc_end"], "ah_throughput": f["ah_throughput"],
