@@ -6,6 +6,7 @@ only the FMU (a supplier's, say) checks it against their own cycler data."""
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import tempfile
 import zipfile
@@ -195,6 +196,39 @@ class FmuRun:
     point_voltage_v: np.ndarray | None = None
 
 
+def fmu_log_callbacks() -> tuple[Any, list[str]]:
+    """FMI 2.0 callbacks whose logger keeps the FMU's messages (formatted by fmpy's native
+    logger proxy, which applies the printf-style arguments ctypes cannot pass) in a list,
+    and that list. Keep the callbacks alive as long as the instance."""
+    import ctypes
+
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (
+        fmi2CallbackAllocateMemoryTYPE,
+        fmi2CallbackFreeMemoryTYPE,
+        fmi2CallbackFunctions,
+        fmi2CallbackLoggerTYPE,
+    )
+    from fmpy.logging import addLoggerProxy
+
+    log: list[str] = []
+
+    def keep(_env, _name, status, category, message) -> None:
+        text = (message or b"").decode("utf-8", "replace")
+        # the pythonfmu wrapper logs "[doStep] PyObject_CallMethod\nCallError('…')"
+        inner = re.search(r"\w+Error\((['\"])(.*)\1\)\s*$", text, re.DOTALL)
+        log.append(f"{inner.group(2) if inner else text} "
+                   f"[{(category or b'').decode('utf-8', 'replace')}, status {status}]")
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(keep)
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)   # fmpy's, as its own
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(ctypes.byref(callbacks))
+    return callbacks, log
+
+
+
 class _Slave:
     """One instance of the FMU in fmpy's FMU2Slave, initialised at a start SoC (with an
     observer: its start estimate)."""
@@ -210,7 +244,8 @@ class _Slave:
                                instanceName="lmncell-evaluate")
         self.inputs = [self.vr[n] for n in ("current", "temperature", "voltage_measured")
                        ][:len(inputs)]
-        self.slave.instantiate(loggingOn=False)
+        self.callbacks, self.log = fmu_log_callbacks()      # kept alive with the instance
+        self.slave.instantiate(callbacks=self.callbacks, loggingOn=False)
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         self.slave.setReal([self.vr["soc0"]], [float(soc0)])
@@ -279,8 +314,9 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
             else:
                 every[j] = slave.voltage()
     except Exception as exc:          # fmpy raises where a call returns an error status
+        said = f" ({slave.log[-1]})" if slave is not None and slave.log else ""
         raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
-                          f"{exc}") from None
+                          f"{exc}{said}") from None
     finally:
         if slave is not None:
             slave.free()

@@ -19,7 +19,6 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
-import re
 import shutil
 import tomllib
 from collections.abc import Mapping
@@ -268,6 +267,8 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
     outputs = [vr["voltage"], vr["soc"], *([vr["cell_temperature"]] if has_cell_t else [])]
     stop = ""
     try:
+        from lmncell.evaluation.fmueval import fmu_log_callbacks
+
         callbacks, log = fmu_log_callbacks()
         slave.instantiate(callbacks=callbacks)
         slave.setupExperiment(startTime=0.0)
@@ -299,38 +300,6 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
         slave.freeInstance()
         shutil.rmtree(unzipped, ignore_errors=True)
     return {key: values[:n] for key, values in out.items()}, stop
-
-
-def fmu_log_callbacks() -> tuple[Any, list[str]]:
-    """FMI 2.0 callbacks whose logger keeps the FMU's messages (formatted by fmpy's native
-    logger proxy, which applies the printf-style arguments ctypes cannot pass) in a list,
-    and that list. Keep the callbacks alive as long as the instance."""
-    import ctypes
-
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (
-        fmi2CallbackAllocateMemoryTYPE,
-        fmi2CallbackFreeMemoryTYPE,
-        fmi2CallbackFunctions,
-        fmi2CallbackLoggerTYPE,
-    )
-    from fmpy.logging import addLoggerProxy
-
-    log: list[str] = []
-
-    def keep(_env, _name, status, category, message) -> None:
-        text = (message or b"").decode("utf-8", "replace")
-        # the pythonfmu wrapper logs "[doStep] PyObject_CallMethod\nCallError('…')"
-        inner = re.search(r"\w+Error\((['\"])(.*)\1\)\s*$", text, re.DOTALL)
-        log.append(f"{inner.group(2) if inner else text} "
-                   f"[{(category or b'').decode('utf-8', 'replace')}, status {status}]")
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(keep)
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)   # fmpy's, as its own
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    addLoggerProxy(ctypes.byref(callbacks))
-    return callbacks, log
 
 
 def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,
