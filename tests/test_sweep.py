@@ -434,3 +434,41 @@ def test_a_step_the_fmu_refuses_is_named_and_a_sweep_keeps_its_other_rows(native
     assert table.loc[0, "stop"].startswith("error: the FMU refused the step at t = ")
     assert np.isnan(table.loc[0, "voltage_min_v"]) and table.loc[1, "stop"] == ""
     assert table.loc[1, "voltage_max_v"] > 3.5
+
+
+def test_other_instances_log_safely_after_a_run_with_the_kept_log(native_fmu, quick_fmu,
+                                                                  tmp_path) -> None:
+    """fmpy's native logger proxy keeps one Python logger per process, for every instance,
+    fmpy's default ones included. A run's logger that was freed afterwards left that pointer
+    dangling, and the next instance with fmpy's default callbacks to log an error crashed
+    the process (a segmentation fault in the full test run). Run in a subprocess: a crash
+    there fails this test instead of the whole session."""
+    import subprocess
+    import sys
+
+    profile = tmp_path / "huge.csv"
+    profile.write_text("time_s,current_a\n0,-1e4\n1,0\n")
+    script = f"""
+import gc, math, sys
+sys.path.insert(0, {str(Path(__file__).resolve().parents[1])!r})
+from lmncell.scenarios.drive import FmuStepError, run_profile
+for fmu in ({str(native_fmu)!r}, {str(quick_fmu)!r}):
+    try:
+        run_profile(fmu, {str(profile)!r})
+    except FmuStepError:
+        pass
+gc.collect()
+from tests.fmu_helpers import Instance
+inst = Instance({str(quick_fmu)!r}, start={{"soc0": 0.8}})
+try:
+    inst.step(math.nan)
+except Exception:
+    pass
+inst.free()
+print("survived")
+"""
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "survived" in out.stdout
+    assert "input 'current' = nan" in out.stdout        # printed as fmpy's default logger does

@@ -9,6 +9,7 @@ import json
 import re
 import shutil
 import tempfile
+import uuid
 import zipfile
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import contextmanager
@@ -196,37 +197,65 @@ class FmuRun:
     point_voltage_v: np.ndarray | None = None
 
 
-def fmu_log_callbacks() -> tuple[Any, list[str]]:
-    """FMI 2.0 callbacks whose logger keeps the FMU's messages (formatted by fmpy's native
-    logger proxy, which applies the printf-style arguments ctypes cannot pass) in a list,
-    and that list. Keep the callbacks alive as long as the instance."""
-    import ctypes
+# fmpy's native logger proxy (which formats the printf-style arguments that ctypes cannot
+# pass) keeps ONE Python logger for the whole process, for every instance whose callbacks it
+# wraps, fmpy's own default callbacks included. So the logger registered here lives as long
+# as the process: it keeps the messages of the instances named in _FMU_LOGS (fmu_log) and
+# prints the others' as fmpy's default logger does.
+_FMU_LOGS: dict[str, list[str]] = {}
+_LOGGER: list[Any] = []        # [callbacks] once registered
 
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (
-        fmi2CallbackAllocateMemoryTYPE,
-        fmi2CallbackFreeMemoryTYPE,
-        fmi2CallbackFunctions,
-        fmi2CallbackLoggerTYPE,
-    )
-    from fmpy.logging import addLoggerProxy
 
+def _keep_or_print(env, name, status, category, message) -> None:
+    """The process's FMU logger (see _FMU_LOGS)."""
+    from fmpy.fmi1 import printLogMessage
+
+    log = _FMU_LOGS.get((name or b"").decode("utf-8", "replace"))
+    if log is None:
+        printLogMessage(env, name, status, category, message)
+        return
+    text = (message or b"").decode("utf-8", "replace")
+    # the pythonfmu wrapper logs "[doStep] PyObject_CallMethod\nCallError('…')"
+    inner = re.search(r"\w+Error\((['\"])(.*)\1\)\s*$", text, re.DOTALL)
+    log.append(f"{inner.group(2) if inner else text} "
+               f"[{(category or b'').decode('utf-8', 'replace')}, status {status}]")
+
+
+def _process_callbacks() -> Any:
+    """The FMI 2.0 callbacks with the process's logger, registered with fmpy's proxy once."""
+    if not _LOGGER:
+        import ctypes
+
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (
+            fmi2CallbackAllocateMemoryTYPE,
+            fmi2CallbackFreeMemoryTYPE,
+            fmi2CallbackFunctions,
+            fmi2CallbackLoggerTYPE,
+        )
+        from fmpy.logging import addLoggerProxy
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(_keep_or_print)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)   # fmpy's own
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        addLoggerProxy(ctypes.byref(callbacks))
+        _LOGGER.append(callbacks)
+    return _LOGGER[0]
+
+
+@contextmanager
+def fmu_log(prefix: str) -> Iterator[tuple[str, Any, list[str]]]:
+    """A unique instance name, the callbacks to instantiate it with, and the list in which its
+    messages are kept while the context lasts."""
+    name = f"{prefix}-{uuid.uuid4().hex[:12]}"
     log: list[str] = []
-
-    def keep(_env, _name, status, category, message) -> None:
-        text = (message or b"").decode("utf-8", "replace")
-        # the pythonfmu wrapper logs "[doStep] PyObject_CallMethod\nCallError('…')"
-        inner = re.search(r"\w+Error\((['\"])(.*)\1\)\s*$", text, re.DOTALL)
-        log.append(f"{inner.group(2) if inner else text} "
-                   f"[{(category or b'').decode('utf-8', 'replace')}, status {status}]")
-
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(keep)
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)   # fmpy's, as its own
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    addLoggerProxy(ctypes.byref(callbacks))
-    return callbacks, log
-
+    callbacks = _process_callbacks()
+    _FMU_LOGS[name] = log
+    try:
+        yield name, callbacks, log
+    finally:
+        _FMU_LOGS.pop(name, None)
 
 
 class _Slave:
@@ -239,13 +268,15 @@ class _Slave:
 
         md = info.description
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
+        # the instance's log (fmu_log) is released by free()
+        self._log = fmu_log("lmncell-evaluate")
+        name, callbacks, self.log = self._log.__enter__()
         self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                                modelIdentifier=md.coSimulation.modelIdentifier,
-                               instanceName="lmncell-evaluate")
+                               instanceName=name)
         self.inputs = [self.vr[n] for n in ("current", "temperature", "voltage_measured")
                        ][:len(inputs)]
-        self.callbacks, self.log = fmu_log_callbacks()      # kept alive with the instance
-        self.slave.instantiate(callbacks=self.callbacks, loggingOn=False)
+        self.slave.instantiate(callbacks=callbacks, loggingOn=False)
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         self.slave.setReal([self.vr["soc0"]], [float(soc0)])
@@ -269,8 +300,11 @@ class _Slave:
         return voltage, soc, std, bool(self.slave.getBoolean([self.vr["out_of_range"]])[0])
 
     def free(self) -> None:
-        self.slave.terminate()
-        self.slave.freeInstance()
+        try:
+            self.slave.terminate()
+            self.slave.freeInstance()
+        finally:
+            self._log.__exit__(None, None, None)
 
 
 def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,

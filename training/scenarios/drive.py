@@ -255,50 +255,50 @@ def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0
     from fmpy import extract, read_model_description
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
+    from lmncell.evaluation.fmueval import fmu_log
 
     md = read_model_description(str(fmu))
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    unzipped = extract(str(fmu))
-    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
-                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="cycle")
     n = load.size
     out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "cell_t")}
     has_cell_t = "cell_temperature" in vr
     outputs = [vr["voltage"], vr["soc"], *([vr["cell_temperature"]] if has_cell_t else [])]
     stop = ""
-    try:
-        from lmncell.evaluation.fmueval import fmu_log_callbacks
-
-        callbacks, log = fmu_log_callbacks()
-        slave.instantiate(callbacks=callbacks)
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        slave.setReal([vr["soc0"]], [soc0])
-        slave.setReal([vr["temperature"]], [temperature_c])
-        slave.exitInitializationMode()
-        u = slave.getReal([vr["voltage"]])[0]
-        for k in range(n):
-            t0 = k * h
-            i = -load[k] / u if by_power else float(load[k])
-            slave.setReal([vr["current"]], [i])
-            try:
-                slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
-            except FMICallException:
-                said = log[-1] if log else "nothing in its log"
-                raise FmuStepError(f"the FMU refused the step at t = {t0:g} s with the cell "
-                                   f"current {i:g} A: {said}", t0) from None
-            u, soc, *cell_t = slave.getReal(outputs)
-            out["time"][k], out["current"][k], out["voltage"][k], out["soc"][k] = t0 + h, i, u, soc
-            out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
-            out["cell_t"][k] = cell_t[0] if cell_t else math.nan
-            stop = empty_reason(u, soc, cutoff_v) or full_reason(u, soc, charge_cutoff_v)
-            if stop:
-                n = k + 1
-                break
-        slave.terminate()
-    finally:
-        slave.freeInstance()
-        shutil.rmtree(unzipped, ignore_errors=True)
+    unzipped = extract(str(fmu))
+    with fmu_log("lmncell-cycle") as (name, callbacks, log):
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                          modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+        try:
+            slave.instantiate(callbacks=callbacks)
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            slave.setReal([vr["soc0"]], [soc0])
+            slave.setReal([vr["temperature"]], [temperature_c])
+            slave.exitInitializationMode()
+            u = slave.getReal([vr["voltage"]])[0]
+            for k in range(n):
+                t0 = k * h
+                i = -load[k] / u if by_power else float(load[k])
+                slave.setReal([vr["current"]], [i])
+                try:
+                    slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
+                except FMICallException:
+                    said = log[-1] if log else "nothing in its log"
+                    raise FmuStepError(f"the FMU refused the step at t = {t0:g} s with the "
+                                       f"cell current {i:g} A: {said}", t0) from None
+                u, soc, *cell_t = slave.getReal(outputs)
+                out["time"][k], out["current"][k], out["voltage"][k] = t0 + h, i, u
+                out["soc"][k] = soc
+                out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
+                out["cell_t"][k] = cell_t[0] if cell_t else math.nan
+                stop = empty_reason(u, soc, cutoff_v) or full_reason(u, soc, charge_cutoff_v)
+                if stop:
+                    n = k + 1
+                    break
+            slave.terminate()
+        finally:
+            slave.freeInstance()
+            shutil.rmtree(unzipped, ignore_errors=True)
     return {key: values[:n] for key, values in out.items()}, stop
 
 
