@@ -250,13 +250,14 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
 
 
 def _stops_summary(stops) -> str:
-    """The sweep's line on runs that stopped early (its column `stop`): how many with a cell
-    empty, full, or refused by the FMU ("error: …"); '' where none did."""
-    error = stops.str.startswith("error: ")
-    full = stops.str.contains(" above ") & ~error
-    empty = (stops != "") & ~full & ~error
-    counts = [(int(empty.sum()), "with a cell empty"), (int(full.sum()), "with a cell full"),
-              (int(error.sum()), "refused by the FMU (its message in stop)")]
+    """The sweep's line on runs that stopped early (its column `stop`, drive.stop_kind): how
+    many with a cell empty, full, or refused by the FMU; '' where none did."""
+    from lmncell.scenarios.drive import stop_kind
+
+    kinds = [stop_kind(stop) for stop in stops]
+    words = {"empty": "with a cell empty", "full": "with a cell full",
+             "error": "refused by the FMU (its message in stop)"}
+    counts = [(kinds.count(kind), what) for kind, what in words.items()]
     total = sum(n for n, _ in counts)
     if not total:
         return ""

@@ -223,6 +223,19 @@ def full_reason(voltage_v: float, soc: float, charge_cutoff_v: float = 0.0) -> s
     return "SoC above 100 %" if soc > 1.0 else ""
 
 
+STEP_ERROR_PREFIX = "error: "   # a sweep row's stop where the FMU refused a step (FmuStepError)
+
+
+def stop_kind(stop: str) -> str:
+    """What a run's stop reason says of it: '' (it ran to the end), "error" (the FMU refused a
+    step: STEP_ERROR_PREFIX), "full" (full_reason) or "empty" (empty_reason)."""
+    if not stop:
+        return ""
+    if stop.startswith(STEP_ERROR_PREFIX):
+        return "error"
+    return "full" if " above " in stop else "empty"
+
+
 def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
                          what: str) -> tuple[float, int]:
     """The communication step (s; step_s, or the FMU's default experiment's, or 1 s) and the
@@ -386,11 +399,6 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
                        out["oor"].astype(bool), figures, cell_t)
 
 
-def _stop_state(f: dict) -> str:
-    """How a run that stopped early left the cell: 'full' (full_reason) or 'empty'."""
-    return "full" if " above " in f["stop"] else "empty"
-
-
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     """Speed (for a drive cycle), current, voltage, SoC and cell temperature over the run."""
     from lmncell.report.plots import plt
@@ -400,7 +408,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     panels = 4 if res.speed_mps is not None else 3
     fig, axes = plt.subplots(panels, 1, figsize=(10, 2.1 * panels + 0.1), sharex=True,
                              constrained_layout=True)
-    stop = (f" — stopped, the cell {_stop_state(f)} after {f['stopped_at_s']:g} s"
+    stop = (f" — stopped, the cell {stop_kind(f['stop'])} after {f['stopped_at_s']:g} s"
             if f["stop"] else "")
     if res.speed_mps is not None:
         axes[0].plot(t, 3.6 * res.speed_mps)
@@ -452,7 +460,7 @@ def simulate_cycle_cli(a) -> int:
         print(_run_line(f))
         if f["stop"]:
             where = f", {f['distance_km']:.1f} km" if "distance_km" in f else ""
-            state = _stop_state(f)
+            state = stop_kind(f["stop"])
             hint = ("; --cutoff sets the cut-off voltage" if state == "empty" else
                     "; --charge-cutoff sets the charge cut-off voltage" if "voltage" in f["stop"]
                     else "")

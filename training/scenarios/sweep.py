@@ -26,6 +26,7 @@ import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
+    STEP_ERROR_PREFIX,
     FmuStepError,
     Vehicle,
     cell_cutoff_v,
@@ -185,8 +186,8 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
                         temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v)
     except FmuStepError as exc:        # the row says so; the other scenarios' rows stand
         return {**_settings(sc, pack), **dict.fromkeys(RESULT_COLUMNS, math.nan),
-                "out_of_range_steps": 0, "stop": f"error: {exc}", "stopped_at_s": exc.t_s,
-                "steps": 0, "wall_s": time.perf_counter() - t0}
+                "out_of_range_steps": 0, "stop": f"{STEP_ERROR_PREFIX}{exc}",
+                "stopped_at_s": exc.t_s, "steps": 0, "wall_s": time.perf_counter() - t0}
     f = res.figures
     return {**_settings(sc, pack),
            "distance_km": f["distance_km"],
