@@ -37,7 +37,7 @@ from lmncell.scenarios.drive import (
     step_means,
 )
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
-from lmncell.scenarios.traces import SpeedTrace, cycle_problem, load_cycle
+from lmncell.scenarios.traces import SpeedTrace, load_cycle
 
 RESULT_COLUMNS = ("distance_km", "voltage_min_v", "voltage_max_v", "soc_end", "ah_throughput",
                   "cell_energy_wh", "pack_energy_kwh", "cell_temperature_max_c",
@@ -74,7 +74,7 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
     voltage, drive.shipped_cutoff_v) or its SoC below 0."""
     if not cycles or not ambients or not soc0s or not vehicle_files:
         raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
-    traces = [_sweep_cycle(c) for c in cycles]
+    traces = [load_cycle(c, "sweep: --cycles") for c in cycles]
     for t in ambients:
         if not is_cell_temperature(t):
             raise DataError(f"sweep: --ambient {t!r}: expected temperatures in °C within "
@@ -103,14 +103,6 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
 
     return [Scenario(c, veh, vf, float(t), float(s), int(repeat), spec(veh), cutoff_v)
             for c, (veh, vf), t, s in itertools.product(traces, vehicles, ambients, soc0s)]
-
-
-def _sweep_cycle(cycle: str | Path) -> SpeedTrace:
-    """A --cycles entry's trace; a DataError naming the option where it is none."""
-    problem = cycle_problem(cycle)
-    if problem:
-        raise DataError(f"sweep: --cycles {str(cycle)!r}: {problem}")
-    return load_cycle(cycle)
 
 
 _UNPACKED: dict[str, Path] = {}

@@ -113,10 +113,10 @@ def trace_title(name: str) -> str:
     return name.upper() if name in CYCLES else name
 
 
-def load_cycle(cycle: str | Path | SpeedTrace) -> SpeedTrace:
+def load_cycle(cycle: str | Path | SpeedTrace, where: str = "cycle") -> SpeedTrace:
     """A shipped cycle by name (CYCLES), or a speed-trace CSV file (SPEED_TRACE); a SpeedTrace
     is returned as it is. DataError naming the file, line, column and value where a file is
-    not such a trace."""
+    not such a trace, and `where` (e.g. the option) where it is neither (cycle_problem)."""
     if isinstance(cycle, SpeedTrace):
         return cycle
     if str(cycle) in CYCLES:
@@ -125,7 +125,7 @@ def load_cycle(cycle: str | Path | SpeedTrace) -> SpeedTrace:
     else:
         problem = cycle_problem(cycle)
         if problem:
-            raise DataError(f"cycle {str(cycle)!r}: {problem}")
+            raise DataError(f"{where} {str(cycle)!r}: {problem}")
         values, name = read_trace(Path(cycle), SPEED_TRACE), Path(cycle).name
     grade = values.get("grade", np.zeros_like(values["time"]))
     return SpeedTrace(name, values["time"], values["speed"], grade)
