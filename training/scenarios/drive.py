@@ -236,14 +236,13 @@ def stop_kind(stop: str) -> str:
     return "full" if " above " in stop else "empty"
 
 
-def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
+def _communication_steps(md: Any, step_s: float | None, span_s: float,
                          what: str) -> tuple[float, int]:
-    """The communication step (s; step_s, or the FMU's default experiment's, or 1 s) and the
-    number of whole steps over span_s; DataError where there are none or more than
-    MAX_CYCLE_STEPS. what: the run as messages name it ("the UDDS cycle")."""
-    from fmpy import read_model_description
-
-    default = read_model_description(str(fmu)).defaultExperiment
+    """The communication step (s; step_s, or the default experiment's of the FMU's model
+    description md (fmpy's), or 1 s) and the number of whole steps over span_s; DataError
+    where there are none or more than MAX_CYCLE_STEPS. what: the run as messages name it
+    ("the UDDS cycle")."""
+    default = md.defaultExperiment
     h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
     n = math.floor(span_s / h + 1e-9)
     if n < 1:
@@ -256,21 +255,21 @@ def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
     return h, n
 
 
-def _drive_fmu(fmu: str | Path, load: np.ndarray, by_power: bool, h: float, soc0: float,
-               temperature_c: float, cutoff_v: float, charge_cutoff_v: float = 0.0
-               ) -> tuple[dict[str, np.ndarray], str]:
-    """Step the FMU with fmpy through one load value per communication step h (s): the cell
+def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: float,
+               soc0: float, temperature_c: float, cutoff_v: float,
+               charge_cutoff_v: float = 0.0) -> tuple[dict[str, np.ndarray], str]:
+    """Step the FMU (md: its model description, fmpy's) with fmpy through one load value per
+    communication step h (s): the cell
     power (W, > 0 discharging; by_power, i = −P/u with u the previous step's voltage) or the
     cell current (A, > 0 charges). Stops after the first step that leaves the cell empty
     (empty_reason) or full (full_reason). Returns the steps' time (s, each step's end),
     current, voltage, SoC, out-of-range flag and cell temperature (NaN without a thermal
     model), and why it stopped early ('' where it did not)."""
-    from fmpy import extract, read_model_description
+    from fmpy import extract
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
     from lmncell.evaluation.fmueval import fmu_log
 
-    md = read_model_description(str(fmu))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     n = load.size
     out = {k: np.empty(n) for k in ("time", "current", "voltage", "soc", "oor", "cell_t")}
@@ -353,10 +352,13 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
     cell_power = power / (vehicle.n_series * vehicle.n_parallel)
     cutoff = shipped_cutoff_v(fmu) if cutoff_v is None else check_cutoff(cutoff_v)
     copies = f"{repeat} × " if repeat > 1 else ""
-    h, n = _communication_steps(fmu, step_s, power.size * dt,
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmu))
+    h, n = _communication_steps(md, step_s, power.size * dt,
                                 f"{copies}the {trace.title} cycle")
     speed = step_means(np.tile(trace.speed_mps, repeat), dt, h, n)
-    out, stop = _drive_fmu(fmu, step_means(cell_power, dt, h, n), True, h, soc0,
+    out, stop = _drive_fmu(fmu, md, step_means(cell_power, dt, h, n), True, h, soc0,
                            temperature_c, cutoff)
     speed = speed[:out["time"].size]
     cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop)
@@ -387,10 +389,13 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
     charge_cutoff = (shipped_cutoff_v(fmu, "voltage_max_v") if charge_cutoff_v is None
                      else check_cutoff(charge_cutoff_v, "--charge-cutoff"))
     copies = f"{repeat} × " if repeat > 1 else ""
-    h, n = _communication_steps(fmu, step_s, current.size * dt,
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmu))
+    h, n = _communication_steps(md, step_s, current.size * dt,
                                 f"{copies}the profile {prof.name}")
-    out, stop = _drive_fmu(fmu, step_means(current, dt, h, n), False, h, soc0, temperature_c,
-                           cutoff, charge_cutoff)
+    out, stop = _drive_fmu(fmu, md, step_means(current, dt, h, n), False, h, soc0,
+                           temperature_c, cutoff, charge_cutoff)
     figures = {"profile": prof.name, "repetitions": repeat,
                **_cell_figures(out, h, soc0, temperature_c, cutoff, stop),
                "charge_cutoff_v": charge_cutoff}
