@@ -400,3 +400,68 @@ def test_read_records_options_are_read_generics(tmp_path) -> None:
         read_record(p, columns={"time": "t", "current": "i", "voltage": "v"}, delimiter=";")
     assert read_record(p, columns={"time": "t", "current": "i", "voltage": "v"},
                        sep=";").voltage_v.tolist() == [3.3, 3.3]
+
+
+def _write_eclab(path, rec, decimal: str = ".", repeat_row: int | None = None,
+                 magic: str = "EC-Lab ASCII FILE", voltage: str = "Ewe/V") -> None:
+    """An EC-Lab ASCII export (.mpt) of a record as the software writes one: a preamble whose
+    second line counts the header lines, tab-separated rows ending in a tab, I in mA (> 0
+    charges), (Q-Qo) in mA.h, Windows-1252 text (µ, ° in the names)."""
+    names = ["mode", "ox/red", "error", "time/s", "control/V/mA", voltage, "I/mA",
+             "(Q-Qo)/mA.h", "Temperature/°C", "Capacitance charge/µF", "cycle number"]
+    preamble = [magic, "", "Galvanostatic Cycling with Potential Limitation", "",
+                "Run on channel : 1 (SN 0001)", "Acquisition started on : 03/01/2024 10:00:00",
+                "Electrode surface area : 0.001 cm²"]
+    preamble[1] = f"Nb header lines : {len(preamble) + 1}"
+    t, i = rec.time_s, rec.current_a
+    q_mah = 1000.0 * rec.charge_ah
+    rows = []
+    for k in range(len(rec)):
+        cells = [1, int(i[k] > 0), 0, t[k], 0.0, rec.voltage_v[k], 1000.0 * i[k], q_mah[k],
+                 25.0 + 0.001 * k, 0.0, 0]
+        rows.append("\t".join(repr(float(c)) if isinstance(c, float) else str(c)
+                              for c in cells) + "\t")
+        if k == repeat_row:
+            rows.append(rows[-1])
+    text = "\n".join([*preamble, "\t".join(names) + "\t", *rows]) + "\n"
+    if decimal == ",":
+        text = "\n".join(ln if k <= len(preamble) else ln.replace(".", ",")
+                         for k, ln in enumerate(text.split("\n")))
+    path.write_bytes(text.replace("\n", "\r\n").encode("cp1252"))
+
+
+def test_biologic_export_reads_by_content(tmp_path) -> None:
+    rec = read_record(A123_S1).slice(0, 3000)
+    for decimal in (".", ","):
+        path = tmp_path / f"cell_{decimal == ','}.mpt"
+        _write_eclab(path, rec, decimal=decimal, repeat_row=100)
+        assert detect_format(path) == "biologic"
+        back = read_record(path)
+        assert back.meta.fmt == "biologic" and len(back) == len(rec)
+        assert any("dropped 1 row" in n for n in back.meta.notes)
+        assert np.allclose(back.time_s, rec.time_s - rec.time_s[0], atol=1e-9)
+        assert np.allclose(back.current_a, rec.current_a, atol=1e-12)
+        assert np.allclose(back.voltage_v, rec.voltage_v, atol=1e-12)
+        assert np.allclose(back.charge_ah, rec.charge_ah - rec.charge_ah[0], atol=1e-12)
+        assert back.temperature_c[1] == pytest.approx(25.001)
+    # a BT-Lab export of a full cell names its voltage Ecell
+    _write_eclab(tmp_path / "bt.mpt", rec, magic="BT-Lab ASCII FILE", voltage="Ecell/V")
+    assert np.allclose(read_record(tmp_path / "bt.mpt").voltage_v, rec.voltage_v)
+    assert main(["inspect", str(tmp_path / "bt.mpt")]) == 0
+
+
+@pytest.mark.parametrize(("edit", "message"), [
+    (lambda s: s.replace("Nb header lines : 8", "Nb header lines: eight"),
+     "line 2 is 'Nb header lines: eight'; expected 'Nb header lines : N'"),
+    (lambda s: s.replace("Nb header lines : 8", "Nb header lines : 9000"),
+     "'Nb header lines : 9000' but the file has"),
+    (lambda s: s.replace("\tEwe/V\t", "\tE/V\t"),
+     "no cell voltage column; expected one of ['Ecell/V'"),
+    (lambda s: s.replace("\tI/mA\t", "\tcurrent\t"), "no current column"),
+])
+def test_biologic_export_errors_name_what_is_wrong(tmp_path, edit, message) -> None:
+    path = tmp_path / "bad.mpt"
+    _write_eclab(path, read_record(A123_S1).slice(0, 50))
+    path.write_bytes(edit(path.read_bytes().decode("cp1252")).encode("cp1252"))
+    with pytest.raises(DataError, match=re.escape(message)):
+        read_record(path)

@@ -333,7 +333,8 @@ def cmd_demo(a: argparse.Namespace) -> int:
 
 def _add_reader_options(s: argparse.ArgumentParser) -> None:
     g = s.add_argument_group("your own CSV files (generic reader; the known formats — Plett, "
-                             "Arbin, Panasonic .mat, BDF — are recognised without these)")
+                             "Arbin, Panasonic .mat, BDF, BioLogic .mpt — are recognised "
+                             "without these)")
     g.add_argument("--columns", type=_columns, metavar="time=COL,current=COL,voltage=COL"
                    "[,temperature=COL]", help="the file's column names for time (s), current, "
                    "voltage (V) and optionally cell temperature (°C)")

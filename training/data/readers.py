@@ -2,8 +2,9 @@
 
 Formats: ``plett`` (ESC toolbox CSV, discharge positive), ``arbin`` (Arbin CSV export,
 discharge negative), ``panasonic`` (Kollmeyer ``.mat`` with struct ``meas``), ``bdf`` (Battery Data
-Format CSV, charge positive) and ``generic`` (CSV with an explicit column mapping). Files may be
-gzip-compressed (``.gz``).
+Format CSV, charge positive), ``biologic`` (EC-Lab / BT-Lab ASCII export ``.mpt``, charge
+positive) and ``generic`` (CSV with an explicit column mapping). Files may be gzip-compressed
+(``.gz``).
 """
 
 from __future__ import annotations
@@ -22,13 +23,23 @@ import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.data.resample import find_gaps
 
-FORMATS = ("plett", "arbin", "panasonic", "bdf", "generic")
+FORMATS = ("plett", "arbin", "panasonic", "bdf", "biologic", "generic")
 PLETT_COLUMNS = ("time", "step", "current", "voltage", "chgAh", "disAh")
 ARBIN_COLUMNS = ("Test_Time(s)", "Current(A)", "Voltage(V)", "Charge_Capacity(Ah)",
                  "Discharge_Capacity(Ah)")
 BDF_TIME, BDF_VOLTAGE, BDF_CURRENT = "Test Time / s", "Voltage / V", "Current / A"
 BDF_AMBIENT, BDF_T1 = "Ambient Temperature / degC", "Temperature T1 / degC"
 BDF_NET_AH, BDF_SOC = "Net Capacity / Ah", "State of Charge / 1"
+# BioLogic EC-Lab / BT-Lab ASCII export (.mpt): a first line naming the software, then
+# "Nb header lines : N" (N counts every line up to and including the column names), then
+# tab-separated rows with the decimal mark of the exporting PC's locale; I > 0 is oxidation at
+# the working electrode, i.e. charge where it is the cell's positive terminal
+BIOLOGIC_MAGIC = ("EC-Lab ASCII FILE", "BT-Lab ASCII FILE")
+BIOLOGIC_TIME = "time/s"
+BIOLOGIC_VOLTAGES = ("Ecell/V", "<Ecell>/V", "Ewe-Ece/V", "Ewe/V", "<Ewe>/V")  # preferred first
+BIOLOGIC_CURRENTS = {"I/mA": 1e-3, "<I>/mA": 1e-3, "I/A": 1.0, "<I>/A": 1.0}    # → A
+BIOLOGIC_CHARGES = {"(Q-Qo)/mA.h": 1e-3, "(Q-Qo)/A.h": 1.0, "(Q-Qo)/C": 1.0 / 3600.0}  # → Ah
+BIOLOGIC_TEMPERATURES = ("Temperature/°C", "<Temperature>/°C", "T/°C")
 GAP_FACTOR = 20.0       # a time step this many times the median step starts a new segment
 PAUSE_MIN_S = 60.0      # a wall-clock jump this much beyond the Time column marks a hidden pause
 
@@ -144,6 +155,8 @@ def _format_of(path: Path) -> str:
     header = read_text(path, first_line=True).strip()
     if not header:
         raise DataError(f"{path}: the file is empty; expected a header line")
+    if header.startswith(BIOLOGIC_MAGIC):
+        return "biologic"
     cols = [c.strip() for c in header.split(",")]
     if cols[: len(PLETT_COLUMNS)] == list(PLETT_COLUMNS):
         return "plett"
@@ -152,7 +165,7 @@ def _format_of(path: Path) -> str:
     if all(c in cols for c in (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)):
         return "bdf"
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
-                    f"{list(FORMATS[:4])}. Name your columns: on the command line "
+                    f"{list(FORMATS[:5])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --discharge-positive as needed); "
@@ -172,19 +185,24 @@ class CsvColumns(dict):
 
 def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                       required: frozenset[str] | set[str] | None = None,
-                      keep_text: frozenset[str] | set[str] = frozenset()) -> CsvColumns:
+                      keep_text: frozenset[str] | set[str] = frozenset(),
+                      header_line: int = 1, text: str | None = None) -> CsvColumns:
     """Every column of a CSV file as float arrays, with the file's line numbers in errors.
 
     sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
     every cell must be a number (default: the known formats' numeric columns); keep_text:
-    columns whose cells are also kept as written (CsvColumns.text)."""
+    columns whose cells are also kept as written (CsvColumns.text); header_line: the file line
+    of the column names (1: the first; the lines before it are skipped); text: the file's text
+    where the caller has read it already (read_text)."""
     if len(sep) != 1 or sep in (decimal, '"') or sep.isalnum():
         raise DataError(f"{path}: delimiter {sep!r}; expected one character other than the "
                         f"decimal mark {decimal!r}, a quote, a letter or a digit")
     if decimal not in (".", ","):
         raise DataError(f"{path}: decimal mark {decimal!r}; expected '.' or ','")
     required = _NUMERIC_REQUIRED if required is None else required
-    numbered = [(k + 1, ln) for k, ln in enumerate(read_text(path).splitlines()) if ln.strip()]
+    text = read_text(path) if text is None else text
+    numbered = [(k + 1, ln) for k, ln in enumerate(text.splitlines())
+                if k + 1 >= header_line and ln.strip()]
     if not numbered:
         raise DataError(f"{path}: the file is empty; expected a header line and data rows")
     header = [c.strip() for c in next(csv.reader([numbered[0][1]], delimiter=sep))]
@@ -383,6 +401,74 @@ def read_bdf(path: Path) -> Record:
                   temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
 
 
+def read_biologic(path: Path) -> Record:
+    """BioLogic EC-Lab / BT-Lab ASCII export (``.mpt``): ``time/s``, the cell voltage (the
+    first of BIOLOGIC_VOLTAGES present), the current (``I/mA`` or ``<I>/mA``; > 0 charges), and
+    where present ``(Q-Qo)/mA.h`` as the charge counter and ``Temperature/°C``.
+
+    The decimal mark is read from the data (a comma where the exporting PC wrote one). Rows
+    that repeat the time of the row before (EC-Lab writes one where a technique or sequence
+    changes) are dropped, the later kept, and counted in meta.notes."""
+    text = read_text(path)
+    lines = text.splitlines()
+    header_line = _biologic_header_line(path, lines)
+    data = next((ln for ln in lines[header_line:] if ln.strip()), "")
+    decimal = "," if re.search(r"\d,\d", data) else "."
+    names = [c.strip() for c in lines[header_line - 1].split("\t")]
+    voltage = _first_present(path, names, BIOLOGIC_VOLTAGES, "cell voltage")
+    current = _first_present(path, names, tuple(BIOLOGIC_CURRENTS), "current")
+    _first_present(path, names, (BIOLOGIC_TIME,), "time")
+    charge = next((c for c in BIOLOGIC_CHARGES if c in names), None)
+    temperature = next((c for c in BIOLOGIC_TEMPERATURES if c in names), None)
+    cols = _read_csv_columns(path, sep="\t", decimal=decimal, header_line=header_line, text=text,
+                             required={BIOLOGIC_TIME, voltage, current,
+                                       *(c for c in (charge, temperature) if c)})
+    t = cols[BIOLOGIC_TIME]
+    keep = np.ones(t.size, dtype=bool)
+    keep[1:] = np.diff(t) != 0
+    notes = ([] if keep.all() else
+             [f"dropped {int((~keep).sum())} row(s) that repeat the time of the row before"])
+    t = t[keep]
+    amps = cols[current][keep] * BIOLOGIC_CURRENTS[current]
+    net_ah = (None if charge is None else
+              (cols[charge][keep] - cols[charge][0]) * BIOLOGIC_CHARGES[charge])
+    file_columns = {"time_s": BIOLOGIC_TIME, "current_a": current, "voltage_v": voltage,
+                    **({"charge_ah": charge} if charge else {}),
+                    **({"temperature_c": temperature} if temperature else {})}
+    meta = _meta(path, "biologic", "none (EC-Lab: I > 0 charges)", t,
+                 segment_starts=_segment_starts_from_gaps(t, amps, net_ah), notes=notes,
+                 file_columns=file_columns,
+                 first_line=cols.first_line if keep.all() else None,
+                 time_origin_s=float(t[0]))
+    return Record(t - t[0], amps, cols[voltage][keep], meta,
+                  temperature_c=None if temperature is None else cols[temperature][keep],
+                  charge_ah=net_ah)
+
+
+def _biologic_header_line(path: Path, lines: list[str]) -> int:
+    """The file line (1-based) of an EC-Lab export's column names, from its second line
+    "Nb header lines : N"."""
+    second = lines[1].strip() if len(lines) > 1 else ""
+    m = re.fullmatch(r"Nb header lines\s*:\s*(\d+)", second)
+    if m is None:
+        raise DataError(f"{path}: line 2 is {second[:80]!r}; expected 'Nb header lines : N' "
+                        f"after the line {lines[0].strip()!r} (an EC-Lab / BT-Lab ASCII export)")
+    n = int(m.group(1))
+    if not 3 <= n < len(lines):
+        raise DataError(f"{path}: 'Nb header lines : {n}' but the file has {len(lines)} lines; "
+                        "expected the column names on line N (3 or more) and data rows after it")
+    return n
+
+
+def _first_present(path: Path, names: list[str], choices: tuple[str, ...], what: str) -> str:
+    """The first of choices among a file's column names; DataError naming both if none is."""
+    found = next((c for c in choices if c in names), None)
+    if found is None:
+        raise DataError(f"{path}: no {what} column; expected one of {list(choices)}, found "
+                        f"{[n for n in names if n]}")
+    return found
+
+
 GENERIC_KEYS = ("time", "current", "voltage", "temperature")
 UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
@@ -517,7 +603,7 @@ def _iso_s(text: str) -> float | None:
 
 
 _READERS = {"plett": read_plett, "arbin": read_arbin, "panasonic": read_panasonic,
-            "bdf": read_bdf}
+            "bdf": read_bdf, "biologic": read_biologic}
 
 
 def check_plausibility(rec: Record) -> None:
