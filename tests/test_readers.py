@@ -465,3 +465,23 @@ def test_biologic_export_errors_name_what_is_wrong(tmp_path, edit, message) -> N
     path.write_bytes(edit(path.read_bytes().decode("cp1252")).encode("cp1252"))
     with pytest.raises(DataError, match=re.escape(message)):
         read_record(path)
+
+
+def test_generic_reader_skips_a_preamble_before_the_column_names(tmp_path, capsys) -> None:
+    # a cycler's text export (here Maccor-like, tab-separated) with its settings first
+    rows = ["Today's Date\t03/01/2024", "Procedure:\tUDDS.000", "Comment/Barcode:\tcell 7", "",
+            "Rec\tTest Time\tCurrent\tVoltage\tTemp 1",
+            "1\t0\t0\t3.3\t25.0", "2\t1\t-1.5\t3.2\t25.1", "3\t2\t-1.5\t3.19\t25.2",
+            "4\t3\t0\t3.25\t25.2"]
+    path = tmp_path / "maccor.txt"
+    path.write_text("\n".join(rows) + "\n")
+    cols = "time=Test Time,current=Current,voltage=Voltage,temperature=Temp 1"
+    rec = read_record(path, columns=dict(c.split("=") for c in cols.split(",")), sep="\t")
+    assert rec.current_a.tolist() == [0.0, -1.5, -1.5, 0.0]
+    assert rec.temperature_c[-1] == 25.2
+    assert any("column names on line 5: the 4 line(s) before them skipped" in n
+               for n in rec.meta.notes)
+    # errors still name the file's own line
+    path.write_text("\n".join([*rows[:7], "3\t2\tx\t3.19\t25.2"]) + "\n")
+    assert main(["inspect", str(path), "--columns", cols, "--delimiter", "tab"]) == 2
+    assert "column 'Current' line 8: 'x' is not a number" in capsys.readouterr().err

@@ -40,6 +40,7 @@ BIOLOGIC_VOLTAGES = ("Ecell/V", "<Ecell>/V", "Ewe-Ece/V", "Ewe/V", "<Ewe>/V")  #
 BIOLOGIC_CURRENTS = {"I/mA": 1e-3, "<I>/mA": 1e-3, "I/A": 1.0, "<I>/A": 1.0}    # → A
 BIOLOGIC_CHARGES = {"(Q-Qo)/mA.h": 1e-3, "(Q-Qo)/A.h": 1.0, "(Q-Qo)/C": 1.0 / 3600.0}  # → Ah
 BIOLOGIC_TEMPERATURES = ("Temperature/°C", "<Temperature>/°C", "T/°C")
+MAX_PREAMBLE_LINES = 1000  # how far the generic reader looks for the line of the column names
 GAP_FACTOR = 20.0       # a time step this many times the median step starts a new segment
 PAUSE_MIN_S = 60.0      # a wall-clock jump this much beyond the Time column marks a hidden pause
 
@@ -511,8 +512,10 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
         if unit is not None and unit not in units:
             raise DataError(f"{path}: {what} unit {unit!r}; expected one of {list(units)}")
     numeric = set(columns.values()) - {columns["time"]}
+    text = read_text(path)
+    header_line = _line_naming(text, set(columns.values()), sep)
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"]})
+                             keep_text={columns["time"]}, header_line=header_line, text=text)
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     if time_unit is not None and notes:
@@ -526,12 +529,24 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
     # a text time column's messages count s from its first row
     file_times = t - t[0] if notes else t
+    if header_line > 1:
+        notes.append(f"column names on line {header_line}: the {header_line - 1} line(s) "
+                     "before them skipped")
     return Record(t - t[0], cur, volts,
                   _meta(path, "generic", note, t, notes=notes,
                         segment_starts=_segment_starts_from_gaps(t, cur),
                         **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                          for k, v in columns.items()})),
                   temperature_c=temp)
+
+
+def _line_naming(text: str, names: set[str], sep: str) -> int:
+    """The file line (1-based) of the first line whose fields hold all the names (a cycler's
+    export may put a preamble of settings before its column names); 1 where none does."""
+    for k, line in enumerate(text.splitlines()[:MAX_PREAMBLE_LINES]):
+        if names <= {c.strip() for c in next(csv.reader([line], delimiter=sep), [])}:
+            return k + 1
+    return 1
 
 
 def _generic_times(cols: CsvColumns, column: str, path: Path, decimal: str
