@@ -275,6 +275,24 @@ def test_empty_and_unknown_files(tmp_path) -> None:
         read_record(bad_mat)
 
 
+def test_binary_files_given_as_data_are_named(tmp_path) -> None:
+    """A workbook, an FMU or a MATLAB v7.3 file given as a record is named as such, with what
+    to do; before, the message spoke only of a NUL byte or of an HDF reader to use."""
+    import zipfile
+    with zipfile.ZipFile(tmp_path / "log.xlsx", "w") as z:
+        z.writestr("xl/workbook.xml", "<workbook/>")
+    (tmp_path / "log.xls").write_bytes(b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1" + bytes(64))
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 ."
+    (tmp_path / "v73.mat").write_bytes(header.ljust(116) + bytes(8) + b"\x00\x02IM"
+                                       + bytes(384) + b"\x89HDF\r\n\x1a\n" + bytes(64))
+    for name, message in (("log.xlsx", "a ZIP archive, such as an Excel workbook (.xlsx: "
+                                       "save its sheet as CSV)"),
+                          ("log.xls", "Excel 97–2003 workbook (.xls: save its sheet as CSV)"),
+                          ("v73.mat", "a MATLAB v7.3 (HDF5) file, which is not read here")):
+        with pytest.raises(DataError, match=re.escape(f"{name}: ") + ".*" + re.escape(message)):
+            read_record(tmp_path / name)
+
+
 def test_gzip_csv_reads(tmp_path) -> None:
     p = tmp_path / "z.csv.gz"
     with gzip.open(p, "wt") as fh:

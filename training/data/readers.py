@@ -70,6 +70,14 @@ def chamber_temp_from_name(path: str | Path) -> float | None:
 
 
 TEXT_EXPECTED = "expected a CSV text file, a MATLAB .mat file or either gzip-compressed (.gz)"
+BINARY_KINDS = (       # what a binary file given as data is, by its first bytes
+    (b"PK\x03\x04", "a ZIP archive, such as an Excel workbook (.xlsx: save its sheet as CSV) "
+                     "or an FMU"),
+    (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1", "an OLE compound file, such as an Excel 97–2003 "
+                                           "workbook (.xls: save its sheet as CSV)"),
+    (b"\x89HDF\r\n\x1a\n", "an HDF5 file (a MATLAB v7.3 .mat file: save it with "
+                           "save(..., '-v7'))"),
+)
 HEAD_BYTES = 1 << 20    # how much of a file detect_format decodes for its first line
 
 
@@ -108,8 +116,9 @@ def read_text(path: Path, first_line: bool = False) -> str:
     encoding = text_encoding(raw, final=not first_line)
     if encoding is None:
         where = raw.find(b"\x00")
-        what = (f"a NUL byte at offset {where}" if where >= 0 else
-                "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
+        what = next((kind for magic, kind in BINARY_KINDS if raw.startswith(magic)), None)
+        what = what or (f"a NUL byte at offset {where}" if where >= 0 else
+                        "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
         raise DataError(f"{path}: not a text file ({what}); {TEXT_EXPECTED}")
     try:
         text = codecs.getincrementaldecoder(encoding)().decode(raw, final=not first_line)
@@ -331,6 +340,10 @@ def read_panasonic(path: Path) -> Record:
                 mat = scipy.io.loadmat(io.BytesIO(fh.read()))
         else:
             mat = scipy.io.loadmat(str(path))
+    except NotImplementedError:     # scipy's answer to a v7.3 (HDF5) file
+        raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file, which is not read here; expected "
+                        "a v7 or older .mat file (in MATLAB: save(FILE, 'meas', '-v7'))"
+                        ) from None
     except Exception as exc:  # scipy raises several types for corrupt files
         raise DataError(f"{path}: not a readable MATLAB file ({exc})") from exc
     if "meas" not in mat:
