@@ -722,6 +722,10 @@ def model_to_dict(model: LmnModel) -> dict:
     return doc
 
 
+MODEL_FILE_EXPECTED = ("expected the JSON model file that `lmncell train` writes (a data "
+                       "record is not one: commands take the model first)")
+
+
 def load_model(path: str | Path) -> LmnModel:
     """Read and check a model file (JSON only; nothing is executed)."""
     path = Path(path)
@@ -730,11 +734,12 @@ def load_model(path: str | Path) -> LmnModel:
     except OSError as exc:
         raise ModelFileError(f"{path}: cannot read the model file ({exc.strerror})") from exc
     except UnicodeDecodeError as exc:
-        raise ModelFileError(f"{path}: not a text (JSON) model file ({exc.reason})") from exc
+        raise ModelFileError(f"{path}: not a text (JSON) model file ({exc.reason}); "
+                             f"{MODEL_FILE_EXPECTED}") from exc
     try:
         doc = json.loads(text)
     except json.JSONDecodeError as exc:
-        raise ModelFileError(f"{path}: not valid JSON ({exc})") from exc
+        raise ModelFileError(f"{path}: not valid JSON ({exc}); {MODEL_FILE_EXPECTED}") from exc
     return model_from_dict(doc, str(path))
 
 

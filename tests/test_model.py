@@ -277,7 +277,11 @@ def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
 def test_not_json_is_refused(tmp_path) -> None:
     p = tmp_path / "m.json"
     p.write_bytes(b"\x80\x04pickle?")
-    with pytest.raises(ModelFileError, match="m.json"):
+    with pytest.raises(ModelFileError, match="m.json: not a text .JSON. model file .* expected "
+                                             "the JSON model file that `lmncell train` writes"):
+        load_model(p)
+    p.write_text("time,current,voltage\n0,0,3.3\n")    # a record given first, as the model
+    with pytest.raises(ModelFileError, match="not valid JSON .*a data record is not one"):
         load_model(p)
     with pytest.raises(ModelFileError, match="expected a JSON object"):
         model_from_dict([1, 2], "list")
