@@ -421,11 +421,13 @@ def test_read_records_options_are_read_generics(tmp_path) -> None:
 
 
 def _write_eclab(path, rec, decimal: str = ".", repeat_row: int | None = None,
-                 magic: str = "EC-Lab ASCII FILE", voltage: str = "Ewe/V") -> None:
+                 magic: str = "EC-Lab ASCII FILE", voltage: str = "Ewe/V",
+                 eis_after: int | None = None) -> None:
     """An EC-Lab ASCII export (.mpt) of a record as the software writes one: a preamble whose
     second line counts the header lines, tab-separated rows ending in a tab, I in mA (> 0
-    charges), (Q-Qo) in mA.h, Windows-1252 text (µ, ° in the names)."""
-    names = ["mode", "ox/red", "error", "time/s", "control/V/mA", voltage, "I/mA",
+    charges), (Q-Qo) in mA.h, Windows-1252 text (µ, ° in the names); with eis_after, three
+    impedance points (freq/Hz > 0) after that row, at its time and just after it."""
+    names = ["mode", "ox/red", "error", "time/s", "freq/Hz", "control/V/mA", voltage, "I/mA",
              "(Q-Qo)/mA.h", "Temperature/°C", "Capacitance charge/µF", "cycle number"]
     preamble = [magic, "", "Galvanostatic Cycling with Potential Limitation", "",
                 "Run on channel : 1 (SN 0001)", "Acquisition started on : 03/01/2024 10:00:00",
@@ -435,12 +437,16 @@ def _write_eclab(path, rec, decimal: str = ".", repeat_row: int | None = None,
     q_mah = 1000.0 * rec.charge_ah
     rows = []
     for k in range(len(rec)):
-        cells = [1, int(i[k] > 0), 0, t[k], 0.0, rec.voltage_v[k], 1000.0 * i[k], q_mah[k],
-                 25.0 + 0.001 * k, 0.0, 0]
+        cells = [1, int(i[k] > 0), 0, t[k], 0.0, 0.0, rec.voltage_v[k], 1000.0 * i[k],
+                 q_mah[k], 25.0 + 0.001 * k, 0.0, 0]
         rows.append("\t".join(repr(float(c)) if isinstance(c, float) else str(c)
                               for c in cells) + "\t")
         if k == repeat_row:
             rows.append(rows[-1])
+        if k == eis_after:
+            for j, freq in enumerate((1e4, 1e2, 1.0)):
+                eis = [3, 0, 0, t[k] + 1e-3 * j, freq, 0.0, 3.0, 5.0, q_mah[k], 25.0, 0.0, 0]
+                rows.append("\t".join(str(c) for c in eis) + "\t")
     text = "\n".join([*preamble, "\t".join(names) + "\t", *rows]) + "\n"
     if decimal == ",":
         text = "\n".join(ln if k <= len(preamble) else ln.replace(".", ",")
@@ -452,11 +458,13 @@ def test_biologic_export_reads_by_content(tmp_path) -> None:
     rec = read_record(A123_S1).slice(0, 3000)
     for decimal in (".", ","):
         path = tmp_path / f"cell_{decimal == ','}.mpt"
-        _write_eclab(path, rec, decimal=decimal, repeat_row=100)
+        _write_eclab(path, rec, decimal=decimal, repeat_row=100, eis_after=2000)
         assert detect_format(path) == "biologic"
         back = read_record(path)
         assert back.meta.fmt == "biologic" and len(back) == len(rec)
-        assert any("dropped 1 row" in n for n in back.meta.notes)
+        assert any("dropped 1 row(s) whose time the next row repeats" in n
+                   for n in back.meta.notes)
+        assert any("dropped 3 impedance (EIS) row(s)" in n for n in back.meta.notes)
         assert np.allclose(back.time_s, rec.time_s - rec.time_s[0], atol=1e-9)
         assert np.allclose(back.current_a, rec.current_a, atol=1e-12)
         assert np.allclose(back.voltage_v, rec.voltage_v, atol=1e-12)
@@ -503,3 +511,11 @@ def test_generic_reader_skips_a_preamble_before_the_column_names(tmp_path, capsy
     path.write_text("\n".join([*rows[:7], "3\t2\tx\t3.19\t25.2"]) + "\n")
     assert main(["inspect", str(path), "--columns", cols, "--delimiter", "tab"]) == 2
     assert "column 'Current' line 8: 'x' is not a number" in capsys.readouterr().err
+
+
+def test_biologic_export_of_impedance_only_is_refused(tmp_path) -> None:
+    path = tmp_path / "peis.mpt"
+    path.write_text("EC-Lab ASCII FILE\nNb header lines : 3\n"
+                    "freq/Hz\ttime/s\tEwe/V\tI/mA\n1000\t0.5\t3.3\t0.1\n100\t1.5\t3.3\t0.1\n")
+    with pytest.raises(DataError, match=r"peis.mpt: no cycling rows \(dropped 2 impedance"):
+        read_record(path)

@@ -40,6 +40,7 @@ BIOLOGIC_VOLTAGES = ("Ecell/V", "<Ecell>/V", "Ewe-Ece/V", "Ewe/V", "<Ewe>/V")  #
 BIOLOGIC_CURRENTS = {"I/mA": 1e-3, "<I>/mA": 1e-3, "I/A": 1.0, "<I>/A": 1.0}    # → A
 BIOLOGIC_CHARGES = {"(Q-Qo)/mA.h": 1e-3, "(Q-Qo)/A.h": 1.0, "(Q-Qo)/C": 1.0 / 3600.0}  # → Ah
 BIOLOGIC_TEMPERATURES = ("Temperature/°C", "<Temperature>/°C", "T/°C")
+BIOLOGIC_FREQUENCY = "freq/Hz"     # > 0 on the rows of an impedance measurement (EIS)
 MAX_PREAMBLE_LINES = 1000  # how far the generic reader looks for the line of the column names
 GAP_FACTOR = 20.0       # a time step this many times the median step starts a new segment
 PAUSE_MIN_S = 60.0      # a wall-clock jump this much beyond the Time column marks a hidden pause
@@ -420,9 +421,10 @@ def read_biologic(path: Path) -> Record:
     first of BIOLOGIC_VOLTAGES present), the current (``I/mA`` or ``<I>/mA``; > 0 charges), and
     where present ``(Q-Qo)/mA.h`` as the charge counter and ``Temperature/°C``.
 
-    The decimal mark is read from the data (a comma where the exporting PC wrote one). Rows
-    that repeat the time of the row before (EC-Lab writes one where a technique or sequence
-    changes) are dropped, the later kept, and counted in meta.notes."""
+    The decimal mark is read from the data (a comma where the exporting PC wrote one). Of two
+    rows with one time (EC-Lab writes them where a technique or sequence changes) the later is
+    kept, and impedance points between the cycling (``freq/Hz`` > 0) are left out; both are
+    counted in meta.notes (_biologic_rows)."""
     text = read_text(path)
     lines = text.splitlines()
     header_line = _biologic_header_line(path, lines)
@@ -437,15 +439,14 @@ def read_biologic(path: Path) -> Record:
     cols = _read_csv_columns(path, sep="\t", decimal=decimal, header_line=header_line, text=text,
                              required={BIOLOGIC_TIME, voltage, current,
                                        *(c for c in (charge, temperature) if c)})
-    t = cols[BIOLOGIC_TIME]
-    keep = np.ones(t.size, dtype=bool)
-    keep[1:] = np.diff(t) != 0
-    notes = ([] if keep.all() else
-             [f"dropped {int((~keep).sum())} row(s) that repeat the time of the row before"])
-    t = t[keep]
+    keep, notes = _biologic_rows(cols)
+    if not keep.any():
+        raise DataError(f"{path}: no cycling rows ({notes[0]}); expected time, voltage and "
+                        "current samples of a charge or discharge")
+    t = cols[BIOLOGIC_TIME][keep]
     amps = cols[current][keep] * BIOLOGIC_CURRENTS[current]
     net_ah = (None if charge is None else
-              (cols[charge][keep] - cols[charge][0]) * BIOLOGIC_CHARGES[charge])
+              (cols[charge][keep] - cols[charge][keep][0]) * BIOLOGIC_CHARGES[charge])
     file_columns = {"time_s": BIOLOGIC_TIME, "current_a": current, "voltage_v": voltage,
                     **({"charge_ah": charge} if charge else {}),
                     **({"temperature_c": temperature} if temperature else {})}
@@ -457,6 +458,23 @@ def read_biologic(path: Path) -> Record:
     return Record(t - t[0], amps, cols[voltage][keep], meta,
                   temperature_c=None if temperature is None else cols[temperature][keep],
                   charge_ah=net_ah)
+
+
+def _biologic_rows(cols: CsvColumns) -> tuple[np.ndarray, list[str]]:
+    """Which rows of an EC-Lab export are samples of the cycling, and notes on those that are
+    not: impedance points (freq/Hz > 0, whose I and E are the AC measurement's) and the
+    earlier of two rows with one time (the later holds the new step's current)."""
+    t = cols[BIOLOGIC_TIME]
+    keep = ~(cols[BIOLOGIC_FREQUENCY] > 0) if BIOLOGIC_FREQUENCY in cols else np.ones(t.size, bool)
+    notes = ([] if keep.all() else [f"dropped {int((~keep).sum())} impedance (EIS) row(s), "
+                                    f"those with {BIOLOGIC_FREQUENCY} > 0"])
+    rows = np.flatnonzero(keep)
+    repeated = rows[:-1][np.diff(t[rows]) == 0]
+    if repeated.size:
+        keep[repeated] = False
+        notes.append(f"dropped {repeated.size} row(s) whose time the next row repeats (kept "
+                     "the later)")
+    return keep, notes
 
 
 def _biologic_header_line(path: Path, lines: list[str]) -> int:
