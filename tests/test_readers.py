@@ -519,3 +519,11 @@ def test_biologic_export_of_impedance_only_is_refused(tmp_path) -> None:
                     "freq/Hz\ttime/s\tEwe/V\tI/mA\n1000\t0.5\t3.3\t0.1\n100\t1.5\t3.3\t0.1\n")
     with pytest.raises(DataError, match=r"peis.mpt: no cycling rows \(dropped 2 impedance"):
         read_record(path)
+
+
+@pytest.mark.parametrize("sep", [";;", "", 3])
+def test_a_bad_delimiter_is_a_data_error_not_a_traceback(tmp_path, sep) -> None:
+    path = tmp_path / "g.csv"
+    path.write_text("t,I,U\n0,0,3.3\n1,1,3.4\n")
+    with pytest.raises(DataError, match="g.csv: delimiter .*; expected one character"):
+        read_record(path, columns={"time": "t", "current": "I", "voltage": "U"}, sep=sep)

@@ -13,6 +13,7 @@ import codecs
 import csv
 import gzip
 import io
+import itertools
 import re
 import warnings
 from collections.abc import Mapping
@@ -205,11 +206,7 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     columns whose cells are also kept as written (CsvColumns.text); header_line: the file line
     of the column names (1: the first; the lines before it are skipped); text: the file's text
     where the caller has read it already (read_text)."""
-    if len(sep) != 1 or sep in (decimal, '"') or sep.isalnum():
-        raise DataError(f"{path}: delimiter {sep!r}; expected one character other than the "
-                        f"decimal mark {decimal!r}, a quote, a letter or a digit")
-    if decimal not in (".", ","):
-        raise DataError(f"{path}: decimal mark {decimal!r}; expected '.' or ','")
+    _check_marks(path, sep, decimal)
     required = _NUMERIC_REQUIRED if required is None else required
     text = read_text(path) if text is None else text
     numbered = [(k + 1, ln) for k, ln in enumerate(text.splitlines())
@@ -245,6 +242,16 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     if line_of[-1] - line_of[0] == len(line_of) - 1:
         out.first_line = line_of[0]
     return out
+
+
+def _check_marks(path: Path, sep: str, decimal: str) -> None:
+    """DataError unless sep is one character that can delimit fields and decimal is "." or
+    ","."""
+    if not isinstance(sep, str) or len(sep) != 1 or sep in (decimal, '"') or sep.isalnum():
+        raise DataError(f"{path}: delimiter {sep!r}; expected one character other than the "
+                        f"decimal mark {decimal!r}, a quote, a letter or a digit")
+    if decimal not in (".", ","):
+        raise DataError(f"{path}: decimal mark {decimal!r}; expected '.' or ','")
 
 
 def _comma_hint(cell: str, decimal: str) -> str:
@@ -543,6 +550,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
         if unit is not None and unit not in units:
             raise DataError(f"{path}: {what} unit {unit!r}; expected one of {list(units)}")
     numeric = set(columns.values()) - {columns["time"]}
+    _check_marks(path, sep, decimal)
     text = read_text(path)
     header_line = _line_naming(text, set(columns.values()), sep)
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
@@ -574,7 +582,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
 def _line_naming(text: str, names: set[str], sep: str) -> int:
     """The file line (1-based) of the first line whose fields hold all the names (a cycler's
     export may put a preamble of settings before its column names); 1 where none does."""
-    for k, line in enumerate(text.splitlines()[:MAX_PREAMBLE_LINES]):
+    for k, line in enumerate(itertools.islice(io.StringIO(text), MAX_PREAMBLE_LINES)):
         if names <= {c.strip() for c in next(csv.reader([line], delimiter=sep), [])}:
             return k + 1
     return 1
