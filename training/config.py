@@ -354,6 +354,9 @@ class TrainConfig:
     7.21 / 16.45 mV with 16; 10 °C records 13.15 / 26.26 and 11.77 / 24.48 mV). Beyond the
     training temperatures the extra splits along temperature can extrapolate worse (A123 trained
     at −5 and 5 °C, its 25 °C record: 5.94 / 30.1 mV with 8, 6.56 / 31.3 mV with 16).
+    A123 folds (−5 / 5 / 25 °C held out, temperature terms: local models along SoC only),
+    20–80 % / whole record mV, at most 8 / 12 / 16: 2.49 / 11.85, 2.56 / 12.75,
+    2.57 / 11.88 (M by the validation error in each).
     stop: "validation" (free-run error; for records at two or more temperature levels the
     geometric mean of each level's, where the network grows as one: the level with the largest
     errors no longer decides M alone; A123 s1 records, 20–80 % / whole record mV held out:
