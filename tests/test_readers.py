@@ -527,3 +527,18 @@ def test_a_bad_delimiter_is_a_data_error_not_a_traceback(tmp_path, sep) -> None:
     path.write_text("t,I,U\n0,0,3.3\n1,1,3.4\n")
     with pytest.raises(DataError, match="g.csv: delimiter .*; expected one character"):
         read_record(path, columns={"time": "t", "current": "I", "voltage": "U"}, sep=sep)
+
+
+def test_generic_reader_skips_a_units_row_after_the_column_names(tmp_path) -> None:
+    path = tmp_path / "units.csv"
+    path.write_text("Time;Current;Voltage\ns;A;V\n0;0;3,30\n1;-1,5;3,20\n2;0;3,25\n")
+    rec = read_record(path, columns={"time": "Time", "current": "Current", "voltage": "Voltage"},
+                      sep=";", decimal=",")
+    assert rec.current_a.tolist() == [0.0, -1.5, 0.0]
+    assert any("line 2 read as the columns' units, not data: 's;A;V'" in n
+               for n in rec.meta.notes)
+    # a row that is not units but bad data is still refused, naming its line
+    path.write_text("Time;Current;Voltage\n0;0;3,30\n1;x;3,20\n")
+    with pytest.raises(DataError, match="column 'Current' line 3: 'x' is not a number"):
+        read_record(path, columns={"time": "Time", "current": "Current", "voltage": "Voltage"},
+                    sep=";", decimal=",")

@@ -198,14 +198,16 @@ class CsvColumns(dict):
 def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                       required: frozenset[str] | set[str] | None = None,
                       keep_text: frozenset[str] | set[str] = frozenset(),
-                      header_line: int = 1, text: str | None = None) -> CsvColumns:
+                      header_line: int = 1, text: str | None = None,
+                      units_row: bool = False) -> CsvColumns:
     """Every column of a CSV file as float arrays, with the file's line numbers in errors.
 
     sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
     every cell must be a number (default: the known formats' numeric columns); keep_text:
     columns whose cells are also kept as written (CsvColumns.text); header_line: the file line
     of the column names (1: the first; the lines before it are skipped); text: the file's text
-    where the caller has read it already (read_text)."""
+    where the caller has read it already (read_text); units_row: the line after the names
+    holds units, not data (skipped)."""
     _check_marks(path, sep, decimal)
     required = _NUMERIC_REQUIRED if required is None else required
     text = read_text(path) if text is None else text
@@ -214,6 +216,9 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     if not numbered:
         raise DataError(f"{path}: the file is empty; expected a header line and data rows")
     header = [c.strip() for c in next(csv.reader([numbered[0][1]], delimiter=sep))]
+    if len(numbered) < 2:
+        raise DataError(f"{path}: the file has a header but no data rows")
+    numbered = numbered[:1] + numbered[2:] if units_row else numbered
     if len(numbered) < 2:
         raise DataError(f"{path}: the file has a header but no data rows")
     line_of = [k for k, _ in numbered[1:]]
@@ -553,8 +558,10 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     _check_marks(path, sep, decimal)
     text = read_text(path)
     header_line = _line_naming(text, set(columns.values()), sep)
+    units = _units_row(text, header_line, numeric, sep, decimal)
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"]}, header_line=header_line, text=text)
+                             keep_text={columns["time"]}, header_line=header_line, text=text,
+                             units_row=units is not None)
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     if time_unit is not None and notes:
@@ -571,6 +578,8 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     if header_line > 1:
         notes.append(f"column names on line {header_line}: the {header_line - 1} line(s) "
                      "before them skipped")
+    if units is not None:
+        notes.append(f"line {units[0]} read as the columns' units, not data: {units[1]!r}")
     return Record(t - t[0], cur, volts,
                   _meta(path, "generic", note, t, notes=notes,
                         segment_starts=_segment_starts_from_gaps(t, cur),
@@ -586,6 +595,36 @@ def _line_naming(text: str, names: set[str], sep: str) -> int:
         if names <= {c.strip() for c in next(csv.reader([line], delimiter=sep), [])}:
             return k + 1
     return 1
+
+
+def _units_row(text: str, header_line: int, numeric: set[str], sep: str, decimal: str
+               ) -> tuple[int, str] | None:
+    """(file line, text) of a units row (such as "s;A;V") right after the column names: where
+    none of the numeric columns named holds a number there and all of them do in the next
+    line; None otherwise."""
+    lines = [(k + 1, ln) for k, ln in enumerate(
+        itertools.islice(io.StringIO(text), header_line - 1, header_line + 9), header_line - 1)
+        if ln.strip()]
+    if len(lines) < 3 or not numeric:
+        return None
+    names = [c.strip() for c in next(csv.reader([lines[0][1]], delimiter=sep))]
+    where = [names.index(n) for n in numeric if n in names]
+
+    def numbers(line: str) -> list[bool]:
+        cells = next(csv.reader([line], delimiter=sep))
+        return [j < len(cells) and _is_number(cells[j], decimal) for j in where]
+
+    if where and not any(numbers(lines[1][1])) and all(numbers(lines[2][1])):
+        return lines[1][0], lines[1][1].strip()
+    return None
+
+
+def _is_number(cell: str, decimal: str) -> bool:
+    try:
+        float(cell.strip().replace(",", ".") if decimal == "," else cell.strip())
+    except ValueError:
+        return False
+    return True
 
 
 def _generic_times(cols: CsvColumns, column: str, path: Path, decimal: str
