@@ -537,6 +537,18 @@ def test_generic_reader_skips_a_units_row_after_the_column_names(tmp_path) -> No
     assert rec.current_a.tolist() == [0.0, -1.5, 0.0]
     assert any("line 2 read as the columns' units, not data: 's;A;V'" in n
                for n in rec.meta.notes)
+    # the row's units are taken: mA, mV and min read as such, and an option that disagrees
+    # with them is refused
+    path.write_text("Time;Current;Voltage\n[min];[mA];[mV]\n0;0;3300\n1;-1500;3200\n")
+    mapping = {"time": "Time", "current": "Current", "voltage": "Voltage"}
+    rec = read_record(path, columns=mapping, sep=";")
+    assert rec.time_s.tolist() == [0.0, 60.0] and rec.current_a.tolist() == [0.0, -1.5]
+    assert rec.voltage_v == pytest.approx([3.3, 3.2], abs=1e-12)
+    assert any("time in min; current in mA; voltage in mV" in n for n in rec.meta.notes)
+    assert read_record(path, columns=mapping, sep=";", current_unit="mA").current_a[1] == -1.5
+    with pytest.raises(DataError, match=re.escape("units row (line 2) gives the current in mA, "
+                                                  "the option given A")):
+        read_record(path, columns=mapping, sep=";", current_unit="A")
     # a row that is not units but bad data is still refused, naming its line
     path.write_text("Time;Current;Voltage\n0;0;3,30\n1;x;3,20\n")
     with pytest.raises(DataError, match="column 'Current' line 3: 'x' is not a number"):

@@ -519,6 +519,14 @@ CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
 VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
 TEMPERATURE_UNITS = {"degC": 0.0, "K": -273.15}      # the offset to °C
+UNITS = {"time": TIME_UNITS, "current": CURRENT_UNITS, "voltage": VOLTAGE_UNITS,
+         "temperature": TEMPERATURE_UNITS}
+UNIT_WORDS = {        # how a units row may write them (lower case, brackets stripped)
+    "time": {"s": "s", "sec": "s", "ms": "ms", "min": "min", "h": "h", "hr": "h"},
+    "current": {"a": "A", "ma": "mA"},
+    "voltage": {"v": "V", "mv": "mV"},
+    "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "k": "K"},
+}
 
 
 def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
@@ -544,16 +552,12 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     if unknown:
         raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
                         f"{list(GENERIC_KEYS)}")
-    if current_unit is not None:
-        if current_unit not in CURRENT_UNITS:
-            raise DataError(f"{path}: current unit {current_unit!r}; expected one of "
-                            f"{list(CURRENT_UNITS)}")
-        current_scale = CURRENT_UNITS[current_unit]
-    for what, unit, units in (("time", time_unit, TIME_UNITS),
-                              ("voltage", voltage_unit, VOLTAGE_UNITS),
-                              ("temperature", temperature_unit, TEMPERATURE_UNITS)):
-        if unit is not None and unit not in units:
-            raise DataError(f"{path}: {what} unit {unit!r}; expected one of {list(units)}")
+    given = {"time": time_unit, "current": current_unit, "voltage": voltage_unit,
+             "temperature": temperature_unit}
+    for what, unit in given.items():
+        if unit is not None and unit not in UNITS[what]:
+            raise DataError(f"{path}: {what} unit {unit!r}; expected one of "
+                            f"{list(UNITS[what])}")
     numeric = set(columns.values()) - {columns["time"]}
     _check_marks(path, sep, decimal)
     text = read_text(path)
@@ -564,6 +568,13 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                              units_row=units is not None)
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
+    if units is not None:
+        row_units = _row_units(text, header_line, units[0], columns, sep, text_time=bool(notes))
+        given = _with_row_units(path, given, row_units, current_scale, units[0])
+        time_unit, current_unit = given["time"], given["current"]
+        voltage_unit, temperature_unit = given["voltage"], given["temperature"]
+    if current_unit is not None:
+        current_scale = CURRENT_UNITS[current_unit]
     if time_unit is not None and notes:
         raise DataError(f"{path}: time unit {time_unit!r} for the column '{columns['time']}', "
                         "whose times are text that carries its own unit; expected no time unit")
@@ -579,7 +590,8 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
         notes.append(f"column names on line {header_line}: the {header_line - 1} line(s) "
                      "before them skipped")
     if units is not None:
-        notes.append(f"line {units[0]} read as the columns' units, not data: {units[1]!r}")
+        notes.append(f"line {units[0]} read as the columns' units, not data: {units[1]!r}"
+                     + "".join(f"; {what} in {unit}" for what, unit in row_units.items()))
     return Record(t - t[0], cur, volts,
                   _meta(path, "generic", note, t, notes=notes,
                         segment_starts=_segment_starts_from_gaps(t, cur),
@@ -617,6 +629,41 @@ def _units_row(text: str, header_line: int, numeric: set[str], sep: str, decimal
     if where and not any(numbers(lines[1][1])) and all(numbers(lines[2][1])):
         return lines[1][0], lines[1][1].strip()
     return None
+
+
+def _row_units(text: str, header_line: int, units_line: int, columns: Mapping[str, str],
+               sep: str, text_time: bool) -> dict[str, str]:
+    """The units a units row gives the mapped columns, where it names one of UNITS (a text
+    time column's own unit is its text's: left out)."""
+    lines = text.splitlines()
+    names = [c.strip() for c in next(csv.reader([lines[header_line - 1]], delimiter=sep))]
+    cells = next(csv.reader([lines[units_line - 1]], delimiter=sep))
+    out = {}
+    for what, column in columns.items():
+        j = names.index(column)
+        word = cells[j].strip().strip("[]()").strip() if j < len(cells) else ""
+        unit = UNIT_WORDS.get(what, {}).get(word.lower())
+        if unit is not None and not (what == "time" and text_time):
+            out[what] = unit
+    return out
+
+
+def _with_row_units(path: Path, given: dict[str, str | None], row_units: dict[str, str],
+                    current_scale: float, line: int) -> dict[str, str | None]:
+    """The units given, completed by those of the file's units row; DataError where the two
+    disagree (a unit given, or for the current a current_scale other than 1)."""
+    out = dict(given)
+    for what, unit in row_units.items():
+        mine = given[what]
+        if what == "current" and mine is None and current_scale != 1.0:
+            mine = next((u for u, f in CURRENT_UNITS.items() if f == current_scale),
+                        f"a scale of {current_scale:g}")
+        if mine is not None and mine != unit:
+            raise DataError(f"{path}: the units row (line {line}) gives the {what} in "
+                            f"{unit}, the option given {mine}; expected them to agree (leave "
+                            "the option out to take the file's unit)")
+        out[what] = unit
+    return out
 
 
 def _is_number(cell: str, decimal: str) -> bool:
