@@ -544,11 +544,34 @@ def test_generic_reader_skips_a_units_row_after_the_column_names(tmp_path) -> No
     rec = read_record(path, columns=mapping, sep=";")
     assert rec.time_s.tolist() == [0.0, 60.0] and rec.current_a.tolist() == [0.0, -1.5]
     assert rec.voltage_v == pytest.approx([3.3, 3.2], abs=1e-12)
-    assert any("time in min; current in mA; voltage in mV" in n for n in rec.meta.notes)
+    assert any(n == "units from the file: time in min (the units row (line 2)), current in mA "
+               "(the units row (line 2)), voltage in mV (the units row (line 2))"
+               for n in rec.meta.notes)
     assert read_record(path, columns=mapping, sep=";", current_unit="mA").current_a[1] == -1.5
     with pytest.raises(DataError, match=re.escape("units row (line 2) gives the current in mA, "
                                                   "the option given A")):
         read_record(path, columns=mapping, sep=";", current_unit="A")
+
+
+def test_generic_reader_takes_units_from_the_column_names(tmp_path) -> None:
+    path = tmp_path / "named.csv"
+    path.write_text("Time (min),I/mA,Voltage [mV],T [K]\n0,0,3300,298.15\n1,-1500,3200,299.15\n")
+    mapping = {"time": "Time (min)", "current": "I/mA", "voltage": "Voltage [mV]",
+               "temperature": "T [K]"}
+    rec = read_record(path, columns=mapping)
+    assert rec.time_s.tolist() == [0.0, 60.0] and rec.current_a.tolist() == [0.0, -1.5]
+    assert rec.voltage_v == pytest.approx([3.3, 3.2], abs=1e-12)
+    assert rec.temperature_c == pytest.approx([25.0, 26.0], abs=1e-9)
+    assert any("current in mA (the column name 'I/mA')" in n for n in rec.meta.notes)
+    with pytest.raises(DataError, match=re.escape("the column name 'Voltage [mV]' gives the "
+                                                  "voltage in mV, the option given V")):
+        read_record(path, columns=mapping, voltage_unit="V")
+    # a name and a units row that disagree are refused
+    path.write_text("Time,Current [A],Voltage\ns,mA,V\n0,0,3.3\n1,-1500,3.2\n")
+    with pytest.raises(DataError, match=re.escape("the column name 'Current [A]' gives the "
+                                                  "current in A, the units row (line 2) in mA")):
+        read_record(path, columns={"time": "Time", "current": "Current [A]",
+                                   "voltage": "Voltage"})
     # a row that is not units but bad data is still refused, naming its line
     path.write_text("Time;Current;Voltage\n0;0;3,30\n1;x;3,20\n")
     with pytest.raises(DataError, match="column 'Current' line 3: 'x' is not a number"):

@@ -341,13 +341,15 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
     g.add_argument("--discharge-positive", action="store_true", help="the file counts "
                    "discharge current as positive (LMNCell: current > 0 charges)")
     g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "
-                   "(default: that of a units row under the names, else A)")
+                   "(default: the file's, from the column name, e.g. 'I [mA]', or a units row "
+                   "under the names; else A)")
     g.add_argument("--time-unit", choices=["s", "ms", "min", "h"], help="unit of a numeric "
-                   "time column (default: that of a units row, else s)")
+                   "time column (default: the file's, from the column name or a units row; else s)")
     g.add_argument("--voltage-unit", choices=["V", "mV"], help="unit of the voltage column "
-                   "(default: that of a units row, else V)")
+                   "(default: the file's, from the column name or a units row; else V)")
     g.add_argument("--temperature-unit", choices=["degC", "K"], help="unit of the temperature "
-                   "column (default: that of a units row, else degC)")
+                   "column (default: the file's, from the column name or a units row; else "
+                   "degC)")
     g.add_argument("--delimiter", metavar="CHAR", help="field delimiter, e.g. ';' or tab "
                    "(default: ',')")
     g.add_argument("--decimal", choices=[".", ","], help="decimal mark (default: '.')")

@@ -521,7 +521,9 @@ VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
 TEMPERATURE_UNITS = {"degC": 0.0, "K": -273.15}      # the offset to °C
 UNITS = {"time": TIME_UNITS, "current": CURRENT_UNITS, "voltage": VOLTAGE_UNITS,
          "temperature": TEMPERATURE_UNITS}
-UNIT_WORDS = {        # how a units row may write them (lower case, brackets stripped)
+DEFAULT_UNITS = {"time": "s", "current": "A", "voltage": "V", "temperature": "degC"}
+NAME_UNIT = re.compile(r"(?:\[\s*([^\]]+?)\s*\]|\(\s*([^)]+?)\s*\)|/\s*([^/\s]+))\s*$")
+UNIT_WORDS = {        # how a units row or a column name may write them (lower case)
     "time": {"s": "s", "sec": "s", "ms": "ms", "min": "min", "h": "h", "hr": "h"},
     "current": {"a": "A", "ma": "mA"},
     "voltage": {"v": "V", "mv": "mV"},
@@ -540,24 +542,14 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
     time column, one of TIME_UNITS (default s); voltage_unit: "V" or "mV"; temperature_unit:
-    "degC" or "K"; discharge_positive: the file counts discharge
-    current as positive (it is negated: LMNCell's current > 0 charges); sep: the delimiter;
-    decimal: "." or "," (decimal comma).
-    """
-    for key in ("time", "current", "voltage"):
-        if key not in columns:
-            raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
-                            "expected time, current and voltage (temperature optional)")
-    unknown = sorted(set(columns) - set(GENERIC_KEYS))
-    if unknown:
-        raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
-                        f"{list(GENERIC_KEYS)}")
+    "degC" or "K"; each unit not given is the file's where its column name or a units row
+    under the names gives one (_file_units), else the default; discharge_positive: the file
+    counts discharge current as positive (it is negated: LMNCell's current > 0 charges); sep:
+    the delimiter; decimal: "." or "," (decimal comma). The column names are on the first line
+    that holds them all (_line_naming); a units row under them is skipped (_units_row)."""
     given = {"time": time_unit, "current": current_unit, "voltage": voltage_unit,
              "temperature": temperature_unit}
-    for what, unit in given.items():
-        if unit is not None and unit not in UNITS[what]:
-            raise DataError(f"{path}: {what} unit {unit!r}; expected one of "
-                            f"{list(UNITS[what])}")
+    _check_mapping(path, columns, given)
     numeric = set(columns.values()) - {columns["time"]}
     _check_marks(path, sep, decimal)
     text = read_text(path)
@@ -568,11 +560,12 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                              units_row=units is not None)
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
-    if units is not None:
-        row_units = _row_units(text, header_line, units[0], columns, sep, text_time=bool(notes))
-        given = _with_row_units(path, given, row_units, current_scale, units[0])
-        time_unit, current_unit = given["time"], given["current"]
-        voltage_unit, temperature_unit = given["voltage"], given["temperature"]
+    file_units = _file_units(path, columns, text, header_line, units, sep, bool(notes))
+    taken = {what: unit_where for what, unit_where in file_units.items()
+             if given[what] is None and unit_where[0] != DEFAULT_UNITS[what]}
+    given = _with_file_units(path, given, file_units, current_scale)
+    time_unit, current_unit = given["time"], given["current"]
+    voltage_unit, temperature_unit = given["voltage"], given["temperature"]
     if current_unit is not None:
         current_scale = CURRENT_UNITS[current_unit]
     if time_unit is not None and notes:
@@ -586,18 +579,47 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
     # a text time column's messages count s from its first row
     file_times = t - t[0] if notes else t
-    if header_line > 1:
-        notes.append(f"column names on line {header_line}: the {header_line - 1} line(s) "
-                     "before them skipped")
-    if units is not None:
-        notes.append(f"line {units[0]} read as the columns' units, not data: {units[1]!r}"
-                     + "".join(f"; {what} in {unit}" for what, unit in row_units.items()))
+    notes += _layout_notes(header_line, units, taken)
     return Record(t - t[0], cur, volts,
                   _meta(path, "generic", note, t, notes=notes,
                         segment_starts=_segment_starts_from_gaps(t, cur),
                         **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                          for k, v in columns.items()})),
                   temperature_c=temp)
+
+
+def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str | None]
+                   ) -> None:
+    """DataError unless the column mapping names time, current and voltage (and at most
+    temperature besides) and every unit given is one of UNITS."""
+    for key in ("time", "current", "voltage"):
+        if key not in columns:
+            raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
+                            "expected time, current and voltage (temperature optional)")
+    unknown = sorted(set(columns) - set(GENERIC_KEYS))
+    if unknown:
+        raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
+                        f"{list(GENERIC_KEYS)}")
+    for what, unit in units.items():
+        if unit is not None and unit not in UNITS[what]:
+            raise DataError(f"{path}: {what} unit {unit!r}; expected one of "
+                            f"{list(UNITS[what])}")
+
+
+def _layout_notes(header_line: int, units: tuple[int, str] | None,
+                  taken: dict[str, tuple[str, str]]) -> list[str]:
+    """Notes on how a generic file was read: lines skipped before the column names, a units
+    row, and the units taken from the file rather than the defaults."""
+    notes = []
+    if header_line > 1:
+        notes.append(f"column names on line {header_line}: the {header_line - 1} line(s) "
+                     "before them skipped")
+    if units is not None:
+        notes.append(f"line {units[0]} read as the columns' units, not data: {units[1]!r}")
+    if taken:
+        notes.append("units from the file: " + ", ".join(
+            f"{what} in {unit} ({where})" for what, (unit, where) in taken.items()))
+    return notes
 
 
 def _line_naming(text: str, names: set[str], sep: str) -> int:
@@ -631,37 +653,52 @@ def _units_row(text: str, header_line: int, numeric: set[str], sep: str, decimal
     return None
 
 
-def _row_units(text: str, header_line: int, units_line: int, columns: Mapping[str, str],
-               sep: str, text_time: bool) -> dict[str, str]:
-    """The units a units row gives the mapped columns, where it names one of UNITS (a text
-    time column's own unit is its text's: left out)."""
-    lines = text.splitlines()
-    names = [c.strip() for c in next(csv.reader([lines[header_line - 1]], delimiter=sep))]
-    cells = next(csv.reader([lines[units_line - 1]], delimiter=sep))
-    out = {}
+def _file_units(path: Path, columns: Mapping[str, str], text: str, header_line: int,
+                units: tuple[int, str] | None, sep: str, text_time: bool
+                ) -> dict[str, tuple[str, str]]:
+    """The units the file itself gives the mapped columns, with where: the column name's
+    (``Current [mA]``, ``Current (mA)``, ``I/mA``) and the units row's (UNIT_WORDS; a text time
+    column's unit is its text's, left out); DataError where the two disagree."""
+    found: dict[str, tuple[str, str]] = {}
     for what, column in columns.items():
-        j = names.index(column)
-        word = cells[j].strip().strip("[]()").strip() if j < len(cells) else ""
-        unit = UNIT_WORDS.get(what, {}).get(word.lower())
-        if unit is not None and not (what == "time" and text_time):
-            out[what] = unit
-    return out
+        m = NAME_UNIT.search(column)
+        word = next((g for g in m.groups() if g), "") if m else ""
+        if word.lower() in UNIT_WORDS[what]:
+            found[what] = (UNIT_WORDS[what][word.lower()], f"the column name {column!r}")
+    if units is not None:
+        lines = text.splitlines()
+        names = [c.strip() for c in next(csv.reader([lines[header_line - 1]], delimiter=sep))]
+        cells = next(csv.reader([lines[units[0] - 1]], delimiter=sep))
+        for what, column in columns.items():
+            j = names.index(column)
+            word = cells[j].strip().strip("[]()").strip().lower() if j < len(cells) else ""
+            if word not in UNIT_WORDS[what]:
+                continue
+            unit, where = UNIT_WORDS[what][word], f"the units row (line {units[0]})"
+            if what in found and found[what][0] != unit:
+                raise DataError(f"{path}: {found[what][1]} gives the {what} in "
+                                f"{found[what][0]}, {where} in {unit}; expected them to agree")
+            found.setdefault(what, (unit, where))
+    if text_time:
+        found.pop("time", None)
+    return found
 
 
-def _with_row_units(path: Path, given: dict[str, str | None], row_units: dict[str, str],
-                    current_scale: float, line: int) -> dict[str, str | None]:
-    """The units given, completed by those of the file's units row; DataError where the two
-    disagree (a unit given, or for the current a current_scale other than 1)."""
+def _with_file_units(path: Path, given: dict[str, str | None],
+                     file_units: dict[str, tuple[str, str]], current_scale: float
+                     ) -> dict[str, str | None]:
+    """The units given, completed by those the file gives (_file_units); DataError where the
+    two disagree (a unit given, or for the current a current_scale other than 1)."""
     out = dict(given)
-    for what, unit in row_units.items():
+    for what, (unit, where) in file_units.items():
         mine = given[what]
         if what == "current" and mine is None and current_scale != 1.0:
             mine = next((u for u, f in CURRENT_UNITS.items() if f == current_scale),
                         f"a scale of {current_scale:g}")
         if mine is not None and mine != unit:
-            raise DataError(f"{path}: the units row (line {line}) gives the {what} in "
-                            f"{unit}, the option given {mine}; expected them to agree (leave "
-                            "the option out to take the file's unit)")
+            raise DataError(f"{path}: {where} gives the {what} in {unit}, the option given "
+                            f"{mine}; expected them to agree (leave the option out to take "
+                            "the file's unit)")
         out[what] = unit
     return out
 
