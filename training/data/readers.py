@@ -560,10 +560,9 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                              units_row=units is not None)
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
-    file_units = _file_units(path, columns, text, header_line, units, sep, bool(notes))
-    taken = {what: unit_where for what, unit_where in file_units.items()
-             if given[what] is None and unit_where[0] != DEFAULT_UNITS[what]}
-    given = _with_file_units(path, given, file_units, current_scale)
+    given, taken = _with_file_units(
+        path, given, _file_units(columns, text, header_line, units, sep, bool(notes)),
+        current_scale)
     time_unit, current_unit = given["time"], given["current"]
     voltage_unit, temperature_unit = given["voltage"], given["temperature"]
     if current_unit is not None:
@@ -653,18 +652,19 @@ def _units_row(text: str, header_line: int, numeric: set[str], sep: str, decimal
     return None
 
 
-def _file_units(path: Path, columns: Mapping[str, str], text: str, header_line: int,
+def _file_units(columns: Mapping[str, str], text: str, header_line: int,
                 units: tuple[int, str] | None, sep: str, text_time: bool
-                ) -> dict[str, tuple[str, str]]:
-    """The units the file itself gives the mapped columns, with where: the column name's
+                ) -> dict[str, list[tuple[str, str]]]:
+    """The units the file itself gives the mapped columns, each with where: the column name's
     (``Current [mA]``, ``Current (mA)``, ``I/mA``) and the units row's (UNIT_WORDS; a text time
-    column's unit is its text's, left out); DataError where the two disagree."""
-    found: dict[str, tuple[str, str]] = {}
+    column's unit is its text's, left out)."""
+    found: dict[str, list[tuple[str, str]]] = {}
     for what, column in columns.items():
         m = NAME_UNIT.search(column)
-        word = next((g for g in m.groups() if g), "") if m else ""
-        if word.lower() in UNIT_WORDS[what]:
-            found[what] = (UNIT_WORDS[what][word.lower()], f"the column name {column!r}")
+        word = next((g for g in m.groups() if g), "").lower() if m else ""
+        if word in UNIT_WORDS[what]:
+            found.setdefault(what, []).append((UNIT_WORDS[what][word],
+                                               f"the column name {column!r}"))
     if units is not None:
         lines = text.splitlines()
         names = [c.strip() for c in next(csv.reader([lines[header_line - 1]], delimiter=sep))]
@@ -672,35 +672,41 @@ def _file_units(path: Path, columns: Mapping[str, str], text: str, header_line: 
         for what, column in columns.items():
             j = names.index(column)
             word = cells[j].strip().strip("[]()").strip().lower() if j < len(cells) else ""
-            if word not in UNIT_WORDS[what]:
-                continue
-            unit, where = UNIT_WORDS[what][word], f"the units row (line {units[0]})"
-            if what in found and found[what][0] != unit:
-                raise DataError(f"{path}: {found[what][1]} gives the {what} in "
-                                f"{found[what][0]}, {where} in {unit}; expected them to agree")
-            found.setdefault(what, (unit, where))
+            if word in UNIT_WORDS[what]:
+                found.setdefault(what, []).append((UNIT_WORDS[what][word],
+                                                   f"the units row (line {units[0]})"))
     if text_time:
         found.pop("time", None)
     return found
 
 
 def _with_file_units(path: Path, given: dict[str, str | None],
-                     file_units: dict[str, tuple[str, str]], current_scale: float
-                     ) -> dict[str, str | None]:
-    """The units given, completed by those the file gives (_file_units); DataError where the
-    two disagree (a unit given, or for the current a current_scale other than 1)."""
-    out = dict(given)
-    for what, (unit, where) in file_units.items():
+                     file_units: dict[str, list[tuple[str, str]]], current_scale: float
+                     ) -> tuple[dict[str, str | None], dict[str, tuple[str, str]]]:
+    """The units to read with, and those of them taken from the file (with where): an option
+    given wins, with a DataWarning where the file says otherwise (a header may be wrong); else
+    the file's unit, a DataError where the column name and the units row disagree."""
+    out, taken = dict(given), {}
+    for what, says in file_units.items():
         mine = given[what]
         if what == "current" and mine is None and current_scale != 1.0:
             mine = next((u for u, f in CURRENT_UNITS.items() if f == current_scale),
                         f"a scale of {current_scale:g}")
-        if mine is not None and mine != unit:
-            raise DataError(f"{path}: {where} gives the {what} in {unit}, the option given "
-                            f"{mine}; expected them to agree (leave the option out to take "
-                            "the file's unit)")
-        out[what] = unit
-    return out
+        other = [(unit, where) for unit, where in says if unit != (mine or says[0][0])]
+        said = " and ".join(f"{where} in {unit}" for unit, where in other)
+        if mine is not None:
+            if other:
+                warnings.warn(f"{path}: {said} gives the {what}; read in {mine} as the option "
+                              "says", DataWarning, stacklevel=4)
+            continue
+        if other:
+            raise DataError(f"{path}: {says[0][1]} gives the {what} in {says[0][0]}, {said}; "
+                            f"expected them to agree (give the {what} unit: "
+                            f"--{what}-unit, {what}_unit=)")
+        out[what] = says[0][0]
+        if says[0][0] != DEFAULT_UNITS[what]:
+            taken[what] = says[0]
+    return out, taken
 
 
 def _is_number(cell: str, decimal: str) -> bool:
