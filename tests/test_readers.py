@@ -550,8 +550,8 @@ def test_generic_reader_skips_a_units_row_after_the_column_names(tmp_path) -> No
     assert read_record(path, columns=mapping, sep=";", current_unit="mA").current_a[1] == -1.5
     # an option wins over the file (whose header may be wrong), with a warning
     with pytest.warns(DataWarning, match="values look like mA"), \
-            pytest.warns(DataWarning, match=re.escape("the units row (line 2) in mA gives the "
-                                                      "current; read in A as the option says")):
+            pytest.warns(DataWarning, match=re.escape("the current is read in A as the option "
+                                                      "says, where the units row (line 2) says mA")):
         assert read_record(path, columns=mapping, sep=";", current_unit="A").current_a[1] == (
             -1500.0)
 
@@ -566,18 +566,18 @@ def test_generic_reader_takes_units_from_the_column_names(tmp_path) -> None:
     assert rec.voltage_v == pytest.approx([3.3, 3.2], abs=1e-12)
     assert rec.temperature_c == pytest.approx([25.0, 26.0], abs=1e-9)
     assert any("current in mA (the column name 'I/mA')" in n for n in rec.meta.notes)
-    with pytest.warns(DataWarning, match=re.escape("the column name 'Time (min)' in min "
-                                                   "gives the time; read in s as the option")):
+    with pytest.warns(DataWarning, match=re.escape("the time is read in s as the option says, "
+                                                   "where the column name 'Time (min)' says min")):
         assert read_record(path, columns=mapping, time_unit="s").time_s.tolist() == [0.0, 1.0]
     # a name and a units row that disagree are refused
     path.write_text("Time,Current [A],Voltage\ns,mA,V\n0,0,3.3\n1,-1500,3.2\n")
     mapping = {"time": "Time", "current": "Current [A]", "voltage": "Voltage"}
-    with pytest.raises(DataError, match=re.escape("the column name 'Current [A]' gives the "
-                                                  "current in A, the units row (line 2) in mA; "
+    with pytest.raises(DataError, match=re.escape("the column name 'Current [A]' says the "
+                                                  "current is in A, the units row (line 2) says mA; "
                                                   "expected them to agree (give the current "
                                                   "unit: --current-unit")):
         read_record(path, columns=mapping)
-    with pytest.warns(DataWarning, match="the column name 'Current .A.' in A gives the current"):
+    with pytest.warns(DataWarning, match="where the column name 'Current .A.' says A"):
         assert read_record(path, columns=mapping, current_unit="mA").current_a[1] == -1.5
     # a row that is not units but bad data is still refused, naming its line
     path.write_text("Time;Current;Voltage\n0;0;3,30\n1;x;3,20\n")

@@ -693,14 +693,14 @@ def _with_file_units(path: Path, given: dict[str, str | None],
             mine = next((u for u, f in CURRENT_UNITS.items() if f == current_scale),
                         f"a scale of {current_scale:g}")
         other = [(unit, where) for unit, where in says if unit != (mine or says[0][0])]
-        said = " and ".join(f"{where} in {unit}" for unit, where in other)
+        said = " and ".join(f"{where} says {unit}" for unit, where in other)
         if mine is not None:
             if other:
-                warnings.warn(f"{path}: {said} gives the {what}; read in {mine} as the option "
-                              "says", DataWarning, stacklevel=4)
+                warnings.warn(f"{path}: the {what} is read in {mine} as the option says, where "
+                              f"{said}", DataWarning, stacklevel=4)
             continue
         if other:
-            raise DataError(f"{path}: {says[0][1]} gives the {what} in {says[0][0]}, {said}; "
+            raise DataError(f"{path}: {says[0][1]} says the {what} is in {says[0][0]}, {said}; "
                             f"expected them to agree (give the {what} unit: "
                             f"--{what}-unit, {what}_unit=)")
         out[what] = says[0][0]
