@@ -13,12 +13,12 @@ import codecs
 import csv
 import gzip
 import io
-import itertools
 import re
 import warnings
 from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
@@ -198,26 +198,24 @@ class CsvColumns(dict):
 def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                       required: frozenset[str] | set[str] | None = None,
                       keep_text: frozenset[str] | set[str] = frozenset(),
-                      header_line: int = 1, text: str | None = None,
+                      header_line: int = 1, lines: list[str] | None = None,
                       units_row: bool = False) -> CsvColumns:
     """Every column of a CSV file as float arrays, with the file's line numbers in errors.
 
     sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
     every cell must be a number (default: the known formats' numeric columns); keep_text:
     columns whose cells are also kept as written (CsvColumns.text); header_line: the file line
-    of the column names (1: the first; the lines before it are skipped); text: the file's text
-    where the caller has read it already (read_text); units_row: the line after the names
-    holds units, not data (skipped)."""
+    of the column names (1: the first; the lines before it are skipped); lines: the file's
+    lines where the caller has read them already (read_text); units_row: the line after the
+    names holds units, not data (skipped)."""
     _check_marks(path, sep, decimal)
     required = _NUMERIC_REQUIRED if required is None else required
-    text = read_text(path) if text is None else text
-    numbered = [(k + 1, ln) for k, ln in enumerate(text.splitlines())
+    lines = read_text(path).splitlines() if lines is None else lines
+    numbered = [(k + 1, ln) for k, ln in enumerate(lines)
                 if k + 1 >= header_line and ln.strip()]
     if not numbered:
         raise DataError(f"{path}: the file is empty; expected a header line and data rows")
     header = [c.strip() for c in next(csv.reader([numbered[0][1]], delimiter=sep))]
-    if len(numbered) < 2:
-        raise DataError(f"{path}: the file has a header but no data rows")
     numbered = numbered[:1] + numbered[2:] if units_row else numbered
     if len(numbered) < 2:
         raise DataError(f"{path}: the file has a header but no data rows")
@@ -233,7 +231,7 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
         for r, row in enumerate(rows):
             try:
                 cell = row[j].strip()
-                col[r] = float(cell.replace(",", ".") if decimal == "," else cell)
+                col[r] = _number(cell, decimal)
             except (ValueError, IndexError):
                 if j >= len(row):
                     raise DataError(f"{path}: line {line_of[r]} has {len(row)} fields, "
@@ -437,8 +435,7 @@ def read_biologic(path: Path) -> Record:
     rows with one time (EC-Lab writes them where a technique or sequence changes) the later is
     kept, and impedance points between the cycling (``freq/Hz`` > 0) are left out; both are
     counted in meta.notes (_biologic_rows)."""
-    text = read_text(path)
-    lines = text.splitlines()
+    lines = read_text(path).splitlines()
     header_line = _biologic_header_line(path, lines)
     data = next((ln for ln in lines[header_line:] if ln.strip()), "")
     decimal = "," if re.search(r"\d,\d", data) else "."
@@ -448,9 +445,9 @@ def read_biologic(path: Path) -> Record:
     _first_present(path, names, (BIOLOGIC_TIME,), "time")
     charge = next((c for c in BIOLOGIC_CHARGES if c in names), None)
     temperature = next((c for c in BIOLOGIC_TEMPERATURES if c in names), None)
-    cols = _read_csv_columns(path, sep="\t", decimal=decimal, header_line=header_line, text=text,
-                             required={BIOLOGIC_TIME, voltage, current,
-                                       *(c for c in (charge, temperature) if c)})
+    cols = _read_csv_columns(path, sep="\t", decimal=decimal, header_line=header_line,
+                             lines=lines, required={BIOLOGIC_TIME, voltage, current,
+                                                    *(c for c in (charge, temperature) if c)})
     keep, notes = _biologic_rows(cols)
     if not keep.any():
         raise DataError(f"{path}: no cycling rows ({notes[0]}); expected time, voltage and "
@@ -552,17 +549,16 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     _check_mapping(path, columns, given)
     numeric = set(columns.values()) - {columns["time"]}
     _check_marks(path, sep, decimal)
-    text = read_text(path)
-    header_line = _line_naming(text, set(columns.values()), sep)
-    units = _units_row(text, header_line, numeric, sep, decimal)
+    lines = read_text(path).splitlines()
+    header_line = _line_naming(lines, set(columns.values()), sep)
+    units = _units_row(lines, header_line, numeric, sep, decimal)
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"]}, header_line=header_line, text=text,
+                             keep_text={columns["time"]}, header_line=header_line, lines=lines,
                              units_row=units is not None)
     _require(path, cols, tuple(columns.values()))
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     given, taken = _with_file_units(
-        path, given, _file_units(columns, text, header_line, units, sep, bool(notes)),
-        current_scale)
+        path, given, _file_units(columns, units, bool(notes)), current_scale)
     time_unit, current_unit = given["time"], given["current"]
     voltage_unit, temperature_unit = given["voltage"], given["temperature"]
     if current_unit is not None:
@@ -605,7 +601,7 @@ def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str 
                             f"{list(UNITS[what])}")
 
 
-def _layout_notes(header_line: int, units: tuple[int, str] | None,
+def _layout_notes(header_line: int, units: UnitsRow | None,
                   taken: dict[str, tuple[str, str]]) -> list[str]:
     """Notes on how a generic file was read: lines skipped before the column names, a units
     row, and the units taken from the file rather than the defaults."""
@@ -614,46 +610,57 @@ def _layout_notes(header_line: int, units: tuple[int, str] | None,
         notes.append(f"column names on line {header_line}: the {header_line - 1} line(s) "
                      "before them skipped")
     if units is not None:
-        notes.append(f"line {units[0]} read as the columns' units, not data: {units[1]!r}")
+        notes.append(f"line {units.line} read as the columns' units, not data: "
+                     f"{units.text!r}")
     if taken:
         notes.append("units from the file: " + ", ".join(
             f"{what} in {unit} ({where})" for what, (unit, where) in taken.items()))
     return notes
 
 
-def _line_naming(text: str, names: set[str], sep: str) -> int:
+def _line_naming(lines: list[str], names: set[str], sep: str) -> int:
     """The file line (1-based) of the first line whose fields hold all the names (a cycler's
     export may put a preamble of settings before its column names); 1 where none does."""
-    for k, line in enumerate(itertools.islice(io.StringIO(text), MAX_PREAMBLE_LINES)):
+    for k, line in enumerate(lines[:MAX_PREAMBLE_LINES]):
         if names <= {c.strip() for c in next(csv.reader([line], delimiter=sep), [])}:
             return k + 1
     return 1
 
 
-def _units_row(text: str, header_line: int, numeric: set[str], sep: str, decimal: str
-               ) -> tuple[int, str] | None:
-    """(file line, text) of a units row (such as "s;A;V") right after the column names: where
-    none of the numeric columns named holds a number there and all of them do in the next
-    line; None otherwise."""
-    lines = [(k + 1, ln) for k, ln in enumerate(
-        itertools.islice(io.StringIO(text), header_line - 1, header_line + 9), header_line - 1)
-        if ln.strip()]
-    if len(lines) < 3 or not numeric:
+class UnitsRow(NamedTuple):
+    """A units row under a file's column names: its file line, its text and its cells by
+    column name."""
+
+    line: int
+    text: str
+    cells: dict[str, str]
+
+
+def _units_row(lines: list[str], header_line: int, numeric: set[str], sep: str,
+               decimal: str) -> UnitsRow | None:
+    """The units row (such as "s;A;V") right after the column names: where none of the
+    numeric columns named holds a number there and all of them do in the next line; None
+    otherwise."""
+    near = [(k + 1, ln) for k, ln in enumerate(lines[header_line - 1:header_line + 9],
+                                               header_line - 1) if ln.strip()]
+    if len(near) < 3 or not numeric:
         return None
-    names = [c.strip() for c in next(csv.reader([lines[0][1]], delimiter=sep))]
+    names = [c.strip() for c in next(csv.reader([near[0][1]], delimiter=sep))]
+    cells = [next(csv.reader([ln], delimiter=sep)) for _, ln in near[1:3]]
     where = [names.index(n) for n in numeric if n in names]
 
-    def numbers(line: str) -> list[bool]:
-        cells = next(csv.reader([line], delimiter=sep))
-        return [j < len(cells) and _is_number(cells[j], decimal) for j in where]
+    def numbers(row: list[str]) -> list[bool]:
+        return [j < len(row) and _is_number(row[j], decimal) for j in where]
 
-    if where and not any(numbers(lines[1][1])) and all(numbers(lines[2][1])):
-        return lines[1][0], lines[1][1].strip()
-    return None
+    if not where or any(numbers(cells[0])) or not all(numbers(cells[1])):
+        return None
+    by_name: dict[str, str] = {}
+    for name, cell in zip(names, cells[0], strict=False):
+        by_name.setdefault(name, cell.strip())     # a repeated name: its first column's
+    return UnitsRow(near[1][0], near[1][1].strip(), by_name)
 
 
-def _file_units(columns: Mapping[str, str], text: str, header_line: int,
-                units: tuple[int, str] | None, sep: str, text_time: bool
+def _file_units(columns: Mapping[str, str], units: UnitsRow | None, text_time: bool
                 ) -> dict[str, list[tuple[str, str]]]:
     """The units the file itself gives the mapped columns, each with where: the column name's
     (``Current [mA]``, ``Current (mA)``, ``I/mA``) and the units row's (UNIT_WORDS; a text time
@@ -665,16 +672,11 @@ def _file_units(columns: Mapping[str, str], text: str, header_line: int,
         if word in UNIT_WORDS[what]:
             found.setdefault(what, []).append((UNIT_WORDS[what][word],
                                                f"the column name {column!r}"))
-    if units is not None:
-        lines = text.splitlines()
-        names = [c.strip() for c in next(csv.reader([lines[header_line - 1]], delimiter=sep))]
-        cells = next(csv.reader([lines[units[0] - 1]], delimiter=sep))
-        for what, column in columns.items():
-            j = names.index(column)
-            word = cells[j].strip().strip("[]()").strip().lower() if j < len(cells) else ""
+        if units is not None:
+            word = units.cells.get(column, "").strip("[]()").strip().lower()
             if word in UNIT_WORDS[what]:
                 found.setdefault(what, []).append((UNIT_WORDS[what][word],
-                                                   f"the units row (line {units[0]})"))
+                                                   f"the units row (line {units.line})"))
     if text_time:
         found.pop("time", None)
     return found
@@ -709,9 +711,14 @@ def _with_file_units(path: Path, given: dict[str, str | None],
     return out, taken
 
 
+def _number(cell: str, decimal: str) -> float:
+    """A cell's number with the decimal mark given ("." or ","); ValueError where it is none."""
+    return float(cell.replace(",", ".") if decimal == "," else cell)
+
+
 def _is_number(cell: str, decimal: str) -> bool:
     try:
-        float(cell.strip().replace(",", ".") if decimal == "," else cell.strip())
+        _number(cell.strip(), decimal)
     except ValueError:
         return False
     return True
