@@ -236,12 +236,15 @@ def stop_kind(stop: str) -> str:
     return "full" if " above " in stop else "empty"
 
 
-def _communication_steps(md: Any, step_s: float | None, span_s: float,
-                         what: str) -> tuple[float, int]:
-    """The communication step (s; step_s, or the default experiment's of the FMU's model
-    description md (fmpy's), or 1 s) and the number of whole steps over span_s; DataError
-    where there are none or more than MAX_CYCLE_STEPS. what: the run as messages name it
-    ("the UDDS cycle")."""
+def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
+                         what: str) -> tuple[Any, float, int]:
+    """The FMU's model description (fmpy's, read once for the whole run), the communication
+    step (s; step_s, or its default experiment's, or 1 s) and the number of whole steps over
+    span_s; DataError where there are none or more than MAX_CYCLE_STEPS. what: the run as
+    messages name it ("the UDDS cycle")."""
+    from fmpy import read_model_description
+
+    md = read_model_description(str(fmu))
     default = md.defaultExperiment
     h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
     n = math.floor(span_s / h + 1e-9)
@@ -252,7 +255,7 @@ def _communication_steps(md: Any, step_s: float | None, span_s: float,
         raise DataError(f"communication step {h:g} s: {n} steps over {what} ({span_s:g} s), "
                         f"more than {MAX_CYCLE_STEPS}, which would take hours and gigabytes; "
                         f"expected a step of at least {span_s / MAX_CYCLE_STEPS:.3g} s")
-    return h, n
+    return md, h, n
 
 
 def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: float,
@@ -352,11 +355,8 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
     cell_power = power / (vehicle.n_series * vehicle.n_parallel)
     cutoff = shipped_cutoff_v(fmu) if cutoff_v is None else check_cutoff(cutoff_v)
     copies = f"{repeat} × " if repeat > 1 else ""
-    from fmpy import read_model_description
-
-    md = read_model_description(str(fmu))
-    h, n = _communication_steps(md, step_s, power.size * dt,
-                                f"{copies}the {trace.title} cycle")
+    md, h, n = _communication_steps(fmu, step_s, power.size * dt,
+                                    f"{copies}the {trace.title} cycle")
     speed = step_means(np.tile(trace.speed_mps, repeat), dt, h, n)
     out, stop = _drive_fmu(fmu, md, step_means(cell_power, dt, h, n), True, h, soc0,
                            temperature_c, cutoff)
@@ -389,11 +389,8 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
     charge_cutoff = (shipped_cutoff_v(fmu, "voltage_max_v") if charge_cutoff_v is None
                      else check_cutoff(charge_cutoff_v, "--charge-cutoff"))
     copies = f"{repeat} × " if repeat > 1 else ""
-    from fmpy import read_model_description
-
-    md = read_model_description(str(fmu))
-    h, n = _communication_steps(md, step_s, current.size * dt,
-                                f"{copies}the profile {prof.name}")
+    md, h, n = _communication_steps(fmu, step_s, current.size * dt,
+                                    f"{copies}the profile {prof.name}")
     out, stop = _drive_fmu(fmu, md, step_means(current, dt, h, n), False, h, soc0,
                            temperature_c, cutoff, charge_cutoff)
     figures = {"profile": prof.name, "repetitions": repeat,
