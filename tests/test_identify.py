@@ -1147,3 +1147,19 @@ def test_a_record_of_one_sample_segments_names_its_length() -> None:
                  RecordMeta("two.csv", "generic", segment_starts=[0, 1]))
     with pytest.raises(DataError, match="the longest lasts 0 s, expected at least 10 s"):
         record_parts(rec, 1.0, 1.0, 2.0)
+
+
+def test_every_setting_has_its_measurements_page_section() -> None:
+    """docs/settings.md, where the measurements behind each default are kept, has a section
+    naming every TrainConfig field (a setting added without one fails here)."""
+    import dataclasses
+    import re
+    from pathlib import Path
+
+    from lmncell.config import TrainConfig
+
+    page = (Path(__file__).resolve().parents[1] / "docs" / "settings.md").read_text("utf-8")
+    headings = " ".join(re.findall(r"^## (.+)$", page, flags=re.MULTILINE))
+    missing = [f.name for f in dataclasses.fields(TrainConfig)
+               if not re.search(rf"\b{f.name}\b", headings)]
+    assert not missing, f"settings without a section in docs/settings.md: {missing}"
