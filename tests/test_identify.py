@@ -1102,7 +1102,7 @@ def test_records_that_leave_the_refinement_unidentified_give_a_model_not_a_trace
                            read_options={"columns": {"time": "t", "current": "i",
                                                      "voltage": "v"}})
     assert model.n_local_models >= 1 and (tmp_path / "m.json").exists()
-    assert "(20–80 % SoC: (none), above 90 %: " in said[-1]     # not 'nan mV'
+    assert "20–80 % SoC: (none), above 90 %: " in said[-1]     # not 'nan mV'
 
     def unsolvable(*_args):
         raise InfeasibleError("the inequality constraints have no solution")
@@ -1163,3 +1163,20 @@ def test_every_setting_has_its_measurements_page_section() -> None:
     missing = [f.name for f in dataclasses.fields(TrainConfig)
                if not re.search(rf"\b{f.name}\b", headings)]
     assert not missing, f"settings without a section in docs/settings.md: {missing}"
+
+
+def test_progress_names_weighted_and_whole_record_errors_apart(tmp_path) -> None:
+    """The growth and the refinement report the weighted error on the fit samples, the last
+    line the unweighted error over the whole training records: they differ (σ_SoC weights,
+    the validation block), so the words must too; the stop criterion is named in words."""
+    lines: list[str] = []
+    _, summary = train_files([PAN_HWFET], tmp_path / "m.json", capacity_ah=2.85, soc0=1.0,
+                             progress=lines.append, max_local_models=2, oe_max_iterations=2,
+                             hysteresis="off")
+    refine = next(line for line in lines if "output-error refinement" in line)
+    assert "weighted free-run RMSE on the fit samples" in refine
+    chosen = next(line for line in lines if "chosen M=" in line)
+    assert "_mv" not in chosen and "validation RMSE" in chosen
+    wrote = lines[-1]
+    assert (f"free-run RMSE over the training records {summary['train_rmse_mv']:.2f} mV "
+            "(unweighted" in wrote)

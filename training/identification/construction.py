@@ -268,6 +268,8 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
         tree = temperature_region_tree(tree, base, design, cfg, boundaries)
     stop_stage = "validation" if cfg.stop == "validation" and cfg.validation != "none" else "aicc"
     grower = Grower(base, segs, design, cfg, fixed_axes, progress, t_start)
+    progress("  growing the tree (RMSE weighted as the fit weights the samples: one-step and "
+             "free run on the fit samples, free run on the validation samples)")
     if (boundaries and cfg.region_growth == "separate" and stop_stage == "validation"
             and cfg.validation == "block"):
         tree = grow_regions_separately(grower, tree)
@@ -277,7 +279,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
            if "validation_level_score_mv" in grower.curve[-1] else "validation_freerun_rmse_mv")
     curve = grower.curve
     model = tree.apply(base)
-    progress(f"  chosen M={model.n_local_models} by {key}")
+    progress(f"  chosen M={model.n_local_models} by {STOP_NAMES[key]}")
     info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
             "time_constant_activation_k": base.tau_activation_k,
             "arrhenius_root_freerun_rmse_mv": e_scores,
@@ -346,6 +348,15 @@ def train_with_and_without_hysteresis(segs: list[Segment], cfg: TrainConfig, cap
 STOP_TOLERANCE = 1.02    # M: the fewest local models within 2 % of the best validation error
 
 
+STOP_NAMES = {  # how progress names each stop criterion (chosen_stage)
+    "aicc": "the lowest AICc",
+    "validation_freerun_rmse_mv": "the free-run validation RMSE (the fewest local models "
+                                  f"within {100 * (STOP_TOLERANCE - 1):g} % of the lowest)",
+    "validation_level_score_mv": "the geometric mean of the temperature levels' free-run "
+                                 "validation RMSE (the fewest local models within "
+                                 f"{100 * (STOP_TOLERANCE - 1):g} % of the lowest)"}
+
+
 class Grower:
     """The tree's growth (step 3 of the module docstring): split the worst leaf, record the
     curve (one-step, AICc, free-run training and validation RMSE per stage), pick M."""
@@ -385,7 +396,7 @@ class Grower:
                            **(label or {})})
         where = "" if not label else f" ({label['validation_records']})"
         self.progress(f"  M={model.n_local_models}: one-step "
-                      f"{self.curve[-1]['one_step_rmse_mv']:.2f} mV, free-run train "
+                      f"{self.curve[-1]['one_step_rmse_mv']:.2f} mV, free-run fit "
                       f"{1e3 * fit_fr:.2f} mV, validation{where} {1e3 * val:.2f} mV"
                       + ("" if np.isnan(by_levels) else
                          f" (by temperature level, geometric mean {1e3 * by_levels:.2f} mV)")

@@ -206,7 +206,8 @@ def refine_output_error(model: LmnModel, segs: list[Segment], design: Design,
             "train_rmse_after_mv": 1e3 * after, "accepted": accepted,
             "offset_ridge": prob.rho if prob.off_col is not None else 0.0,
             "ocv_refined": prob.with_ocv}
-    progress(f"  output-error refinement: free-run training RMSE {1e3 * before:.2f} → "
+    progress(f"  output-error refinement: weighted free-run RMSE on the fit samples "
+             f"{1e3 * before:.2f} → "
              f"{1e3 * after:.2f} mV in {sol.nfev} evaluations"
              + (f", offsets pulled towards 0 (ρ = {info['offset_ridge']:g})"
                 if info["offset_ridge"] else "")

@@ -315,8 +315,8 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
         model.extra["baselines"] = baseline_docs
     save_model(model, out)
     summary = _train_summary(model, train_metrics, result.info, seconds, baseline_docs)
-    progress(f"wrote {out}: {model.n_local_models} local models, free-run training RMSE "
-             f"{summary['train_rmse_mv']:.2f} mV (20–80 % SoC: "
+    progress(f"wrote {out}: {model.n_local_models} local models, free-run RMSE over the "
+             f"training records {summary['train_rmse_mv']:.2f} mV (unweighted; 20–80 % SoC: "
              f"{_mv_or_none(summary['train_window_rmse_mv'])}{_ends_text(summary)}), LMN "
              f"training {result.info['seconds']:.1f} s, total {seconds:.1f} s")
     return model, summary
