@@ -20,7 +20,15 @@ from pathlib import Path
 
 import numpy as np
 from lmncell.fmu.interface import dependency_indices, fmu_path
-from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, OUT_OF_RANGE_DESCRIPTION, VOLTAGE_MARGIN_V
+from lmncell.runtime.cosim import (
+    CURRENT_MARGIN,
+    CURRENT_MARGIN_A,
+    MAX_STEPS_PER_CALL,
+    OUT_OF_RANGE_DESCRIPTION,
+    SOC_MARGIN,
+    TEMPERATURE_MARGIN_K,
+    VOLTAGE_MARGIN_V,
+)
 from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE,
@@ -160,7 +168,8 @@ def _regressor_defines(m: LmnModel, state_of: list[int]) -> list[str]:
 
 
 def _limit_defines(m: LmnModel) -> list[str]:
-    """The trained ranges behind out_of_range, and what the partition holds."""
+    """The trained ranges behind out_of_range with their margins (cosim.trained_bounds), and
+    what the partition holds."""
     lim = m.limits
     t_lim = lim.get("temperature_c", [-1e9, 1e9])
     return [
@@ -169,7 +178,10 @@ def _limit_defines(m: LmnModel) -> list[str]:
         f"#define V_MIN {lim['voltage_v'][0]!r}", f"#define V_MAX {lim['voltage_v'][1]!r}",
         f"#define V_MARGIN {VOLTAGE_MARGIN_V!r}",
         f"#define T_MIN {float(t_lim[0])!r}", f"#define T_MAX {float(t_lim[1])!r}",
-        f"#define HAS_TEMPERATURE_PARTITION {int('temperature' in m.partition_variables)}",
+        f"#define HAS_TEMPERATURE_RANGE {int('temperature_c' in lim)}",
+        f"#define CURRENT_MARGIN {CURRENT_MARGIN!r}",
+        f"#define CURRENT_MARGIN_A {CURRENT_MARGIN_A!r}",
+        f"#define SOC_MARGIN {SOC_MARGIN!r}", f"#define T_MARGIN {TEMPERATURE_MARGIN_K!r}",
         f"#define LINEAR_STATES {int('filtered_current' not in m.partition_variables)}"]
 
 

@@ -28,6 +28,10 @@ MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physica
 VOLTAGE_MARGIN_V = 0.1   # out_of_range also when the model's voltage leaves the trained
 # voltage range by more than this (a free run beyond its data: a cold knee extrapolated below
 # the SoC its records reached went to −1.1 V with current, SoC and temperature in range)
+CURRENT_MARGIN = 0.05       # out_of_range: the current beyond a trained bound by 5 % of it
+CURRENT_MARGIN_A = 1e-3     # … plus 1 mA,
+SOC_MARGIN = 0.02           # the SoC beyond the trained range by 0.02,
+TEMPERATURE_MARGIN_K = 2.0  # the cell temperature by 2 K (where the model has a trained range)
 OUT_OF_RANGE_DESCRIPTION = (
     "true while current, SoC or temperature leave the trained region or the model's voltage "
     f"its trained range by more than {VOLTAGE_MARGIN_V:g} V (the model extrapolates)")
@@ -60,6 +64,22 @@ def held_delayed_currents(current_a: list[float], ts: float, delay_s: float) -> 
 class InputError(ValueError):
     """A non-finite or impossible input; the message names the variable."""
 
+
+def trained_bounds(model: LmnModel) -> tuple[float, ...]:
+    """(current lo, hi (A), SoC lo, hi, cell temperature lo, hi (°C), model voltage lo, hi (V)):
+    the model's trained region widened by the margins above, beyond which out_of_range is
+    raised (and lmncell evaluate / simulate warn); ±∞ where the model has no such range. The
+    temperature counts wherever the model has a trained range, whether or not it is in the
+    partition: outside it a model extrapolates its temperature gains, or has none."""
+    lim, inf = model.limits, math.inf
+    lo, hi = lim.get("current_a", (-inf, inf))
+    slo, shi = lim.get("soc", (-inf, inf))
+    tlo, thi = lim.get("temperature_c", (-inf, inf))
+    vlo, vhi = lim.get("voltage_v", (-inf, inf))
+    return (lo - CURRENT_MARGIN * abs(lo) - CURRENT_MARGIN_A,
+            hi + CURRENT_MARGIN * abs(hi) + CURRENT_MARGIN_A, slo - SOC_MARGIN, shi + SOC_MARGIN,
+            tlo - TEMPERATURE_MARGIN_K, thi + TEMPERATURE_MARGIN_K, vlo - VOLTAGE_MARGIN_V,
+            vhi + VOLTAGE_MARGIN_V)
 
 @dataclass
 class Parameters:
@@ -109,7 +129,7 @@ class CellCosim:
         self.preview_v: float | None = None
         self.preview_current_a = 0.0     # the current the preview takes (A)
         self._start_temperature_c = t_cell
-        self._bounds = self._range_bounds()
+        self._bounds = trained_bounds(self.model)
         self._i_max = MAX_C_RATE * p.capacity_ah
 
     @property
@@ -159,19 +179,6 @@ class CellCosim:
     def soc_std(self) -> float:
         """Observer's SoC standard deviation; 0 without an observer (coulomb counting)."""
         return self.observer.soc_std if self.observer else 0.0
-
-    def _range_bounds(self) -> tuple[float, ...]:
-        """Accepted current (A), SoC, temperature (°C) and model voltage (V) bounds: the
-        trained region with the margins check_range and check_voltage allow (±∞ where the
-        model is not limited)."""
-        lim, inf = self.model.limits, math.inf
-        lo, hi = lim.get("current_a", (-inf, inf))
-        slo, shi = lim.get("soc", (-inf, inf))
-        tlo, thi = (lim.get("temperature_c", (-inf, inf))
-                    if "temperature" in self.model.partition_variables else (-inf, inf))
-        vlo, vhi = lim.get("voltage_v", (-inf, inf))
-        return (lo - 0.05 * abs(lo) - 1e-3, hi + 0.05 * abs(hi) + 1e-3, slo - 0.02, shi + 0.02,
-                tlo - 2.0, thi + 2.0, vlo - VOLTAGE_MARGIN_V, vhi + VOLTAGE_MARGIN_V)
 
     def check_range(self, current_a: float, temperature_c: float) -> str:
         """'' when inside the trained region, else a message (the model still extrapolates)."""

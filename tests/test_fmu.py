@@ -140,6 +140,33 @@ def test_many_instantiations_do_not_leak(quick_fmu) -> None:
         shutil.rmtree(d, ignore_errors=True)
 
 
+def test_out_of_range_when_the_temperature_leaves_the_trained_range(fmu, quick_model) -> None:
+    """The quick model has no temperature in its partition (one chamber temperature), yet its
+    Arrhenius gain and thermal model use the temperature: both FMUs raise out_of_range 2 K
+    beyond the trained cell temperatures, as README's table says, and lmncell evaluate's
+    warning uses the same margins (cosim.trained_bounds)."""
+    from lmncell.evaluation.evaluate import warn_outside_training
+    from lmncell.runtime.cosim import TEMPERATURE_MARGIN_K
+
+    model = load_model(quick_model)
+    lo, hi = model.limits["temperature_c"]
+    assert "temperature" not in model.partition_variables
+    flags = {}
+    for label, temperature in (("inside", 0.5 * (lo + hi)), ("cold", lo - 10.0)):
+        inst = Instance(fmu, start={"soc0": 0.9, "temperature_is_cell": True})
+        try:
+            inst.step(-1.0, temperature=temperature)
+            flags[label] = inst.slave.getBoolean([inst.vr["out_of_range"]])[0]
+        finally:
+            inst.free()
+    assert flags == {"inside": False, "cold": True}
+    with pytest.warns(UserWarning, match="outside the trained"):
+        warn_outside_training(model, "r", np.array([-1.0]),
+                              np.array([lo - TEMPERATURE_MARGIN_K - 0.01]))
+    assert not warn_outside_training(model, "r", np.array([-1.0]),
+                                     np.array([lo - TEMPERATURE_MARGIN_K + 0.01]))
+
+
 def test_out_of_range_flag(quick_fmu) -> None:
     inst = Instance(quick_fmu, start={"soc0": 0.9})
     try:

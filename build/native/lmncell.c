@@ -957,13 +957,14 @@ static void observer_step(State *s, double i, double v, double t) {
 
 /* ----- co-simulation engine (cosim.CellCosim) --------------------------------------------------- */
 /* CellCosim.check_range: 1 when the step's current, SoC or temperature lies outside the
-   trained region (with its margins) */
+   trained region (with its margins: cosim.trained_bounds) */
 static int inputs_out_of_range(double i, double t, double soc) {
     int out = 0;
-    if (i < I_MIN - 0.05 * fabs(I_MIN) - 1e-3 || i > I_MAX + 0.05 * fabs(I_MAX) + 1e-3) out = 1;
-    if (soc < SOC_MIN - 0.02 || soc > SOC_MAX + 0.02) out = 1;
-#if HAS_TEMPERATURE_PARTITION
-    if (t < T_MIN - 2 || t > T_MAX + 2) out = 1;
+    if (i < I_MIN - CURRENT_MARGIN * fabs(I_MIN) - CURRENT_MARGIN_A
+        || i > I_MAX + CURRENT_MARGIN * fabs(I_MAX) + CURRENT_MARGIN_A) out = 1;
+    if (soc < SOC_MIN - SOC_MARGIN || soc > SOC_MAX + SOC_MARGIN) out = 1;
+#if HAS_TEMPERATURE_RANGE
+    if (t < T_MIN - T_MARGIN || t > T_MAX + T_MARGIN) out = 1;
 #else
     (void)t;
 #endif

@@ -21,6 +21,7 @@ from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
+from lmncell.runtime.cosim import trained_bounds
 from lmncell.runtime.model import LmnModel, load_model, model_from_dict
 from lmncell.runtime.step import initial_hysteresis, simulate, simulate_ambient
 
@@ -225,29 +226,28 @@ def warn_outside_training(model: LmnModel, name: str, current_a: np.ndarray,
                           temperature_c: np.ndarray | None,
                           soc: np.ndarray | None = None) -> list[str]:
     """Warn (UserWarning) where a run's current (A), cell temperature (°C) or SoC leaves what
-    the model was trained on (model.limits: current by more than 10 % + 10 mA, temperature
-    2 K, SoC 0.02, as the FMU flags it); the values are not clamped. Returns the messages."""
+    the model was trained on by the margins at which the FMU raises out_of_range
+    (lmncell.runtime.cosim.trained_bounds); the values are not clamped. Returns the messages."""
     import warnings
 
     msgs = []
     lim = model.limits
-    lo, hi = lim.get("current_a", [-np.inf, np.inf])
+    ilo, ihi, slo, shi, tlo, thi = trained_bounds(model)[:6]
     imin, imax = float(current_a.min()), float(current_a.max())
-    if imin < 1.1 * lo - 0.01 or imax > 1.1 * hi + 0.01:
+    if imin < ilo or imax > ihi:
+        lo, hi = lim["current_a"]
         msgs.append(f"{name}: current {imin:.2f}…{imax:.2f} A exceeds the trained range "
                     f"{lo:.2f}…{hi:.2f} A")
-    if temperature_c is not None and "temperature_c" in lim:
-        tlo, thi = lim["temperature_c"]
-        if temperature_c.min() < tlo - 2 or temperature_c.max() > thi + 2:
-            msgs.append(f"{name}: temperature {temperature_c.min():.1f}…"
-                        f"{temperature_c.max():.1f} °C outside the trained {tlo:.1f}…"
-                        f"{thi:.1f} °C")
-    if soc is not None and "soc" in lim:
-        slo, shi = lim["soc"]
-        outside = np.flatnonzero((soc < slo - 0.02) | (soc > shi + 0.02))
+    if temperature_c is not None and (temperature_c.min() < tlo or temperature_c.max() > thi):
+        lo, hi = lim["temperature_c"]
+        msgs.append(f"{name}: temperature {temperature_c.min():.1f}…"
+                    f"{temperature_c.max():.1f} °C outside the trained {lo:.1f}…{hi:.1f} °C")
+    if soc is not None:
+        outside = np.flatnonzero((soc < slo) | (soc > shi))
         if outside.size:
+            lo, hi = lim["soc"]
             msgs.append(f"{name}: SoC {soc.min():.3f}…{soc.max():.3f} leaves the trained "
-                        f"{slo:.3f}…{shi:.3f} first at step {int(outside[0])}"
+                        f"{lo:.3f}…{hi:.3f} first at step {int(outside[0])}"
                         + (" (below 0 the cell is past empty)" if soc.min() < 0 else ""))
     for m in msgs:
         warnings.warn(m, UserWarning, stacklevel=3)
