@@ -183,6 +183,41 @@ def test_api_takes_one_ocv_test_file_on_its_own(monkeypatch, tmp_path) -> None:
         assert seen["ocv_tests"] == [str(given)]
 
 
+def test_api_takes_one_data_file_on_its_own(monkeypatch, tmp_path, quick_model) -> None:
+    """lmncell.train("cycle.mat", ...) and lmncell.evaluate(model, "cycle.mat") take that one
+    file, not its characters (which read '/' as a file); a list that holds something other
+    than paths is named."""
+    import lmncell
+    import lmncell.identification.train as train_module
+    from lmncell.data.records import DataError
+
+    seen: list = []
+    monkeypatch.setattr(train_module, "train_files",
+                        lambda paths, out, *a, **k: (seen.append(paths), ("model", None))[1])
+    for given in (str(PAN_US06), Path(PAN_US06)):
+        assert lmncell.train(given, tmp_path / "m.json") == "model"
+        assert seen[-1] == [given]
+    one = lmncell.evaluate(quick_model, str(PAN_US06), soc0=1.0)
+    assert one == lmncell.evaluate(quick_model, [PAN_US06], soc0=1.0)
+    with pytest.raises(DataError, match=r"evaluate: paths holds 3; expected data files' paths"):
+        lmncell.evaluate(quick_model, [PAN_US06, 3])
+    with pytest.raises(DataError, match=r"train: paths is 3\.0; expected a data file's path"):
+        lmncell.train(3.0, tmp_path / "m.json")
+
+
+def test_api_sweep_takes_one_value_per_axis_on_its_own(native_fmu) -> None:
+    """lmncell.sweep(fmu, cycles="wltc", ambient_c=25.0, soc0=0.9) is one scenario, as with
+    lists of one ("wltc" was read letter by letter, 25.0 raised TypeError)."""
+    import lmncell
+
+    one = lmncell.sweep(native_fmu, cycles="us06", ambient_c=25.0, soc0=0.9, workers=1,
+                        progress=False)
+    listed = lmncell.sweep(native_fmu, cycles=["us06"], ambient_c=[25.0], soc0=[0.9],
+                           workers=1, progress=False)
+    cols = [c for c in one.columns if c != "wall_s"]
+    assert len(one) == 1 and one[cols].equals(listed[cols])
+
+
 def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -> None:
     import lmncell
     from lmncell.config import ConfigError

@@ -472,3 +472,17 @@ print("survived")
     assert out.returncode == 0, out.stderr[-2000:]
     assert "survived" in out.stdout
     assert "input 'current' = nan" in out.stdout        # printed as fmpy's default logger does
+
+
+def test_workers_that_do_not_start_say_the_usual_cause() -> None:
+    """A script that calls lmncell.sweep without the `__main__` guard makes Dask's workers fail
+    with "Nanny failed to start"; the error then says what to do."""
+    from lmncell.scenarios.sweep import _local_cluster
+
+    class FailingCluster:
+        def __init__(self, **_kwargs) -> None:
+            raise RuntimeError("Nanny failed to start.")
+
+    with pytest.raises(RuntimeError, match=r"Nanny failed to start\.\)\. A script that calls "
+                                           r"lmncell.sweep must call it under `if __name__"):
+        _local_cluster(FailingCluster, 1)

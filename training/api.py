@@ -12,6 +12,7 @@ Units are SI (s, A, V, Ah, °C); current > 0 charges the cell; SoC is a fraction
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,8 +30,8 @@ __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_mod
            "read_record", "simulate", "sweep", "train"]
 
 
-def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | None = None,
-          soc0: float | Sequence[float] | None = None, *,
+def train(paths: str | Path | Sequence[str | Path], out: str | Path,
+          capacity_ah: float | None = None, soc0: float | Sequence[float] | None = None, *,
           ocv_tests: str | Path | Sequence[str | Path] | None = None,
           baselines: bool = False, config: str | Path | None = None,
           read_options: Mapping[str, Any] | None = None, progress: Progress = print_progress,
@@ -51,10 +52,36 @@ def train(paths: Sequence[str | Path], out: str | Path, capacity_ah: float | Non
         settings["ocv_tests"] = [str(p) for p in ocv_tests]
     from lmncell.identification.train import train_files
 
-    model, _ = train_files(list(paths), out, capacity_ah, soc0, baselines=baselines,
+    model, _ = train_files(_path_list("train", paths), out, capacity_ah, soc0, baselines=baselines,
                            config=config, progress=progress, read_options=read_options,
                            **settings)
     return model
+
+
+def _one_or_many(values: Any) -> list:
+    """A sweep axis as a list: one value given on its own (a cycle name or file, a number,
+    None) is a list of one, so that "wltc" is not read letter by letter."""
+    if values is None or isinstance(values, (str, os.PathLike, int, float)):
+        return [values]
+    return list(values)
+
+
+def _path_list(caller: str, paths: Any) -> list[str | Path]:
+    """The data files as a list: one path (str or path-like) given on its own is a list of
+    one (iterating over a string would read '/' as a file); anything else must be a sequence
+    of paths, or DataError naming the caller's argument."""
+    if isinstance(paths, (str, os.PathLike)):
+        return [paths]
+    try:
+        out = list(paths)
+    except TypeError:
+        raise DataError(f"{caller}: paths is {paths!r:.60}; expected a data file's path or a "
+                        "list of them") from None
+    bad = [p for p in out if not isinstance(p, (str, os.PathLike))]
+    if bad:
+        raise DataError(f"{caller}: paths holds {bad[0]!r:.60}; expected data files' paths "
+                        "(str or pathlib.Path)")
+    return out
 
 
 def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
@@ -116,7 +143,7 @@ def _temperature_profile(temperature_c: Any, steps: int) -> np.ndarray:
     return temp
 
 
-def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
+def evaluate(model: LmnModel | str | Path, paths: str | Path | Sequence[str | Path],
              soc0: float | Sequence[float] | None = None,
              read_options: Mapping[str, Any] | None = None, *, ambient: bool = False,
              through_hidden_pauses: bool = False) -> list[dict]:
@@ -132,14 +159,14 @@ def evaluate(model: LmnModel | str | Path, paths: Sequence[str | Path],
     if not isinstance(model, LmnModel) and str(model).lower().endswith(".fmu"):
         from lmncell.evaluation.fmueval import evaluate_fmu
 
-        _, rows = evaluate_fmu(model, list(paths), soc0, ambient, read_options,
+        _, rows = evaluate_fmu(model, _path_list("evaluate", paths), soc0, ambient, read_options,
                                through_hidden_pauses, progress=lambda _m: None)
         return rows
     if not isinstance(model, LmnModel):
         model = load_model(model)
     from lmncell.evaluation.evaluate import evaluate_model
 
-    _, rows = evaluate_model(model, list(paths), soc0, read_options=read_options,
+    _, rows = evaluate_model(model, _path_list("evaluate", paths), soc0, read_options=read_options,
                              ambient=ambient, through_hidden_pauses=through_hidden_pauses)
     return rows
 
@@ -173,7 +200,7 @@ def sweep(fmu: str | Path, cycles: Sequence[str | Path] = ("wltc",),
     from lmncell.scenarios.sweep import scenarios
     from lmncell.scenarios.sweep import sweep as _sweep
 
-    cases = scenarios(list(cycles), list(ambient_c), list(soc0),
-                      [None if v is None else str(v) for v in vehicles], repeat,
+    cases = scenarios(_one_or_many(cycles), _one_or_many(ambient_c), _one_or_many(soc0),
+                      [None if v is None else str(v) for v in _one_or_many(vehicles)], repeat,
                       cutoff_v=cutoff_v)
     return _sweep(fmu, cases, workers, scheduler, progress)

@@ -211,8 +211,7 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     cluster = None
     own = client is None
     if own and scheduler is None:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        cluster = _local_cluster(LocalCluster, workers)
         client = Client(cluster)
     elif own:
         client = _connect(Client, scheduler)
@@ -248,6 +247,20 @@ def check_table_path(path: str | Path) -> Path:
         raise DataError(f"{path}: writing Parquet needs pyarrow or fastparquet (pip install "
                         "pyarrow), neither is installed; or give a .csv name")
     return path
+
+
+def _local_cluster(cluster_class, workers: int | None):
+    """A LocalCluster of `workers` single-threaded processes; where its workers cannot start,
+    a RuntimeError that says the usual cause (dask raises "Nanny failed to start")."""
+    try:
+        return cluster_class(n_workers=workers, threads_per_worker=1, processes=True,
+                             dashboard_address=None)
+    except RuntimeError as exc:
+        raise RuntimeError(
+            f"sweep: the Dask worker processes did not start ({exc}). A script that calls "
+            "lmncell.sweep must call it under `if __name__ == \"__main__\":`, because each "
+            "worker process imports the script again, and code piped to python's standard "
+            "input cannot start them at all (see examples/sweep_local_cluster.py)") from exc
 
 
 def _connect(client_class, scheduler: str):
