@@ -235,6 +235,8 @@ def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -
     ({"temperature_c": np.zeros(3)}, "temperature_c has 3 values for 5 current steps"),
     ({"temperature_c": 298.15}, r"within -60…100 °C \(a cell temperature in °C, not K\)"),
     ({"temperature_c": "warm"}, "temperature_c is 'warm'"),
+    ({"capacity_ah": 0}, r"capacity_ah = 0; expected a finite number > 0 \(Ah"),
+    ({"capacity_ah": float("nan")}, "capacity_ah = nan; expected a finite number > 0"),
 ])
 def test_api_simulate_names_what_is_wrong_with_its_inputs(quick_model, kwargs, message) -> None:
     import lmncell

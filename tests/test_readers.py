@@ -529,6 +529,28 @@ def test_a_bad_delimiter_is_a_data_error_not_a_traceback(tmp_path, sep) -> None:
         read_record(path, columns={"time": "t", "current": "I", "voltage": "U"}, sep=sep)
 
 
+@pytest.mark.parametrize("sep, text, hint", [
+    (",", "t;I;U\n0;0;3.3\n", r"the names hold ';': is that the delimiter\? give it: "
+                              "--delimiter ';' or sep=';'"),
+    (",", "t\tI\tU\n0\t0\t3.3\n", "the names hold a tab: .* --delimiter tab or sep='\\\\t'"),
+    (";", "t,I,U\n0,0,3.3\n", "the names hold ',': .* --delimiter ',' or sep=','"),
+])
+def test_names_joined_by_another_delimiter_are_pointed_out(tmp_path, sep, text, hint) -> None:
+    """A ';'- or tab-delimited file read with ',' has one column holding all the names: the
+    error says which delimiter the names seem to use, and how to give it."""
+    path = tmp_path / "g.csv"
+    path.write_text(text)
+    with pytest.raises(DataError, match=r"missing column\(s\) .*; found .* \(" + hint):
+        read_record(path, columns={"time": "t", "current": "I", "voltage": "U"}, sep=sep)
+
+
+def test_a_column_mapping_that_is_not_one_is_named(tmp_path) -> None:
+    path = tmp_path / "g.csv"
+    path.write_text("t,I,U\n0,0,3.3\n1,1,3.4\n")
+    with pytest.raises(DataError, match=r"g.csv: columns = 'time=t'; expected a mapping"):
+        read_record(path, columns="time=t")
+
+
 def test_generic_reader_skips_a_units_row_after_the_column_names(tmp_path) -> None:
     path = tmp_path / "units.csv"
     path.write_text("Time;Current;Voltage\ns;A;V\n0;0;3,30\n1;-1,5;3,20\n2;0;3,25\n")

@@ -12,6 +12,7 @@ Units are SI (s, A, V, Ah, °C); current > 0 charges the cell; SoC is a fraction
 
 from __future__ import annotations
 
+import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -100,12 +101,25 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     current = _profile("current_a", current_a, "A")
     if not 0.0 <= float(soc0) <= 1.0:
         raise DataError(f"simulate: soc0 = {float(soc0)!r}; expected a fraction within 0…1")
+    if capacity_ah is not None:
+        capacity_ah = _positive("capacity_ah", capacity_ah, "Ah, or None for the model's")
     temp = None
     if temperature_c is not None:
         temp = _temperature_profile(temperature_c, current.size)
     sim = _simulate_runtime(model, current, temp, float(soc0), capacity_ah)
     warn_outside_training(model, "simulate", current, temp, sim.soc)
     return sim
+
+
+def _positive(name: str, value: Any, unit: str) -> float:
+    """value as a finite float > 0, or DataError naming `name` (unit: what it is in)."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        number = math.nan
+    if not (math.isfinite(number) and number > 0):
+        raise DataError(f"simulate: {name} = {value!r:.60}; expected a finite number > 0 ({unit})")
+    return number
 
 
 def _profile(name: str, values: Any, unit: str) -> np.ndarray:

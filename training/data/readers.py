@@ -276,10 +276,26 @@ _NUMERIC_REQUIRED = {"time", "current", "voltage", "chgAh", "disAh", *ARBIN_COLU
                      BDF_VOLTAGE, BDF_CURRENT}
 
 
-def _require(path: Path, cols: Mapping[str, np.ndarray], names: tuple[str, ...]) -> None:
+def _require(path: Path, cols: Mapping[str, np.ndarray], names: tuple[str, ...],
+             sep: str | None = None) -> None:
+    """DataError naming the columns missing, with what was found (and, given the delimiter
+    the header was split by, a hint where the names read as one joined by another)."""
     missing = [n for n in names if n not in cols]
     if missing:
-        raise DataError(f"{path}: missing column(s) {missing}; found {list(cols)}")
+        raise DataError(f"{path}: missing column(s) {missing}; found {list(cols)}"
+                        + ("" if sep is None else _delimiter_hint(list(cols), sep)))
+
+
+def _delimiter_hint(found: list[str], sep: str) -> str:
+    """' (…give the delimiter …)' where a header split by sep holds one of the usual other
+    delimiters inside its names (a file delimited by ';' or tabs read with ','), else ''."""
+    for other, shown, cli, python in ((";", "';'", "';'", "';'"),
+                                      ("\t", "a tab", "tab", "'\\t'"),
+                                      (",", "','", "','", "','")):
+        if other != sep and any(other in name for name in found):
+            return (f" (the names hold {shown}: is that the delimiter? give it: --delimiter "
+                    f"{cli} or sep={python})")
+    return ""
 
 
 def _segment_starts_from_gaps(time_s: np.ndarray, current_a: np.ndarray | None = None,
@@ -555,7 +571,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
                              keep_text={columns["time"]}, header_line=header_line, lines=lines,
                              units_row=units is not None)
-    _require(path, cols, tuple(columns.values()))
+    _require(path, cols, tuple(columns.values()), sep)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     given, taken = _with_file_units(
         path, given, _file_units(columns, units, bool(notes)), current_scale)
@@ -835,6 +851,11 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
         raise TypeError(f"read_record() got unknown option(s) {unknown}; expected some of "
                         f"{list(GENERIC_OPTIONS)} (sep is the CLI's --delimiter)")
     path = check_readable(path)
+    columns = generic_kw.get("columns")
+    if columns is not None and not isinstance(columns, Mapping):
+        raise DataError(f"{path}: columns = {columns!r:.60}; expected a mapping of LMNCell's "
+                        "quantities to the file's column names, e.g. {'time': 'Time [s]', "
+                        "'current': 'I [A]', 'voltage': 'U [V]'}")
     if fmt is None and generic_kw.get("columns"):
         fmt = "generic"
     if fmt != "generic" and generic_kw:
