@@ -21,7 +21,7 @@ from lmncell.data.soc import (
     ocv_from_slow_tests,
 )
 
-from tests.conftest import A123_S1, A123_S2, DATA, PAN_US06, ROOT
+from tests.conftest import A123_S1, A123_S2, DATA, PAN_HWFET, PAN_US06, ROOT
 
 
 def test_a123_capacity_and_soc_run_from_full_to_empty() -> None:
@@ -250,3 +250,17 @@ def test_ocv_tests_in_either_order_and_a_dynamic_record_is_no_ocv_test() -> None
     with pytest.raises(DataError, match=r"A123_DYN_50_P25_s1\.csv\.gz: its discharge current is "
                                         r"0\.\d\d C .*expected a slow OCV test, C/5 or slower"):
         measured_ocv([str(A123_S1)], 2.0307, knots)
+
+
+def test_a_counted_soc_beyond_0_to_1_names_where_and_the_charge_moved(tmp_path) -> None:
+    """A capacity far too small (or a wrong start SoC) counts the SoC out of 0…1: the error
+    names the start SoC, the capacity, where it happens and how much charge the record moves,
+    not an internal array ('soc_ref' at row …)."""
+    from lmncell.data.dataset import record_to_segments
+
+    rec = read_record(PAN_HWFET)
+    with pytest.raises(DataError, match=r"counted from SoC 1 with a capacity of 0\.1 Ah, the SoC "
+                                        r"reaches -0\.05\d at \d+\.?\d* s \(.*\); expected 0…1\. "
+                                        r"From its start the record discharges up to 2\.\d+ Ah"):
+        record_to_segments(rec, 1.0, 1.0, 0.1)
+    assert record_to_segments(rec, 1.0, 1.0, 2.85)     # the right capacity reads as before

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from lmncell.data.records import DataError, Record
 from lmncell.data.resample import resample_segment
-from lmncell.data.soc import REST_CURRENT_A, coulomb_count, discharged_ah
+from lmncell.data.soc import REST_CURRENT_A, discharged_ah, reference_soc
 
 
 @dataclass
@@ -126,7 +126,7 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
                  current_delay_s: float = 0.0) -> list[tuple[Record, Segment]]:
     """record_to_segments with each segment's gap-free part of the record as measured (its own
     samples, reference SoC and temperature, the chamber set point where none was measured)."""
-    rec = rec.with_soc(coulomb_count(rec, soc0, capacity_ah))
+    rec = rec.with_soc(reference_soc(rec, soc0, capacity_ah))
     chamber = rec.meta.chamber_temp_c
     ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None
                and np.isfinite(chamber) else None)

@@ -84,6 +84,30 @@ def coulomb_count(rec: Record, soc0: float, capacity_ah: float,
     return soc0 + charge_throughput_ah(rec, use_counters) / capacity_ah
 
 
+SOC_SLACK = 0.05   # a counted SoC this far beyond 0…1 is refused (a wrong start SoC or capacity)
+
+
+def reference_soc(rec: Record, soc0: float, capacity_ah: float) -> np.ndarray:
+    """coulomb_count as a record's reference SoC: DataError where it leaves 0…1 by more than
+    SOC_SLACK, naming where, and the charge the record moves from its start both ways, so that
+    the start SoC or the capacity can be put right."""
+    soc = coulomb_count(rec, soc0, capacity_ah)
+    charge_ah = (soc - soc0) * capacity_ah
+    outside = np.flatnonzero((soc < -SOC_SLACK) | (soc > 1 + SOC_SLACK))
+    if not outside.size:
+        return soc
+    k = int(outside[0])
+    where = (f"line {rec.meta.first_line + k}" if rec.meta.first_line is not None
+             else f"sample {k}")
+    raise DataError(
+        f"{rec.meta.source}: counted from SoC {soc0:g} with a capacity of {capacity_ah:g} Ah, the "
+        f"SoC reaches {soc[k]:.3f} at {float(rec.time_s[k]):g} s ({where}); expected 0…1. From "
+        f"its start the record discharges up to {max(0.0, -float(charge_ah.min())):.4g} Ah and "
+        f"charges up to {max(0.0, float(charge_ah.max())):.4g} Ah: check the start SoC "
+        "(--soc0, soc0=) and the capacity (the model's, or --capacity, capacity_ah= when "
+        "training)")
+
+
 def starts_full(rec: Record, v_full: float, tol_v: float = 0.08, rest_s: float = 10.0) -> bool:
     """True where the record starts with a rest at (or near) the top-of-charge voltage v_full."""
     t = rec.time_s - rec.time_s[0]
