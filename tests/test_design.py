@@ -226,6 +226,63 @@ def test_design_proof_json_on_the_builtin_cell(tmp_path, capsys) -> None:
     assert (tmp_path / "P_proof.png").exists() and out.with_suffix(".proof.json").exists()
 
 
+def test_random_programmes_the_cell_cannot_run_are_left_out_and_named(tmp_path) -> None:
+    """A random programme is held inside the voltage limits on the design model only; one that
+    the virtual cell stops (PyBaMM's DFN at SoC 0.9 did, on its maximum voltage) is left out of
+    the medians and named, instead of ending the whole comparison (and the design with it). The
+    designed programme itself still may not fail."""
+    from lmncell.design.proof import (
+        characterise,
+        compare_on_virtual_cell,
+        make_virtual_cell,
+        ocv_test_record,
+        plot_proof,
+    )
+    from lmncell.design.pybamm_cell import VirtualCellRunError
+
+    builtin = make_virtual_cell("builtin", 2.3)
+
+    class StopsOn:
+        """The built-in cell, stopping on the programme named `bad`."""
+
+        def __init__(self, bad: str) -> None:
+            self.bad, self.capacity_ah = bad, builtin.capacity_ah
+
+        def run(self, current_a, soc0, ts=1.0, name="programme"):
+            if name == self.bad:
+                raise VirtualCellRunError(f"virtual cell, {name}: the solve stopped at 45.5 s")
+            return builtin.run(current_a, soc0, ts, name)
+
+        def ocv_test(self, c_rate):
+            return builtin.ocv_test(c_rate)
+
+        def describe(self) -> str:
+            return builtin.describe()
+
+    cell, cyc = CellSpec(capacity_ah=2.3, max_c_rate=20.0), CyclerSpec()
+    spec = DesignSpec(parse_profile("0.6,0.4"), duration_s=600.0)
+    ocv = ocv_test_record(builtin, 2.3, tmp_path)
+    model = characterise(builtin, cell, spec, ocv).cell
+    designed = design_programme(model, cyc, spec, progress=lambda _m: None)
+    said: list[str] = []
+    res = compare_on_virtual_cell(designed, model, cyc, spec, StopsOn("prbs_seed_2"), ocv,
+                                  said.append, (1, 2), ("prbs",))
+    assert list(res["skipped"]) == ["prbs_seed_2"] and "45.5 s" in res["skipped"]["prbs_seed_2"]
+    assert any(m.startswith("  prbs_seed_2: not compared") for m in said)
+    for entry in res["profiles"].values():
+        assert len(entry["prbs_mv"]) == 1 and entry["prbs_median_mv"] == entry["prbs_mv"][0]
+    res = compare_on_virtual_cell(designed, model, cyc, spec, StopsOn("prbs_seed_1"), ocv,
+                                  said.append, (1,), ("prbs",))
+    assert all(e["prbs_median_mv"] is None and not e["beats_prbs_median"]
+               for e in res["profiles"].values())
+    assert not res["designed_beats_every_median"] and "prbs_over_designed" not in res[
+        "covariance_det_ratio"]
+    plot_proof(res, tmp_path)                       # a kind without runs still plots
+    with pytest.raises(VirtualCellRunError, match="designed"):
+        compare_on_virtual_cell(designed, model, cyc, spec, StopsOn("designed"), ocv,
+                                said.append, (1,), ("prbs",))
+
+
 def test_pybamm_virtual_cell_runs_pulses_and_refuses_a_stopped_solve() -> None:
     pytest.importorskip("pybamm")
     from lmncell.design.pybamm_cell import PybammCell

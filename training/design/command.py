@@ -141,7 +141,10 @@ def run_design(a) -> int:
         proof_json.write_text(json.dumps(result, indent=1))
         fig = plot_proof(result, Path(a.plot) if a.plot else Path(a.out).parent,
                          Path(a.out).stem)
+        left_out = result["skipped"]
         say(f"wrote {proof_json}, {fig}; the design beats the median of every random kind on "
-            f"every profile: {'yes' if result['designed_beats_every_median'] else 'no'}")
+            f"every profile: {'yes' if result['designed_beats_every_median'] else 'no'}"
+            + (f" ({len(left_out)} random programme(s) left out, the virtual cell could not run "
+               f"them: {', '.join(left_out)})" if left_out else ""))
         print(json.dumps(result if a.json else result["profiles"], indent=1))
     return 0

@@ -26,6 +26,11 @@ import numpy as np
 from lmncell.data.records import DataError
 from lmncell.design.optimal import held_soc
 
+
+class VirtualCellRunError(DataError):
+    """A programme the virtual cell cannot run to its end (a voltage limit or its solver);
+    the message names the programme and where it stopped."""
+
 PARAMETER_SET = "Prada2013"
 PARAMETER_CHANGES: dict[str, float] = {"Negative particle diffusivity [m2.s-1]": 3e-13}
 SOLVER_RTOL = 1e-6        # relative tolerance of IDAKLU (the default 1e-4 is ~0.3 mV at 3.3 V)
@@ -94,13 +99,14 @@ class PybammCell:
                 sol = sim.step(dt=ts * (b - a), inputs={"Current function [A]": -current_a[a]},
                                save=False, starting_solution=sol)
             except pybamm.SolverError as exc:
-                raise DataError(f"virtual cell ({self.model}), {name}: the solve failed at "
-                                f"{t0:.0f} s: {exc}") from exc
+                raise VirtualCellRunError(f"virtual cell ({self.model}), {name}: the solve "
+                                          f"failed at {t0:.0f} s: {exc}") from exc
             reached = float(sol.t[-1])
             if reached < t0 + ts * (b - a) - 1e-6:
-                raise DataError(f"virtual cell ({self.model}), {name}: the solve stopped at "
-                                f"{reached:.1f} s of {ts * n:.1f} s ({sol.termination}); the "
-                                "programme leaves the cell's voltage limits or its physics")
+                raise VirtualCellRunError(
+                    f"virtual cell ({self.model}), {name}: the solve stopped at {reached:.1f} s "
+                    f"of {ts * n:.1f} s ({sol.termination}); the programme leaves the cell's "
+                    "voltage limits or its physics")
             t = np.minimum(t0 + ts * np.arange(1, b - a + 1), reached)
             u[a:b] = sol["Terminal voltage [V]"](t)
             t0 = reached
