@@ -241,18 +241,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "
                  + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
-    fixed_axes = frozenset()
-    if n_temp and "temperature" in cfg.partition:
-        fixed_axes = frozenset({cfg.partition.index("temperature")})
-        progress("  temperature acts through the temperature terms, not through splits: "
-                 "sigmoid splits between a few training temperatures interpolate badly")
-    cfg = resolve_max_local_models(cfg, segs, bool(fixed_axes), progress)
-    boundaries = region_boundaries(segs) if uses_temperature_regions(cfg, segs) else []
-    if boundaries:
-        fixed_axes = frozenset({cfg.partition.index("temperature")})
-        progress("  temperature regions: fixed splits at " + ", ".join(
-            f"{c:.1f} °C (width {w:.2f} K)" for c, w in boundaries)
-                 + "; no other splits along temperature")
+    cfg, fixed_axes, boundaries = _temperature_structure(cfg, segs, n_temp, progress)
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     ladder = local_ladder(cfg, base, segs, progress)
     e_scores: dict[str, float] = {}
@@ -285,30 +274,60 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
             "arrhenius_root_freerun_rmse_mv": e_scores,
             "temperature_terms": n_temp,
             "ocv_prefit_rmse_mv": 1e3 * ocv.rmse_v}
+    if cfg.oe_refinement:
+        model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
+    info.update(_final_figures(model, segs, design, cfg.oe_refinement,
+                               grower.levels if key == "validation_level_score_mv" else None))
+    info["seconds"] = time.perf_counter() - t_start
+    return TrainResult(model, curve, model.n_local_models, info)
+
+
+def _temperature_structure(cfg: TrainConfig, segs: list[Segment], n_temp: int,
+                           progress: Progress) -> tuple[TrainConfig, frozenset, list]:
+    """How temperature enters the growth: the partition axes no split may use (temperature
+    where temperature terms or regions carry it), the resolved max_local_models, and the
+    temperature regions' fixed boundaries (empty without regions)."""
+    fixed_axes: frozenset = frozenset()
+    if n_temp and "temperature" in cfg.partition:
+        fixed_axes = frozenset({cfg.partition.index("temperature")})
+        progress("  temperature acts through the temperature terms, not through splits: "
+                 "sigmoid splits between a few training temperatures interpolate badly")
+    cfg = resolve_max_local_models(cfg, segs, bool(fixed_axes), progress)
+    boundaries = region_boundaries(segs) if uses_temperature_regions(cfg, segs) else []
+    if boundaries:
+        fixed_axes = frozenset({cfg.partition.index("temperature")})
+        progress("  temperature regions: fixed splits at " + ", ".join(
+            f"{c:.1f} °C (width {w:.2f} K)" for c, w in boundaries)
+                 + "; no other splits along temperature")
+    return cfg, fixed_axes, boundaries
+
+
+def _final_figures(model: LmnModel, segs: list[Segment], design: Design, refined: bool,
+                   levels: list | None) -> dict:
+    """The final model's free-run RMSE (mV) on the validation samples (the fit samples where
+    there are none, validation "none"), after the refinement also on the fit samples, and per
+    temperature level where M was chosen per level (levels: the grower's, else None); each
+    sample set simulated once."""
     squares: dict[str, np.ndarray] = {}
 
     def final_squares(which: str) -> np.ndarray:
-        """The final model's freerun_squares over 'val' or 'fit' samples, simulated once."""
         if which not in squares:
             squares[which] = freerun_squares(model, segs, design, which)
         return squares[which]
 
-    def final_error(which: str) -> float:
-        """The final model's free-run RMSE (V) over 'val' or 'fit' samples."""
-        return rmse_of_squares(final_squares(which))
-
-    if cfg.oe_refinement:
-        model, info["output_error"] = refine_output_error(model, segs, design, cfg, progress)
-        info["refined_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error("val"))
-        info["refined_train_freerun_rmse_mv"] = finite_or_none(1e3 * final_error("fit"))
-    # over the fit samples where there are no validation samples (validation "none")
+    out: dict = {}
+    if refined:
+        out["refined_validation_freerun_rmse_mv"] = finite_or_none(
+            1e3 * rmse_of_squares(final_squares("val")))
+        out["refined_train_freerun_rmse_mv"] = finite_or_none(
+            1e3 * rmse_of_squares(final_squares("fit")))
     final = "val" if design.w_val.sum() > 0 else "fit"
-    info["final_validation_freerun_rmse_mv"] = finite_or_none(1e3 * final_error(final))
-    if key == "validation_level_score_mv":     # M was chosen per level: so is the final figure
-        info["final_validation_level_score_mv"] = finite_or_none(
-            1e3 * level_score(rmse_by_level(final_squares(final), grower.levels)))
-    info["seconds"] = time.perf_counter() - t_start
-    return TrainResult(model, curve, model.n_local_models, info)
+    out["final_validation_freerun_rmse_mv"] = finite_or_none(
+        1e3 * rmse_of_squares(final_squares(final)))
+    if levels is not None:                     # M was chosen per level: so is the final figure
+        out["final_validation_level_score_mv"] = finite_or_none(
+            1e3 * level_score(rmse_by_level(final_squares(final), levels)))
+    return out
 
 
 def _mv(value: float | None) -> str:
