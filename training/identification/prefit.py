@@ -99,79 +99,94 @@ def choose_prefit(cfg: TrainConfig, base: LmnModel, segs: list[Segment],
     is then fitted with every sample at its record's weight: the window focuses the local
     models, but the OCV is a property of the whole SoC range (with the window's weights the
     A123 OCV came out 40–90 mV low below 10 % SoC, where the observers read the SoC)."""
-    taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
-                  if t >= 2 * cfg.sample_time_s)
-    fit_weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
-    ocv_weights = [s.record_weight * ~m for s, m in zip(segs, masks, strict=True)]
-    cur = [s.current_a for s in segs]
-    volt = [s.voltage_v for s in segs]
-    hyst_cache: dict[float, list[np.ndarray]] = {}
-
-    def hyst_series(gamma: float) -> list[np.ndarray]:
-        # the runtime's hysteresis recursion (lmncell.runtime.step.ExoStepper.update), per segment
-        if gamma not in hyst_cache:
-            hyst_cache[gamma] = [hysteresis(s.current_a, gamma, cfg.sample_time_s,
-                                            base.capacity_ah, initial_hysteresis(s.soc0))
-                                 for s in segs]
-        return hyst_cache[gamma]
-
-    fixed = None
-    if cfg.ocv_tests:
-        fixed = measured_ocv(cfg.ocv_tests, base.capacity_ah, np.linspace(0, 1, cfg.ocv_knots))
+    pre = _Prefits(cfg, base, segs, masks, socs)
+    if pre.fixed is not None:
         progress(f"  OCV from slow tests {', '.join(Path(p).name for p in cfg.ocv_tests)}: "
-                 f"{fixed[0]:.3f} … {fixed[-1]:.3f} V (fixed)")
-
-    def prefit(gamma: float | None, e_k: float | None, r_knots: int = 1,
-               weights: list[np.ndarray] = fit_weights):
-        gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
-        return fit_ocv(socs, cur, volt, weights, None if gamma is None else hyst_series(gamma),
-                       cfg.sample_time_s, taus, cfg.ocv_knots, gain, fixed, r_knots)
-
-    # E is chosen where the linear pre-fit can follow the cell, with the inverse-variance SoC
-    # weights the network will use: unweighted, the voltage collapse before the cut-off, while
-    # the cell is warmest, chose E (Panasonic 25 °C, US06 left out: E off, held-out RMSE
-    # 13.9 mV in 20–80 % and 31.0 mV whole; with the weights E = 2000 K, 10.2 and 22.2 mV).
-    # γ keeps the fit weights: the hysteresis of LFP shows most where the OCV is steep
-    select: list[list[np.ndarray]] = []       # computed on the first call: only 'auto' needs it
-
-    def selection_weights() -> list[np.ndarray]:
-        if not select:
-            knots = np.linspace(0, 1, cfg.ocv_knots)
-            table = fixed if fixed is not None else prefit(None, None).ocv_v
-            select.append([w * f for w, f in zip(
-                fit_weights, soc_reference_factors(socs, knots, table, cfg), strict=True)])
-        return select[0]
-
-    groups = arrhenius_groups(cfg, segs)
-
-    def prefit_selection(gamma: float | None, e_k: float | None, r_knots: int = 1) -> OcvFit:
-        """The pre-fit that chooses E: over all segments, or with temperature regions one per
-        level (each its own resistances, and its own OCV where no test fixes it), their RMSE
-        pooled."""
-        weights = selection_weights()
-        if len(groups) < 2:
-            return prefit(gamma, e_k, r_knots, weights=weights)
-        fits, masses = [], []
-        for group in groups:
-            w = [wk if k in group else np.zeros_like(wk) for k, wk in enumerate(weights)]
-            fits.append(prefit(gamma, e_k, r_knots, weights=w))
-            masses.append(float(sum(float(np.sum(wk)) for wk in w)))
-        pooled = np.sqrt(sum(f.rmse_v ** 2 * m for f, m in zip(fits, masses, strict=True))
-                         / max(sum(masses), 1e-300))
-        return dataclasses.replace(fits[0], rmse_v=float(pooled))
-
-    if len(groups) > 1:
-        progress(f"  E from pre-fits of each of the {len(groups)} temperature levels on its own "
-                 "(the temperature regions carry the differences between levels, E the "
-                 "warm-up within each)")
+                 f"{pre.fixed[0]:.3f} … {pre.fixed[-1]:.3f} V (fixed)")
+    if len(pre.groups) > 1:
+        progress(f"  E from pre-fits of each of the {len(pre.groups)} temperature levels on "
+                 "its own (the temperature regions carry the differences between levels, E "
+                 "the warm-up within each)")
     if e_k_chosen:
         e_k = e_k_chosen[0]
         progress(f"  temperature scaling: {'off' if e_k is None else f'E = {e_k:g} K'} "
                  "(chosen above)")
     else:
-        e_k = _choose_arrhenius(cfg, segs, prefit_selection, progress)
-    gamma, trial = _choose_hysteresis(cfg, e_k, prefit, progress)
-    return gamma, trial, e_k, prefit(gamma, e_k, weights=ocv_weights)
+        e_k = _choose_arrhenius(cfg, segs, pre.selection_fit, progress)
+    gamma, trial = _choose_hysteresis(cfg, e_k, pre.fit, progress)
+    return gamma, trial, e_k, pre.fit(gamma, e_k, weights=pre.ocv_weights)
+
+
+class _Prefits:
+    """The linear OCV pre-fits of one training (fit_ocv over every segment), with what they
+    share: the fit and OCV weights, the hysteresis series per γ and the measured OCV (fixed,
+    where ocv_tests give one)."""
+
+    def __init__(self, cfg: TrainConfig, base: LmnModel, segs: list[Segment],
+                 masks: list[np.ndarray], socs: list[np.ndarray]) -> None:
+        self.cfg, self.base, self.segs, self.socs = cfg, base, segs, socs
+        self.taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
+                           if t >= 2 * cfg.sample_time_s)
+        self.fit_weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
+        self.ocv_weights = [s.record_weight * ~m for s, m in zip(segs, masks, strict=True)]
+        self._hyst: dict[float, list[np.ndarray]] = {}
+        self._selection: list[np.ndarray] | None = None   # computed on first use ('auto')
+        self.fixed = (measured_ocv(cfg.ocv_tests, base.capacity_ah,
+                                   np.linspace(0, 1, cfg.ocv_knots))
+                      if cfg.ocv_tests else None)
+        self.groups = arrhenius_groups(cfg, segs)
+
+    def hysteresis_series(self, gamma: float) -> list[np.ndarray]:
+        """The runtime's hysteresis recursion (lmncell.runtime.step.ExoStepper.update) per
+        segment, computed once per γ."""
+        if gamma not in self._hyst:
+            self._hyst[gamma] = [hysteresis(s.current_a, gamma, self.cfg.sample_time_s,
+                                            self.base.capacity_ah, initial_hysteresis(s.soc0))
+                                 for s in self.segs]
+        return self._hyst[gamma]
+
+    def fit(self, gamma: float | None, e_k: float | None, r_knots: int = 1,
+            weights: list[np.ndarray] | None = None) -> OcvFit:
+        """The pre-fit with hysteresis γ (None: none), Arrhenius E (None: none), r_knots
+        resistance knots over SoC and these sample weights (default: the fit weights)."""
+        cfg, segs = self.cfg, self.segs
+        gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
+        return fit_ocv(self.socs, [s.current_a for s in segs], [s.voltage_v for s in segs],
+                       self.fit_weights if weights is None else weights,
+                       None if gamma is None else self.hysteresis_series(gamma),
+                       cfg.sample_time_s, self.taus, cfg.ocv_knots, gain, self.fixed, r_knots)
+
+    def selection_weights(self) -> list[np.ndarray]:
+        """The fit weights times the inverse-variance SoC factors the network will use: E is
+        chosen where the linear pre-fit can follow the cell (unweighted, the voltage collapse
+        before the cut-off, while the cell is warmest, chose E: Panasonic 25 °C, US06 left
+        out, E off, held-out RMSE 13.9 mV in 20–80 % and 31.0 mV whole; with the weights
+        E = 2000 K, 10.2 and 22.2 mV). γ keeps the fit weights: the hysteresis of LFP shows
+        most where the OCV is steep."""
+        if self._selection is None:
+            knots = np.linspace(0, 1, self.cfg.ocv_knots)
+            table = self.fixed if self.fixed is not None else self.fit(None, None).ocv_v
+            self._selection = [w * f for w, f in zip(
+                self.fit_weights, soc_reference_factors(self.socs, knots, table, self.cfg),
+                strict=True)]
+        return self._selection
+
+    def selection_fit(self, gamma: float | None, e_k: float | None,
+                      r_knots: int = 1) -> OcvFit:
+        """The pre-fit that chooses E: over all segments, or with temperature regions one per
+        level (each its own resistances, and its own OCV where no test fixes it), their RMSE
+        pooled."""
+        weights = self.selection_weights()
+        if len(self.groups) < 2:
+            return self.fit(gamma, e_k, r_knots, weights=weights)
+        fits, masses = [], []
+        for group in self.groups:
+            w = [wk if k in group else np.zeros_like(wk) for k, wk in enumerate(weights)]
+            fits.append(self.fit(gamma, e_k, r_knots, weights=w))
+            masses.append(float(sum(float(np.sum(wk)) for wk in w)))
+        pooled = np.sqrt(sum(f.rmse_v ** 2 * m for f, m in zip(fits, masses, strict=True))
+                         / max(sum(masses), 1e-300))
+        return dataclasses.replace(fits[0], rmse_v=float(pooled))
 
 
 def arrhenius_groups(cfg: TrainConfig, segs: list[Segment]) -> list[set[int]]:
