@@ -81,6 +81,7 @@ def trained_bounds(model: LmnModel) -> tuple[float, ...]:
             tlo - TEMPERATURE_MARGIN_K, thi + TEMPERATURE_MARGIN_K, vlo - VOLTAGE_MARGIN_V,
             vhi + VOLTAGE_MARGIN_V)
 
+
 @dataclass
 class Parameters:
     soc0: float
