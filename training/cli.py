@@ -12,7 +12,12 @@ from pathlib import Path
 from typing import Any
 
 from lmncell import __version__
-from lmncell.config import ConfigError, output_file_problem, parse_setting
+from lmncell.config import (
+    LOCAL_MODELS_PER_REGION,
+    ConfigError,
+    output_file_problem,
+    parse_setting,
+)
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.progress import Progress, print_progress, print_progress_stderr
@@ -411,7 +416,9 @@ def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "syntax; repeatable, e.g. --set max_local_models=4 --set "
                    "'partition=[\"soc\",\"current\"]'")
     s.add_argument("--max-local-models", type=_positive_int, help="upper limit of M "
-                   "(default: 8 per training temperature the tree splits along, else 8)")
+                   f"(default: {LOCAL_MODELS_PER_REGION} per training temperature where the "
+                   f"local models differ by temperature, else {LOCAL_MODELS_PER_REGION}; twice "
+                   "that where the partition has the current)")
     s.add_argument("--ocv-tests", nargs="+", metavar="FILE", help="slow OCV tests, C/5 or "
                    "slower (a discharge from full and a charge from empty, in either order; or "
                    "one file with both): fixes the OCV")

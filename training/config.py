@@ -26,6 +26,7 @@ OFFSET_RIDGE = 0.003       # offset_ridge 'auto' where slow OCV tests fix the OC
 OCV_TEST_ANCHOR = 0.003    # ocv_refinement: 1 mV off the test costs like this share of samples
 OCV_REFINE_SOC_MIN = 0.1   # ocv_refinement: the test's OCV knots below this SoC stay as measured
 OCV_REFINE_LEVELS = 3      # ocv_refinement 'auto': on for records at this many temperature levels
+LOCAL_MODELS_PER_REGION = 8  # max_local_models 'auto': per temperature region (×2 with current)
 
 
 SWITCH_SETTINGS = ("ocv_input", "soc_input", "oblique", "oe_refinement")

@@ -25,7 +25,12 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.config import DEPLETION_FAST_TAU_S, ConfigError, TrainConfig
+from lmncell.config import (
+    DEPLETION_FAST_TAU_S,
+    LOCAL_MODELS_PER_REGION,
+    ConfigError,
+    TrainConfig,
+)
 from lmncell.data.dataset import Segment
 from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ladder import Ladder, ladder_for, ladder_keys
@@ -173,7 +178,6 @@ def resolve_fast_depletion(cfg: TrainConfig, segs: list[Segment], progress: Prog
     return dataclasses.replace(cfg, depletion_fast_tau_s=float(fast))
 
 
-LOCAL_MODELS_PER_REGION = 8
 
 
 def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_fixed: bool,
