@@ -136,16 +136,21 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     assert main(["explain", str(quick_model)]) == 0
     out = capsys.readouterr().out
     lines = out.splitlines()
-    assert "RC ladder" in lines[0] and "R@800s" in lines[2] and "R ≥ 0" in lines[2]
+    # the depletion columns are explained: @0.1 is a coefficient, @SoC what the LM's data see
+    assert lines[2].startswith("R_dep: the depletion resistance R_d·(0.1/SoC)^4")
+    head = 3
+    assert "RC ladder" in lines[0] and "R@800s" in lines[head] and "R ≥ 0" in lines[head]
+    assert "R_dep@0.1" in lines[head] and "R_dep@SoC" in lines[head]
     doc = json.loads(quick_model.read_text())
-    rows = lines[3:3 + len(doc["local_models"]["theta"])]
+    rows = lines[head + 1:head + 1 + len(doc["local_models"]["theta"])]
     assert all(r.split()[-1] == "yes" for r in rows)
     # then the training error by SoC that the EKF's measurement error follows
     rms = doc["noise"]["residual_rms_by_soc"]
-    assert lines[3 + len(rows)].startswith("free-run training error RMS by SoC (mV) 0.05: "
-                                           f"{1e3 * rms['rms_v'][0]:.1f}, 0.15: ")
-    assert "σ_u(SoC) is 10 × 3 × that" in lines[4 + len(rows)]
-    assert len(lines) == 5 + len(rows)
+    end = head + 1 + len(rows)
+    assert lines[end].startswith("free-run training error RMS by SoC (mV) 0.05: "
+                                 f"{1e3 * rms['rms_v'][0]:.1f}, 0.15: ")
+    assert "σ_u(SoC) is 10 × 3 × that" in lines[end + 1]
+    assert len(lines) == end + 2
     assert main(["explain", str(quick_model), "--temperature", "10", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert all(r["temperature_c"] == 10.0 and r["rc_positive"] for r in doc)
@@ -154,7 +159,6 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     factor = Depletion(**json.loads(quick_model.read_text())["regressors"]["depletion"]).factor
     assert all(r["r_depletion_at_soc_mohm"] == pytest.approx(
         r["r_depletion_mohm"] * factor(r["soc"]), rel=1e-12, abs=1e-3) for r in doc)
-    assert "R_dep@0.1" in lines[2] and "R_dep@SoC" in lines[2]
     (tmp_path / "bad.json").write_text("{}")
     assert main(["explain", str(tmp_path / "bad.json")]) == 2
     assert "bad.json" in capsys.readouterr().err

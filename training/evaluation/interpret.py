@@ -167,6 +167,11 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
                     else f"; current delayed by {model.current_delay_s:g} s (the voltage "
                          "channel's lag)"))
     lines.append("resistances in mΩ, voltages in mV; current > 0 charges")
+    if model.depletion is not None and "r_depletion_mohm" in rows[0]:
+        lines.append(f"R_dep: the depletion resistance R_d·(0.1/SoC)^{model.depletion.power:g}"
+                     f" (held below SoC {model.depletion.soc_min:.3g}) that a steady current "
+                     "sees beside R static; @0.1 at SoC 0.1 (for a local model valid far above "
+                     "it, a coefficient its data never reach), @SoC at the local model's own")
     part = model.partition_variables
     if "rc_mohm_by_tau_s" in rows[0]:
         taus = [k for k in rows[0]["rc_mohm_by_tau_s"] if k != "0"]
