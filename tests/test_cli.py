@@ -341,6 +341,10 @@ def test_temperatures_on_the_command_line_are_cell_temperatures_in_celsius(quick
     with pytest.raises(SystemExit):
         main(["explain", str(quick_model), "--temperature", "298.15"])
     assert "a cell temperature in °C within -60…100 (not K)" in capsys.readouterr().err
+    with pytest.raises(SystemExit):     # simulate's --ambient is the ambient's, said so
+        main(["simulate", str(quick_model), "--ambient", "298.15"])
+    assert "--ambient: '298.15': expected an ambient temperature in °C within -60…100 (not K)" in (
+        capsys.readouterr().err)
 
 
 @pytest.mark.parametrize("command", [["simulate"], ["sweep", "--out", "OUT"]])

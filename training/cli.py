@@ -102,6 +102,9 @@ _cutoff = number_argument(float, is_cutoff, CUTOFF_EXPECTED)
 _temperature = number_argument(
     float, is_cell_temperature,
     "a cell temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
+_ambient = number_argument(
+    float, is_cell_temperature,
+    "an ambient temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
 
 
 def soc_list_argument(text: str) -> list[float]:
@@ -510,7 +513,7 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "built-in compact EV; not with --current)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
     s.add_argument("--soc0", type=_float01, default=0.9, help="start SoC")
-    s.add_argument("--ambient", type=_temperature, default=25.0, help="ambient temperature, "
+    s.add_argument("--ambient", type=_ambient, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
                    "a step longer than the cycle's or profile's samples holds their mean power or "
