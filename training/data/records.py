@@ -148,6 +148,7 @@ def _check_finite(name: str, values: np.ndarray, meta: RecordMeta) -> None:
 
 CELL_VOLTAGE_RANGE_V = (0.0, 6.0)           # a record's terminal voltage must lie in it
 CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # and its cell or chamber temperature in this
+SOC_SLACK = 0.05   # a reference SoC this far beyond 0…1 is refused (start SoC or capacity)
 
 
 def is_cell_temperature(values: float | np.ndarray) -> bool:
@@ -203,7 +204,9 @@ def validate_record(rec: Record) -> None:
         _check_range("temperature_c", rec.temperature_c, CELL_TEMPERATURE_RANGE_C, "°C",
                      "a cell temperature in °C (a column in K: --temperature-unit K, "
                      "temperature_unit='K')", rec.meta)
-    if rec.soc_ref is not None and ((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05)).any():
-        row = int(np.flatnonzero((rec.soc_ref < -0.05) | (rec.soc_ref > 1.05))[0])
-        raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected a "
-                        "fraction within 0…1 (check start SoC and capacity)")
+    if rec.soc_ref is not None:
+        outside = np.flatnonzero((rec.soc_ref < -SOC_SLACK) | (rec.soc_ref > 1 + SOC_SLACK))
+        if outside.size:
+            row = int(outside[0])
+            raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected "
+                            "a fraction within 0…1 (check start SoC and capacity)")

@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.data.records import DataError, Record
+from lmncell.data.records import SOC_SLACK, DataError, Record
 
 REST_CURRENT_A = 0.02
 SLOW_TEST_MAX_C_RATE = 0.2   # an OCV test's loaded samples run at C/5 or slower (median)
@@ -84,18 +84,15 @@ def coulomb_count(rec: Record, soc0: float, capacity_ah: float,
     return soc0 + charge_throughput_ah(rec, use_counters) / capacity_ah
 
 
-SOC_SLACK = 0.05   # a counted SoC this far beyond 0…1 is refused (a wrong start SoC or capacity)
-
-
 def reference_soc(rec: Record, soc0: float, capacity_ah: float) -> np.ndarray:
     """coulomb_count as a record's reference SoC: DataError where it leaves 0…1 by more than
     SOC_SLACK, naming where, and the charge the record moves from its start both ways, so that
     the start SoC or the capacity can be put right."""
     soc = coulomb_count(rec, soc0, capacity_ah)
-    charge_ah = (soc - soc0) * capacity_ah
     outside = np.flatnonzero((soc < -SOC_SLACK) | (soc > 1 + SOC_SLACK))
     if not outside.size:
         return soc
+    charge_ah = (soc - soc0) * capacity_ah
     k = int(outside[0])
     where = (f"line {rec.meta.first_line + k}" if rec.meta.first_line is not None
              else f"sample {k}")

@@ -31,6 +31,7 @@ class VirtualCellRunError(DataError):
     """A programme the virtual cell cannot run to its end (a voltage limit or its solver);
     the message names the programme and where it stopped."""
 
+
 PARAMETER_SET = "Prada2013"
 PARAMETER_CHANGES: dict[str, float] = {"Negative particle diffusivity [m2.s-1]": 3e-13}
 SOLVER_RTOL = 1e-6        # relative tolerance of IDAKLU (the default 1e-4 is ~0.3 mV at 3.3 V)

@@ -178,8 +178,6 @@ def resolve_fast_depletion(cfg: TrainConfig, segs: list[Segment], progress: Prog
     return dataclasses.replace(cfg, depletion_fast_tau_s=float(fast))
 
 
-
-
 def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_fixed: bool,
                              progress: Progress = _quiet) -> TrainConfig:
     """The settings with max_local_models "auto" replaced: LOCAL_MODELS_PER_REGION per
