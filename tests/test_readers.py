@@ -255,6 +255,17 @@ def test_missing_column(tmp_path) -> None:
         read_record(p, fmt="bdf")
 
 
+def test_a_json_file_given_as_data_is_named(tmp_path, quick_model) -> None:
+    """A model file (or other JSON) given where a record belongs says what it is."""
+    with pytest.raises(DataError, match=r"pan.json: an LMNCell model file \(give it as the "
+                                        r"model: lmncell evaluate MODEL.json DATA"):
+        read_record(quick_model)
+    other = tmp_path / "results.json"
+    other.write_text('[{"record": "a"}]')
+    with pytest.raises(DataError, match="results.json: a JSON file, not a measurement record"):
+        read_record(other)
+
+
 def test_empty_and_unknown_files(tmp_path) -> None:
     empty = tmp_path / "e.csv"
     empty.write_text("")

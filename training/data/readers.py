@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.data.resample import find_gaps
+from lmncell.runtime.model import FORMAT as MODEL_FORMAT
 
 FORMATS = ("plett", "arbin", "panasonic", "bdf", "biologic", "generic")
 PLETT_COLUMNS = ("time", "step", "current", "voltage", "chgAh", "disAh")
@@ -176,12 +177,25 @@ def _format_of(path: Path) -> str:
         return "arbin"
     if all(c in cols for c in (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)):
         return "bdf"
+    if header.startswith(("{", "[{", "[[")) or header == "[":      # JSON, not a table
+        raise DataError(f"{path}: {_json_kind(path)}, not a measurement record; "
+                        f"{TEXT_EXPECTED}")
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:5])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})")
+
+
+def _json_kind(path: Path) -> str:
+    """What a JSON file given as data seems to be: an LMNCell model file, or some JSON."""
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    if f'"format": "{MODEL_FORMAT}"'.encode() in head:
+        return ("an LMNCell model file (give it as the model: lmncell evaluate MODEL.json "
+                "DATA...)")
+    return "a JSON file"
 
 
 class CsvColumns(dict):
