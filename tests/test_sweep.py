@@ -3,6 +3,7 @@ number of workers, bad option values are refused with the option's name."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -375,6 +376,30 @@ def test_a_charge_profile_stops_at_the_charge_cut_off_or_full(native_fmu, tmp_pa
     assert full.soc[-1] > 1.0 and (full.soc[:-1] <= 1.0).all()
     assert main(["simulate", str(native_fmu), "--current", str(path), "--soc0", "0.5"]) == 0
     assert ("the cell is full (cell voltage" in capsys.readouterr().out)
+
+
+def test_a_cut_off_beyond_the_model_s_voltages_is_refused(native_fmu, tmp_path, capsys) -> None:
+    """A discharge cut-off at or above the highest voltage the model was trained on (or a
+    charge cut-off at or below the lowest) would end every run at its first step: simulate
+    and sweep refuse it, naming the option and the model's own cut-off. Before, --cutoff 5
+    ran and reported "the cell is empty" after 1 s."""
+    profile = tmp_path / "p.csv"
+    profile.write_text("time_s,current_a\n0,1\n1,1\n2,1\n")
+    cases = [(["simulate", str(native_fmu), "--cycle", "wltc", "--cutoff", "5"],
+              r"--cutoff 5 V: at or above the highest voltage of the model's training records "
+              r"\(4\.\d{3} V\), so every run would stop at its first step; expected a discharge "
+              r"cut-off below it \(the model's own: 2\.\d{3} V\)"),
+             (["simulate", str(native_fmu), "--current", str(profile), "--charge-cutoff", "2"],
+              r"--charge-cutoff 2 V: at or below the lowest voltage of the model's training "
+              r"records \(2\.\d{3} V\).* expected a charge cut-off above it"),
+             (["sweep", str(native_fmu), "--cycles", "wltc", "--ambient", "25", "--soc0", "0.9",
+               "--cutoff", "4.5", "--workers", "1", "--out", str(tmp_path / "r.csv")],
+              r"--cutoff 4\.5 V: at or above the highest voltage")]
+    for args, message in cases:
+        assert main(args) == 2
+        assert re.search(message, capsys.readouterr().err)
+    assert not (tmp_path / "r.csv").exists()
+    assert main(["simulate", str(native_fmu), "--cycle", "wltc", "--cutoff", "3"]) == 0
 
 
 @pytest.mark.parametrize("args, message", [

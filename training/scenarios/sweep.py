@@ -31,6 +31,7 @@ from lmncell.scenarios.drive import (
     Vehicle,
     cell_cutoff_v,
     check_cutoff,
+    check_cutoff_in_range,
     load_vehicle,
     pack_power,
     run_cycle,
@@ -201,10 +202,13 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     import pandas as pd
     from dask.distributed import Client, LocalCluster
     from dask.distributed import progress as dask_progress
-    from lmncell.evaluation.fmueval import read_fmu_info
+    from lmncell.evaluation.fmueval import read_fmu_info, shipped_model_doc
 
     fmu = Path(fmu)
     read_fmu_info(fmu)                 # ConfigError naming the file unless an LMNCell FMU
+    cell = shipped_model_doc(fmu).get("cell")
+    for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
+        check_cutoff_in_range(cell, cutoff_v, "sweep: --cutoff")
     if workers is not None and workers < 1:
         raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
     data = fmu.read_bytes()
