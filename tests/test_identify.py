@@ -351,6 +351,24 @@ def test_list_settings_may_be_tuples() -> None:
     assert cfg.soc_window == (0.1, 0.9) and len(cfg.filters) == 2
 
 
+def test_the_filter_chain_gains_sub_second_elements_at_short_sample_times() -> None:
+    """filters "auto": the chain 0.01, 5, 30, 150, 800, 3000 s at Ts = 1 s (the models of
+    before), its first element split at 0.5 and 2 s where each is ≥ 5·Ts: both at 0.1 s (the
+    Panasonic 10 Hz logs, docs/settings.md), 2 s alone at 0.2 s. A list given is kept."""
+    chain = [(0.01, 5.0), (5.0, 30.0), (30.0, 150.0), (150.0, 800.0), (800.0, 3000.0)]
+    assert load_config().filter_pairs() == chain
+    assert load_config(sample_time_s=0.5).filter_pairs() == chain
+    assert load_config(sample_time_s=0.1).filter_pairs() == [(0.01, 0.5), (0.5, 2.0),
+                                                              (2.0, 5.0), *chain[1:]]
+    assert load_config(sample_time_s=0.2).filter_pairs() == [(0.01, 2.0), (2.0, 5.0),
+                                                              *chain[1:]]
+    given = load_config(sample_time_s=0.1, filters=[[0.01, 5.0], [5.0, 30.0]])
+    assert given.filter_pairs() == chain[:2]
+    assert given.filter_time_constants_s() == [0.01, 5.0, 5.0, 30.0]
+    with pytest.raises(ConfigError, match="'filters' = 'fast': expected 'auto' or a list"):
+        load_config(filters="fast")
+
+
 def test_bad_config_file(tmp_path) -> None:
     p = tmp_path / "c.toml"
     p.write_text("[train]\nmax_local_models = 'many'\n")

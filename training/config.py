@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import math
 import os
 import tomllib
@@ -26,6 +27,9 @@ OFFSET_RIDGE = 0.003       # offset_ridge 'auto' where slow OCV tests fix the OC
 OCV_TEST_ANCHOR = 0.003    # ocv_refinement: 1 mV off the test costs like this share of samples
 OCV_REFINE_SOC_MIN = 0.1   # ocv_refinement: the test's OCV knots below this SoC stay as measured
 OCV_REFINE_LEVELS = 3      # ocv_refinement 'auto': on for records at this many temperature levels
+FILTER_CHAIN_S = (0.01, 5.0, 30.0, 150.0, 800.0, 3000.0)   # filters 'auto': the chain (s)
+SUB_SECOND_SPLITS_S = (0.5, 2.0)   # filters 'auto': its first element split here (s) where …
+SPLIT_MIN_SAMPLES = 5              # … the split lies at least this many samples Ts from 0
 LOCAL_MODELS_PER_REGION = 8  # max_local_models 'auto': per temperature region (×2 with current)
 
 
@@ -80,7 +84,8 @@ class TrainConfig:
     output_lags / current_terms: na past outputs y(k−1) … y(k−na) (0: local models without
     output feedback, which cannot go unstable) and nb currents i(k) … i(k−nb+1).
     filters: [tau_fast_s, tau_slow_s] pairs (s), each a regressor v = LP_fast(i) − LP_slow(i)
-    of zero DC gain; the default chain spans relaxation from seconds to about an hour.
+    of zero DC gain; "auto": the chain 0.01, 5, 30, 150, 800, 3000 s (relaxation from seconds
+    to about an hour), for Ts below 1 s split also at 0.5 and 2 s where that is ≥ 5·Ts.
     hysteresis: "auto" (γ chosen by the OCV pre-fit, kept where it lowers the pre-fit's error
     enough, or where the validation error says so), "off", or γ (1): the state
     h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ·|i|·Ts/(3600·Cn)), a regressor of every model.
@@ -181,9 +186,7 @@ class TrainConfig:
     current_delay_s: str | float = "auto"
     output_lags: int = 0
     current_terms: int = 2
-    filters: list[list[float]] = field(
-        default_factory=lambda: [[0.01, 5.0], [5.0, 30.0], [30.0, 150.0], [150.0, 800.0],
-                                 [800.0, 3000.0]])
+    filters: str | list[list[float]] = "auto"
     hysteresis: str | float = "auto"
     temperature_scaling: str | float = "auto"
     time_constant_scaling: str | float = "auto"
@@ -245,9 +248,20 @@ class TrainConfig:
             return float(self.depletion_tau_s)
         return self.nearest_filter_time_constant_s(DEPLETION_TAU_S)
 
+    def filter_pairs(self) -> list[tuple[float, float]]:
+        """The filters' [tau_fast_s, tau_slow_s] pairs: as given, or for "auto"
+        FILTER_CHAIN_S with its first element split at each SUB_SECOND_SPLITS_S of at least
+        SPLIT_MIN_SAMPLES·Ts (none at Ts = 1 s; 0.5 and 2 s at 0.1 s)."""
+        if self.filters != "auto":
+            return [(float(a), float(b)) for a, b in self.filters]
+        splits = [t for t in SUB_SECOND_SPLITS_S
+                  if t >= SPLIT_MIN_SAMPLES * self.sample_time_s]
+        chain = [FILTER_CHAIN_S[0], *splits, *FILTER_CHAIN_S[1:]]
+        return list(itertools.pairwise(chain))
+
     def filter_time_constants_s(self) -> list[float]:
         """Every filter's time constants, in order [fast_1, slow_1, fast_2, …] (s)."""
-        return [float(t) for f in self.filters for t in f]
+        return [t for f in self.filter_pairs() for t in f]
 
     def nearest_filter_time_constant_s(self, tau_s: float) -> float:
         """The filters' time constant nearest tau_s on a log scale (the first of equals)."""
@@ -301,10 +315,11 @@ class TrainConfig:
         """The list-valued settings are lists (or tuples) of the right shape (their values are
         checked later): filters of pairs, the SoC window of two, the partition and the record
         weights of any length."""
-        if not (isinstance(self.filters, (list, tuple)) and all(
+        if not (self.filters == "auto" or (isinstance(self.filters, (list, tuple)) and all(
                 isinstance(f, (list, tuple)) and len(f) == 2 and all(is_real_number(x) for x in f)
-                for f in self.filters)):
-            raise self._bad("filters", "expected a list of [tau_fast_s, tau_slow_s] pairs")
+                for f in self.filters))):
+            raise self._bad("filters", "expected 'auto' or a list of [tau_fast_s, tau_slow_s] "
+                                       "pairs")
         window = self.soc_window
         if not (isinstance(window, (list, tuple)) and len(window) == 2
                 and all(is_real_number(x) for x in window)):
@@ -321,11 +336,11 @@ class TrainConfig:
         bad = self._bad
         if not self.sample_time_s > 0:
             raise bad("sample_time_s", "expected > 0 s")
-        for f in self.filters:
-            if len(f) != 2 or not 0 < f[0] < f[1]:
+        for f in self.filter_pairs():
+            if not 0 < f[0] < f[1]:
                 raise bad("filters", "expected pairs [tau_fast_s, tau_slow_s], 0 < fast < slow")
         if self.local_model_form == "rc_ladder" and not is_ladder(
-                self.filters, self.sample_time_s, self.output_lags):
+                self.filter_pairs(), self.sample_time_s, self.output_lags):
             raise bad("local_model_form", "RC-ladder local models need output_lags = 0 and a "
                       "chain of filters whose time constants at or above sample_time_s are "
                       "shared like [[0.01, 5], [5, 30], [30, 150]]; use 'free' or 'auto'")
@@ -380,7 +395,7 @@ class TrainConfig:
                 raise bad("depletion_tau_s", "expected 'auto' or a time constant in s")
             try:
                 Depletion(float(self.depletion_tau_s), 1.0).state_index(
-                    [(float(a), float(b)) for a, b in self.filters])
+                    self.filter_pairs())
             except ValueError as exc:
                 raise bad("depletion_tau_s", f"{exc} (or set depletion_power = 0)") from None
         fast = self.depletion_fast_tau_s

@@ -174,7 +174,7 @@ OFFSET_SCALE_V = 0.01   # the local OCV offset's scale in the relative sensitivi
 
 # the default LMN's filter ladder: its local models' dynamic regressors are low-passes of the
 # current at these time constants (s), the slow end of each pair (5, 30, 150, 800, 3000 s)
-LMN_FILTER_TAUS_S = tuple(float(slow) for _, slow in TrainConfig().filters)
+LMN_FILTER_TAUS_S = tuple(slow for _, slow in TrainConfig().filter_pairs())
 
 
 def sensitivities(cell: CellSpec, current: np.ndarray, ts: float,

@@ -125,7 +125,7 @@ class _Prefits:
     def __init__(self, cfg: TrainConfig, base: LmnModel, segs: list[Segment],
                  masks: list[np.ndarray], socs: list[np.ndarray]) -> None:
         self.cfg, self.base, self.segs, self.socs = cfg, base, segs, socs
-        self.taus = sorted(t for t in {t for f in cfg.filters for t in f} | {1000.0}
+        self.taus = sorted(t for t in set(cfg.filter_time_constants_s()) | {1000.0}
                            if t >= 2 * cfg.sample_time_s)
         self.fit_weights = [s.weight * ~m for s, m in zip(segs, masks, strict=True)]
         self.ocv_weights = [s.record_weight * ~m for s, m in zip(segs, masks, strict=True)]

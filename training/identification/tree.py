@@ -26,7 +26,7 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
     m = LmnModel(
         sample_time_s=cfg.sample_time_s, capacity_ah=capacity_ah, ocv_soc=ocv_soc, ocv_v=ocv_v,
         output_lags=cfg.output_lags, current_terms=cfg.current_terms,
-        filters=[(float(a), float(b)) for a, b in cfg.filters], hysteresis_gamma=gamma,
+        filters=cfg.filter_pairs(), hysteresis_gamma=gamma,
         ocv_input=cfg.ocv_input, soc_input=cfg.soc_input, offset=True,
         relative_ocv=cfg.output == "relative_ocv", partition_variables=list(cfg.partition),
         partition_center=center, partition_scale=scale, roots=roots,
