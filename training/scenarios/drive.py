@@ -193,34 +193,32 @@ def check_cutoff(cutoff_v: float, option: str = "--cutoff") -> float:
 
 
 def check_cutoff_in_range(cell: Mapping[str, Any] | None, cutoff_v: float,
-                          option: str = "--cutoff") -> float:
+                          option: str = "--cutoff", charge: bool = False) -> float:
     """A given cut-off (V) checked against the model's training voltages (a model file's
-    `cell` table): a discharge cut-off (option --cutoff) at or above their highest, or a
-    charge cut-off (--charge-cutoff) at or below their lowest, would end every run at its
-    first step: DataError naming the option. 0 (none) passes."""
-    charge = "charge" in option
+    `cell` table): a discharge cut-off at or above their highest, or a charge cut-off (charge)
+    at or below their lowest, would end every run at its first step: DataError naming the
+    option. 0 (none) passes."""
     low, high = cell_cutoff_v(cell), cell_cutoff_v(cell, "voltage_max_v")
-    bound, side = (low, "lowest") if charge else (high, "highest")
+    bound, own = (low, high) if charge else (high, low)
     if cutoff_v > 0.0 and bound > 0.0 and (cutoff_v <= bound if charge else cutoff_v >= bound):
-        own = high if charge else low
-        raise DataError(f"{option} {cutoff_v:g} V: {'at or below' if charge else 'at or above'}"
-                        f" the {side} voltage of the model's training records ({bound:.3f} V), "
-                        "so every run would stop at its first step; expected a "
-                        f"{'charge' if charge else 'discharge'} cut-off "
-                        f"{'above' if charge else 'below'} it (the model's own: {own:.3f} V)")
+        where, kind, side = (("at or below the lowest", "charge", "above") if charge else
+                             ("at or above the highest", "discharge", "below"))
+        raise DataError(f"{option} {cutoff_v:g} V: {where} voltage of the model's training "
+                        f"records ({bound:.3f} V), so every run would stop at its first step; "
+                        f"expected a {kind} cut-off {side} it (the model's own: {own:.3f} V)")
     return cutoff_v
 
 
-def _given_cutoff(fmu: str | Path, cutoff_v: float | None, option: str = "--cutoff") -> float:
-    """The run's cut-off (V): the FMU model's own for None, else the value given, checked
-    (check_cutoff, check_cutoff_in_range)."""
+def _given_cutoff(fmu: str | Path, cutoff_v: float | None, charge: bool = False) -> float:
+    """The run's discharge cut-off (V), or with charge its charge cut-off: the FMU model's own
+    for None, else the value given, checked (check_cutoff, check_cutoff_in_range)."""
     from lmncell.evaluation.fmueval import shipped_model_doc
 
     cell = shipped_model_doc(fmu).get("cell")
-    key = "voltage_max_v" if "charge" in option else "voltage_min_v"
     if cutoff_v is None:
-        return cell_cutoff_v(cell, key)
-    return check_cutoff_in_range(cell, check_cutoff(cutoff_v, option), option)
+        return cell_cutoff_v(cell, "voltage_max_v" if charge else "voltage_min_v")
+    option = "--charge-cutoff" if charge else "--cutoff"
+    return check_cutoff_in_range(cell, check_cutoff(cutoff_v, option), option, charge)
 
 
 def empty_reason(voltage_v: float, soc: float, cutoff_v: float) -> str:
@@ -417,7 +415,7 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
     dt = prof.step_s
     current = np.tile(prof.current_a, repeat)
     cutoff = _given_cutoff(fmu, cutoff_v)
-    charge_cutoff = _given_cutoff(fmu, charge_cutoff_v, "--charge-cutoff")
+    charge_cutoff = _given_cutoff(fmu, charge_cutoff_v, charge=True)
     copies = f"{repeat} × " if repeat > 1 else ""
     md, h, n = _communication_steps(fmu, step_s, current.size * dt,
                                     f"{copies}the profile {prof.name}")
