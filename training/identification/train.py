@@ -113,8 +113,9 @@ def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
         return None
     return (f"note: {name} is logged every {fastest:.3g} s (median), faster than the model's "
             f"Ts = {sample_time_s:g} s: the model follows the voltage's {sample_time_s:g}-s "
-            "means, not every sample; where the voltage at each sample matters, train at the "
-            f"log's rate (--set sample_time_s={round_step(fastest):g}, which takes longer)")
+            "means, not every sample; where the voltage at each sample matters and the host "
+            f"steps the model at the log's rate, train at that rate (--set "
+            f"sample_time_s={round_step(fastest):g}, which takes longer)")
 
 
 def round_step(interval_s: float) -> float:
