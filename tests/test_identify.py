@@ -317,6 +317,8 @@ def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_region
     ({"ocv_tests": ["a.csv", "b.csv", "c.csv"]}, "'ocv_tests' = \\['a.csv'"),
     ({"filters": 5.0}, "'filters' = 5.0"),
     ({"filters": [[1.0, "x"]]}, "'filters'"),
+    ({"filters": []}, "'filters' = \\[\\]: the depletion regressor .* expected at least one "
+                      "filter \\(or set depletion_power = 0\\)"),
     ({"soc_window": 0.5}, "'soc_window' = 0.5: expected \\[low, high\\]"),
     ({"partition": [["soc"]]}, "'partition'"),
     ({"record_weights": 1.0}, "'record_weights' = 1.0"),

@@ -390,6 +390,10 @@ class TrainConfig:
         bad = self._bad
         if not (is_real_number(self.depletion_power) and 0 <= self.depletion_power <= 8):
             raise bad("depletion_power", "expected 0 (off) … 8")
+        if self.depletion_power and not self.filter_pairs():
+            raise bad("filters", "the depletion regressor low-passes the current with one of "
+                                 "the filters' time constants: expected at least one filter "
+                                 "(or set depletion_power = 0)")
         if self.depletion_power and self.depletion_tau_s != "auto":
             if not is_real_number(self.depletion_tau_s):
                 raise bad("depletion_tau_s", "expected 'auto' or a time constant in s")
