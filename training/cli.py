@@ -301,6 +301,7 @@ def _floats(option: str):
 
 def cmd_sweep(a: argparse.Namespace) -> int:
     from lmncell.scenarios.sweep import (
+        check_sweep,
         check_table_path,
         plot_sweep,
         scenarios,
@@ -311,6 +312,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     check_table_path(a.out)
     cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat,
                       a.pack, a.spread, a.seed, a.cells, a.cutoff)
+    check_sweep(a.fmu, cases, a.workers)
     print(f"sweep: {len(cases)} scenario(s) on "
           + (f"the scheduler {a.scheduler}" if a.scheduler else
              f"a LocalCluster of {a.workers or 'all'} worker(s)"), flush=True)

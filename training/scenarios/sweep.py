@@ -193,6 +193,22 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
            "wall_s": time.perf_counter() - t0}
 
 
+def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None) -> Path:
+    """The FMU's path, once it is known to be an LMNCell FMU (ConfigError naming the file if
+    not) whose model's voltages the scenarios' cut-off lies within (check_cutoff_in_range),
+    and workers a whole number ≥ 1 or None; DataError naming the option otherwise."""
+    from lmncell.evaluation.fmueval import read_fmu_info, shipped_model_doc
+
+    fmu = Path(fmu)
+    read_fmu_info(fmu)
+    cell = shipped_model_doc(fmu).get("cell")
+    for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
+        check_cutoff_in_range(cell, cutoff_v, "sweep: --cutoff")
+    if workers is not None and workers < 1:
+        raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
+    return fmu
+
+
 def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
           scheduler: str | None = None, progress: bool = True, client=None):
     """Run the scenarios on Dask and return the table (pandas DataFrame), one row per
@@ -202,15 +218,8 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     import pandas as pd
     from dask.distributed import Client, LocalCluster
     from dask.distributed import progress as dask_progress
-    from lmncell.evaluation.fmueval import read_fmu_info, shipped_model_doc
 
-    fmu = Path(fmu)
-    read_fmu_info(fmu)                 # ConfigError naming the file unless an LMNCell FMU
-    cell = shipped_model_doc(fmu).get("cell")
-    for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
-        check_cutoff_in_range(cell, cutoff_v, "sweep: --cutoff")
-    if workers is not None and workers < 1:
-        raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
+    fmu = check_sweep(fmu, cases, workers)
     data = fmu.read_bytes()
     cluster = None
     own = client is None
