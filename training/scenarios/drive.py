@@ -157,12 +157,18 @@ def step_means(values: np.ndarray, dt: float, h: float, n: int) -> np.ndarray:
     return means
 
 
+def shipped_cell(fmu: str | Path) -> Mapping[str, Any] | None:
+    """The `cell` table of an LMNCell FMU's model file (resources/model.json), None without
+    one."""
+    from lmncell.evaluation.fmueval import shipped_model_doc
+
+    return shipped_model_doc(fmu).get("cell")
+
+
 def shipped_cutoff_v(fmu: str | Path, key: str = "voltage_min_v") -> float:
     """The discharge cut-off (V) of an LMNCell FMU's model file (resources/model.json), as
     cell_cutoff_v gives it (key "voltage_max_v": the charge cut-off)."""
-    from lmncell.evaluation.fmueval import shipped_model_doc
-
-    return cell_cutoff_v(shipped_model_doc(fmu).get("cell"), key)
+    return cell_cutoff_v(shipped_cell(fmu), key)
 
 
 def cell_cutoff_v(cell: Mapping[str, Any] | None, key: str = "voltage_min_v") -> float:
@@ -209,12 +215,11 @@ def check_cutoff_in_range(cell: Mapping[str, Any] | None, cutoff_v: float,
     return cutoff_v
 
 
-def _given_cutoff(fmu: str | Path, cutoff_v: float | None, charge: bool = False) -> float:
-    """The run's discharge cut-off (V), or with charge its charge cut-off: the FMU model's own
-    for None, else the value given, checked (check_cutoff, check_cutoff_in_range)."""
-    from lmncell.evaluation.fmueval import shipped_model_doc
-
-    cell = shipped_model_doc(fmu).get("cell")
+def _given_cutoff(cell: Mapping[str, Any] | None, cutoff_v: float | None,
+                  charge: bool = False) -> float:
+    """The run's discharge cut-off (V), or with charge its charge cut-off: the model's own
+    (its `cell` table, shipped_cell) for None, else the value given, checked (check_cutoff,
+    check_cutoff_in_range)."""
     if cutoff_v is None:
         return cell_cutoff_v(cell, "voltage_max_v" if charge else "voltage_min_v")
     option = "--charge-cutoff" if charge else "--cutoff"
@@ -382,7 +387,7 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
     dt = trace.step_s
     power = np.tile(pack_power(vehicle, trace.speed_mps, trace.grade, dt), repeat)
     cell_power = power / (vehicle.n_series * vehicle.n_parallel)
-    cutoff = _given_cutoff(fmu, cutoff_v)
+    cutoff = _given_cutoff(shipped_cell(fmu), cutoff_v)
     copies = f"{repeat} × " if repeat > 1 else ""
     md, h, n = _communication_steps(fmu, step_s, power.size * dt,
                                     f"{copies}the {trace.title} cycle")
@@ -414,8 +419,9 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
     prof = load_current_profile(profile, discharge_positive)
     dt = prof.step_s
     current = np.tile(prof.current_a, repeat)
-    cutoff = _given_cutoff(fmu, cutoff_v)
-    charge_cutoff = _given_cutoff(fmu, charge_cutoff_v, charge=True)
+    cell = shipped_cell(fmu)
+    cutoff = _given_cutoff(cell, cutoff_v)
+    charge_cutoff = _given_cutoff(cell, charge_cutoff_v, charge=True)
     copies = f"{repeat} × " if repeat > 1 else ""
     md, h, n = _communication_steps(fmu, step_s, current.size * dt,
                                     f"{copies}the profile {prof.name}")

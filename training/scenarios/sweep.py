@@ -35,6 +35,7 @@ from lmncell.scenarios.drive import (
     load_vehicle,
     pack_power,
     run_cycle,
+    shipped_cell,
     step_means,
 )
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
@@ -197,11 +198,11 @@ def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = No
     """The FMU's path, once it is known to be an LMNCell FMU (ConfigError naming the file if
     not) whose model's voltages the scenarios' cut-off lies within (check_cutoff_in_range),
     and workers a whole number ≥ 1 or None; DataError naming the option otherwise."""
-    from lmncell.evaluation.fmueval import read_fmu_info, shipped_model_doc
+    from lmncell.evaluation.fmueval import read_fmu_info
 
     fmu = Path(fmu)
     read_fmu_info(fmu)
-    cell = shipped_model_doc(fmu).get("cell")
+    cell = shipped_cell(fmu)
     for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
         check_cutoff_in_range(cell, cutoff_v, "sweep: --cutoff")
     if workers is not None and workers < 1:
