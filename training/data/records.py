@@ -151,6 +151,11 @@ CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # and its cell or chamber temperatur
 SOC_SLACK = 0.05   # a reference SoC this far beyond 0…1 is refused (start SoC or capacity)
 
 
+def soc_outside(soc: np.ndarray) -> np.ndarray:
+    """Indices where a reference SoC leaves 0…1 by more than SOC_SLACK."""
+    return np.flatnonzero((soc < -SOC_SLACK) | (soc > 1 + SOC_SLACK))
+
+
 def is_cell_temperature(values: float | np.ndarray) -> bool:
     """Whether every value is a finite cell temperature in °C within CELL_TEMPERATURE_RANGE_C
     (a value in kelvin is not)."""
@@ -205,7 +210,7 @@ def validate_record(rec: Record) -> None:
                      "a cell temperature in °C (a column in K: --temperature-unit K, "
                      "temperature_unit='K')", rec.meta)
     if rec.soc_ref is not None:
-        outside = np.flatnonzero((rec.soc_ref < -SOC_SLACK) | (rec.soc_ref > 1 + SOC_SLACK))
+        outside = soc_outside(rec.soc_ref)
         if outside.size:
             row = int(outside[0])
             raise DataError(f"{src}: 'soc_ref' is {rec.soc_ref[row]:.4f} at row {row}; expected "

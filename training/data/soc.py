@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.data.records import SOC_SLACK, DataError, Record
+from lmncell.data.records import DataError, Record, soc_outside
 
 REST_CURRENT_A = 0.02
 SLOW_TEST_MAX_C_RATE = 0.2   # an OCV test's loaded samples run at C/5 or slower (median)
@@ -89,7 +89,7 @@ def reference_soc(rec: Record, soc0: float, capacity_ah: float) -> np.ndarray:
     SOC_SLACK, naming where, and the charge the record moves from its start both ways, so that
     the start SoC or the capacity can be put right."""
     soc = coulomb_count(rec, soc0, capacity_ah)
-    outside = np.flatnonzero((soc < -SOC_SLACK) | (soc > 1 + SOC_SLACK))
+    outside = soc_outside(soc)
     if not outside.size:
         return soc
     charge_ah = (soc - soc0) * capacity_ah
