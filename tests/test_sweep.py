@@ -430,6 +430,21 @@ def test_a_sweep_says_which_runs_stopped_with_a_cell_full(native_fmu, tmp_path,
     assert out.read_text().splitlines()[1].split(",")[16] == "SoC above 100 %"
 
 
+def test_a_sweep_warns_of_scenarios_outside_the_trained_range(native_fmu, tmp_path,
+                                                            capsys) -> None:
+    """The quick model knows the cell near 25 °C: a sweep at 60 °C ambient extrapolates, and
+    the summary says which scenarios did; at 25 °C it says nothing."""
+    out = tmp_path / "r.csv"
+    args = ["sweep", str(native_fmu), "--cycles", "us06", "--soc0", "0.8", "--workers", "1",
+            "--out", str(out)]
+    assert main([*args, "--ambient", "25"]) == 0
+    assert "trained range" not in capsys.readouterr().out
+    assert main([*args, "--ambient", "25,60"]) == 0
+    assert ("warning: 1 of 2 scenario(s) left the model's trained range (current, SoC, "
+            "temperature or its voltage) in some step, at ambient 60 °C (column "
+            "out_of_range_steps)" in capsys.readouterr().out)
+
+
 def test_a_step_the_fmu_refuses_is_named_and_a_sweep_keeps_its_other_rows(native_fmu, quick_fmu,
                                                                           tmp_path,
                                                                           capsys) -> None:

@@ -274,6 +274,19 @@ def _stops_summary(stops) -> str:
             + " (columns stop, stopped_at_s); --cutoff sets the cut-off voltage\n")
 
 
+def _range_summary(out_of_range_steps, ambient_c) -> str:
+    """The sweep's line on scenarios whose FMU flagged out_of_range in some step (the model
+    extrapolated its training data): how many, at which ambient temperatures (°C); '' where
+    none did."""
+    left = [t for n, t in zip(out_of_range_steps, ambient_c, strict=True) if n > 0]
+    if not left:
+        return ""
+    ambients = ", ".join(f"{t:g}" for t in sorted(set(left)))
+    return (f"warning: {len(left)} of {len(out_of_range_steps)} scenario(s) left the model's "
+            "trained range (current, SoC, temperature or its voltage) in some step, at ambient "
+            f"{ambients} °C (column out_of_range_steps): their figures are extrapolated\n")
+
+
 def cmd_simulate(a: argparse.Namespace) -> int:
     from lmncell.scenarios.drive import simulate_cycle_cli
 
@@ -322,6 +335,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
           f"{table['voltage_min_v'].min():.3f} V, end SoC {table['soc_end'].min():.3f}…"
           f"{table['soc_end'].max():.3f}, {table['wall_s'].sum():.1f} s of FMU runs")
     print(_stops_summary(table["stop"]), end="")
+    print(_range_summary(table["out_of_range_steps"], table["ambient_c"]), end="")
     if a.plot:
         for f in plot_sweep(table, a.plot):
             print(f"plot: {f}")
