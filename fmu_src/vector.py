@@ -4,13 +4,15 @@ per-cell capacity and an overpotential scale for cell-to-cell spread.
 
 Cell k's voltage is OCV(SoC_k) + r_k·ŷ_k for a relative-OCV model (r_k = 1: the model as
 identified; r_k > 1: a cell whose resistances and polarisation are r_k times larger), or r_k·ŷ_k
-for an absolute model. With r = 1 and the model's capacity every cell equals CellStepper.
+for an absolute model. With r = 1 and the model's capacity every cell equals CellStepper
+given the currents the model takes after its current delay, i.e. the FMU's engine.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from .cosim import trained_bounds
 from .model import LmnModel
 from .step import (
     CHARGE,
@@ -66,6 +68,10 @@ class VectorCells:
         self._any_activation = bool(self._in_activation.any())
         self._depletion_states = ([] if m.depletion is None
                                   else m.depletion.state_indices(m.filters))
+        self._bounds = trained_bounds(m)
+        self.out_of_range = np.zeros(n, dtype=bool)
+        self._delay_share = m.current_delay_s / ts        # δ/Ts of the model's current delay
+        self._last_input: np.ndarray | None = None        # the last step's currents given (A)
 
     # ----- the step ---------------------------------------------------------------------------
     def _features(self, i: np.ndarray, t: np.ndarray, soc: np.ndarray, lp: np.ndarray,
@@ -139,21 +145,45 @@ class VectorCells:
             self.cell_temperature_c = rested_temperature(self.model.thermal, temperature_c)
         return self.cell_temperature_c
 
+    def _taken(self, current_a: np.ndarray) -> np.ndarray:
+        """The currents the model takes in a step given current_a (A) held over it: with a
+        current delay δ, (δ·i(k−1) + (Ts − δ)·i(k))/Ts, i(−1) = i(0), as the FMU takes them
+        (cosim.held_delayed_currents)."""
+        if not self._delay_share:
+            return current_a
+        last = current_a if self._last_input is None else self._last_input
+        return self._delay_share * last + (1.0 - self._delay_share) * current_a
+
     def peek(self, current_a: np.ndarray, temperature_c: np.ndarray | float) -> np.ndarray:
         """The voltages a step with these currents would give; nothing changes."""
-        i = np.asarray(current_a, dtype=float)
+        i = self._taken(np.asarray(current_a, dtype=float))
         t = np.broadcast_to(np.asarray(temperature_c, dtype=float), (self.n,))
         started, cell = self._started, self.cell_temperature_c
         u = self._advance(i, self._temperatures(t))[-1]
         self._started, self.cell_temperature_c = started, cell
         return u
 
+    def _outside(self, i: np.ndarray, soc: np.ndarray, t: np.ndarray,
+                 u: np.ndarray) -> np.ndarray:
+        """Per cell, the FMU's out_of_range for a step (cosim.trained_bounds): its current (A),
+        its SoC at the step's start, the cell temperature it was taken at (°C) or its voltage
+        after it (V) beyond the trained region and its margins."""
+        ilo, ihi, slo, shi, tlo, thi, vlo, vhi = self._bounds
+        return ~((ilo <= i) & (i <= ihi) & (slo <= soc) & (soc <= shi) & (tlo <= t) & (t <= thi)
+                 & (vlo <= u) & (u <= vhi))
+
     def step(self, current_a: np.ndarray, temperature_c: np.ndarray | float) -> np.ndarray:
-        """One model step of every cell (currents held over it, > 0 charges); the voltages."""
-        i = np.asarray(current_a, dtype=float)
+        """One model step of every cell (currents held over it, > 0 charges; with a current
+        delay the model takes them δ late, _taken); the voltages. out_of_range then says which
+        cells left the trained region in it."""
+        given = np.array(current_a, dtype=float)
+        i = self._taken(given)
+        self._last_input = given
         t_in = np.broadcast_to(np.asarray(temperature_c, dtype=float), (self.n,))
         t = self._temperatures(t_in)
+        soc_before = self.soc
         self.soc, self.lp, self.h, self.direction, y, self.voltage_v = self._advance(i, t)
+        self.out_of_range = self._outside(i, soc_before, t, self.voltage_v)
         if self.past.shape[1]:
             self.past = np.column_stack([i, self.past[:, :-1]])
         if self.model.output_lags:

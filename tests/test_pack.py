@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from lmncell.data.records import DataError
+from lmncell.runtime.cosim import CellCosim, Parameters, held_delayed_currents
 from lmncell.runtime.model import load_model
 from lmncell.runtime.step import CellStepper, CellThermal
 from lmncell.runtime.vector import VectorCells
-from lmncell.scenarios.pack import Pack, PackSpec, parse_pack, parse_spread
+from lmncell.scenarios.pack import Pack, PackSpec, drive_pack, parse_pack, parse_spread
 
 
 @pytest.mark.parametrize("temperature_is_cell", [True, False])
@@ -24,12 +25,16 @@ def test_vectorised_step_equals_the_per_cell_step(request, fixture, temperature_
     single = [CellStepper(model, s, c, 20.0 + offset) for s, c in zip(soc0, cap, strict=True)]
     thermal = [CellThermal(model, temperature_is_cell) for _ in single]
     rng = np.random.default_rng(0)
-    for k in range(2000):
-        i, t = rng.uniform(-6, 3, 4), 20.0 + 5 * np.sin(k / 300)
+    currents = rng.uniform(-6, 3, (2000, 4))
+    taken = np.array([held_delayed_currents(c.tolist(), model.sample_time_s,
+                                            model.current_delay_s) for c in currents.T]).T
+    assert model.current_delay_s > 0 or fixture == "a123_model"    # the delay is exercised
+    for k, (i, i_taken) in enumerate(zip(currents, taken, strict=True)):
+        t = 20.0 + 5 * np.sin(k / 300)
         u = cells.step(i, t)
         for j, (c, th) in enumerate(zip(single, thermal, strict=True)):
-            assert c.step(i[j], th.cell_temperature(t)) == pytest.approx(u[j], abs=1e-12)
-            th.update(t, i[j], c)
+            assert c.step(i_taken[j], th.cell_temperature(t)) == pytest.approx(u[j], abs=1e-12)
+            th.update(t, i_taken[j], c)
             assert c.soc == pytest.approx(cells.soc[j], abs=1e-12)
 
 
@@ -56,6 +61,61 @@ def test_identical_cells_split_evenly_and_equal_one_cell(quick_model) -> None:
     for _ in range(200):
         u = pack.step_current(-6.0)
         np.testing.assert_allclose(u, one.step(np.array([-2.0]), 25.0)[0], rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("temperature_is_cell", [True, False])
+def test_a_vectorised_cell_is_the_fmus_engine(quick_model, temperature_is_cell) -> None:
+    """Each cell's voltage and out_of_range after a step are the FMU engine's for the same
+    inputs (its current delay included): a current beyond the trained one, a hot ambient, and
+    the SoC run out."""
+    model = load_model(quick_model)
+    cells = VectorCells(model, 0.9, n=1, temperature_c=25.0,
+                        temperature_is_cell=temperature_is_cell)
+    fmu = CellCosim(model, Parameters(0.9, model.capacity_ah,
+                                      temperature_is_cell=temperature_is_cell))
+    fmu.reset(25.0)
+    flags = []
+    for k in range(2400):
+        i = -40.0 if 100 <= k < 110 else -3.0
+        t = 45.0 if 500 <= k < 900 else 25.0
+        cells.step(np.array([i]), t)
+        fmu.advance(model.sample_time_s, i, t)
+        assert cells.out_of_range[0] == fmu.out_of_range, k
+        assert cells.voltage_v[0] == pytest.approx(fmu.voltage_v, abs=1e-9), k
+        flags.append(fmu.out_of_range)
+    assert 0 < sum(flags) < len(flags)
+
+
+def test_a_cell_that_is_not_passive_does_not_take_the_groups_current(quick_model) -> None:
+    """Where the model's dU/dI of a cell falls to 0 or below (a model far beyond its data),
+    an equal-voltage share would send kiloamperes round the group: the share then takes a
+    floor of a tenth of the start's resistance, and the step counts as out of range."""
+    model = load_model(quick_model)
+    pack = Pack(model, PackSpec(1, 3), soc0=0.8, ambient_c=25.0)
+    assert pack.resistance_floor_ohm > 1e-4
+    peek = pack.cells.peek
+
+    def not_passive(current_a, temperature_c):     # cell 0: dU/dI = −3 mΩ
+        u = peek(current_a, temperature_c)
+        u[0] = 3.6 - 0.003 * current_a[0]
+        return u
+
+    pack.cells.peek = not_passive
+    i = pack.share(-6.0)
+    assert pack.floored and i.sum() == pytest.approx(-6.0, abs=1e-12)
+    assert np.abs(i).max() < 100.0 * 6.0          # bounded (the 1 µΩ of before: ~10⁴ A)
+    pack.cells.peek = peek
+    pack.share(-6.0)
+    assert not pack.floored
+
+
+def test_a_pack_counts_its_steps_outside_the_trained_region(quick_model) -> None:
+    model = load_model(quick_model)
+    power = np.full(600, 100.0)                      # W: 12 cells at about 2 A each
+    at = {amb: drive_pack(model, PackSpec(4, 3, 0.02, 0.05, 1), power, amb, 0.9, 2.5)
+          for amb in (25.0, 60.0)}
+    assert at[25.0]["out_of_range_steps"] == 0
+    assert at[60.0]["out_of_range_steps"] == at[60.0]["steps"] == 600
 
 
 @pytest.mark.parametrize("text", ["96x3", "0s3p", "s3p", ""])

@@ -4,7 +4,12 @@ numpy (lmncell.runtime.vector.VectorCells).
 The Np cells of a parallel group share the group's current by their impedance: each step the
 cells' voltages are linearised around an equal share (two trial steps) and the currents chosen
 so that all cells of a group reach the same voltage to first order, summing exactly to the
-string current. The Ns groups in series carry the string current. Spread: per cell, the
+string current. A cell's linearised resistance is taken as at least MIN_RESISTANCE_SHARE of the
+pack's median at its start: below that (none in drive cycles inside the trained region, where
+the least was 0.66 of it) the model is outside what it knows, not passive (the current partition
+of a model driven far beyond its temperatures gave −3 mΩ), and an equal-voltage share would
+send kiloamperes round the group; such a step counts as out of range. The Ns groups in series
+carry the string current. Spread: per cell, the
 capacity and the overpotential scale r (resistances and polarisation) are drawn from normal
 distributions with the given relative standard deviations, seeded, clipped to ±3σ.
 """
@@ -21,6 +26,8 @@ from lmncell.runtime.vector import VectorCells
 from lmncell.scenarios.drive import empty_reason, full_reason
 
 DELTA_A = 1e-3     # current step of the linearisation (A)
+MIN_RESISTANCE_SHARE = 0.1   # a cell's linearised resistance at least this share of the start's
+MIN_RESISTANCE_OHM = 1e-6    # … and at least this (a model not passive even at its start)
 
 
 @dataclass(frozen=True)
@@ -94,6 +101,9 @@ class Pack:
                                  resistance_scale=r, temperature_c=ambient_c,
                                  temperature_is_cell=temperature_is_cell)
         self.current_a = np.zeros(cap.size)
+        self.resistance_floor_ohm = max(MIN_RESISTANCE_SHARE * float(np.median(
+            self._resistances(self.current_a))), MIN_RESISTANCE_OHM)
+        self.floored = False     # the last share raised a resistance to resistance_floor_ohm
 
     @property
     def voltage_v(self) -> float:
@@ -106,16 +116,25 @@ class Pack:
         parallel group to first order, each group's currents summing to the string current."""
         ns, npar = self.spec.n_series, self.spec.n_parallel
         i0 = np.full(self.cells.n, string_current_a / npar)
+        self.floored = False
         if npar == 1:
             return i0
         u0 = self.cells.peek(i0, self.ambient_c)
-        u1 = self.cells.peek(i0 + DELTA_A, self.ambient_c)
-        b = np.maximum((u1 - u0) / DELTA_A, 1e-6).reshape(ns, npar)   # Ω, > 0
+        b = self._resistances(i0, u0)
+        self.floored = bool((b < self.resistance_floor_ohm).any())
+        b = np.maximum(b, self.resistance_floor_ohm).reshape(ns, npar)   # Ω, > 0
         a = u0.reshape(ns, npar) - b * i0.reshape(ns, npar)
         v = (string_current_a + np.sum(a / b, axis=1)) / np.sum(1.0 / b, axis=1)
         i = (v[:, None] - a) / b
         i += (string_current_a - i.sum(axis=1))[:, None] / npar     # exact sum despite round-off
         return i.ravel()
+
+    def _resistances(self, current_a: np.ndarray, u0: np.ndarray | None = None) -> np.ndarray:
+        """Each cell's linearised resistance dU/dI (Ω) of a step with these currents (A); u0:
+        their voltages where already known."""
+        if u0 is None:
+            u0 = self.cells.peek(current_a, self.ambient_c)
+        return (self.cells.peek(current_a + DELTA_A, self.ambient_c) - u0) / DELTA_A
 
     def step_current(self, string_current_a: float) -> np.ndarray:
         self.current_a = self.share(string_current_a)
@@ -129,7 +148,9 @@ class Pack:
 def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambient_c: float,
                soc0: float, cutoff_v: float = 0.0) -> dict:
     """Drive a pack through a power profile (one value per model step); the figures a sweep
-    reports: the weakest cell's minimum voltage and SoC, the hottest cell, the string's Ah.
+    reports: the weakest cell's minimum voltage and SoC, the hottest cell, the string's Ah,
+    and the steps in which a cell left the trained region (VectorCells.out_of_range) or the
+    share floored a resistance (out_of_range_steps).
     The run stops after the first step that leaves a cell empty (drive.empty_reason: its
     voltage below cutoff_v (V) or its SoC below 0) or full (drive.full_reason: its SoC above
     1, as a single cell's run stops): "stop" says why, "stopped_at_s" when."""
@@ -137,10 +158,11 @@ def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambien
     ts = model.sample_time_s
     v_min, v_max, t_max = np.inf, -np.inf, -np.inf
     string_ah = energy_wh = 0.0
-    stop, steps = "", 0
+    stop, steps, outside = "", 0, 0
     for p in np.asarray(pack_power_w, dtype=float).tolist():
         u = pack.step_power(p)
         steps += 1
+        outside += bool(pack.cells.out_of_range.any() or pack.floored)
         v_min, v_max = min(v_min, float(u.min())), max(v_max, float(u.max()))
         t_max = max(t_max, float(pack.cells.cell_temperature_c.max()))
         i_string = float(pack.current_a[: spec.n_parallel].sum())
@@ -156,4 +178,5 @@ def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambien
             "ah_throughput": string_ah, "pack_energy_kwh": energy_wh / 1000.0,
             "cell_temperature_max_c": t_max if model.thermal is not None else float("nan"),
             "cell_steps": int(steps * pack.cells.n), "steps": steps, "stop": stop,
+            "out_of_range_steps": outside,
             "stopped_at_s": steps * ts if stop else None}

@@ -163,7 +163,8 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
             "soc_end": f["soc_end"], "soc_end_min": f["soc_end_min"],
             "ah_throughput": f["ah_throughput"], "cell_energy_wh": math.nan,
             "pack_energy_kwh": f["pack_energy_kwh"],
-            "cell_temperature_max_c": f["cell_temperature_max_c"], "out_of_range_steps": 0,
+            "cell_temperature_max_c": f["cell_temperature_max_c"],
+            "out_of_range_steps": f["out_of_range_steps"],
             "stop": f["stop"], "stopped_at_s": _or_nan(f["stopped_at_s"]),
             "steps": f["steps"], "wall_s": time.perf_counter() - t0}
 
