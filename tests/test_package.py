@@ -166,6 +166,24 @@ def test_python_api_end_to_end(tmp_path) -> None:
     assert fmu.stat().st_size > 1000
 
 
+def test_api_simulate_is_the_fmus_engine_stepped_at_ts(quick_model) -> None:
+    """lmncell.simulate takes the profile as the FMU stepped at Ts with it does: the quick
+    model's current delay included (8 mV apart at a current step before)."""
+    import lmncell
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = lmncell.load_model(quick_model)
+    assert model.current_delay_s > 0
+    current = np.r_[np.full(60, -2.85), np.zeros(60), np.full(60, 1.0)]
+    sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=0.9)
+    engine = CellCosim(model, Parameters(0.9, model.capacity_ah, temperature_is_cell=True))
+    engine.reset(25.0)
+    for k, i in enumerate(current):
+        engine.advance(model.sample_time_s, float(i), 25.0)
+        assert engine.voltage_v == pytest.approx(sim.voltage_v[k], abs=1e-9), k
+        assert engine.soc == pytest.approx(sim.soc[k], abs=1e-12), k
+
+
 def test_api_takes_one_ocv_test_file_on_its_own(monkeypatch, tmp_path) -> None:
     """lmncell.train(..., ocv_tests="c20.mat") passes that one file, not its characters."""
     import lmncell

@@ -23,6 +23,7 @@ from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
 from lmncell.evaluation.evaluate import warn_outside_training
 from lmncell.progress import Progress, print_progress
+from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.step import SimResult
 from lmncell.runtime.step import simulate as _simulate_runtime
@@ -93,9 +94,11 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
 
     temperature_c: cell temperature per step or one value (°C; default 25 °C); soc0: the SoC
     before the first step. Returns arrays `voltage_v` (V, the mean over each step) and `soc`
-    (after each step), plus the network output `y` and the local models' `validity`. Where the
-    current, temperature or SoC leaves what the model was trained on, a UserWarning says so
-    (the model extrapolates there; below SoC 0 the cell is past empty)."""
+    (after each step), plus the network output `y` and the local models' `validity`. A model
+    with a current delay δ (model.current_delay_s) takes each step's current δ late, as its FMU
+    stepped at Ts with the same profile does: (δ·i(k−1) + (Ts − δ)·i(k))/Ts, i(−1) = i(0).
+    Where the current, temperature or SoC leaves what the model was trained on, a UserWarning
+    says so (the model extrapolates there; below SoC 0 the cell is past empty)."""
     if not isinstance(model, LmnModel):
         model = load_model(model)
     current = _profile("current_a", current_a, "A")
@@ -106,7 +109,9 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     temp = None
     if temperature_c is not None:
         temp = _temperature_profile(temperature_c, current.size)
-    sim = _simulate_runtime(model, current, temp, float(soc0), capacity_ah)
+    taken = np.array(held_delayed_currents(current.tolist(), model.sample_time_s,
+                                           model.current_delay_s))
+    sim = _simulate_runtime(model, taken, temp, float(soc0), capacity_ah)
     warn_outside_training(model, "simulate", current, temp, sim.soc)
     return sim
 
