@@ -32,6 +32,20 @@ def programme(tmp_path_factory):
     return out
 
 
+def test_design_json_prints_the_programmes_figures(tmp_path, capsys) -> None:
+    """--json without --compare-virtual printed nothing on stdout (the proof it documented
+    exists only with --compare-virtual): now the programme's figures, progress on stderr."""
+    out = tmp_path / "p.csv"
+    assert main(["design", "--capacity", "2.85", "--soc-profile", "0.9,0.3", "--duration",
+                 "1200", "--out", str(out), "--json"]) == 0
+    said = capsys.readouterr()
+    figures = json.loads(said.out)
+    assert figures["files"][0] == str(out) and "wrote" in said.err
+    assert figures["soc_at_profile_points"] == pytest.approx([0.9, 0.3], abs=0.02)
+    current = np.loadtxt(out, delimiter=",", skiprows=1)[:, 1]
+    assert figures["current_a"] == [current.min(), current.max()]
+
+
 def test_cycler_csv_and_bdf(programme) -> None:
     with open(programme) as fh:
         rows = list(csv.reader(fh))

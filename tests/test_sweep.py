@@ -3,6 +3,7 @@ number of workers, bad option values are refused with the option's name."""
 
 from __future__ import annotations
 
+import json
 import re
 from pathlib import Path
 
@@ -401,6 +402,25 @@ def test_a_cut_off_beyond_the_model_s_voltages_is_refused(native_fmu, tmp_path, 
         assert re.search(message, out.err) and "scenario(s) on" not in out.out
     assert not (tmp_path / "r.csv").exists()
     assert main(["simulate", str(native_fmu), "--cycle", "wltc", "--cutoff", "3"]) == 0
+
+
+def test_simulate_json_is_json_alone_and_the_plot_is_named(native_fmu, tmp_path,
+                                                           capsys) -> None:
+    """With --json stdout is the JSON alone (the out-of-range warning went there after it),
+    the plot's file is named as written (a name without a suffix gets .png), and a suffix that
+    matplotlib cannot write is refused before the run (it raised a traceback after it)."""
+    plot = tmp_path / "run"
+    assert main(["simulate", str(native_fmu), "--cycle", "us06", "--ambient", "60", "--json",
+                 "--plot", str(plot)]) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out)["out_of_range_steps"] > 0
+    assert "warning: " in err and f"plot: {plot}.png" in err
+    assert (tmp_path / "run.png").exists()
+    with pytest.raises(SystemExit) as exit_info:
+        main(["simulate", str(native_fmu), "--cycle", "us06", "--plot", str(tmp_path / "run.txt")])
+    assert exit_info.value.code == 2
+    assert "a figure's file name ends in one of" in capsys.readouterr().err
+    assert not (tmp_path / "run.txt").exists()
 
 
 @pytest.mark.parametrize("args, message", [

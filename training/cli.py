@@ -63,6 +63,23 @@ def output_file_argument(text: str) -> str:
     return text
 
 
+def figure_file_argument(text: str) -> str:
+    """output_file_argument for a figure: a name without a suffix gets .png (what matplotlib
+    writes it as); any other suffix must be a format matplotlib writes (.png, .pdf, .svg, …)."""
+    suffix = Path(text).suffix.lower().lstrip(".")
+    if not suffix:
+        text += ".png"
+    else:
+        from matplotlib.figure import Figure
+
+        formats = Figure().canvas.get_supported_filetypes()
+        if suffix not in formats:
+            raise argparse.ArgumentTypeError(
+                f"{text!r}: a figure's file name ends in one of "
+                f"{', '.join('.' + f for f in sorted(formats))} (.png where it has none)")
+    return output_file_argument(text)
+
+
 def fmu_file_argument(text: str) -> str:
     """output_file_argument for an FMU, whose name the builders accept (fmu.interface.fmu_path:
     it must end in .fmu)."""
@@ -403,7 +420,7 @@ def _add_inspect_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell inspect` subcommand."""
     s = sub.add_parser("inspect", help="summarise cycler files (and plot them)", **fmt)
     s.add_argument("files", nargs="+", help="data files (CSV, .mat, BDF; .gz too)")
-    s.add_argument("--plot", type=output_file_argument, metavar="OUT.png",
+    s.add_argument("--plot", type=figure_file_argument, metavar="OUT.png",
                    help="one figure of all files")
     s.add_argument("--capacity", type=_positive, help="Ah, for C-rates and SoC (default: the "
                    "discharged charge of a record that starts full)")
@@ -538,7 +555,7 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "the run stops where the voltage falls below it or the SoC below 0 (default: "
                    "the lowest voltage of the model's training records; 0: none, the run stops "
                    "at SoC 0 or a voltage below 0)")
-    s.add_argument("--plot", type=output_file_argument, metavar="OUT.png",
+    s.add_argument("--plot", type=figure_file_argument, metavar="OUT.png",
                    help="figure of speed, current, voltage, SoC")
     s.add_argument("--json", action="store_true", help="print the results as JSON")
     s.set_defaults(func=cmd_simulate)
@@ -616,8 +633,8 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--virtual-cell", choices=VIRTUAL_CELLS, default=None,
                    help="PyBaMM DFN with Prada2013 (the sim extra) or the built-in ECM (default: "
                    "pybamm where installed)")
-    s.add_argument("--json", action="store_true", help="print the proof as JSON on stdout "
-                   "(progress on stderr)")
+    s.add_argument("--json", action="store_true", help="print the programme's figures as JSON "
+                   "on stdout, with --compare-virtual the proof (progress on stderr)")
     s.add_argument("--out", required=True, type=output_file_argument, metavar="P.csv",
                    help="cycler programme to write")
     s.set_defaults(func=cmd_design)

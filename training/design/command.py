@@ -65,6 +65,7 @@ def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, so
     import math
     import warnings
 
+    from lmncell.runtime.cosim import held_delayed_currents
     from lmncell.runtime.step import simulate
     from lmncell.scenarios.drive import step_means
 
@@ -72,8 +73,9 @@ def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, so
     steps = math.floor(current_a.size * sample_time_s / ts + 1e-9)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the pulses may leave the trained current
-        sim = simulate(model, step_means(current_a, sample_time_s, ts, steps), None, soc0,
-                       capacity_ah=cell.capacity_ah)
+        taken = held_delayed_currents(step_means(current_a, sample_time_s, ts, steps).tolist(),
+                                      ts, model.current_delay_s)     # as its FMU takes them
+        sim = simulate(model, np.array(taken), None, soc0, capacity_ah=cell.capacity_ah)
     low, high = float(sim.voltage_v.min()), float(sim.voltage_v.max())
     text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
     if low < cell.voltage_min_v or high > cell.voltage_max_v:
@@ -96,6 +98,18 @@ def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]]
               for k in taus}
     rc = [(median[k], float(k)) for k in taus if k != "0" and median[k] > 0.0]
     return (median["0"], rc) if median.get("0", 0.0) > 0.0 else None
+
+
+def programme_figures(prog, files: list[Path], model_check_text: str | None) -> dict:
+    """What `lmncell design --json` prints without --compare-virtual: the files written, the
+    programme's current (A) and predicted voltage (V) ranges, its duration (s), the SoC reached
+    at each profile point, and with --model the model's own run of it (model_check)."""
+    return {"files": [str(f) for f in files],
+            "current_a": [float(prog.current_a.min()), float(prog.current_a.max())],
+            "predicted_voltage_v": [float(prog.voltage_v.min()), float(prog.voltage_v.max())],
+            "duration_s": float(prog.time_s[-1] + (prog.time_s[1] - prog.time_s[0])),
+            "soc_at_profile_points": [float(p[1]) for p in prog.profile_points],
+            "model_check": model_check_text}
 
 
 def run_design(a) -> int:
@@ -132,10 +146,14 @@ def run_design(a) -> int:
         f"{prog.current_a.max():.2f} A, predicted voltage {prog.voltage_v.min():.3f} … "
         f"{prog.voltage_v.max():.3f} V, SoC reached at the profile points: "
         + ", ".join(f"{p[1]:.3f}" for p in prog.profile_points))
+    check = None
     if model is not None and result is None:
-        say(model_check(model, prog.current_a, cyc.sample_time_s, spec.soc_profile[0], cell))
+        check = model_check(model, prog.current_a, cyc.sample_time_s, spec.soc_profile[0], cell)
+        say(check)
     if a.plot:
         plot_programme(prog, Path(a.plot))
+    if a.json and result is None:
+        print(json.dumps(programme_figures(prog, files, check), indent=1))
     if result is not None:
         proof_json = Path(a.out).with_suffix(".proof.json")
         proof_json.write_text(json.dumps(result, indent=1))

@@ -20,6 +20,7 @@ import dataclasses
 import json
 import math
 import shutil
+import sys
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -487,8 +488,7 @@ def simulate_cycle_cli(a) -> int:
     else:
         res = run_cycle(a.fmu, a.cycle, load_vehicle(a.vehicle), a.repeat, a.soc0, a.step,
                         a.ambient, a.cutoff)
-    if a.plot:
-        plot_cycle(res, a.plot)
+    plotted = plot_cycle(res, a.plot) if a.plot else None
     f = res.figures
     if a.json:
         print(json.dumps(f, indent=1))
@@ -502,9 +502,12 @@ def simulate_cycle_cli(a) -> int:
                     else "")
             print(f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} "
                   f"({f['stop']}){hint}")
-    if f["out_of_range_steps"]:
+    if f["out_of_range_steps"]:        # on stderr with --json: stdout is the JSON alone
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
-              "(current, SoC or temperature); see the FMU log and the plot")
+              "(current, SoC or temperature); see the FMU log and the plot",
+              file=sys.stderr if a.json else sys.stdout)
+    if plotted:
+        print(f"plot: {plotted}", file=sys.stderr if a.json else sys.stdout)
     return 0
 
 
