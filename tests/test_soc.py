@@ -252,6 +252,23 @@ def test_ocv_tests_in_either_order_and_a_dynamic_record_is_no_ocv_test() -> None
         measured_ocv([str(A123_S1)], 2.0307, knots)
 
 
+def test_one_ocv_test_that_does_not_run_full_to_empty_is_named() -> None:
+    """A dither near empty given as the one OCV test (A123 S2: 3 mAh of C/30-size pulses) was
+    refused as "41.55 C … at 0.00303456 Ah", a rate on its own few mAh; now it says how little
+    it discharges against the cell's capacity and what the test must be."""
+    from lmncell.data.records import Record, RecordMeta
+    from lmncell.identification.ocvfit import measured_ocv
+
+    t = np.arange(0.0, 4000.0, 10.0)
+    current = np.where((t // 100) % 2 == 0, -0.07, 0.065)
+    rec = Record(t, current, 2.5 + 0.0 * t, RecordMeta("dither.csv", "x"))
+    message = (r"dither\.csv: discharges 0\.0\d+ Ah, [\d.]+ % of the capacity 2\.0307 Ah; "
+               "expected one slow test that runs from full to empty and back")
+    with pytest.MonkeyPatch.context() as mp, pytest.raises(DataError, match=message):
+        mp.setattr("lmncell.data.readers.read_record", lambda _p: rec)
+        measured_ocv(["dither.csv"], 2.0307, np.linspace(0.0, 1.0, 21))
+
+
 def test_a_counted_soc_beyond_0_to_1_names_where_and_the_charge_moved(tmp_path) -> None:
     """A capacity far too small (or a wrong start SoC) counts the SoC out of 0…1: the error
     names the start SoC, the capacity, where it happens and how much charge the record moves,

@@ -186,13 +186,20 @@ class RoundTripOcv:
     capacity_ah: float
 
 
-def ocv_from_round_trip(rec: Record, points: int = 101) -> RoundTripOcv:
+ROUND_TRIP_MIN_SHARE = 0.5   # a one-file OCV test discharges at least this share of the
+#                              cell's capacity
+
+
+def ocv_from_round_trip(rec: Record, points: int = 101,
+                        model_capacity_ah: float | None = None) -> RoundTripOcv:
     """OCV branches from one slow test that starts full, discharges to empty and charges back.
 
     A tester's current offset shows as discharged ≠ charged Ah (Panasonic C/20: 2.997 vs
     2.616 Ah). The offset δ (A, added to every loaded sample) that balances the two is removed;
     SoC then runs 1 → 0 over the corrected discharge and 0 → 1 over the charge, so the curve's
-    SoC is a fraction of this test's own capacity (returned, Ah)."""
+    SoC is a fraction of this test's own capacity (returned, Ah). model_capacity_ah: the cell's
+    capacity (Ah), where known; a test that discharges less than ROUND_TRIP_MIN_SHARE of it
+    is refused (it does not run from full to empty: a dither, A123 S2)."""
     dt = np.diff(rec.time_s, append=rec.time_s[-1])
     dis, chg = rec.current_a < -REST_CURRENT_A, rec.current_a > REST_CURRENT_A
     if dis.sum() < 10 or chg.sum() < 10:
@@ -204,6 +211,12 @@ def ocv_from_round_trip(rec: Record, points: int = 101) -> RoundTripOcv:
     current = rec.current_a + offset * (dis | chg)
     fixed = dataclasses.replace(rec, current_a=current, charge_ah=None, soc_ref=None)
     capacity = q_dis - offset * float(dt[dis].sum()) / 3600.0
+    if model_capacity_ah and not capacity >= ROUND_TRIP_MIN_SHARE * model_capacity_ah:
+        raise DataError(f"{rec.meta.source}: discharges {capacity:.4g} Ah, "
+                        f"{100 * capacity / model_capacity_ah:.2g} % of the capacity "
+                        f"{model_capacity_ah:g} Ah; expected one slow test that runs from full "
+                        "to empty and back, or two files: a discharge from full and a charge "
+                        "from empty")
     grid = np.linspace(0.0, 1.0, points)
     curve = OcvCurve(grid, _branch(fixed, capacity, 1.0, grid, -1.0),
                      _branch(fixed, capacity, 1.0, grid, +1.0))

@@ -146,7 +146,7 @@ def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarr
 
     recs = [read_record(p) for p in paths]
     if len(recs) == 1:
-        curve = ocv_from_round_trip(recs[0]).curve
+        curve = ocv_from_round_trip(recs[0], model_capacity_ah=capacity_ah).curve
     elif len(recs) == 2:
         net = [float(charge_throughput_ah(r)[-1]) for r in recs]
         if (net[0] < 0) == (net[1] < 0):
