@@ -266,6 +266,27 @@ def test_a_json_file_given_as_data_is_named(tmp_path, quick_model) -> None:
         read_record(other)
 
 
+def test_a_speed_trace_given_as_data_is_named(tmp_path) -> None:
+    """A vehicle speed trace (the shipped cycles' format, or time_s,speed_kmh) given where a
+    record belongs says what it is and where it goes; before: 'unknown format … Name your
+    columns'. A vehicle's log with a voltage column stays a record to name columns of."""
+    from lmncell.scenarios.traces import data_dir
+
+    shipped = data_dir() / "drive_cycles" / "udds.csv"
+    with pytest.raises(DataError, match=r"udds.csv: a vehicle speed trace \(cycSecs, cycMps, "
+                                        r"cycGrade\), not a measurement record; a model drives "
+                                        r"it with lmncell simulate CELL.fmu --cycle "):
+        read_record(shipped)
+    own = tmp_path / "route.csv"
+    own.write_text("time_s,speed_kmh\n0,0\n1,5\n")
+    with pytest.raises(DataError, match="route.csv: a vehicle speed trace"):
+        read_record(own)
+    log = tmp_path / "log.csv"
+    log.write_text("time_s,speed_kmh,pack_voltage_v\n0,0,390\n1,5,389\n")
+    with pytest.raises(DataError, match="log.csv: unknown format"):
+        read_record(log)
+
+
 def test_empty_and_unknown_files(tmp_path) -> None:
     empty = tmp_path / "e.csv"
     empty.write_text("")

@@ -180,12 +180,26 @@ def _format_of(path: Path) -> str:
     if header.startswith(("{", "[{", "[[")) or header == "[":      # JSON, not a table
         raise DataError(f"{path}: {_json_kind(path)}, not a measurement record; "
                         f"{TEXT_EXPECTED}")
+    if _is_speed_trace(cols):
+        raise DataError(f"{path}: a vehicle speed trace ({', '.join(cols[:3])}), not a "
+                        "measurement record; a model drives it with lmncell simulate CELL.fmu "
+                        f"--cycle {path} (or lmncell sweep --cycles)")
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:5])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})")
+
+
+def _is_speed_trace(columns: list[str]) -> bool:
+    """Whether a header's columns are those of a vehicle speed trace (lmncell.scenarios.traces:
+    a time and a speed column, as `lmncell simulate --cycle` reads them)."""
+    from lmncell.scenarios.traces import SPEED_TRACE
+
+    names = {c.lower() for c in columns}
+    return (all(names & set(SPEED_TRACE.columns[q]) for q in SPEED_TRACE.required)
+            and not any("volt" in name for name in names))     # a vehicle's log is a record
 
 
 def _json_kind(path: Path) -> str:
