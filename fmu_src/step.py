@@ -310,12 +310,16 @@ def recursion(A: np.ndarray, b: np.ndarray, y_init: list[float]) -> np.ndarray:
 
 @dataclass
 class SimResult:
-    """Free-run simulation of a record: voltage (V), SoC, network output ŷ and validities."""
+    """Free-run simulation of a record: voltage (V), SoC, network output ŷ and validities; and
+    where the run was driven by the ambient temperature, the cell temperature (°C) that the
+    thermal model computed at the end of each step, as the FMU's output cell_temperature
+    (None otherwise)."""
 
     voltage_v: np.ndarray
     soc: np.ndarray
     y: np.ndarray
     validity: np.ndarray
+    cell_temperature_c: np.ndarray | None = None
 
 
 def simulate_exo(model: LmnModel, ex: ExoSeries, soc0: float, h0: float,
@@ -760,7 +764,7 @@ def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarr
     stepper = CellStepper(model, soc0, capacity_ah, t_start, h0)
     n = current.size
     u, soc, y = np.empty(n), np.empty(n), np.empty(n)
-    cell = np.empty(n)
+    cell, cell_end = np.empty(n), np.empty(n)
     phi = np.empty((n, model.n_local_models))
     for k, (i, ta) in enumerate(zip(current.tolist(), ambient.tolist(), strict=True)):
         cell[k] = thermal.cell_temperature(ta)
@@ -769,4 +773,5 @@ def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarr
         y[k] = u[k] - stepper.ocv(soc[k]) if model.relative_ocv else u[k]
         phi[k] = stepper.validity
         thermal.update(ta, i, stepper)
-    return SimResult(u, soc, y, phi), cell
+        cell_end[k] = thermal.temperature_c
+    return SimResult(u, soc, y, phi, cell_end), cell

@@ -184,6 +184,29 @@ def test_api_simulate_is_the_fmus_engine_stepped_at_ts(quick_model) -> None:
         assert engine.soc == pytest.approx(sim.soc[k], abs=1e-12), k
 
 
+def test_api_simulate_from_the_ambient_is_the_fmus_default(quick_model) -> None:
+    """ambient_c drives the thermal model, as the FMU with temperature_is_cell = false: the
+    same voltages and cell temperatures; temperature_c and ambient_c together are refused."""
+    import lmncell
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = lmncell.load_model(quick_model)
+    assert model.thermal is not None and model.current_delay_s > 0
+    current = np.r_[np.full(900, -3.0), np.zeros(300)]
+    sim = lmncell.simulate(model, current, soc0=0.9, ambient_c=25.0)
+    engine = CellCosim(model, Parameters(0.9, model.capacity_ah))
+    engine.reset(25.0)
+    for k, i in enumerate(current):
+        engine.advance(model.sample_time_s, float(i), 25.0)
+        assert engine.voltage_v == pytest.approx(sim.voltage_v[k], abs=1e-9), k
+        assert engine.cell_temperature_c == pytest.approx(sim.cell_temperature_c[k], abs=1e-9)
+    assert sim.cell_temperature_c.max() > 26.0              # the cell warmed above the ambient
+    with pytest.raises(lmncell.api.DataError, match="temperature_c .* and ambient_c given"):
+        lmncell.simulate(model, current, temperature_c=25.0, ambient_c=20.0)
+    with pytest.raises(lmncell.api.DataError, match=r"ambient_c must lie within .*an ambient"):
+        lmncell.simulate(model, current, ambient_c=293.15)
+
+
 def test_api_takes_one_ocv_test_file_on_its_own(monkeypatch, tmp_path) -> None:
     """lmncell.train(..., ocv_tests="c20.mat") passes that one file, not its characters."""
     import lmncell

@@ -25,7 +25,7 @@ from lmncell.evaluation.evaluate import warn_outside_training
 from lmncell.progress import Progress, print_progress
 from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import LmnModel, load_model
-from lmncell.runtime.step import SimResult
+from lmncell.runtime.step import SimResult, simulate_ambient
 from lmncell.runtime.step import simulate as _simulate_runtime
 
 __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_model",
@@ -88,13 +88,18 @@ def _path_list(caller: str, paths: Any) -> list[str | Path]:
 
 def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
              temperature_c: np.ndarray | float | None = None, soc0: float = 1.0,
-             capacity_ah: float | None = None) -> SimResult:
+             capacity_ah: float | None = None, *,
+             ambient_c: np.ndarray | float | None = None) -> SimResult:
     """Free-run simulation of a current profile sampled at the model's sample time
     (model.sample_time_s; each value held over one step, > 0 charges).
 
-    temperature_c: cell temperature per step or one value (°C; default 25 °C); soc0: the SoC
-    before the first step. Returns arrays `voltage_v` (V, the mean over each step) and `soc`
-    (after each step), plus the network output `y` and the local models' `validity`. A model
+    temperature_c: cell temperature per step or one value (°C; default 25 °C), as the FMU with
+    temperature_is_cell = true takes it; or instead ambient_c: the ambient temperature per
+    step or one value (°C), from which the model's thermal model computes the cell temperature
+    (the FMU's default; returned as `cell_temperature_c`; a model without a thermal model takes
+    the ambient as the cell temperature). soc0: the SoC before the first step. Returns arrays
+    `voltage_v` (V, the mean over each step) and `soc` (after each step), plus the network
+    output `y` and the local models' `validity`. A model
     with a current delay δ (model.current_delay_s) takes each step's current δ late, as its FMU
     stepped at Ts with the same profile does: (δ·i(k−1) + (Ts − δ)·i(k))/Ts, i(−1) = i(0).
     Where the current, temperature or SoC leaves what the model was trained on, a UserWarning
@@ -106,12 +111,19 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
         raise DataError(f"simulate: soc0 = {float(soc0)!r}; expected a fraction within 0…1")
     if capacity_ah is not None:
         capacity_ah = _positive("capacity_ah", capacity_ah, "Ah, or None for the model's")
-    temp = None
-    if temperature_c is not None:
-        temp = _temperature_profile(temperature_c, current.size)
+    if temperature_c is not None and ambient_c is not None:
+        raise DataError("simulate: temperature_c (the cell's) and ambient_c given; expected one "
+                        "of them")
     taken = np.array(held_delayed_currents(current.tolist(), model.sample_time_s,
                                            model.current_delay_s))
-    sim = _simulate_runtime(model, taken, temp, float(soc0), capacity_ah)
+    if ambient_c is not None:
+        ambient = _temperature_profile(ambient_c, current.size, "ambient_c")
+        sim, temp = simulate_ambient(model, taken, ambient, float(soc0), capacity_ah)
+    else:
+        temp = None
+        if temperature_c is not None:
+            temp = _temperature_profile(temperature_c, current.size)
+        sim = _simulate_runtime(model, taken, temp, float(soc0), capacity_ah)
     warn_outside_training(model, "simulate", current, temp, sim.soc)
     return sim
 
@@ -145,20 +157,23 @@ def _profile(name: str, values: Any, unit: str) -> np.ndarray:
     return arr
 
 
-def _temperature_profile(temperature_c: Any, steps: int) -> np.ndarray:
+def _temperature_profile(temperature_c: Any, steps: int,
+                         name: str = "temperature_c") -> np.ndarray:
     """One temperature or one per step (°C) as an array of `steps`, within
-    CELL_TEMPERATURE_RANGE_C, or DataError."""
+    CELL_TEMPERATURE_RANGE_C, or DataError naming the argument `name`."""
     from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, is_cell_temperature
 
-    temp = _profile("temperature_c", temperature_c, "°C")
+    temp = _profile(name, temperature_c, "°C")
     if np.ndim(temperature_c) == 0:
         temp = np.full(steps, temp[0])
     if temp.size != steps:
-        raise DataError(f"simulate: temperature_c has {temp.size} values for {steps} current "
+        raise DataError(f"simulate: {name} has {temp.size} values for {steps} current "
                         "steps; expected one value or one per step")
     if not is_cell_temperature(temp):
-        raise DataError("simulate: temperature_c must lie within {:g}…{:g} °C (a cell "
-                        "temperature in °C, not K)".format(*CELL_TEMPERATURE_RANGE_C))
+        what = "an ambient" if name == "ambient_c" else "a cell"
+        raise DataError(f"simulate: {name} must lie within "
+                        "{:g}…{:g} °C ".format(*CELL_TEMPERATURE_RANGE_C)
+                        + f"({what} temperature in °C, not K)")
     return temp
 
 
