@@ -979,15 +979,23 @@ def _logged_every(step_s: float, name: str) -> Record:
                   RecordMeta(f"/logs/{name}", "test", sample_time_s=step_s))   # as readers do
 
 
-def test_a_log_faster_than_the_model_gets_a_note_with_the_rate_to_train_at() -> None:
+def test_a_log_faster_or_slower_than_the_model_gets_a_note() -> None:
     fast, slow = _logged_every(0.1, "fast.csv"), _logged_every(1.0, "slow.csv")
     note = sampling_note([slow, fast], 1.0)
     assert note is not None
     assert "fast.csv" in note and "every 0.1 s" in note and "sample_time_s=0.1" in note
-    assert sampling_note([slow, fast], 0.1) is None          # trained at the log's rate
+    assert sampling_note([fast], 0.1) is None                # trained at the log's rate
+    assert sampling_note([slow, fast], 0.1).startswith("note: slow.csv is logged every 1 s")
     assert sampling_note([slow], 1.0) is None
     assert sampling_note([_logged_every(1.0, "one.csv").slice(0, 1), fast], 1.0) == note
     assert sampling_note([_logged_every(0.5, "half.csv")], 1.0) is not None
+    # a log slower than Ts (a 1 s log trained at 0.5 s): its samples are held over steps
+    held = sampling_note([slow], 0.5)
+    assert held is not None and held.startswith("note: slow.csv is logged every 1 s (median), "
+                                                "slower than the model's Ts = 0.5 s: each "
+                                                "sample is held over 2 model steps")
+    assert sampling_note([slow, fast], 0.5).count("note: ") == 2
+    assert sampling_note([slow, _logged_every(0.5, "half.csv")], 0.7) is None
     assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02
 
 

@@ -103,19 +103,30 @@ def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
     record's median sample interval, its meta.sample_time_s, at least FAST_LOG_RATIO times
     below Ts): the model then follows each Ts-mean of the voltage, not every sample, and a host
     that scores the FMU at the log's samples sees the fast part of each current pulse missing.
-    None otherwise."""
+    Likewise where a record is logged slower (FAST_LOG_RATIO times above Ts): each of its
+    samples is held over several model steps, and the model learns nothing within a sample.
+    None where neither."""
     logged = [(r.meta.sample_time_s, r.name) for r in records
               if math.isfinite(r.meta.sample_time_s)]
     if not logged:
         return None
+    notes = []
     fastest, name = min(logged)
-    if fastest * FAST_LOG_RATIO > sample_time_s:
-        return None
-    return (f"note: {name} is logged every {fastest:.3g} s (median), faster than the model's "
+    if fastest * FAST_LOG_RATIO <= sample_time_s:
+        notes.append(
+            f"note: {name} is logged every {fastest:.3g} s (median), faster than the model's "
             f"Ts = {sample_time_s:g} s: the model follows the voltage's {sample_time_s:g}-s "
             "means, not every sample; where the voltage at each sample matters and the host "
             f"steps the model at the log's rate, train at that rate (--set "
             f"sample_time_s={round_step(fastest):g}, which takes longer)")
+    slowest, name = max(logged)
+    if slowest >= FAST_LOG_RATIO * sample_time_s:
+        notes.append(
+            f"note: {name} is logged every {slowest:.3g} s (median), slower than the model's "
+            f"Ts = {sample_time_s:g} s: each sample is held over {slowest / sample_time_s:.3g} "
+            "model steps, so the model learns nothing of what the cell does between samples "
+            "(its fast time constants rest on the faster records alone, or on none)")
+    return "\n".join(notes) or None
 
 
 def round_step(interval_s: float) -> float:
