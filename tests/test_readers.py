@@ -266,6 +266,29 @@ def test_a_json_file_given_as_data_is_named(tmp_path, quick_model) -> None:
         read_record(other)
 
 
+def test_a_temperature_read_every_few_rows_is_held_between_readings(tmp_path) -> None:
+    """A thermocouple logged every 10th row, blank between (was refused: "column 'T' line 3:
+    '' is not a number"): each blank holds the reading before it, and a note says so; a text
+    cell there, or a column with no reading, is still refused with its line."""
+    cols = {"time": "t", "current": "I", "voltage": "U", "temperature": "T"}
+    rows = [f"{k},-1.0,3.{k % 7},{20 + k // 10 if k % 10 == 3 else ''}" for k in range(40)]
+    path = tmp_path / "aux.csv"
+    path.write_text("t,I,U,T\n" + "\n".join(rows) + "\n")
+    rec = read_record(path, columns=cols)
+    np.testing.assert_array_equal(rec.temperature_c[:3], [20.0] * 3)    # the first, back
+    np.testing.assert_array_equal(rec.temperature_c[3:13], [20.0] * 10)
+    np.testing.assert_array_equal(rec.temperature_c[13:23], [21.0] * 10)
+    assert rec.temperature_c[-1] == 23.0
+    assert ("column 'T': 36 of 40 rows blank between readings, each holding the reading "
+            "before it" in " ".join(rec.meta.notes))
+    path.write_text("t,I,U,T\n" + "\n".join(rows).replace(",20\n", ",n/a\n", 1) + "\n")
+    with pytest.raises(DataError, match=r"aux.csv: column 'T' line 5: 'n/a' is not a number"):
+        read_record(path, columns=cols)
+    path.write_text("t,I,U,T\n0,-1,3.3,\n1,-1,3.3,\n")
+    with pytest.raises(DataError, match=r"column 'T' has no reading \(every cell blank\)"):
+        read_record(path, columns=cols)
+
+
 def test_a_speed_trace_given_as_data_is_named(tmp_path) -> None:
     """A vehicle speed trace (the shipped cycles' format, or time_s,speed_kmh) given where a
     record belongs says what it is and where it goes; before: 'unknown format … Name your

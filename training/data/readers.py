@@ -596,11 +596,15 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     lines = read_text(path).splitlines()
     header_line = _line_naming(lines, set(columns.values()), sep)
     units = _units_row(lines, header_line, numeric, sep, decimal)
-    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"]}, header_line=header_line, lines=lines,
-                             units_row=units is not None)
+    temp_col = columns.get("temperature")
+    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric - {temp_col},
+                             keep_text={columns["time"], temp_col} - {None},
+                             header_line=header_line, lines=lines, units_row=units is not None)
     _require(path, cols, tuple(columns.values()), sep)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
+    if temp_col is not None:
+        cols[temp_col], held = _held_readings(cols, temp_col, path, decimal)
+        notes += held
     given, taken = _with_file_units(
         path, given, _file_units(columns, units, bool(notes)), current_scale)
     time_unit, current_unit = given["time"], given["current"]
@@ -625,6 +629,30 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                         **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                          for k, v in columns.items()})),
                   temperature_c=temp)
+
+
+def _held_readings(cols: CsvColumns, name: str, path: Path, decimal: str
+                   ) -> tuple[np.ndarray, list[str]]:
+    """An auxiliary column logged more slowly than the rest (a thermocouple read every few
+    rows, blank between readings): each blank cell takes the reading before it (the first
+    reading back to the start), with a note saying how many; a cell that is text, or a column
+    without a reading, is a DataError naming it."""
+    values, text = cols[name].copy(), cols.text[name]
+    blank = np.array([cell == "" for cell in text])
+    for r in np.flatnonzero(np.isnan(values) & ~blank):
+        raise DataError(f"{path}: column '{name}' line {cols.lines[r]}: {text[r]!r} is not a "
+                        f"number{_comma_hint(text[r], decimal)}")
+    if not blank.any():
+        return values, []
+    read = np.flatnonzero(~blank)
+    if not read.size:
+        raise DataError(f"{path}: column '{name}' has no reading (every cell blank); expected "
+                        "numbers, or leave the column out of --columns")
+    values = values[read[np.maximum(np.searchsorted(read, np.arange(values.size), "right") - 1,
+                                    0)]]
+    return values, [f"column '{name}': {int(blank.sum())} of {values.size} rows blank between "
+                    "readings, each holding the reading before it (the first reading back to "
+                    "the start)"]
 
 
 def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str | None]
