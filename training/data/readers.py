@@ -639,7 +639,9 @@ def _held_readings(cols: CsvColumns, name: str, path: Path, decimal: str
     without a reading, is a DataError naming it."""
     values, text = cols[name].copy(), cols.text[name]
     blank = np.array([cell == "" for cell in text])
-    for r in np.flatnonzero(np.isnan(values) & ~blank):
+    bad = np.flatnonzero(np.isnan(values) & ~blank)
+    if bad.size:
+        r = int(bad[0])
         raise DataError(f"{path}: column '{name}' line {cols.lines[r]}: {text[r]!r} is not a "
                         f"number{_comma_hint(text[r], decimal)}")
     if not blank.any():
@@ -648,11 +650,11 @@ def _held_readings(cols: CsvColumns, name: str, path: Path, decimal: str
     if not read.size:
         raise DataError(f"{path}: column '{name}' has no reading (every cell blank); expected "
                         "numbers, or leave the column out of --columns")
-    values = values[read[np.maximum(np.searchsorted(read, np.arange(values.size), "right") - 1,
-                                    0)]]
-    return values, [f"column '{name}': {int(blank.sum())} of {values.size} rows blank between "
-                    "readings, each holding the reading before it (the first reading back to "
-                    "the start)"]
+    before = np.maximum(np.searchsorted(read, np.arange(values.size), "right") - 1, 0)
+    return values[read[before]], [
+        f"column '{name}': {int(blank.sum())} of {values.size} rows blank between readings, "
+        "each holding the reading before it"
+        + (" (the rows before the first reading hold that one)" if blank[0] else "")]
 
 
 def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str | None]
