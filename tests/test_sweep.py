@@ -404,6 +404,23 @@ def test_a_cut_off_beyond_the_model_s_voltages_is_refused(native_fmu, tmp_path, 
     assert main(["simulate", str(native_fmu), "--cycle", "wltc", "--cutoff", "3"]) == 0
 
 
+def test_simulate_says_what_left_the_trained_range(fmu, capsys) -> None:
+    """The warning names what the FMU's first out-of-range warning names (before, it said 'see
+    the FMU log', which the command never showed): here the ambient 60 °C, beyond the
+    temperatures the model was trained at."""
+    from lmncell.scenarios.drive import run_cycle
+
+    res = run_cycle(fmu, "us06", soc0=0.8, temperature_c=60.0)
+    first = res.figures["out_of_range_first"]
+    assert res.figures["out_of_range_steps"] > 0 and "temperature" in first
+    assert "outside the trained" in first and "lmncell-cycle" not in first
+    assert run_cycle(fmu, "us06", soc0=0.8, temperature_c=25.0).figures[
+        "out_of_range_first"] is None
+    assert main(["simulate", str(fmu), "--cycle", "us06", "--soc0", "0.8", "--ambient",
+                 "60"]) == 0
+    assert f"; the FMU's first warning: {first}; see the plot" in capsys.readouterr().out
+
+
 def test_simulate_json_is_json_alone_and_the_plot_is_named(native_fmu, tmp_path,
                                                            capsys) -> None:
     """With --json stdout is the JSON alone (the out-of-range warning went there after it),

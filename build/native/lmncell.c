@@ -982,11 +982,20 @@ static void check_range(Instance *in, int inputs_out, double i, double t, double
     State *s = &in->s;
     int volt_out = voltage_out_of_range(s->voltage), out = inputs_out || volt_out;
     if (out && !s->out_of_range)
+#if HAS_TEMPERATURE_RANGE
         logf_(in, fmi2Warning, "logStatusWarning",
               "current %.3f A, SoC %.3f, temperature %.1f degC or model voltage %.3f V outside "
-              "the trained region (current %.3f..%.3f A, SoC %.3f..%.3f, voltage %.3f..%.3f V "
-              "within %.1f V); the model extrapolates", i, soc, t, s->voltage, I_MIN, I_MAX,
-              SOC_MIN, SOC_MAX, V_MIN, V_MAX, V_MARGIN);
+              "the trained region (current %.3f..%.3f A, SoC %.3f..%.3f, temperature "
+              "%.1f..%.1f degC, voltage %.3f..%.3f V within %.1f V); the model extrapolates",
+              i, soc, t, s->voltage, I_MIN, I_MAX, SOC_MIN, SOC_MAX, T_MIN, T_MAX, V_MIN, V_MAX,
+              V_MARGIN);
+#else
+        logf_(in, fmi2Warning, "logStatusWarning",
+              "current %.3f A, SoC %.3f or model voltage %.3f V outside the trained region "
+              "(current %.3f..%.3f A, SoC %.3f..%.3f, voltage %.3f..%.3f V within %.1f V); the "
+              "model extrapolates", i, soc, s->voltage, I_MIN, I_MAX, SOC_MIN, SOC_MAX, V_MIN,
+              V_MAX, V_MARGIN);
+#endif
     s->out_of_range = out;
 }
 

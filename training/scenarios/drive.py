@@ -295,14 +295,15 @@ def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
 
 def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: float,
                soc0: float, temperature_c: float, cutoff_v: float,
-               charge_cutoff_v: float = 0.0) -> tuple[dict[str, np.ndarray], str]:
+               charge_cutoff_v: float = 0.0) -> tuple[dict[str, np.ndarray], str, str]:
     """Step the FMU (md: its model description, fmpy's) with fmpy through one load value per
     communication step h (s): the cell
     power (W, > 0 discharging; by_power, i = −P/u with u the previous step's voltage) or the
     cell current (A, > 0 charges). Stops after the first step that leaves the cell empty
     (empty_reason) or full (full_reason). Returns the steps' time (s, each step's end),
     current, voltage, SoC, out-of-range flag and cell temperature (NaN without a thermal
-    model), and why it stopped early ('' where it did not)."""
+    model), why it stopped early ('' where it did not), and the FMU's first warning (the
+    start of its first out-of-range excursion: what left the trained region; '' for none)."""
     from fmpy import extract
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
@@ -319,7 +320,7 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
         slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                           modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         try:
-            slave.instantiate(callbacks=callbacks)
+            slave.instantiate(callbacks=callbacks, loggingOn=True)   # its warnings kept in log
             slave.setupExperiment(startTime=0.0)
             slave.enterInitializationMode()
             slave.setReal([vr["soc0"]], [soc0])
@@ -349,12 +350,24 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
         finally:
             slave.freeInstance()
             shutil.rmtree(unzipped, ignore_errors=True)
-    return {key: values[:n] for key, values in out.items()}, stop
+        first = first_warning(log, name)
+    return {key: values[:n] for key, values in out.items()}, stop, first
+
+
+def first_warning(log: list[str], instance_name: str) -> str:
+    """The first message an FMU logged with the status fmi2Warning (fmueval.fmu_log's
+    entries), without the instance's name before it and the category after it; ''."""
+    for entry in log:
+        text, _, tail = entry.rpartition(" [")
+        if tail.endswith("status 1]"):
+            return text.removeprefix(f"{instance_name}: ")
+    return ""
 
 
 def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,
-                  cutoff_v: float, stop: str) -> dict:
-    """The figures of any run (_drive_fmu's steps): duration, charge, energy, extremes."""
+                  cutoff_v: float, stop: str, first: str = "") -> dict:
+    """The figures of any run (_drive_fmu's steps): duration, charge, energy, extremes, and
+    the FMU's first out-of-range warning (out_of_range_first, None without one)."""
     cur, volt, n = out["current"], out["voltage"], out["time"].size
     has_cell_t = not np.isnan(out["cell_t"]).all()
     return {
@@ -365,7 +378,8 @@ def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature
         "voltage_min_v": float(volt.min()), "voltage_max_v": float(volt.max()),
         "soc_start": soc0, "soc_end": float(out["soc"][-1]),
         "soc_swing": float(out["soc"].max() - out["soc"].min()),
-        "out_of_range_steps": int(out["oor"].sum()), "ambient_c": float(temperature_c),
+        "out_of_range_steps": int(out["oor"].sum()), "out_of_range_first": first or None,
+        "ambient_c": float(temperature_c),
         "cell_temperature_max_c": float(np.max(out["cell_t"])) if has_cell_t else None,
         "cutoff_v": cutoff_v, "stop": stop, "stopped_at_s": float(n * h) if stop else None,
     }
@@ -393,10 +407,10 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
     md, h, n = _communication_steps(fmu, step_s, power.size * dt,
                                     f"{copies}the {trace.title} cycle")
     speed = step_means(np.tile(trace.speed_mps, repeat), dt, h, n)
-    out, stop = _drive_fmu(fmu, md, step_means(cell_power, dt, h, n), True, h, soc0,
-                           temperature_c, cutoff)
+    out, stop, first = _drive_fmu(fmu, md, step_means(cell_power, dt, h, n), True, h, soc0,
+                                  temperature_c, cutoff)
     speed = speed[:out["time"].size]
-    cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop)
+    cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop, first)
     figures = {"cycle": trace.name, "repetitions": repeat, "step_s": h,
                "duration_s": cell["duration_s"],
                "distance_km": float(np.sum(speed) * h / 1000.0),
@@ -426,10 +440,10 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
     copies = f"{repeat} × " if repeat > 1 else ""
     md, h, n = _communication_steps(fmu, step_s, current.size * dt,
                                     f"{copies}the profile {prof.name}")
-    out, stop = _drive_fmu(fmu, md, step_means(current, dt, h, n), False, h, soc0,
-                           temperature_c, cutoff, charge_cutoff)
+    out, stop, first = _drive_fmu(fmu, md, step_means(current, dt, h, n), False, h, soc0,
+                                  temperature_c, cutoff, charge_cutoff)
     figures = {"profile": prof.name, "repetitions": repeat,
-               **_cell_figures(out, h, soc0, temperature_c, cutoff, stop),
+               **_cell_figures(out, h, soc0, temperature_c, cutoff, stop, first),
                "charge_cutoff_v": charge_cutoff}
     cell_t = out["cell_t"] if figures["cell_temperature_max_c"] is not None else None
     return CycleResult(out["time"], None, out["current"], out["voltage"], out["soc"],
@@ -503,8 +517,10 @@ def simulate_cycle_cli(a) -> int:
             print(f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} "
                   f"({f['stop']}){hint}")
     if f["out_of_range_steps"]:        # on stderr with --json: stdout is the JSON alone
+        first = f["out_of_range_first"]
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
-              "(current, SoC or temperature); see the FMU log and the plot",
+              "(current, SoC, temperature or its voltage)"
+              + (f"; the FMU's first warning: {first}" if first else "") + "; see the plot",
               file=sys.stderr if a.json else sys.stdout)
     if plotted:
         print(f"plot: {plotted}", file=sys.stderr if a.json else sys.stdout)
