@@ -325,7 +325,7 @@ class LmnCellSlave(Fmi2Slave):
             return False
         self._time = now + step_size
         if cosim.out_of_range and not was:
-            self.log(f"{self.instance_name}: t = {current_time} s: {cosim.range_message}",
+            self.log(f"{self.instance_name}: t = {current_time:.9g} s: {cosim.range_message}",
                      Fmi2Status.warning)
         return True
 

@@ -45,6 +45,17 @@ def test_fmu_through_the_samples_scores_as_its_model_file(quick_model, which, am
     assert rows[0]["steps"] == len(ref_traces[0].segment)
 
 
+def test_an_fmu_row_names_what_left_the_trained_region(fmu, capsys) -> None:
+    """The US06 record goes beyond the quick model's records (its current, its 32.9 °C): the
+    row and the printed line quote the FMU's first warning, not only a count of steps."""
+    _, rows = evaluate_fmu(fmu, [PAN_US06], 1.0, progress=quiet)
+    first = rows[0]["out_of_range_first"]
+    assert rows[0]["out_of_range_steps"] > 0 and "outside the trained" in first
+    assert "lmncell-evaluate" not in first and "status" not in first
+    assert main(["evaluate", str(fmu), str(PAN_US06), "--soc0", "1"]) == 0
+    assert f"; its first warning: {first}" in capsys.readouterr().out
+
+
 def test_fmu_at_model_steps_gets_the_held_delayed_current(quick_model, native_fmu) -> None:
     """Stepped at Ts with the mean current over each step, the FMU computes what a delayed
     model takes from such steps, and that differs from what the current did within them."""

@@ -195,6 +195,7 @@ class FmuRun:
     out_of_range: np.ndarray
     points_s: np.ndarray | None = None
     point_voltage_v: np.ndarray | None = None
+    first_warning: str = ""     # the FMU's first out-of-range warning (first_warning)
 
 
 # fmpy's native logger proxy (which formats the printf-style arguments that ctypes cannot
@@ -258,6 +259,18 @@ def fmu_log(prefix: str) -> Iterator[tuple[str, Any, list[str]]]:
         _FMU_LOGS.pop(name, None)
 
 
+def first_warning(log: list[str], instance_name: str) -> str:
+    """The first message an FMU logged with the status fmi2Warning (fmu_log's entries; with
+    logging on, both LMNCell FMUs warn so at the start of each out-of-range excursion, naming
+    what left the trained region), without the instance's name before it and the category
+    after it; '' where it logged none."""
+    for entry in log:
+        text, _, tail = entry.rpartition(" [")
+        if tail.endswith("status 1]"):
+            return text.removeprefix(f"{instance_name}: ")
+    return ""
+
+
 class _Slave:
     """One instance of the FMU in fmpy's FMU2Slave, initialised at a start SoC (with an
     observer: its start estimate)."""
@@ -270,13 +283,13 @@ class _Slave:
         self.vr = {v.name: v.valueReference for v in md.modelVariables}
         # the instance's log (fmu_log) is released by free()
         self._log = fmu_log("lmncell-evaluate")
-        name, callbacks, self.log = self._log.__enter__()
+        self.name, callbacks, self.log = self._log.__enter__()
         self.slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                                modelIdentifier=md.coSimulation.modelIdentifier,
-                               instanceName=name)
+                               instanceName=self.name)
         self.inputs = [self.vr[n] for n in ("current", "temperature", "voltage_measured")
                        ][:len(inputs)]
-        self.slave.instantiate(callbacks=callbacks, loggingOn=False)
+        self.slave.instantiate(callbacks=callbacks, loggingOn=True)   # warnings kept in log
         self.slave.setupExperiment(startTime=0.0)
         self.slave.enterInitializationMode()
         self.slave.setReal([self.vr["soc0"]], [float(soc0)])
@@ -347,6 +360,7 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
                 k += 1
             else:
                 every[j] = slave.voltage()
+        warned = first_warning(slave.log, slave.name)
     except Exception as exc:          # fmpy raises where a call returns an error status
         said = f" ({slave.log[-1]})" if slave is not None and slave.log else ""
         raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
@@ -354,7 +368,8 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     finally:
         if slave is not None:
             slave.free()
-    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool), points, every)
+    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool), points, every,
+                  warned)
 
 
 def sample_metrics(part: Record, seg: Segment, run: FmuRun, ts: float) -> dict | None:
@@ -426,6 +441,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                              "fmu": record_metrics(seg.voltage_v, run.voltage_v, seg.soc_ref),
                              **({"fmu_samples": raw} if raw else {}),
                              "out_of_range_steps": int(run.out_of_range.sum()),
+                             "out_of_range_first": run.first_warning or None,
                              "steps": len(seg),
                              "driven": "model_steps" if at_model_steps else "samples"}
                             | notes)
@@ -455,9 +471,11 @@ def evaluate_fmu_files(fmu: str | Path, paths: Sequence[str | Path],
     print_rows(rows, progress)
     for r in rows:
         if r["out_of_range_steps"]:
+            first = r.get("out_of_range_first")
             progress(f"{r['record'][:48]:48s} the FMU flagged out_of_range in "
                      f"{r['out_of_range_steps']} of {r['steps']} steps (outside its training "
-                     "data: current, SoC, temperature or its own voltage)")
+                     "data: current, SoC, temperature or its own voltage)"
+                     + (f"; its first warning: {first}" if first else ""))
     return rows
 
 

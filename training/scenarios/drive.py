@@ -307,7 +307,7 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
     from fmpy import extract
     from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
-    from lmncell.evaluation.fmueval import fmu_log
+    from lmncell.evaluation.fmueval import first_warning, fmu_log
 
     vr = {v.name: v.valueReference for v in md.modelVariables}
     n = load.size
@@ -352,16 +352,6 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
             shutil.rmtree(unzipped, ignore_errors=True)
         first = first_warning(log, name)
     return {key: values[:n] for key, values in out.items()}, stop, first
-
-
-def first_warning(log: list[str], instance_name: str) -> str:
-    """The first message an FMU logged with the status fmi2Warning (fmueval.fmu_log's
-    entries), without the instance's name before it and the category after it; ''."""
-    for entry in log:
-        text, _, tail = entry.rpartition(" [")
-        if tail.endswith("status 1]"):
-            return text.removeprefix(f"{instance_name}: ")
-    return ""
 
 
 def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,
