@@ -227,7 +227,8 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                       required: frozenset[str] | set[str] | None = None,
                       keep_text: frozenset[str] | set[str] = frozenset(),
                       header_line: int = 1, lines: list[str] | None = None,
-                      units_row: bool = False) -> CsvColumns:
+                      units_row: bool = False,
+                      blank_ok: frozenset[str] | set[str] = frozenset()) -> CsvColumns:
     """Every column of a CSV file as float arrays, with the file's line numbers in errors.
 
     sep: the field delimiter; decimal: the decimal mark ("." or ","); required: columns whose
@@ -235,7 +236,8 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     columns whose cells are also kept as written (CsvColumns.text); header_line: the file line
     of the column names (1: the first; the lines before it are skipped); lines: the file's
     lines where the caller has read them already (read_text); units_row: the line after the
-    names holds units, not data (skipped)."""
+    names holds units, not data (skipped); blank_ok: required columns whose empty cells are
+    let through as NaN (an auxiliary channel read every few rows)."""
     _check_marks(path, sep, decimal)
     required = _NUMERIC_REQUIRED if required is None else required
     lines = read_text(path).splitlines() if lines is None else lines
@@ -266,7 +268,7 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
                                     f"expected {len(header)} (column '{name}' missing)"
                                     ) from None
                 col[r] = np.nan  # non-numeric cell (date strings etc.): checked where used
-                if name in required:
+                if name in required and not (name in blank_ok and cell == ""):
                     raise DataError(f"{path}: column '{name}' line {line_of[r]}: {row[j]!r} "
                                     f"is not a number{_comma_hint(cell, decimal)}") from None
         out[name] = col
@@ -597,13 +599,14 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     header_line = _line_naming(lines, set(columns.values()), sep)
     units = _units_row(lines, header_line, numeric, sep, decimal)
     temp_col = columns.get("temperature")
-    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric - {temp_col},
+    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
                              keep_text={columns["time"], temp_col} - {None},
-                             header_line=header_line, lines=lines, units_row=units is not None)
+                             header_line=header_line, lines=lines, units_row=units is not None,
+                             blank_ok={temp_col} - {None})
     _require(path, cols, tuple(columns.values()), sep)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     if temp_col is not None:
-        cols[temp_col], held = _held_readings(cols, temp_col, path, decimal)
+        cols[temp_col], held = _held_readings(cols, temp_col, path)
         notes += held
     given, taken = _with_file_units(
         path, given, _file_units(columns, units, bool(notes)), current_scale)
@@ -631,19 +634,13 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                   temperature_c=temp)
 
 
-def _held_readings(cols: CsvColumns, name: str, path: Path, decimal: str
-                   ) -> tuple[np.ndarray, list[str]]:
+def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
     """An auxiliary column logged more slowly than the rest (a thermocouple read every few
-    rows, blank between readings): each blank cell takes the reading before it (the first
-    reading back to the start), with a note saying how many; a cell that is text, or a column
-    without a reading, is a DataError naming it."""
-    values, text = cols[name].copy(), cols.text[name]
-    blank = np.array([cell == "" for cell in text])
-    bad = np.flatnonzero(np.isnan(values) & ~blank)
-    if bad.size:
-        r = int(bad[0])
-        raise DataError(f"{path}: column '{name}' line {cols.lines[r]}: {text[r]!r} is not a "
-                        f"number{_comma_hint(text[r], decimal)}")
+    rows, blank between readings; read with blank_ok, so its other cells are numbers): each
+    blank cell takes the reading before it (the first reading back to the start), with a
+    note saying how many; a column without a reading is a DataError naming it."""
+    values = cols[name]
+    blank = np.array([cell == "" for cell in cols.text[name]])
     if not blank.any():
         return values, []
     read = np.flatnonzero(~blank)
