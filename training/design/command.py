@@ -65,17 +65,15 @@ def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, so
     import math
     import warnings
 
-    from lmncell.runtime.cosim import held_delayed_currents
-    from lmncell.runtime.step import simulate
+    from lmncell.api import simulate
     from lmncell.scenarios.drive import step_means
 
     ts = model.sample_time_s
     steps = math.floor(current_a.size * sample_time_s / ts + 1e-9)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the pulses may leave the trained current
-        taken = held_delayed_currents(step_means(current_a, sample_time_s, ts, steps).tolist(),
-                                      ts, model.current_delay_s)     # as its FMU takes them
-        sim = simulate(model, np.array(taken), None, soc0, capacity_ah=cell.capacity_ah)
+        sim = simulate(model, step_means(current_a, sample_time_s, ts, steps), None, soc0,
+                       capacity_ah=cell.capacity_ah)      # the current as its FMU takes it
     low, high = float(sim.voltage_v.min()), float(sim.voltage_v.max())
     text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
     if low < cell.voltage_min_v or high > cell.voltage_max_v:
