@@ -494,6 +494,7 @@ def simulate_cycle_cli(a) -> int:
                         a.ambient, a.cutoff)
     plotted = plot_cycle(res, a.plot) if a.plot else None
     f = res.figures
+    notes = sys.stderr if a.json else sys.stdout    # with --json, stdout is the JSON alone
     if a.json:
         print(json.dumps(f, indent=1))
     else:
@@ -506,14 +507,14 @@ def simulate_cycle_cli(a) -> int:
                     else "")
             print(f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} "
                   f"({f['stop']}){hint}")
-    if f["out_of_range_steps"]:        # on stderr with --json: stdout is the JSON alone
+    if f["out_of_range_steps"]:
         first = f["out_of_range_first"]
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
               "(current, SoC, temperature or its voltage)"
               + (f"; the FMU's first warning: {first}" if first else "") + "; see the plot",
-              file=sys.stderr if a.json else sys.stdout)
+              file=notes)
     if plotted:
-        print(f"plot: {plotted}", file=sys.stderr if a.json else sys.stdout)
+        print(f"plot: {plotted}", file=notes)
     return 0
 
 
