@@ -5,6 +5,7 @@ from __future__ import annotations
 import gzip
 import json
 import re
+import shlex
 import warnings
 from datetime import datetime, timedelta
 
@@ -661,3 +662,31 @@ def test_generic_reader_takes_units_from_the_column_names(tmp_path) -> None:
     with pytest.raises(DataError, match="column 'Current' line 3: 'x' is not a number"):
         read_record(path, columns={"time": "Time", "current": "Current", "voltage": "Voltage"},
                     sep=";", decimal=",")
+
+
+def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> None:
+    """A plain table with units in its names, ';'-delimited with decimal commas, was refused
+    with the generic "Name your columns" alone; the message now proposes the options for this
+    header, and those options read it (with the mA of the name). A header without one clear
+    time, current and voltage column gets no proposal."""
+    path = tmp_path / "eu.csv"
+    path.write_text("Time [s];Current [mA];Voltage [V];T_cell;T_ambient\n"
+                    + "".join(f"{k};-{k % 5 * 100},5;3,{300 + k % 7};25,1;24\n"
+                              for k in range(30)))
+    assert main(["inspect", str(path)]) == 2
+    err = capsys.readouterr().err
+    proposal = ("--columns 'time=Time [s],current=Current [mA],voltage=Voltage [V],"
+                "temperature=T_cell' --delimiter ';' --decimal ,")
+    assert "eu.csv: unknown format; " in err and f"perhaps: {proposal} (check" in err
+    assert main(["inspect", str(path), *shlex.split(proposal)]) == 0
+    out = capsys.readouterr().out
+    assert "current -0.401 … -0.001 A" in out and "current in mA" in out, out
+    rec = read_record(path, columns={"time": "Time [s]", "current": "Current [mA]",
+                                     "voltage": "Voltage [V]", "temperature": "T_cell"},
+                      sep=";", decimal=",")
+    assert rec.current_a[1] == pytest.approx(-0.1005) and rec.temperature_c[0] == 25.1
+    for header in ("a,b,c\n1,2,3\n", "Time,Current,U1,U2\n0,1,3,3\n"):
+        path.write_text(header)
+        with pytest.raises(DataError, match="unknown format") as info:
+            read_record(path)
+        assert "perhaps" not in str(info.value)

@@ -109,14 +109,15 @@ def text_encoding(raw: bytes, final: bool = True) -> str | None:
     return None
 
 
-def read_text(path: Path, first_line: bool = False) -> str:
-    """The file's text (or its first line) in its encoding (text_encoding), with a DataError
-    for what is not text."""
+def read_text(path: Path, first_line: bool = False, head: bool = False) -> str:
+    """The file's text (or its first line, or its first HEAD_BYTES) in its encoding
+    (text_encoding), with a DataError for what is not text."""
+    part = first_line or head
     try:
-        raw = _raw_bytes(path, HEAD_BYTES if first_line else None)
+        raw = _raw_bytes(path, HEAD_BYTES if part else None)
     except (gzip.BadGzipFile, EOFError, OSError) as exc:
         raise DataError(f"{path}: cannot be read ({exc}); {TEXT_EXPECTED}") from None
-    encoding = text_encoding(raw, final=not first_line)
+    encoding = text_encoding(raw, final=not part)
     if encoding is None:
         where = raw.find(b"\x00")
         what = next((kind for magic, kind in BINARY_KINDS if raw.startswith(magic)), None)
@@ -124,12 +125,18 @@ def read_text(path: Path, first_line: bool = False) -> str:
                         "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
         raise DataError(f"{path}: not a text file ({what}); {TEXT_EXPECTED}")
     try:
-        text = codecs.getincrementaldecoder(encoding)().decode(raw, final=not first_line)
+        text = codecs.getincrementaldecoder(encoding)().decode(raw, final=not part)
     except UnicodeDecodeError as exc:             # a UTF-16 file cut in a character
         raise DataError(f"{path}: not a text file ({encoding}: {exc.reason} at byte "
                         f"{exc.start}); {TEXT_EXPECTED}") from None
     text = text.replace("\r\n", "\n").replace("\r", "\n")
     return text.split("\n", 1)[0] if first_line else text
+
+
+def _second_line(path: Path) -> str | None:
+    """The line under the header (its first data row, in a plain table), or None."""
+    lines = read_text(path, head=True).split("\n", 2)
+    return lines[1] if len(lines) > 2 else None
 
 
 def check_readable(path: str | Path) -> Path:
@@ -189,7 +196,18 @@ def _format_of(path: Path) -> str:
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --discharge-positive as needed); "
-                    "in Python read_record(path, columns={...})")
+                    "in Python read_record(path, columns={...})"
+                    + _suggestion(header, _second_line(path)))
+
+
+def _suggestion(header: str, first_row: str | None) -> str:
+    """'. This header reads, perhaps, with …' (lmncell.data.header), or ''."""
+    from lmncell.data.header import suggested_options
+
+    options = suggested_options(header, first_row)
+    return ("" if options is None else
+            f". For this header, perhaps: {options} (check the columns; add "
+            "--discharge-positive where the file counts discharge current as positive)")
 
 
 def _is_speed_trace(columns: list[str]) -> bool:

@@ -1,0 +1,71 @@
+"""Which columns of an unknown table's header look like time, current, voltage and temperature:
+the reader's options that would read it, proposed in the unknown-format error. Only proposed,
+never applied: the sign of the current and the columns are the user's to confirm."""
+
+from __future__ import annotations
+
+import re
+import shlex
+
+DELIMITERS = ((",", None), (";", "';'"), ("\t", "tab"))   # (delimiter, its --delimiter value)
+DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
+TIME_NAMES = {"time", "t", "test time", "total time", "elapsed time", "run time",
+              "relative time", "time s", "testtime", "seconds",
+              "test"}                                  # Maccor's "Test (Sec)"
+CURRENT_NAMES = {"current", "i", "curr", "cell current", "battery current", "amps", "amp",
+                 "current a", "i a"}
+VOLTAGE_NAMES = {"voltage", "u", "v", "volt", "volts", "cell voltage", "battery voltage",
+                 "terminal voltage", "ecell", "e cell", "u cell", "ucell", "v cell", "vcell"}
+CELL_WORDS = ("cell", "battery", "surface", "case", "t1")   # a cell's, not the chamber's
+
+
+def suggested_options(header: str, first_row: str | None) -> str | None:
+    """The CLI options that read a table with this header line (and this first data row, which
+    tells a decimal comma), e.g. "--columns 'time=Time [s],current=I [mA],voltage=U [V]'
+    --delimiter ';' --decimal ,"; None where the time, current or voltage column is missing
+    or not the only candidate."""
+    sep, shown = max(DELIMITERS, key=lambda d: header.count(d[0]))
+    names = [n.strip().strip('"').strip() for n in header.split(sep)]
+    picks = _picks(names)
+    if picks is None or any("," in n or "=" in n for n in picks.values()):
+        return None                                   # not expressible as --columns
+    options = ["--columns " + shlex.quote(",".join(f"{k}={v}" for k, v in picks.items()))]
+    if shown is not None:
+        options.append(f"--delimiter {shown}")
+    cells = [] if first_row is None else [c.strip().strip('"') for c in first_row.split(sep)]
+    if sep != "," and any(DECIMAL_COMMA.match(c) for c in cells):
+        options.append("--decimal ,")
+    return " ".join(options)
+
+
+def _picks(names: list[str]) -> dict[str, str] | None:
+    """{quantity: column name} for time, current, voltage (each the only candidate, else None)
+    and temperature (where one column, or one cell temperature among several, names it)."""
+    bases = {name: _base(name) for name in names}
+    picks: dict[str, str] = {}
+    for what, exact, word in (("time", TIME_NAMES, "time"), ("current", CURRENT_NAMES, "current"),
+                              ("voltage", VOLTAGE_NAMES, "voltage")):
+        found = ([n for n, b in bases.items() if b in exact]
+                 or [n for n, b in bases.items() if word in b.split()
+                     and not ({"step", "cycle", "date", "limit", "set"} & set(b.split()))])
+        if len(found) > 1:                             # 'time' before 't', 'voltage' before 'v'
+            found = [n for n in found if len(bases[n]) > 1]
+        if len(found) != 1:
+            return None
+        picks[what] = found[0]
+    temps = [n for n, b in bases.items() if n not in picks.values()
+             and ("temp" in b or b.startswith("t ") or b in ("t1", "tcell"))]
+    cells = [n for n in temps if any(w in bases[n] for w in CELL_WORDS)]
+    chosen = temps if len(temps) == 1 else cells
+    if len(chosen) == 1:
+        picks["temperature"] = chosen[0]
+    return picks
+
+
+def _base(name: str) -> str:
+    """A column name without its unit (lmncell.data.readers.NAME_UNIT), in lower case, with
+    '_', '-' and '.' as spaces: 'Test_Time(s)' → 'test time'."""
+    from lmncell.data.readers import NAME_UNIT
+
+    bare = NAME_UNIT.sub("", name) if NAME_UNIT.search(name) else name
+    return " ".join(re.sub(r"[_\-.]", " ", bare).lower().split())
