@@ -71,6 +71,8 @@ def test_fmu_at_model_steps_gets_the_held_delayed_current(quick_model, native_fm
     through, _ = evaluate_fmu(native_fmu, [PAN_US06], 1.0, progress=quiet)
     assert np.abs(through[0].voltage["fmu"] - expected).max() > 1e-3
     assert rows[0]["driven"] == "model_steps"
+    assert rows[0]["out_of_range_steps"] > 0           # its first warning too (was None)
+    assert "outside the trained" in rows[0]["out_of_range_first"]
 
 
 def test_communication_points_hold_every_sample_and_every_model_step_end() -> None:

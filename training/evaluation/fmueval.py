@@ -31,7 +31,6 @@ from lmncell.evaluation.evaluate import (
     temperature_words,
     write_traces,
 )
-from lmncell.evaluation.fmucheck import run_fmu_on_segment
 from lmncell.evaluation.metrics import record_metrics
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
@@ -362,14 +361,20 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
                 every[j] = slave.voltage()
         warned = first_warning(slave.log, slave.name)
     except Exception as exc:          # fmpy raises where a call returns an error status
-        said = f" ({slave.log[-1]})" if slave is not None and slave.log else ""
-        raise ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: "
-                          f"{exc}{said}") from None
+        raise _failed(info, seg, t, exc, slave) from None
     finally:
         if slave is not None:
             slave.free()
     return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool), points, every,
                   warned)
+
+
+def _failed(info: FmuInfo, seg: Segment, t: float, exc: Exception, slave: _Slave | None
+            ) -> ConfigError:
+    """The error of an FMU call that failed at time t of a segment, with the FMU's last
+    message where it logged one."""
+    said = f" ({slave.log[-1]})" if slave is not None and slave.log else ""
+    return ConfigError(f"{info.path}: the FMU failed on {seg.name} at t = {t:g} s: {exc}{said}")
 
 
 def sample_metrics(part: Record, seg: Segment, run: FmuRun, ts: float) -> dict | None:
@@ -389,22 +394,35 @@ def sample_metrics(part: Record, seg: Segment, run: FmuRun, ts: float) -> dict |
     return record_metrics(part.voltage_v[inside], run.point_voltage_v[at], soc)
 
 
-def drive_at_model_steps(info: FmuInfo, seg: Segment, ambient: bool) -> FmuRun:
-    """drive_at_samples' results with the FMU run by fmpy.simulate_fmu in steps of Ts, given the
-    record's mean current over each step (fmucheck.run_fmu_on_segment): what a host that
-    steps at Ts with averaged inputs gives; with a current delay the FMU then has only
-    (δ·i(k−1) + (Ts − δ)·i(k))/Ts, not what the current did within the step."""
-    n = len(seg)
+def drive_at_model_steps(info: FmuInfo, unzipped: str, seg: Segment, ambient: bool
+                         ) -> FmuRun:
+    """drive_at_samples' results with the FMU stepped in steps of Ts, each holding the
+    segment's mean current and temperature over it (as fmucheck.run_fmu_on_segment drives it
+    through fmpy.simulate_fmu): what a host that steps at Ts with averaged inputs gives; with a
+    current delay the FMU then has only (δ·i(k−1) + (Ts − δ)·i(k))/Ts, not what the current
+    did within the step."""
+    n, ts = len(seg), info.step_s
+    temperature = ambient_of(seg) if ambient else seg.temperature_c
+    if temperature is None:
+        temperature = np.full(n, 25.0)
+    inputs = np.column_stack([seg.current_a, temperature]).tolist()
+    out = np.empty((n, 4))
+    slave, t = None, 0.0
     try:
-        res = run_fmu_on_segment(info.path, seg, info.step_s, ambient=ambient)
-    except Exception as exc:          # fmpy raises Exception where a call returns an error
-        raise ConfigError(f"{info.path}: the FMU failed on {seg.name}: {exc}") from None
-    if len(res) < n + 1:
-        raise ConfigError(f"{info.path}: the FMU stopped after {len(res) - 1} of {n} steps on "
-                          f"{seg.name} (its log says why)")
-    return FmuRun(np.asarray(res["voltage"][1:n + 1], dtype=float),
-                  np.asarray(res["soc"][1:n + 1], dtype=float), np.zeros(n),
-                  np.asarray(res["out_of_range"][1:n + 1], dtype=bool))
+        slave = _Slave(info, unzipped, seg.soc0, not ambient, inputs[0])
+        for k, values in enumerate(inputs):
+            slave.set_inputs(values)
+            slave.slave.doStep(currentCommunicationPoint=t, communicationStepSize=ts)
+            t = (k + 1) * ts
+            out[k] = slave.outputs()
+        warned = first_warning(slave.log, slave.name)
+    except Exception as exc:          # fmpy raises where a call returns an error status
+        raise _failed(info, seg, t, exc, slave) from None
+    finally:
+        if slave is not None:
+            slave.free()
+    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool),
+                  first_warning=warned)
 
 
 def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
@@ -422,7 +440,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
     from fmpy import extract
 
     info = read_fmu_info(fmu)
-    unzipped = None if at_model_steps else extract(str(info.path))
+    unzipped = extract(str(info.path))
     traces, rows = [], []
     how = "in steps of Ts with mean inputs" if at_model_steps else "through the samples"
     try:
@@ -431,7 +449,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
             for part, seg in record_parts(rec, info.step_s, rec_soc0, info.capacity_ah):
                 progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
                          f"steps of {info.step_s:g} s")
-                run = (drive_at_model_steps(info, seg, ambient) if at_model_steps
+                run = (drive_at_model_steps(info, unzipped, seg, ambient) if at_model_steps
                        else drive_at_samples(info, unzipped, part, seg, ambient))
                 traces.append(Trace(seg, {"fmu": run.voltage_v}, run.soc,
                                     np.zeros((len(seg), 0))))
@@ -446,8 +464,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
                              "driven": "model_steps" if at_model_steps else "samples"}
                             | notes)
     finally:
-        if unzipped is not None:
-            shutil.rmtree(unzipped, ignore_errors=True)
+        shutil.rmtree(unzipped, ignore_errors=True)
     return traces, rows
 
 
