@@ -956,15 +956,17 @@ static void observer_step(State *s, double i, double v, double t) {
 }
 
 /* ----- co-simulation engine (cosim.CellCosim) --------------------------------------------------- */
-/* CellCosim.check_range: 1 when the step's current, SoC or temperature lies outside the
-   trained region (with its margins: cosim.trained_bounds) */
+/* CellCosim.check_range: which of the step's current, SoC and temperature lie outside the
+   trained region (with its margins: cosim.trained_bounds), as OUT_* bits; 0 inside */
+enum { OUT_CURRENT = 1, OUT_SOC = 2, OUT_TEMPERATURE = 4 };
+
 static int inputs_out_of_range(double i, double t, double soc) {
     int out = 0;
     if (i < I_MIN - CURRENT_MARGIN * fabs(I_MIN) - CURRENT_MARGIN_A
-        || i > I_MAX + CURRENT_MARGIN * fabs(I_MAX) + CURRENT_MARGIN_A) out = 1;
-    if (soc < SOC_MIN - SOC_MARGIN || soc > SOC_MAX + SOC_MARGIN) out = 1;
+        || i > I_MAX + CURRENT_MARGIN * fabs(I_MAX) + CURRENT_MARGIN_A) out |= OUT_CURRENT;
+    if (soc < SOC_MIN - SOC_MARGIN || soc > SOC_MAX + SOC_MARGIN) out |= OUT_SOC;
 #if HAS_TEMPERATURE_RANGE
-    if (t < T_MIN - T_MARGIN || t > T_MAX + T_MARGIN) out = 1;
+    if (t < T_MIN - T_MARGIN || t > T_MAX + T_MARGIN) out |= OUT_TEMPERATURE;
 #else
     (void)t;
 #endif
@@ -977,25 +979,49 @@ static int voltage_out_of_range(double v) {
     return !(v >= V_MIN - V_MARGIN && v <= V_MAX + V_MARGIN);
 }
 
-/* out_of_range after a model step, with one FMI warning at the start of each excursion */
+/* buf (size bytes, n of them used) with "; " and a formatted part appended (the parts of an
+   out-of-range message); returns the bytes used, at most size - 1 (a long one is cut) */
+static size_t append_part(char *buf, size_t n, size_t size, const char *fmt, ...) {
+    va_list ap;
+    int k;
+    if (n > 0 && n + 2 < size) {
+        memcpy(buf + n, "; ", 3);
+        n += 2;
+    }
+    if (n + 1 >= size) return size - 1;
+    va_start(ap, fmt);
+    k = vsnprintf(buf + n, size - n, fmt, ap);
+    va_end(ap);
+    n += k > 0 ? (size_t)k : 0;
+    return n < size ? n : size - 1;
+}
+
+/* out_of_range after a model step, with one FMI warning at the start of each excursion that
+   names what left the trained region (CellCosim.range_message, as the Python FMU logs it) */
 static void check_range(Instance *in, int inputs_out, double i, double t, double soc) {
     State *s = &in->s;
     int volt_out = voltage_out_of_range(s->voltage), out = inputs_out || volt_out;
-    if (out && !s->out_of_range)
+    if (out && !s->out_of_range) {
+        char msg[400] = "";
+        size_t n = 0;
+        if (inputs_out & OUT_CURRENT)
+            n = append_part(msg, n, sizeof msg, "current %.3f A outside the trained %.3f..%.3f A",
+                            i, I_MIN, I_MAX);
+        if (inputs_out & OUT_SOC)
+            n = append_part(msg, n, sizeof msg, "SoC %.3f outside the trained %.3f..%.3f", soc,
+                            SOC_MIN, SOC_MAX);
 #if HAS_TEMPERATURE_RANGE
-        logf_(in, fmi2Warning, "logStatusWarning",
-              "current %.3f A, SoC %.3f, temperature %.1f degC or model voltage %.3f V outside "
-              "the trained region (current %.3f..%.3f A, SoC %.3f..%.3f, temperature "
-              "%.1f..%.1f degC, voltage %.3f..%.3f V within %.1f V); the model extrapolates",
-              i, soc, t, s->voltage, I_MIN, I_MAX, SOC_MIN, SOC_MAX, T_MIN, T_MAX, V_MIN, V_MAX,
-              V_MARGIN);
+        if (inputs_out & OUT_TEMPERATURE)
+            n = append_part(msg, n, sizeof msg, "temperature %.1f degC outside the trained "
+                            "%.1f..%.1f degC", t, T_MIN, T_MAX);
 #else
-        logf_(in, fmi2Warning, "logStatusWarning",
-              "current %.3f A, SoC %.3f or model voltage %.3f V outside the trained region "
-              "(current %.3f..%.3f A, SoC %.3f..%.3f, voltage %.3f..%.3f V within %.1f V); the "
-              "model extrapolates", i, soc, s->voltage, I_MIN, I_MAX, SOC_MIN, SOC_MAX, V_MIN,
-              V_MAX, V_MARGIN);
+        (void)t;
 #endif
+        if (volt_out)
+            n = append_part(msg, n, sizeof msg, "model voltage %.3f V outside the trained "
+                            "%.3f..%.3f V", s->voltage, V_MIN, V_MAX);
+        logf_(in, fmi2Warning, "logStatusWarning", "t = %.9g s: %s", s->time, msg);
+    }
     s->out_of_range = out;
 }
 
