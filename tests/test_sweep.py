@@ -10,6 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from lmncell.cli import main
+from lmncell.data.readers import read_record
+from lmncell.data.records import DataError
 
 pytest.importorskip("dask.distributed", reason="the sweep extra (dask[distributed]) is absent")
 pytest.importorskip("pandas", reason="the sweep extra (pandas) is absent")
@@ -87,7 +89,6 @@ def test_a_scheduler_address_that_answers_nothing_is_named(native_fmu, tmp_path,
 def test_parquet_without_an_engine_is_refused_before_the_run(tmp_path, monkeypatch) -> None:
     import importlib.util
 
-    from lmncell.data.records import DataError
     from lmncell.scenarios.sweep import check_table_path
 
     monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
@@ -242,7 +243,6 @@ def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None
     pack of 100.5 cells in series was simulated."""
     from importlib import resources
 
-    from lmncell.data.records import DataError
     from lmncell.scenarios.drive import load_vehicle
 
     text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
@@ -287,6 +287,11 @@ def test_a_speed_trace_file_drives_the_fmu_as_the_shipped_cycle(native_fmu, tmp_
     wide = tmp_path / "my_us06_utf16.csv"                 # Excel's "Unicode text"
     wide.write_text(path.read_text(), encoding="utf-16")
     assert run_cycle(native_fmu, str(wide)).figures["soc_end"] == mine["soc_end"]
+    units = tmp_path / "units.csv"                # the units in brackets (was: no time column)
+    _write_us06_as(units, "Time [s],Speed (km/h),Grade", ",", 3.6)
+    assert run_cycle(native_fmu, str(units)).figures["soc_end"] == mine["soc_end"]
+    with pytest.raises(DataError, match="units.csv: a vehicle speed trace"):
+        read_record(units)
     cases = scenarios([str(path), "us06"], [25.0], [0.9])
     table = sweep(native_fmu, cases, workers=1, progress=False)
     assert list(table["cycle"]) == ["my_us06.csv", "us06"]
@@ -345,8 +350,12 @@ def test_a_current_profile_drives_the_fmu_as_the_cycle_that_gave_it(native_fmu, 
         f"{k},{float(i)!r}\n" for k, i in enumerate(cycle.current_a)))
     milli.write_text("Time_s;Current_mA\n" + "".join(
         f"{k};{-1000 * float(i)!r}\n" for k, i in enumerate(cycle.current_a)))
+    minutes = tmp_path / "us06_min.csv"           # units in brackets (was: no time column)
+    minutes.write_text("Time [min],Current [mA]\n" + "".join(
+        f"{k / 60!r},{1000 * float(i)!r}\n" for k, i in enumerate(cycle.current_a)))
     for res in (run_profile(native_fmu, amps, soc0=0.7),
-                run_profile(native_fmu, milli, soc0=0.7, discharge_positive=True)):
+                run_profile(native_fmu, milli, soc0=0.7, discharge_positive=True),
+                run_profile(native_fmu, minutes, soc0=0.7)):
         assert res.speed_mps is None
         assert np.allclose(res.current_a, cycle.current_a, rtol=1e-12, atol=0)
         assert np.allclose(res.voltage_v, cycle.voltage_v, rtol=1e-9, atol=0)

@@ -531,11 +531,12 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                       help="speed trace: wltc, udds, us06, hwfet, or a CSV file with a time "
                       "column (time_s or cycSecs), a speed column (speed_mps, speed_kmh, "
                       "speed_mph or cycMps) and optionally the road grade as rise over run "
-                      "(grade or cycGrade) (default: wltc)")
+                      "(grade or cycGrade); a unit may stand in brackets: 'Speed [km/h]' "
+                      "(default: wltc)")
     load.add_argument("--current", metavar="FILE.csv",
                       help="a cell current profile instead of a drive cycle: a CSV file with a "
-                      "time column (time_s) and a current column (current_a or current_ma; "
-                      "> 0 charges unless --discharge-positive)")
+                      "time column (time_s) and a current column (current_a or current_ma, or "
+                      "'Current [mA]'; > 0 charges unless --discharge-positive)")
     s.add_argument("--discharge-positive", action="store_true",
                    help="the --current profile counts discharge as positive")
     s.add_argument("--charge-cutoff", type=_cutoff, metavar="V", help="with --current: the "

@@ -213,9 +213,9 @@ def _suggestion(header: str, first_row: str | None) -> str:
 def _is_speed_trace(columns: list[str]) -> bool:
     """Whether a header's columns are those of a vehicle speed trace (lmncell.scenarios.traces:
     a time and a speed column, as `lmncell simulate --cycle` reads them)."""
-    from lmncell.scenarios.traces import SPEED_TRACE
+    from lmncell.scenarios.traces import SPEED_TRACE, trace_key
 
-    names = {c.lower() for c in columns}
+    names = {trace_key(c) for c in columns}
     return (all(names & set(SPEED_TRACE.columns[q]) for q in SPEED_TRACE.required)
             and not any("volt" in name for name in names))     # a vehicle's log is a record
 

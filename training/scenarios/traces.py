@@ -2,7 +2,9 @@
 drive cycles, or the user's CSV) and cell current profiles (the user's CSV).
 
 A trace file is a CSV with a header (commas, semicolons or tabs between the columns) whose
-columns are found by name, case-insensitively; its time rises in even steps of any length. A
+columns are found by name, case-insensitively, the unit after '_' or in the name's brackets,
+parentheses or after a slash ('Time [s]' is time_s, 'Speed (km/h)' speed_kmh); its time rises
+in even steps of any length. A
 value that is not a finite number, a time that does not rise evenly, or a value outside its
 quantity's limits is refused with the file, column, line and value.
 """
@@ -20,7 +22,9 @@ CYCLES = {"udds": "udds.csv", "us06": "us06.csv", "hwfet": "hwfet.csv", "wltc": 
 MAX_SPEED_MPS = 100.0   # 360 km/h: a faster speed in a trace is a unit mix-up
 MAX_GRADE = 0.5         # rise over run: a steeper road in a trace is a unit mix-up (%, degrees)
 DELIMITERS = ",;\t"     # the header's first of these that it holds is the delimiter
-TIME_COLUMNS = {"cycsecs": (1.0, "s"), "time_s": (1.0, "s"), "time": (1.0, "s")}
+TIME_COLUMNS = {"cycsecs": (1.0, "s"), "time_s": (1.0, "s"), "time": (1.0, "s"),
+                "time_ms": (1e-3, "ms"), "time_min": (60.0, "min"), "time_h": (3600.0, "h")}
+UNIT_KEYS = {"km/h": "kmh", "m/s": "mps", "mi/h": "mph", "sec": "s"}   # a name's unit as a key
 
 
 def data_dir() -> Path:
@@ -52,7 +56,7 @@ SPEED_TRACE = TraceFormat(
      "grade": (-MAX_GRADE, MAX_GRADE, " (rise over run, not % or degrees)")},
     "a CSV with a header: a time column (time_s, or FASTSim's cycSecs), a speed column "
     "(speed_mps, speed_kmh, speed_mph, or cycMps) and optionally the road grade as rise over "
-    "run (grade, or cycGrade)")
+    "run (grade, or cycGrade); a unit may also stand in brackets: 'Speed [km/h]'")
 
 CURRENT_PROFILE = TraceFormat(
     "current profile",
@@ -60,7 +64,7 @@ CURRENT_PROFILE = TraceFormat(
     ("time", "current"),
     {},
     "a CSV with a header: a time column (time_s) and a cell current column (current_a or "
-    "current_ma; > 0 charges)")
+    "current_ma; > 0 charges); a unit may also stand in brackets: 'Current [mA]'")
 
 
 @dataclass(frozen=True)
@@ -196,7 +200,7 @@ def _rows(path: Path, fmt: TraceFormat) -> list[tuple[int, list[str]]]:
 
 def _columns(header: list[str], path: Path, fmt: TraceFormat) -> dict[str, TraceColumn]:
     """Each quantity's column in a trace file's header."""
-    names = [h.strip().lower() for h in header]
+    names = [trace_key(h) for h in header]
     found: dict[str, TraceColumn] = {}
     for quantity, accepted in fmt.columns.items():
         hits = [TraceColumn(k, header[k].strip(), *accepted[n]) for k, n in enumerate(names)
@@ -211,6 +215,21 @@ def _columns(header: list[str], path: Path, fmt: TraceFormat) -> dict[str, Trace
         raise DataError(f"{path}: no {' and no '.join(missing)} column in the header "
                         f"{[h.strip() for h in header]}; expected {fmt.expected}")
     return found
+
+
+def trace_key(name: str) -> str:
+    """A header name as TraceFormat.columns spells it: lower case, with a unit in brackets,
+    parentheses or after a slash (lmncell.data.readers.NAME_UNIT) joined by '_':
+    'Time [s]' → 'time_s', 'Speed (km/h)' → 'speed_kmh', 'current/mA' → 'current_ma'."""
+    from lmncell.data.readers import NAME_UNIT
+
+    name = name.strip().lower()
+    found = NAME_UNIT.search(name)
+    base = name[:found.start()].strip().replace(" ", "_") if found else ""
+    if not (found and base):
+        return name
+    unit = next(g for g in found.groups() if g)
+    return f"{base}_{UNIT_KEYS.get(unit, unit)}"
 
 
 def _check_values(values: dict[str, np.ndarray], columns: dict[str, TraceColumn],
