@@ -20,6 +20,8 @@ from lmncell.design.optimal import (
     parse_profile,
     predict,
     random_programme,
+    shrink_to_fit,
+    voltage_window,
 )
 
 
@@ -383,7 +385,63 @@ def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_mo
     said = capsys.readouterr().out
     assert (f"the model itself runs the programme at {sim.voltage_v.min():.3f} … "
             f"{sim.voltage_v.max():.3f} V\n") in said
-    # an R0 too small for the cell: the design says that the model leaves the limits
+    # an R0 too small for the cell (the model left the limits, with a warning, before): the
+    # sequences that take the model outside shrink until it stays inside, and it says so
     assert main(["design", "--capacity", "2.85", "--soc-profile", "0.9,0.3", "--duration",
                  "2400", "--model", str(quick_model), "--r0", "0.002", "--out", str(out)]) == 0
-    assert "V; warning: outside the limits" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "the model itself left the voltage window in sequence(s) " in said
+    assert "warning: outside the limits" not in said
+    current = np.loadtxt(out, delimiter=",", skiprows=1)[:, 1]
+    with pytest.warns(UserWarning):
+        sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=0.9)
+    assert low <= sim.voltage_v.min() and sim.voltage_v.max() <= high
+
+
+def test_shrinking_keeps_each_sequences_charge_and_the_other_model_inside() -> None:
+    """Sequences in which another model (here the design model with three times its
+    resistances) leaves the voltage window shrink towards their mean current until it stays
+    inside; the others and every sequence's charge stay as designed."""
+    cell, cyc = CellSpec(capacity_ah=2.3), CyclerSpec()
+    spec = DesignSpec([0.9, 0.1], 3600.0)
+    prog = design_programme(cell, cyc, spec, progress=lambda _m: None)
+    stiff = dataclasses.replace(cell, r0_ohm=3 * cell.r0_ohm,
+                                rc=[(3 * r, t) for r, t in cell.rc])
+
+    def stiff_voltage(current: np.ndarray) -> np.ndarray:
+        return predict(stiff, current, 1.0, 0.9, np.zeros(len(stiff.rc)))[0]
+
+    lo, hi = voltage_window(cell, spec)
+    v = stiff_voltage(prog.current_a)
+    assert v.min() < lo or v.max() > hi
+    fitted, shrunk = shrink_to_fit(prog, cell, cyc, spec, stiff_voltage)
+    v = stiff_voltage(fitted.current_a)
+    assert lo <= v.min() and v.max() <= hi
+    assert shrunk and all(0.0 < kept < 1.0 for kept in shrunk.values())
+    ends = [*prog.sequence_starts[1:], prog.current_a.size]
+    for k, (a, b) in enumerate(zip(prog.sequence_starts, ends, strict=True)):
+        assert fitted.current_a[a:b].sum() == pytest.approx(prog.current_a[a:b].sum())
+        same = np.array_equal(fitted.current_a[a:b], prog.current_a[a:b])
+        assert same == (k not in shrunk)
+    assert fitted.voltage_v == pytest.approx(predict(cell, fitted.current_a, 1.0, 0.9,
+                                                     np.zeros(len(cell.rc)))[0])
+
+
+def test_the_resistance_scale_from_a_model_is_its_response_over_the_design_models(
+        quick_model) -> None:
+    """The factor on the design model's resistances at each SoC is the model's pulse
+    response over the design model's: halving the design model's resistances doubles it; it
+    rises towards empty where the model's resistance does."""
+    from lmncell.design.command import design_impedance, model_resistance_scale
+    from lmncell.runtime.model import load_model
+
+    model = load_model(quick_model)
+    r0, rc = design_impedance(model)
+    cell = CellSpec(capacity_ah=2.85, r0_ohm=r0, rc=rc, ocv_soc=tuple(model.ocv_soc),
+                    ocv_v=tuple(model.ocv_v))
+    socs, factors = model_resistance_scale(model, cell, [0.9, 0.1])
+    half = dataclasses.replace(cell, r0_ohm=r0 / 2, rc=[(r / 2, t) for r, t in rc])
+    socs_half, factors_half = model_resistance_scale(model, half, [0.9, 0.1])
+    assert socs_half == socs and socs[0] < 0.1 < 0.9 < socs[-1]
+    assert np.allclose(factors_half, 2 * np.array(factors), rtol=1e-9)
+    assert factors[0] > 1.15 * np.median(factors)

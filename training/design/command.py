@@ -15,6 +15,7 @@ from lmncell.design.optimal import (
     parse_profile,
     plot_programme,
     sequence_count,
+    shrink_to_fit,
     write_programme,
 )
 from lmncell.runtime.model import LmnModel
@@ -50,6 +51,12 @@ def _cell(a, say=print) -> tuple[CellSpec, LmnModel | None]:
             say(f"design model from {Path(a.model).name}: R0 {1e3 * cell.r0_ohm:.1f} mΩ, RC "
                 + ", ".join(f"{1e3 * r:.1f} mΩ at {t:g} s" for r, t in cell.rc)
                 + f" (the median of its local models at {m.reference_temperature_c:g} °C)")
+            cell.r_scale_soc, cell.r_scale = model_resistance_scale(m, cell,
+                                                                    parse_profile(a.soc_profile))
+            say("  its resistances × " + ", ".join(
+                f"{g:.2f} at SoC {s:.2f}" for s, g in list(zip(
+                    cell.r_scale_soc, cell.r_scale, strict=True))[::SCALE_SAID_EVERY])
+                + " (the model's own pulse response over the profile's SoC)")
     if a.voltage_min is not None:
         cell.voltage_min_v = a.voltage_min
     if a.voltage_max is not None:
@@ -57,11 +64,65 @@ def _cell(a, say=print) -> tuple[CellSpec, LmnModel | None]:
     return cell, m
 
 
+SCALE_POINTS = 13          # SoC points of the design model's resistance scale from a model
+SCALE_SAID_EVERY = 4       # every how many of them progress names
+PULSE_REST_S, PULSE_S = 60, 30
+SCALE_BOUNDS = (0.2, 5.0)  # as the characterisation of a virtual cell bounds its factors
+
+
+def model_resistance_scale(model: LmnModel, cell: CellSpec, profile: list[float]
+                           ) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """SoC points over the profile's range (widened by the design's SoC margin) and, at each,
+    the factor on the design model's resistances that best matches the model's own response
+    (lmncell.simulate, its reference temperature) to a PULSE_S discharge and charge pulse from
+    rest: least squares of the voltages' departures from the OCV, less their value at rest.
+    A model's resistance rises towards empty (R_d, its local models there), which the median
+    impedance of design_impedance misses: a programme designed without it took the Panasonic
+    model to 2.03 V at SoC 0.1 (limit 2.55 V)."""
+    import warnings
+
+    from lmncell.api import simulate
+    from lmncell.design.optimal import predict, soc_window
+
+    lo, hi = soc_window(DesignSpec(profile))
+    socs = np.linspace(max(lo, 0.02), min(hi, 0.98), SCALE_POINTS)
+    low_i, high_i = model.limits.get("current_a", (-cell.capacity_ah, cell.capacity_ah))
+    amp = min(abs(low_i), abs(high_i), cell.max_c_rate * cell.capacity_ah) or cell.capacity_ah
+    rest = np.zeros(PULSE_REST_S)
+    current = np.concatenate([rest, np.full(PULSE_S, -amp), rest, np.full(PULSE_S, amp), rest])
+    factors = []
+    for soc0 in socs:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")       # a pulse may leave the trained region
+            v = simulate(model, current, None, float(soc0), capacity_ah=cell.capacity_ah)
+        u, soc, _ = predict(cell, current, model.sample_time_s, float(soc0),
+                            np.zeros(len(cell.rc)))
+        own = v.voltage_v - cell.ocv(soc)
+        design = u - cell.ocv(soc)
+        own, design = own - own[PULSE_REST_S - 1], design - design[PULSE_REST_S - 1]
+        factor = float(own @ design / (design @ design)) if design @ design > 0 else 1.0
+        factors.append(float(np.clip(factor, *SCALE_BOUNDS)) if np.isfinite(factor) else 1.0)
+    return tuple(float(s) for s in socs), tuple(factors)
+
+
 def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, soc0: float,
                 cell: CellSpec) -> str:
-    """The model's own voltage over a programme (current held over samples of sample_time_s,
-    free run from soc0 at the model's reference temperature, at its own sample time), and a
-    warning where it leaves the design's voltage limits."""
+    """The model's own voltage over a programme (model_voltage), and a warning where it leaves
+    the design's voltage limits."""
+    v = model_voltage(model, current_a, sample_time_s, soc0, cell.capacity_ah)
+    low, high = float(v.min()), float(v.max())
+    text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
+    if low < cell.voltage_min_v or high > cell.voltage_max_v:
+        text += (f"; warning: outside the limits {cell.voltage_min_v:.3f} … "
+                 f"{cell.voltage_max_v:.3f} V (a larger --r0, or a lower --max-c-rate)")
+    return text
+
+
+def model_voltage(model: LmnModel, current_a: np.ndarray, sample_time_s: float, soc0: float,
+                  capacity_ah: float) -> np.ndarray:
+    """The model's own voltage (V) over a programme: free run from soc0 at its reference
+    temperature, the current held over samples of sample_time_s taken as its FMU takes it at
+    its own sample time; one value per model step."""
     import math
     import warnings
 
@@ -72,14 +133,30 @@ def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, so
     steps = math.floor(current_a.size * sample_time_s / ts + 1e-9)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the pulses may leave the trained current
-        sim = simulate(model, step_means(current_a, sample_time_s, ts, steps), None, soc0,
-                       capacity_ah=cell.capacity_ah)      # the current as its FMU takes it
-    low, high = float(sim.voltage_v.min()), float(sim.voltage_v.max())
-    text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
-    if low < cell.voltage_min_v or high > cell.voltage_max_v:
-        text += (f"; warning: outside the limits {cell.voltage_min_v:.3f} … "
-                 f"{cell.voltage_max_v:.3f} V (a larger --r0, or a lower --max-c-rate)")
-    return text
+        return simulate(model, step_means(current_a, sample_time_s, ts, steps), None, soc0,
+                        capacity_ah=capacity_ah).voltage_v
+
+
+def _fit_to_model(prog, model: LmnModel, cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
+                  say):
+    """The programme with the sequences that take the model itself outside the voltage
+    window shrunk towards their mean current (optimal.shrink_to_fit), said where any were."""
+    ts, soc0 = model.sample_time_s, spec.soc_profile[0]
+    dt = cyc.sample_time_s
+
+    def at_samples(current: np.ndarray) -> np.ndarray:
+        v = model_voltage(model, current, dt, soc0, cell.capacity_ah)
+        step = np.minimum((np.arange(1, current.size + 1) * dt / ts - 1e-9).astype(int),
+                          v.size - 1)
+        return v[np.maximum(step, 0)]
+
+    prog, shrunk = shrink_to_fit(prog, cell, cyc, spec, at_samples)
+    if shrunk:
+        say("  the model itself left the voltage window in sequence(s) "
+            + ", ".join(f"{k + 1} ({100 * kept:.0f} % of the spread kept)"
+                        for k, kept in shrunk.items())
+            + "; their current shrunk towards each one's mean (same charge)")
+    return prog
 
 
 def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]] | None:
@@ -139,6 +216,8 @@ def run_design(a) -> int:
         result, prog = prove_design(vc, cell, cyc, spec, design, progress=say)
     else:
         prog = design(cell)
+        if model is not None:
+            prog = _fit_to_model(prog, model, cell, cyc, spec, say)
     files = write_programme(prog, Path(a.out))
     say(f"wrote {', '.join(str(f) for f in files)}; current {prog.current_a.min():.2f} … "
         f"{prog.current_a.max():.2f} A, predicted voltage {prog.voltage_v.min():.3f} … "

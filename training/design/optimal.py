@@ -479,6 +479,47 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     return Programme(time_s, cur, u, socs, starts, points, lds, settings)
 
 
+SHRINK_STEP = 0.2        # a sequence's spread around its mean shrinks by this share at a time
+
+
+def shrink_to_fit(prog: Programme, cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
+                  voltage_of) -> tuple[Programme, dict[int, float]]:
+    """The programme with each sequence in which voltage_of (the voltage, V, of another model
+    at every programme sample for a current) leaves the design's voltage window shrunk towards
+    its mean current, SHRINK_STEP at a time, until it stays inside (its charge, and so the SoC
+    profile, unchanged); and {sequence index: the share of its spread kept} for those shrunk.
+    A sequence whose mean current alone leaves the window keeps none and is left to the
+    caller's check."""
+    lo, hi = voltage_window(cell, spec)
+    n = prog.current_a.size
+    bounds = list(zip(prog.sequence_starts, [*prog.sequence_starts[1:], n], strict=True))
+    kept = np.ones(len(bounds))
+    cur = prog.current_a.copy()
+    while True:
+        v = voltage_of(cur)
+        out = [k for k, (a, b) in enumerate(bounds)
+               if kept[k] > 0 and ((v[a:b] < lo) | (v[a:b] > hi)).any()]
+        if not out:
+            break
+        for k in out:
+            a, b = bounds[k]
+            kept[k] = max(0.0, round(kept[k] - SHRINK_STEP, 6))
+            mean = float(prog.current_a[a:b].mean())
+            cur[a:b] = mean + kept[k] * (prog.current_a[a:b] - mean)
+    shrunk = {k: float(kept[k]) for k in range(len(bounds)) if kept[k] < 1.0}
+    if not shrunk:
+        return prog, {}
+    ts = cyc.sample_time_s
+    u, socs, _ = predict(cell, cur, ts, prog.profile_points[0][1], np.zeros(len(cell.rc)))
+    i_max = prog.settings["max_current_a"]
+    log_dets = [log_det_information(cell, cur[a:b], ts, amplitude_band(
+                    spec, i_max, k, float(cur[a:b].mean())), spec.information)
+                if k in shrunk else ld
+                for k, ((a, b), ld) in enumerate(zip(bounds, prog.log_dets, strict=True))]
+    return dataclasses.replace(prog, current_a=cur, voltage_v=u, soc=socs,
+                               log_dets=log_dets), shrunk
+
+
 RANDOM_KINDS = ("prbs", "aprbs")
 
 
