@@ -392,6 +392,8 @@ def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_mo
     said = capsys.readouterr().out
     assert "the model itself left the voltage window in sequence(s) " in said
     assert "warning: outside the limits" not in said
+    kept = json.loads(out.with_suffix(".json").read_text())["settings"]["spread_kept_by_sequence"]
+    assert kept and all(0.0 <= share < 1.0 for share in kept.values())
     current = np.loadtxt(out, delimiter=",", skiprows=1)[:, 1]
     with pytest.warns(UserWarning):
         sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=0.9)

@@ -178,13 +178,15 @@ def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]]
 def programme_figures(prog, files: list[Path], model_check_text: str | None) -> dict:
     """What `lmncell design --json` prints without --compare-virtual: the files written, the
     programme's current (A) and predicted voltage (V) ranges, its duration (s), the SoC reached
-    at each profile point, and with --model the model's own run of it (model_check)."""
+    at each profile point, and with --model the model's own run of it (model_check) and the
+    share of their current's spread kept by sequences shrunk for it (numbered from 1)."""
     return {"files": [str(f) for f in files],
             "current_a": [float(prog.current_a.min()), float(prog.current_a.max())],
             "predicted_voltage_v": [float(prog.voltage_v.min()), float(prog.voltage_v.max())],
             "duration_s": float(prog.time_s[-1] + (prog.time_s[1] - prog.time_s[0])),
             "soc_at_profile_points": [float(p[1]) for p in prog.profile_points],
-            "model_check": model_check_text}
+            "model_check": model_check_text,
+            "spread_kept_by_sequence": prog.settings.get("spread_kept_by_sequence", {})}
 
 
 def run_design(a) -> int:

@@ -516,8 +516,10 @@ def shrink_to_fit(prog: Programme, cell: CellSpec, cyc: CyclerSpec, spec: Design
                     spec, i_max, k, float(cur[a:b].mean())), spec.information)
                 if k in shrunk else ld
                 for k, ((a, b), ld) in enumerate(zip(bounds, prog.log_dets, strict=True))]
-    return dataclasses.replace(prog, current_a=cur, voltage_v=u, soc=socs,
-                               log_dets=log_dets), shrunk
+    settings = {**prog.settings,
+                "spread_kept_by_sequence": {str(k + 1): kept for k, kept in shrunk.items()}}
+    return dataclasses.replace(prog, current_a=cur, voltage_v=u, soc=socs, log_dets=log_dets,
+                               settings=settings), shrunk
 
 
 RANDOM_KINDS = ("prbs", "aprbs")
