@@ -11,7 +11,7 @@ import shutil
 import tempfile
 import uuid
 import zipfile
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -343,30 +343,45 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     ends = at_step_ends(points, ts)
     out = np.empty((n - start_step, 4))
     every = np.empty(points.size)
-    slave, t, k = None, start_s, 0
+    done = [0]                                        # model steps ended so far
+
+    def keep(slave: _Slave, j: int) -> None:
+        if ends[j]:
+            out[done[0]] = slave.outputs()
+            every[j] = out[done[0], 0]
+            done[0] += 1
+        else:
+            every[j] = slave.voltage()
+
+    warned = _step_through(info, unzipped, seg, seg.soc0 if soc0 is None else soc0,
+                           not ambient, observer, inputs.tolist(), points.tolist(), keep,
+                           start_s)
+    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool), points, every,
+                  warned)
+
+
+def _step_through(info: FmuInfo, unzipped: str, seg: Segment, soc0: float, cell: bool,
+                  observer: int, inputs: list[list[float]], points: list[float],
+                  after_step: Callable[[_Slave, int], None], start_s: float = 0.0) -> str:
+    """One instance of the FMU (_Slave) stepped from start_s (s) to each point in turn, the
+    step to points[j] holding inputs[j], after_step(slave, j) after it; returns the FMU's first
+    out-of-range warning (first_warning); a failed call is a ConfigError naming the record and
+    the time."""
+    slave, t = None, start_s
     try:
-        slave = _Slave(info, unzipped, seg.soc0 if soc0 is None else soc0, not ambient,
-                       inputs[0], observer)
-        for j, (point, values, end) in enumerate(zip(points.tolist(), inputs.tolist(),
-                                                     ends.tolist(), strict=True)):
+        slave = _Slave(info, unzipped, soc0, cell, inputs[0], observer)
+        for j, (point, values) in enumerate(zip(points, inputs, strict=True)):
             slave.set_inputs(values)
             slave.slave.doStep(currentCommunicationPoint=t - start_s,
                                communicationStepSize=point - t)
             t = point
-            if end:
-                out[k] = slave.outputs()
-                every[j] = out[k, 0]
-                k += 1
-            else:
-                every[j] = slave.voltage()
-        warned = first_warning(slave.log, slave.name)
+            after_step(slave, j)
+        return first_warning(slave.log, slave.name)
     except Exception as exc:          # fmpy raises where a call returns an error status
         raise _failed(info, seg, t, exc, slave) from None
     finally:
         if slave is not None:
             slave.free()
-    return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool), points, every,
-                  warned)
 
 
 def _failed(info: FmuInfo, seg: Segment, t: float, exc: Exception, slave: _Slave | None
@@ -407,20 +422,12 @@ def drive_at_model_steps(info: FmuInfo, unzipped: str, seg: Segment, ambient: bo
         temperature = np.full(n, 25.0)
     inputs = np.column_stack([seg.current_a, temperature]).tolist()
     out = np.empty((n, 4))
-    slave, t = None, 0.0
-    try:
-        slave = _Slave(info, unzipped, seg.soc0, not ambient, inputs[0])
-        for k, values in enumerate(inputs):
-            slave.set_inputs(values)
-            slave.slave.doStep(currentCommunicationPoint=t, communicationStepSize=ts)
-            t = (k + 1) * ts
-            out[k] = slave.outputs()
-        warned = first_warning(slave.log, slave.name)
-    except Exception as exc:          # fmpy raises where a call returns an error status
-        raise _failed(info, seg, t, exc, slave) from None
-    finally:
-        if slave is not None:
-            slave.free()
+
+    def keep(slave: _Slave, k: int) -> None:
+        out[k] = slave.outputs()
+
+    warned = _step_through(info, unzipped, seg, seg.soc0, not ambient, 0, inputs,
+                           (ts * np.arange(1, n + 1)).tolist(), keep)
     return FmuRun(out[:, 0], out[:, 1], out[:, 2], out[:, 3].astype(bool),
                   first_warning=warned)
 
