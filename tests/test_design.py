@@ -447,3 +447,18 @@ def test_the_resistance_scale_from_a_model_is_its_response_over_the_design_model
     assert socs_half == socs and socs[0] < 0.1 < 0.9 < socs[-1]
     assert np.allclose(factors_half, 2 * np.array(factors), rtol=1e-9)
     assert factors[0] > 1.15 * np.median(factors)
+
+
+def test_model_check_warns_where_the_model_leaves_its_limits(quick_model) -> None:
+    """What design --model prints after the model ran its programme: the voltage range, and a
+    warning naming the limits where the model leaves them (here a 5C discharge from SoC 0.2)."""
+    from lmncell.design.command import model_check
+    from lmncell.runtime.model import load_model
+
+    model = load_model(quick_model)
+    low, high = model.limits["voltage_v"]
+    cell = CellSpec(capacity_ah=2.85, voltage_min_v=low, voltage_max_v=high)
+    gentle = model_check(model, np.full(300, -1.0), 1.0, 0.8, cell)
+    assert gentle.startswith("the model itself runs the programme at ") and "warning" not in gentle
+    hard = model_check(model, np.full(600, -14.25), 1.0, 0.2, cell)
+    assert f"; warning: outside the limits {low:.3f} … {high:.3f} V even where" in hard

@@ -108,13 +108,15 @@ def model_resistance_scale(model: LmnModel, cell: CellSpec, profile: list[float]
 def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, soc0: float,
                 cell: CellSpec) -> str:
     """The model's own voltage over a programme (model_voltage), and a warning where it leaves
-    the design's voltage limits."""
+    the design's voltage limits (after _fit_to_model: where even a sequence's mean current,
+    the charge the profile needs in it, takes the model there)."""
     v = model_voltage(model, current_a, sample_time_s, soc0, cell.capacity_ah)
     low, high = float(v.min()), float(v.max())
     text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
     if low < cell.voltage_min_v or high > cell.voltage_max_v:
         text += (f"; warning: outside the limits {cell.voltage_min_v:.3f} … "
-                 f"{cell.voltage_max_v:.3f} V (a larger --r0, or a lower --max-c-rate)")
+                 f"{cell.voltage_max_v:.3f} V even where a sequence holds its mean current "
+                 "(a longer --duration, or a SoC profile that stays further from empty or full)")
     return text
 
 
