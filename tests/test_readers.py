@@ -677,7 +677,7 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
     err = capsys.readouterr().err
     proposal = ("--columns 'time=Time [s],current=Current [mA],voltage=Voltage [V],"
                 "temperature=T_cell' --delimiter ';' --decimal ,")
-    assert "eu.csv: unknown format; " in err and f"perhaps: {proposal} (check" in err
+    assert "eu.csv: unknown format; " in err and f"(line 1), perhaps: {proposal} (check" in err
     assert main(["inspect", str(path), *shlex.split(proposal)]) == 0
     out = capsys.readouterr().out
     assert "current -0.401 … -0.001 A" in out and "current in mA" in out, out
@@ -685,6 +685,13 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
                                      "voltage": "Voltage [V]", "temperature": "T_cell"},
                       sep=";", decimal=",")
     assert rec.current_a[1] == pytest.approx(-0.1005) and rec.temperature_c[0] == 25.1
+    preamble = tmp_path / "cycler.csv"             # a cycler's settings above the table
+    preamble.write_text("Channel: 3\nCell: X-1\n\nt/s,I/A,U/V\n0,-1.0,3.3\n1,-1.0,3.2\n")
+    with pytest.raises(DataError, match=r"\(line 4\), perhaps: --columns time=t/s,current=I/A,"
+                                        r"voltage=U/V \(check"):
+        read_record(preamble)
+    assert len(read_record(preamble, columns={"time": "t/s", "current": "I/A",
+                                              "voltage": "U/V"})) == 2
     for header in ("a,b,c\n1,2,3\n", "Time,Current,U1,U2\n0,1,3,3\n"):
         path.write_text(header)
         with pytest.raises(DataError, match="unknown format") as info:

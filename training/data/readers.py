@@ -133,12 +133,6 @@ def read_text(path: Path, first_line: bool = False, head: bool = False) -> str:
     return text.split("\n", 1)[0] if first_line else text
 
 
-def _second_line(path: Path) -> str | None:
-    """The line under the header (its first data row, in a plain table), or None."""
-    lines = read_text(path, head=True).split("\n", 2)
-    return lines[1] if len(lines) > 2 else None
-
-
 def check_readable(path: str | Path) -> Path:
     """The path, if it names a readable, non-empty file; DataError naming the problem if not."""
     path = Path(path)
@@ -197,17 +191,26 @@ def _format_of(path: Path) -> str:
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})"
-                    + _suggestion(header, _second_line(path)))
+                    + _suggestion(path))
 
 
-def _suggestion(header: str, first_row: str | None) -> str:
-    """'. This header reads, perhaps, with …' (lmncell.data.header), or ''."""
+SUGGESTION_LINES = 100    # how far down a cycler's preamble the header of a proposal may lie
+
+
+def _suggestion(path: Path) -> str:
+    """'. For this header, perhaps: OPTIONS …' for the first of the file's first
+    SUGGESTION_LINES lines that names a time, a current and a voltage column
+    (lmncell.data.header, with the line under it as its first row), or ''."""
     from lmncell.data.header import suggested_options
 
-    options = suggested_options(header, first_row)
-    return ("" if options is None else
-            f". For this header, perhaps: {options} (check the columns; add "
-            "--discharge-positive where the file counts discharge current as positive)")
+    lines = read_text(path, head=True).split("\n", SUGGESTION_LINES + 1)[:SUGGESTION_LINES + 1]
+    for k, line in enumerate(lines[:-1]):
+        options = suggested_options(line, lines[k + 1])
+        if options is not None:
+            return (f". For this header (line {k + 1}), perhaps: {options} (check the columns; "
+                    "add --discharge-positive where the file counts discharge current as "
+                    "positive)")
+    return ""
 
 
 def _is_speed_trace(columns: list[str]) -> bool:
