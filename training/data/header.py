@@ -63,9 +63,8 @@ def _picks(names: list[str]) -> dict[str, str] | None:
 
 
 def _base(name: str) -> str:
-    """A column name without its unit (lmncell.data.readers.NAME_UNIT), in lower case, with
+    """A column name without its unit (lmncell.data.readers.split_unit), in lower case, with
     '_', '-' and '.' as spaces: 'Test_Time(s)' → 'test time'."""
-    from lmncell.data.readers import NAME_UNIT
+    from lmncell.data.readers import split_unit
 
-    bare = NAME_UNIT.sub("", name) if NAME_UNIT.search(name) else name
-    return " ".join(re.sub(r"[_\-.]", " ", bare).lower().split())
+    return " ".join(re.sub(r"[_\-.]", " ", split_unit(name)[0]).lower().split())

@@ -587,6 +587,16 @@ UNITS = {"time": TIME_UNITS, "current": CURRENT_UNITS, "voltage": VOLTAGE_UNITS,
          "temperature": TEMPERATURE_UNITS}
 DEFAULT_UNITS = {"time": "s", "current": "A", "voltage": "V", "temperature": "degC"}
 NAME_UNIT = re.compile(r"(?:\[\s*([^\]]+?)\s*\]|\(\s*([^)]+?)\s*\)|/\s*([^/\s]+))\s*$")
+
+
+def split_unit(name: str) -> tuple[str, str]:
+    """A column name's words before the unit it ends in and that unit as written (NAME_UNIT:
+    in brackets, parentheses or after a slash): 'Current [mA]' → ('Current', 'mA'),
+    'I/mA' → ('I', 'mA'); (name, '') for a name without one."""
+    found = NAME_UNIT.search(name)
+    if found is None:
+        return name, ""
+    return name[:found.start()].rstrip(), next(g for g in found.groups() if g)
 UNIT_WORDS = {        # how a units row or a column name may write them (lower case)
     "time": {"s": "s", "sec": "s", "ms": "ms", "min": "min", "h": "h", "hr": "h"},
     "current": {"a": "A", "ma": "mA"},
@@ -759,8 +769,7 @@ def _file_units(columns: Mapping[str, str], units: UnitsRow | None, text_time: b
     column's unit is its text's, left out)."""
     found: dict[str, list[tuple[str, str]]] = {}
     for what, column in columns.items():
-        m = NAME_UNIT.search(column)
-        word = next((g for g in m.groups() if g), "").lower() if m else ""
+        word = split_unit(column)[1].lower()
         if word in UNIT_WORDS[what]:
             found.setdefault(what, []).append((UNIT_WORDS[what][word],
                                                f"the column name {column!r}"))

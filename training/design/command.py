@@ -14,8 +14,10 @@ from lmncell.design.optimal import (
     design_programme,
     parse_profile,
     plot_programme,
+    predict,
     sequence_count,
     shrink_to_fit,
+    soc_window,
     write_programme,
 )
 from lmncell.runtime.model import LmnModel
@@ -82,7 +84,6 @@ def model_resistance_scale(model: LmnModel, cell: CellSpec, profile: list[float]
     import warnings
 
     from lmncell.api import simulate
-    from lmncell.design.optimal import predict, soc_window
 
     lo, hi = soc_window(DesignSpec(profile))
     socs = np.linspace(max(lo, 0.02), min(hi, 0.98), SCALE_POINTS)

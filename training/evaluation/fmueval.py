@@ -343,13 +343,12 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     ends = at_step_ends(points, ts)
     out = np.empty((n - start_step, 4))
     every = np.empty(points.size)
-    done = [0]                                        # model steps ended so far
+    step_of = np.cumsum(ends) - 1                     # the model step that point j ends
 
     def keep(slave: _Slave, j: int) -> None:
         if ends[j]:
-            out[done[0]] = slave.outputs()
-            every[j] = out[done[0], 0]
-            done[0] += 1
+            out[step_of[j]] = slave.outputs()
+            every[j] = out[step_of[j], 0]
         else:
             every[j] = slave.voltage()
 

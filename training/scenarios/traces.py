@@ -219,16 +219,15 @@ def _columns(header: list[str], path: Path, fmt: TraceFormat) -> dict[str, Trace
 
 def trace_key(name: str) -> str:
     """A header name as TraceFormat.columns spells it: lower case, with a unit in brackets,
-    parentheses or after a slash (lmncell.data.readers.NAME_UNIT) joined by '_':
+    parentheses or after a slash (lmncell.data.readers.split_unit) joined by '_':
     'Time [s]' → 'time_s', 'Speed (km/h)' → 'speed_kmh', 'current/mA' → 'current_ma'."""
-    from lmncell.data.readers import NAME_UNIT
+    from lmncell.data.readers import split_unit
 
     name = name.strip().lower()
-    found = NAME_UNIT.search(name)
-    base = name[:found.start()].strip().replace(" ", "_") if found else ""
-    if not (found and base):
+    base, unit = split_unit(name)
+    base = base.strip().replace(" ", "_")
+    if not (unit and base):
         return name
-    unit = next(g for g in found.groups() if g)
     return f"{base}_{UNIT_KEYS.get(unit, unit)}"
 
 
