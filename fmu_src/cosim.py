@@ -101,9 +101,9 @@ class CellCosim:
     def reset(self, temperature_c: float = 25.0) -> None:
         p = self.params
         if not 0.0 <= p.soc0 <= 1.0 or not math.isfinite(p.soc0):
-            raise InputError(f"parameter 'soc0' = {p.soc0!r}: expected a fraction within 0…1")
+            raise InputError(f"parameter 'soc0' = {p.soc0:g}: expected a fraction within 0..1")
         if not (math.isfinite(p.capacity_ah) and p.capacity_ah > 0):
-            raise InputError(f"parameter 'capacity' = {p.capacity_ah!r}: expected > 0 Ah")
+            raise InputError(f"parameter 'capacity' = {p.capacity_ah:g}: expected > 0 Ah")
         if p.observer not in OBSERVER_NAMES:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")
@@ -190,14 +190,14 @@ class CellCosim:
         lim, msgs = self.model.limits, []
         if not ilo <= current_a <= ihi:
             lo, hi = lim["current_a"]
-            msgs.append(f"current {current_a:.3f} A outside the trained {lo:.3f}…{hi:.3f} A")
+            msgs.append(f"current {current_a:.3f} A outside the trained {lo:.3f}..{hi:.3f} A")
         if not slo <= soc <= shi:
             lo, hi = lim["soc"]
-            msgs.append(f"SoC {soc:.3f} outside the trained {lo:.3f}…{hi:.3f}")
+            msgs.append(f"SoC {soc:.3f} outside the trained {lo:.3f}..{hi:.3f}")
         if not tlo <= temperature_c <= thi:
             lo, hi = lim["temperature_c"]
-            msgs.append(f"temperature {temperature_c:.1f} °C outside the trained "
-                        f"{lo:.1f}…{hi:.1f} °C")
+            msgs.append(f"temperature {temperature_c:.1f} degC outside the trained "
+                        f"{lo:.1f}..{hi:.1f} degC")
         return "; ".join(msgs)
 
     def check_voltage(self) -> str:
@@ -209,15 +209,17 @@ class CellCosim:
         lim = self.model.limits.get("voltage_v")
         if lim is None:                  # a model without a voltage range: never flagged
             return ""
-        return f"model voltage {v:.3f} V outside the trained {lim[0]:.3f}…{lim[1]:.3f} V"
+        return f"model voltage {v:.3f} V outside the trained {lim[0]:.3f}..{lim[1]:.3f} V"
 
     def advance(self, step_s: float, current_a: float, temperature_c: float = 25.0,
                 voltage_measured_v: float = 0.0) -> int:
         """Advance by one communication step with held inputs; returns model steps taken.
 
-        voltage_measured_v ≤ 0 means "not measured". Raises InputError (naming the variable,
-        or the step size where it spans more than MAX_STEPS_PER_CALL model steps) before
-        changing any state.
+        voltage_measured_v ≤ 0 means "not measured". Raises InputError, with the state as it
+        was, for an input that is not acceptable (naming the variable, or the step size where
+        it spans more than MAX_STEPS_PER_CALL model steps) and where the model's arithmetic
+        fails or its outputs are not finite (inputs far outside the trained region, such as a
+        cell a few kelvin above absolute zero), as the native FMU does.
         """
         i_max = self._i_max
         ts = self.model.sample_time_s
@@ -225,6 +227,27 @@ class CellCosim:
                 <= MAX_TEMPERATURE_C and 0.0 < step_s <= MAX_STEPS_PER_CALL * ts
                 and math.isfinite(voltage_measured_v)):
             self._refuse(step_s, current_a, temperature_c, voltage_measured_v)
+        before = self.get_state()
+        try:
+            taken = self._advance(step_s, current_a, temperature_c, voltage_measured_v)
+            finite = self._outputs_finite()
+        except (ArithmeticError, ValueError):   # OverflowError of math.exp, LinAlgError, …
+            finite = False
+        if not finite:
+            self.set_state(before)
+            raise InputError("the model produced a non-finite output (inputs far outside the "
+                             "trained region?)")
+        return taken
+
+    def _outputs_finite(self) -> bool:
+        """Whether every output and the preview are finite (the native FMU's outputs_finite)."""
+        values = (self.voltage_v, self.soc, self.soc_std, self.cell_temperature_c)
+        return all(math.isfinite(v) for v in values)
+
+    def _advance(self, step_s: float, current_a: float, temperature_c: float,
+                 voltage_measured_v: float) -> int:
+        """advance() once its inputs are known to be acceptable."""
+        ts = self.model.sample_time_s
         delay = self.model.current_delay_s
         if delay and math.isnan(self.delay_charge_as):   # before the start: the first current
             self.delay_charge_as = current_a * delay
@@ -270,22 +293,22 @@ class CellCosim:
         """Raise InputError naming the first input of advance() that is not acceptable."""
         for name, val in (("current", current_a), ("temperature", temperature_c)):
             if not math.isfinite(val):
-                raise InputError(f"input '{name}' = {val!r}: expected a finite number")
+                raise InputError(f"input '{name}' = {val:g}: expected a finite number")
+        if not math.isfinite(voltage_measured_v):
+            raise InputError(f"input 'voltage_measured' = {voltage_measured_v:g}: expected a "
+                             "finite number (0 when not measured)")
         if not math.isfinite(step_s) or step_s <= 0:
-            raise InputError(f"communication step size {step_s!r}: expected > 0 s")
+            raise InputError(f"communication step size {step_s:g} s: expected > 0 s")
         ts = self.model.sample_time_s
         if step_s > MAX_STEPS_PER_CALL * ts:
-            raise InputError(f"communication step size {step_s!r} s: more than "
-                             f"{MAX_STEPS_PER_CALL:,} model steps of {ts:g} s; expected at most "
+            raise InputError(f"communication step size {step_s:g} s: more than "
+                             f"{MAX_STEPS_PER_CALL} model steps of {ts:g} s; expected at most "
                              f"{MAX_STEPS_PER_CALL * ts:g} s in one step (split it)")
-        if not math.isfinite(voltage_measured_v):
-            raise InputError(f"input 'voltage_measured' = {voltage_measured_v!r}: expected a "
-                             "finite number (0 when not measured)")
         if abs(current_a) > self._i_max:
-            raise InputError(f"input 'current' = {current_a!r} A: beyond {MAX_C_RATE:g} C of "
+            raise InputError(f"input 'current' = {current_a:g} A: beyond {MAX_C_RATE:g} C of "
                              f"{self.params.capacity_ah:g} Ah, not a current a cell carries")
-        raise InputError(f"input 'temperature' = {temperature_c!r} °C: expected "
-                         f"{MIN_TEMPERATURE_C:g}…{MAX_TEMPERATURE_C:g} °C")
+        raise InputError(f"input 'temperature' = {temperature_c:g} degC: expected "
+                         f"{MIN_TEMPERATURE_C:g}..{MAX_TEMPERATURE_C:g} degC")
 
     def _model_step(self) -> None:
         ts = self.model.sample_time_s

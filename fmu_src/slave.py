@@ -271,23 +271,24 @@ class LmnCellSlave(Fmi2Slave):
         """Report an ordinary call error: raised as CallError (→ fmi2Error) where the wrapper
         allows it, else logged (the call is then ignored)."""
         if self._errors_as_status:
-            raise CallError(f"{self.instance_name}: {msg}")
-        self.log(f"{self.instance_name}: {msg}", Fmi2Status.error)
+            raise CallError(msg)
+        self.log(msg, Fmi2Status.error)
 
     def enter_initialization_mode(self) -> None:
         self._in_initialization = True
 
     def exit_initialization_mode(self) -> None:
-        """Bad parameters are errors (see _error) and leave the FMU uninitialised, so that every
-        doStep is refused."""
+        """Bad parameters are errors (see _error) and leave the FMU in Initialization Mode,
+        uninitialised, so that every doStep is refused until the parameters are set right and
+        this is called again (as in the native FMU)."""
         if not self._in_initialization:
-            self._error("fmi2ExitInitializationMode called without fmi2EnterInitializationMode")
+            self._error("fmi2ExitInitializationMode is not allowed in " +
+                        ("terminated" if self._terminated else "step mode" if self._cosim
+                         else "instantiated"))
             return
-        self._in_initialization = False
         if self.observer not in OBSERVERS:
-            self._error(f"parameter 'observer' = {self.observer}: this FMU offers "
-                        f"{sorted(OBSERVERS)} ({', '.join(OBSERVERS.values())}); not "
-                        "initialised, every step will be refused")
+            self._error(f"parameter 'observer' = {self.observer}: expected 0 none, 1 EKF, "
+                        "2 fuzzy, 3 IMM; not initialised, every step will be refused")
             return
         try:
             self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
@@ -299,6 +300,8 @@ class LmnCellSlave(Fmi2Slave):
         except InputError as exc:
             self._cosim = None
             self._error(f"{exc}; not initialised, every step will be refused")
+            return
+        self._in_initialization = False
 
     def setup_experiment(self, start_time: float, stop_time: float | None,
                          tolerance: float | None) -> None:
@@ -310,23 +313,23 @@ class LmnCellSlave(Fmi2Slave):
     def do_step(self, current_time: float, step_size: float) -> bool:
         cosim, now = self._cosim, self._time
         if cosim is None or self._terminated:
-            self._error("do_step called " + ("after terminate" if self._terminated else
-                                             "before initialisation"))
+            mode = ("terminated" if self._terminated else "initialization mode"
+                    if self._in_initialization else "instantiated")
+            self._error(f"fmi2DoStep is not allowed in {mode}")
             return False
         if not abs(current_time - now) <= 1e-9 * max(1.0, abs(now)):  # NaN too
-            self._error(f"do_step: currentCommunicationPoint {current_time!r} s is not the FMU's "
-                        f"time {now!r} s (steps must follow on from each other)")
+            self._error(f"fmi2DoStep: currentCommunicationPoint {current_time:.17g} s is not the "
+                        f"FMU's time {now:.17g} s (steps must follow on from each other)")
             return False
         try:
             was = cosim.out_of_range
             cosim.advance(step_size, self.current, self.temperature, self.voltage_measured)
         except InputError as exc:
-            self._error(f"t = {current_time} s: {exc}; the step was not taken")
+            self._error(f"t = {now:.9g} s: {exc}; the step was not taken")
             return False
         self._time = now + step_size
         if cosim.out_of_range and not was:
-            self.log(f"{self.instance_name}: t = {current_time:.9g} s: {cosim.range_message}",
-                     Fmi2Status.warning)
+            self.log(f"t = {now:.9g} s: {cosim.range_message}", Fmi2Status.warning)
         return True
 
     # ----- FMU state: parameters, inputs and the whole engine state ------------------------

@@ -96,6 +96,51 @@ def impossible_inputs(fmu: str) -> dict:
     return out
 
 
+def logged_messages(fmu: str) -> dict:
+    """Every message the FMU logs (the instance's name left out), the statuses and the final
+    outputs over one sequence: doStep before and during initialisation, bad parameters at
+    exitInitializationMode and then good ones, an out-of-range warning, each input refused,
+    a partial model step, a near-absolute-zero step whose arithmetic overflows, a wrong
+    communication point, a step after terminate."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    md = read_model_description(fmu)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    statuses = []
+    with fmu_log("seq") as (name, callbacks, log):
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu), instanceName=name,
+                          modelIdentifier=md.coSimulation.modelIdentifier)
+        slave.instantiate(callbacks=callbacks, loggingOn=True)
+        statuses.append(_status(lambda: slave.doStep(0.0, 1.0)))
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        statuses.append(_status(lambda: slave.doStep(0.0, 1.0)))
+        for ref, bad, good in (("soc0", 1.5, 0.5), ("observer", 7, 0), ("capacity", -1.0, 2.0)):
+            setter = slave.setInteger if ref == "observer" else slave.setReal
+            setter([vr[ref]], [bad])
+            statuses.append(_status(slave.exitInitializationMode))
+            setter([vr[ref]], [good])
+        statuses.append(_status(slave.exitInitializationMode))
+        statuses.append(_status(slave.exitInitializationMode))
+        t = 0.0
+        for current, temperature, h in ((2.0, -273.0, 1.0), (1.0, 60.0, 1.0),
+                                        (math.nan, 25.0, 1.0), (0.0, math.inf, 1.0),
+                                        (1.0, -300.0, 1.0), (1e6, 25.0, 1.0), (0.0, 25.0, 0.5),
+                                        (0.0, 25.0, -1.0), (0.0, 25.0, 1e30),
+                                        (-1.0, 25.0, 0.25)):
+            slave.setReal([vr["current"], vr["temperature"]], [current, temperature])
+            status = _status(lambda t=t, h=h: slave.doStep(t, h))
+            statuses.append(status)
+            t += h if status == OK else 0.0
+        statuses.append(_status(lambda: slave.doStep(t + 5.0, 1.0)))
+        outputs = slave.getReal([vr["voltage"], vr["soc"], vr["cell_temperature"]])
+        slave.terminate()
+        statuses.append(_status(lambda: slave.doStep(t, 1.0)))
+        slave.freeInstance()
+        messages = [entry.replace(name, "NAME") for entry in log]
+    return {"messages": messages, "statuses": statuses, "outputs": outputs}
+
+
 def observers_at_full(fmu: str) -> dict:
     """Issue 19: each observer from SoC 1.0 with a ±2 A square wave that starts by charging,
     the FMU's own voltage fed back as the measurement, then contradictory measurements."""
@@ -366,6 +411,7 @@ def random_calls_long(fmu: str) -> dict:
 
 
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
+                                     logged_messages,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       instantiate_many, random_calls, random_calls_long)}
 

@@ -103,6 +103,9 @@ typedef struct {
     char name[128];
     int logging;
     int mode;
+    /* the last out-of-range model step's values, for the warning fmi2DoStep logs */
+    int range_inputs, range_volt;
+    double range_i, range_t, range_soc, range_v;
 } Instance;
 
 static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt, ...) {
@@ -996,33 +999,43 @@ static size_t append_part(char *buf, size_t n, size_t size, const char *fmt, ...
     return n < size ? n : size - 1;
 }
 
-/* out_of_range after a model step, with one FMI warning at the start of each excursion that
-   names what left the trained region (CellCosim.range_message, as the Python FMU logs it) */
+/* out_of_range after a model step; where it is set, what left the trained region is kept for
+   the warning (log_range) */
 static void check_range(Instance *in, int inputs_out, double i, double t, double soc) {
     State *s = &in->s;
-    int volt_out = voltage_out_of_range(s->voltage), out = inputs_out || volt_out;
-    if (out && !s->out_of_range) {
-        char msg[400] = "";
-        size_t n = 0;
-        if (inputs_out & OUT_CURRENT)
-            n = append_part(msg, n, sizeof msg, "current %.3f A outside the trained %.3f..%.3f A",
-                            i, I_MIN, I_MAX);
-        if (inputs_out & OUT_SOC)
-            n = append_part(msg, n, sizeof msg, "SoC %.3f outside the trained %.3f..%.3f", soc,
-                            SOC_MIN, SOC_MAX);
-#if HAS_TEMPERATURE_RANGE
-        if (inputs_out & OUT_TEMPERATURE)
-            n = append_part(msg, n, sizeof msg, "temperature %.1f degC outside the trained "
-                            "%.1f..%.1f degC", t, T_MIN, T_MAX);
-#else
-        (void)t;
-#endif
-        if (volt_out)
-            n = append_part(msg, n, sizeof msg, "model voltage %.3f V outside the trained "
-                            "%.3f..%.3f V", s->voltage, V_MIN, V_MAX);
-        logf_(in, fmi2Warning, "logStatusWarning", "t = %.9g s: %s", s->time, msg);
+    int volt_out = voltage_out_of_range(s->voltage);
+    s->out_of_range = inputs_out || volt_out;
+    if (s->out_of_range) {
+        in->range_inputs = inputs_out;
+        in->range_volt = volt_out;
+        in->range_i = i;
+        in->range_t = t;
+        in->range_soc = soc;
+        in->range_v = s->voltage;
     }
-    s->out_of_range = out;
+}
+
+/* the FMI warning at the start of an out-of-range excursion (a doStep after which out_of_range
+   is set and before which it was not): what left the trained region in the last model step,
+   as CellCosim.range_message and the Python FMU write it; t0 the step's communication point */
+static void log_range(Instance *in, double t0) {
+    char msg[400] = "";
+    size_t n = 0;
+    if (in->range_inputs & OUT_CURRENT)
+        n = append_part(msg, n, sizeof msg, "current %.3f A outside the trained %.3f..%.3f A",
+                        in->range_i, I_MIN, I_MAX);
+    if (in->range_inputs & OUT_SOC)
+        n = append_part(msg, n, sizeof msg, "SoC %.3f outside the trained %.3f..%.3f",
+                        in->range_soc, SOC_MIN, SOC_MAX);
+#if HAS_TEMPERATURE_RANGE
+    if (in->range_inputs & OUT_TEMPERATURE)
+        n = append_part(msg, n, sizeof msg, "temperature %.1f degC outside the trained "
+                        "%.1f..%.1f degC", in->range_t, T_MIN, T_MAX);
+#endif
+    if (in->range_volt)
+        n = append_part(msg, n, sizeof msg, "model voltage %.3f V outside the trained "
+                        "%.3f..%.3f V", in->range_v, V_MIN, V_MAX);
+    logf_(in, fmi2Warning, "logStatusWarning", "t = %.9g s: %s", t0, msg);
 }
 
 /* ----- cell temperature (step.CellThermal, thermal.py) ---------------------------------------- */
@@ -1088,40 +1101,42 @@ static fmi2Status cosim_advance(Instance *in, double h) {
     State *s = &in->s;
     double remaining = h;
     if (!isfinite(s->current)) {
-        logf_(in, fmi2Error, "logStatusError", "input 'current' = %g: expected a finite number; "
-              "the step was not taken", s->current);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: input 'current' = %g: expected a "
+              "finite number; the step was not taken", s->time, s->current);
         return fmi2Error;
     }
     if (!isfinite(s->temperature)) {
-        logf_(in, fmi2Error, "logStatusError", "input 'temperature' = %g: expected a finite "
-              "number; the step was not taken", s->temperature);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: input 'temperature' = %g: expected "
+              "a finite number; the step was not taken", s->time, s->temperature);
         return fmi2Error;
     }
     if (!isfinite(s->voltage_measured)) {
-        logf_(in, fmi2Error, "logStatusError", "input 'voltage_measured' = %g: expected a finite "
-              "number (0 when not measured); the step was not taken", s->voltage_measured);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: input 'voltage_measured' = %g: "
+              "expected a finite number (0 when not measured); the step was not taken", s->time,
+              s->voltage_measured);
         return fmi2Error;
     }
     if (!isfinite(h) || h <= 0) {
-        logf_(in, fmi2Error, "logStatusError", "communication step size %g: expected > 0 s", h);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: communication step size %g s: "
+              "expected > 0 s; the step was not taken", s->time, h);
         return fmi2Error;
     }
     if (h > MAX_STEPS_PER_CALL * TS) {  /* for ever, once TS no longer changes `remaining` */
-        logf_(in, fmi2Error, "logStatusError", "communication step size %.17g s: more than %.0f "
-              "model steps of %g s; expected at most %g s in one step (split it); the step was "
-              "not taken", h, MAX_STEPS_PER_CALL, TS, MAX_STEPS_PER_CALL * TS);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: communication step size %g s: more "
+              "than %.0f model steps of %g s; expected at most %g s in one step (split it); the "
+              "step was not taken", s->time, h, MAX_STEPS_PER_CALL, TS, MAX_STEPS_PER_CALL * TS);
         return fmi2Error;
     }
     if (fabs(s->current) > MAX_C_RATE * s->capacity) {
-        logf_(in, fmi2Error, "logStatusError", "input 'current' = %g A: beyond %g C of %g Ah, "
-              "not a current a cell carries; the step was not taken", s->current, MAX_C_RATE,
-              s->capacity);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: input 'current' = %g A: beyond %g C "
+              "of %g Ah, not a current a cell carries; the step was not taken", s->time,
+              s->current, MAX_C_RATE, s->capacity);
         return fmi2Error;
     }
     if (s->temperature < MIN_TEMPERATURE_C || s->temperature > MAX_TEMPERATURE_C) {
-        logf_(in, fmi2Error, "logStatusError", "input 'temperature' = %g degC: expected %g..%g "
-              "degC; the step was not taken", s->temperature, MIN_TEMPERATURE_C,
-              MAX_TEMPERATURE_C);
+        logf_(in, fmi2Error, "logStatusError", "t = %.9g s: input 'temperature' = %g degC: "
+              "expected %g..%g degC; the step was not taken", s->time, s->temperature,
+              MIN_TEMPERATURE_C, MAX_TEMPERATURE_C);
         return fmi2Error;
     }
     if (DELAY_S > 0 && isnan(s->d_charge)) s->d_charge = s->current * DELAY_S;
@@ -1181,17 +1196,18 @@ static fmi2Status initialise(Instance *in) {
     State *s = &in->s;
     if (!(s->soc0 >= 0.0 && s->soc0 <= 1.0)) {
         logf_(in, fmi2Error, "logStatusError", "parameter 'soc0' = %g: expected a fraction "
-              "within 0..1", s->soc0);
+              "within 0..1; not initialised, every step will be refused", s->soc0);
         return fmi2Error;
     }
     if (!(isfinite(s->capacity) && s->capacity > 0)) {
-        logf_(in, fmi2Error, "logStatusError", "parameter 'capacity' = %g: expected > 0 Ah",
+        logf_(in, fmi2Error, "logStatusError", "parameter 'capacity' = %g: expected > 0 Ah; "
+              "not initialised, every step will be refused",
               s->capacity);
         return fmi2Error;
     }
     if (s->observer < 0 || s->observer > 3) {
         logf_(in, fmi2Error, "logStatusError", "parameter 'observer' = %d: expected 0 none, 1 EKF, "
-              "2 fuzzy, 3 IMM", s->observer);
+              "2 fuzzy, 3 IMM; not initialised, every step will be refused", s->observer);
         return fmi2Error;
     }
     init_state(s);
@@ -1562,15 +1578,19 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         State before;                   /* its first state_kept bytes: what a refused step
                                            restores */
         size_t kept = state_kept(&in->s);
+        int was_out = in->s.out_of_range;
+        double t0 = in->s.time;
         fmi2Status st;
         memcpy(&before, &in->s, kept);
         st = cosim_advance(in, h);
         if (st == fmi2OK && !outputs_finite(&in->s)) {
             memcpy(&in->s, &before, kept);
-            logf_(in, fmi2Error, "logStatusError", "t = %g s: the model produced a non-finite "
-                  "output (inputs far outside the trained region?); the step was not taken", t);
+            logf_(in, fmi2Error, "logStatusError", "t = %.9g s: the model produced a "
+                  "non-finite output (inputs far outside the trained region?); the step was not "
+                  "taken", t0);
             return fmi2Error;
         }
+        if (st == fmi2OK && in->s.out_of_range && !was_out) log_range(in, t0);
         return st;
     }
 #endif
