@@ -26,6 +26,7 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
+import uuid
 import warnings
 import zipfile
 from pathlib import Path
@@ -205,13 +206,21 @@ def _indent(elem: ET.Element) -> None:
     ET.indent(elem, space="  ")
 
 
+def pythonfmu_guid(module_hash: str) -> str:
+    """The FMU's GUID: a fingerprint of the model file (its hash), as the FMI standard suggests
+    and the native FMU's is, so that the same model gives the same GUID in every build
+    (pythonfmu's own is time-based, new at each build)."""
+    return str(uuid.uuid5(uuid.NAMESPACE_URL, f"lmncell-pythonfmu:{module_hash}"))
+
+
 def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
                             wrapper: str = STOCK) -> str:
-    """Add units, InitialUnknowns, default experiment, version and generation tool (which
-    names the wrapper in the linux64 binary)."""
+    """Set the GUID (pythonfmu_guid) and add units, InitialUnknowns, default experiment,
+    version and generation tool (which names the wrapper in the linux64 binary)."""
     from lmncell import __version__
 
     root = ET.fromstring(xml_text)
+    root.set("guid", pythonfmu_guid(module_hash))
     root.set("generationTool", f"LMNCell {__version__} ({wrapper})")
     root.set("version", module_hash)
     root.set("description", model.extra.get("description", "LMNCell model"))
@@ -359,7 +368,7 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
     with zipfile.ZipFile(out) as z:
         xml_text = z.read("modelDescription.xml").decode("utf-8")
     root = ET.fromstring(xml_text)
-    members = patched_binary(root.get("guid"), root.find("CoSimulation").get("modelIdentifier"))
+    members = patched_binary(pythonfmu_guid(h), root.find("CoSimulation").get("modelIdentifier"))
     wrapper = PATCHED if members else STOCK
     members["modelDescription.xml"] = patch_model_description(xml_text, model, h,
                                                               wrapper).encode("utf-8")

@@ -9,6 +9,7 @@ import os
 import shutil
 import subprocess
 import sys
+import uuid
 import zipfile
 from pathlib import Path
 from xml.etree import ElementTree as ET
@@ -67,6 +68,23 @@ def test_pythonfmu_fmu_carries_the_patched_wrapper(quick_fmu) -> None:
         root = ET.fromstring(z.read("modelDescription.xml"))
         doc = z.read("documentation/index.html").decode()
     assert PATCHED in root.get("generationTool") and "returns fmi2Error" in doc
+
+
+def _guid(fmu: Path) -> str:
+    with zipfile.ZipFile(fmu) as z:
+        return ET.fromstring(z.read("modelDescription.xml")).get("guid")
+
+
+def test_the_guid_is_the_models_fingerprint(quick_model, quick_fmu, stock_fmu,
+                                            native_fmu) -> None:
+    """Every build of one model's pythonfmu FMU has the same GUID, a name-based UUID of the
+    model file's hash, as the native FMU's is (pythonfmu's own is time-based: a new GUID at
+    each build); the two flavours differ."""
+    from lmncell.fmu.pythonfmu_build import model_hash, pythonfmu_guid
+
+    guid = pythonfmu_guid(model_hash(quick_model))
+    assert _guid(quick_fmu) == _guid(stock_fmu) == guid != _guid(native_fmu)
+    assert uuid.UUID(guid).version == 5 == uuid.UUID(_guid(native_fmu)).version
 
 
 @pytest.fixture(scope="module")
