@@ -28,6 +28,11 @@ def dependency_indices(output: str, names: list[str]) -> str:
     return " ".join(str(names.index(n) + 1) for n in INITIAL_DEPENDENCIES[output])
 
 
+class NativeBuildError(RuntimeError):
+    """The C compiler or the FMI headers are missing, or compilation failed (the command line
+    prints the message, which says what to install, without a traceback)."""
+
+
 def fmu_path(out: str | Path) -> Path:
     """The FMU archive's path, which must end in .fmu (FMI 2.0: an FMU is a zip file with that
     extension; pythonfmu took any other name for a folder to put LMNCell.fmu in). ValueError

@@ -19,7 +19,7 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-from lmncell.fmu.interface import dependency_indices, fmu_path
+from lmncell.fmu.interface import NativeBuildError, dependency_indices, fmu_path
 from lmncell.runtime.cosim import (
     CURRENT_MARGIN,
     CURRENT_MARGIN_A,
@@ -51,10 +51,6 @@ HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
 MODEL_IDENTIFIER = "LMNCell"
 PART_CODES = {"soc": 0, "current": 1, "filtered_current": 2, "temperature": 3}
-
-
-class NativeBuildError(RuntimeError):
-    """The C compiler or the FMI headers are missing, or compilation failed."""
 
 
 def fmi_headers() -> Path:

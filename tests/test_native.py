@@ -50,6 +50,23 @@ def test_native_fmu_validates_and_ships_sources(native_fmu) -> None:
             "sources/buildDescription.xml", "documentation/index.html"} <= names
 
 
+def test_without_a_c_compiler_build_fmu_says_what_to_install(quick_model, tmp_path,
+                                                              monkeypatch, capsys) -> None:
+    """No gcc: `lmncell build-fmu --native` ends with the message and exit status 2, no
+    traceback (it printed one), and writes no FMU."""
+    from lmncell.cli import main
+    from lmncell.fmu import native_build
+
+    which = shutil.which
+    monkeypatch.setattr(native_build.shutil, "which",
+                        lambda name: None if name in ("gcc", "cc") else which(name))
+    out = tmp_path / "cell.fmu"
+    assert main(["build-fmu", str(quick_model), "--out", str(out), "--native"]) == 2
+    err = capsys.readouterr().err
+    assert "build-fmu: error: no C compiler (gcc) found: install gcc" in err
+    assert "Traceback" not in err and not out.exists()
+
+
 def test_same_interface_as_pythonfmu(native_fmu, quick_fmu) -> None:
     from fmpy import read_model_description
 

@@ -20,6 +20,7 @@ from lmncell.config import (
 )
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
+from lmncell.fmu.interface import NativeBuildError
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
 from lmncell.runtime.model import ModelFileError
@@ -27,7 +28,7 @@ from lmncell.scenarios.drive import CUTOFF_EXPECTED, is_cutoff
 from lmncell.scenarios.traces import cycle_problem
 
 USER_ERRORS = (DataError, ModelFileError, ConfigError, InputError, FileNotFoundError,
-               IsADirectoryError, PermissionError)
+               IsADirectoryError, PermissionError, NativeBuildError)
 
 
 class _HelpFormatter(argparse.RawDescriptionHelpFormatter):
