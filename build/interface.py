@@ -10,7 +10,14 @@ dependencies.
 
 from __future__ import annotations
 
+import os
+import zipfile
+from datetime import UTC, datetime
 from pathlib import Path
+
+from lmncell.config import ConfigError
+
+ZIP_EPOCH_S = 315532800   # 1980-01-01T00:00:00Z, the earliest date a zip member can carry
 
 INITIAL_DEPENDENCIES: dict[str, tuple[str, ...]] = {
     # OCV(soc0) plus the network's rest output at soc0 and the starting cell temperature
@@ -41,3 +48,33 @@ def fmu_path(out: str | Path) -> Path:
     if path.suffix != ".fmu":
         raise ValueError(f"{path}: an FMU's file name must end in .fmu")
     return path
+
+
+def build_time() -> datetime | None:
+    """The time set by SOURCE_DATE_EPOCH (seconds since 1970 UTC; reproducible-builds.org), which
+    both builders then give every archive member and the pythonfmu FMU its
+    generationDateAndTime, so that two builds of one model are byte-identical; None where it is
+    not set (then the members carry the time of the build). ConfigError naming it where it is not
+    a whole number of seconds from 1980 on."""
+    text = os.environ.get("SOURCE_DATE_EPOCH", "").strip()
+    if not text:
+        return None
+    try:
+        seconds = int(text)
+    except ValueError:
+        seconds = -1
+    if seconds < ZIP_EPOCH_S:
+        raise ConfigError(f"SOURCE_DATE_EPOCH = {text!r}: expected a whole number of seconds "
+                          f"since 1970 (UTC), at least {ZIP_EPOCH_S} (1980, the zip format's "
+                          "earliest date)")
+    return datetime.fromtimestamp(seconds, tz=UTC)
+
+
+def zip_entry(name: str, when: datetime | None) -> zipfile.ZipInfo:
+    """An archive member's header: deflated, readable by all (-rw-r--r--), dated `when` (UTC)
+    or, where it is None, now (local time, as zipfile dates members)."""
+    stamp = when.astimezone(UTC) if when is not None else datetime.now()
+    info = zipfile.ZipInfo(name, date_time=stamp.timetuple()[:6])
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = 0o644 << 16
+    return info

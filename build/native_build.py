@@ -19,7 +19,13 @@ import zipfile
 from pathlib import Path
 
 import numpy as np
-from lmncell.fmu.interface import NativeBuildError, dependency_indices, fmu_path
+from lmncell.fmu.interface import (
+    NativeBuildError,
+    build_time,
+    dependency_indices,
+    fmu_path,
+    zip_entry,
+)
 from lmncell.runtime.cosim import (
     CURRENT_MARGIN,
     CURRENT_MARGIN_A,
@@ -454,6 +460,7 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
 
     model_path, out = Path(model_path), fmu_path(out)
     model = load_model(model_path)
+    when = build_time()
     version = model_hash(model_path)
     guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"lmncell-native:{version}"))
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -465,11 +472,13 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
         (src / "buildDescription.xml").write_text(BUILD_DESCRIPTION, encoding="utf-8")
         binary = Path(tmp) / f"{MODEL_IDENTIFIER}.so"
         compile_linux64(src, binary, ["-DLMNCELL_TRIVIAL"] if trivial else None)
+        members = [("modelDescription.xml", model_description(model, guid, version).encode()),
+                   (f"binaries/linux64/{MODEL_IDENTIFIER}.so", binary.read_bytes()),
+                   *((f"sources/{f.name}", f.read_bytes()) for f in sorted(src.iterdir())),
+                   ("resources/model.json", model_path.read_bytes()),
+                   ("documentation/index.html",
+                    documentation_html(model, model_path, "native").encode())]
         with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
-            z.writestr("modelDescription.xml", model_description(model, guid, version))
-            z.write(binary, f"binaries/linux64/{MODEL_IDENTIFIER}.so")
-            for f in sorted(src.iterdir()):
-                z.write(f, f"sources/{f.name}")
-            z.write(model_path, "resources/model.json")
-            z.writestr("documentation/index.html", documentation_html(model, model_path, "native"))
+            for name, data in members:
+                z.writestr(zip_entry(name, when), data)
     return out

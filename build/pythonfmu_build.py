@@ -33,7 +33,7 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import lmncell.runtime as runtime_package
-from lmncell.fmu.interface import dependency_indices, fmu_path
+from lmncell.fmu.interface import build_time, dependency_indices, fmu_path, zip_entry
 from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, VOLTAGE_MARGIN_V
 from lmncell.runtime.model import LmnModel, load_model
 
@@ -221,6 +221,8 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
 
     root = ET.fromstring(xml_text)
     root.set("guid", pythonfmu_guid(module_hash))
+    if (when := build_time()) is not None:
+        root.set("generationDateAndTime", when.strftime("%Y-%m-%dT%H:%M:%SZ"))
     root.set("generationTool", f"LMNCell {__version__} ({wrapper})")
     root.set("version", module_hash)
     root.set("description", model.extra.get("description", "LMNCell model"))
@@ -271,11 +273,13 @@ def _rewrite_members(fmu: Path, members: dict[str, bytes]) -> None:
     """Replace the contents of the named zip members (same names, same order) and add, at the
     end, those the FMU does not have yet."""
     tmp = fmu.with_suffix(".tmp")
+    when = build_time()
     with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
         for item in zin.infolist():
-            zout.writestr(item, members.get(item.filename, zin.read(item.filename)))
+            header = item if when is None else zip_entry(item.filename, when)
+            zout.writestr(header, members.get(item.filename, zin.read(item.filename)))
         for name in sorted(members.keys() - set(zin.namelist())):
-            zout.writestr(name, members[name])
+            zout.writestr(zip_entry(name, when), members[name])
     tmp.replace(fmu)
 
 
@@ -341,6 +345,7 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
 
     model_path, out = Path(model_path), fmu_path(out)
     model = load_model(model_path)
+    build_time()      # a bad SOURCE_DATE_EPOCH is refused before the build, not after it
     h = model_hash(model_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="lmncell_fmu_") as tmp:

@@ -87,6 +87,22 @@ def test_the_guid_is_the_models_fingerprint(quick_model, quick_fmu, stock_fmu,
     assert uuid.UUID(guid).version == 5 == uuid.UUID(_guid(native_fmu)).version
 
 
+@pytest.mark.slow
+def test_source_date_epoch_makes_the_pythonfmu_build_reproducible(quick_model, tmp_path,
+                                                                  monkeypatch) -> None:
+    """With SOURCE_DATE_EPOCH set, two pythonfmu builds of one model are byte-identical: the
+    members and generationDateAndTime carry that time, the GUID is the model's fingerprint
+    and the patched wrapper compiles to the same bytes."""
+    from lmncell.fmu.pythonfmu_build import build_fmu
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    first, second = (build_fmu(quick_model, tmp_path / f"{k}.fmu") for k in "ab")
+    assert first.read_bytes() == second.read_bytes()
+    with zipfile.ZipFile(first) as z:
+        root = ET.fromstring(z.read("modelDescription.xml"))
+    assert root.get("generationDateAndTime") == "2023-11-14T22:13:20Z"
+
+
 @pytest.fixture(scope="module")
 def stock_fmu(quick_model, tmp_path_factory):
     """The pythonfmu FMU built where no C++ compiler is found: it keeps pythonfmu's wrapper."""

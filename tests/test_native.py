@@ -67,6 +67,24 @@ def test_without_a_c_compiler_build_fmu_says_what_to_install(quick_model, tmp_pa
     assert "Traceback" not in err and not out.exists()
 
 
+def test_source_date_epoch_makes_the_build_reproducible(quick_model, tmp_path,
+                                                        monkeypatch) -> None:
+    """With SOURCE_DATE_EPOCH set, two native builds of one model are byte-identical (members
+    dated then); a value before 1980 is refused with its name before anything is built."""
+    from lmncell.config import ConfigError
+    from lmncell.fmu.native_build import build_native_fmu
+
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "1700000000")
+    first, second = (build_native_fmu(quick_model, tmp_path / f"{k}.fmu") for k in "ab")
+    assert first.read_bytes() == second.read_bytes()
+    with zipfile.ZipFile(first) as z:
+        assert {i.date_time for i in z.infolist()} == {(2023, 11, 14, 22, 13, 20)}
+    monkeypatch.setenv("SOURCE_DATE_EPOCH", "12")
+    with pytest.raises(ConfigError, match="SOURCE_DATE_EPOCH = '12': expected a whole number"):
+        build_native_fmu(quick_model, tmp_path / "c.fmu")
+    assert not (tmp_path / "c.fmu").exists()
+
+
 def test_same_interface_as_pythonfmu(native_fmu, quick_fmu) -> None:
     from fmpy import read_model_description
 
