@@ -71,10 +71,11 @@ def build_time() -> datetime | None:
 
 
 def zip_entry(name: str, when: datetime | None) -> zipfile.ZipInfo:
-    """An archive member's header: deflated, readable by all (-rw-r--r--), dated `when` (UTC)
-    or, where it is None, now (local time, as zipfile dates members)."""
+    """An archive member's header: deflated, readable by all (-rw-r--r--; the shared libraries
+    under binaries/ also executable, -rwxr-xr-x), dated `when` (UTC) or, where it is None, now
+    (local time, as zipfile dates members)."""
     stamp = when.astimezone(UTC) if when is not None else datetime.now()
     info = zipfile.ZipInfo(name, date_time=stamp.timetuple()[:6])
     info.compress_type = zipfile.ZIP_DEFLATED
-    info.external_attr = 0o644 << 16
+    info.external_attr = (0o755 if name.startswith("binaries/") else 0o644) << 16
     return info

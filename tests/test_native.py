@@ -79,6 +79,7 @@ def test_source_date_epoch_makes_the_build_reproducible(quick_model, tmp_path,
     assert first.read_bytes() == second.read_bytes()
     with zipfile.ZipFile(first) as z:
         assert {i.date_time for i in z.infolist()} == {(2023, 11, 14, 22, 13, 20)}
+        assert z.getinfo("binaries/linux64/LMNCell.so").external_attr >> 16 == 0o755
     monkeypatch.setenv("SOURCE_DATE_EPOCH", "12")
     with pytest.raises(ConfigError, match="SOURCE_DATE_EPOCH = '12': expected a whole number"):
         build_native_fmu(quick_model, tmp_path / "c.fmu")
