@@ -388,6 +388,21 @@ def test_a_charge_profile_stops_at_the_charge_cut_off_or_full(native_fmu, tmp_pa
     assert ("the cell is full (cell voltage" in capsys.readouterr().out)
 
 
+def test_a_stop_outside_the_trained_range_is_not_called_an_empty_cell(native_fmu,
+                                                                        capsys) -> None:
+    """A run that crosses the cut-off while the model is outside its trained range (here a
+    −40 °C ambient) says so, with the SoC, instead of "the cell is empty"; inside it, the cell
+    is empty."""
+    args = ["simulate", str(native_fmu), "--cycle", "us06", "--soc0", "0.9", "--cutoff", "3.9"]
+    assert main([*args, "--ambient", "-40"]) == 0
+    out = capsys.readouterr().out
+    assert re.search(r"stopped after \d+ s, [\d.]+ km: cell voltage 3\.\d{3} V below the cut-off "
+                     r"3\.900 V at SoC 8\d\.\d %, with the model outside its trained range", out)
+    assert "the cell is empty" not in out
+    assert main([*args, "--ambient", "27"]) == 0
+    assert "the cell is empty (cell voltage" in capsys.readouterr().out
+
+
 def test_a_cut_off_beyond_the_model_s_voltages_is_refused(native_fmu, tmp_path, capsys) -> None:
     """A discharge cut-off at or above the highest voltage the model was trained on (or a
     charge cut-off at or below the lowest) would end every run at its first step: simulate

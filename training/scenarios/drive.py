@@ -500,13 +500,7 @@ def simulate_cycle_cli(a) -> int:
     else:
         print(_run_line(f))
         if f["stop"]:
-            where = f", {f['distance_km']:.1f} km" if "distance_km" in f else ""
-            state = stop_kind(f["stop"])
-            hint = ("; --cutoff sets the cut-off voltage" if state == "empty" else
-                    "; --charge-cutoff sets the charge cut-off voltage" if "voltage" in f["stop"]
-                    else "")
-            print(f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} "
-                  f"({f['stop']}){hint}")
+            print(_stop_line(f, bool(res.out_of_range[-1]), float(res.soc[-1])))
     if f["out_of_range_steps"]:
         first = f["out_of_range_first"]
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
@@ -516,6 +510,23 @@ def simulate_cycle_cli(a) -> int:
     if plotted:
         print(f"plot: {plotted}", file=notes)
     return 0
+
+
+def _stop_line(f: dict, outside: bool, soc: float) -> str:
+    """The line on a run that stopped early (f: its figures, with a stop reason): the cell empty
+    or full, with the option that sets the cut-off. Where the voltage crossed a cut-off while
+    the model was outside its trained range (outside, at the last step) it says so, with the
+    SoC: the voltage is then the model's extrapolation (a cold ambient far below the trained
+    temperatures collapses it at a SoC of 0.9), not a cell that is empty or full."""
+    where = f", {f['distance_km']:.1f} km" if "distance_km" in f else ""
+    state = stop_kind(f["stop"])
+    hint = ("; --cutoff sets the cut-off voltage" if state == "empty" else
+            "; --charge-cutoff sets the charge cut-off voltage" if "voltage" in f["stop"] else "")
+    if outside and f["stop"].startswith("cell voltage"):
+        return (f"stopped after {f['stopped_at_s']:g} s{where}: {f['stop']} at SoC "
+                f"{100 * soc:.1f} %, with the model outside its trained range (the warning "
+                f"below): an extrapolated voltage, not necessarily a cell that is {state}{hint}")
+    return f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} ({f['stop']}){hint}"
 
 
 def _run_line(f: dict) -> str:
