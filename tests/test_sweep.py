@@ -391,16 +391,23 @@ def test_a_charge_profile_stops_at_the_charge_cut_off_or_full(native_fmu, tmp_pa
 def test_a_stop_outside_the_trained_range_is_not_called_an_empty_cell(native_fmu,
                                                                         capsys) -> None:
     """A run that crosses the cut-off while the model is outside its trained range (here a
-    −40 °C ambient) says so, with the SoC, instead of "the cell is empty"; inside it, the cell
-    is empty."""
+    −40 °C ambient) says so, with the SoC, instead of "the cell is empty", and so does its
+    plot's title; inside it, the cell is empty."""
     args = ["simulate", str(native_fmu), "--cycle", "us06", "--soc0", "0.9", "--cutoff", "3.9"]
     assert main([*args, "--ambient", "-40"]) == 0
     out = capsys.readouterr().out
+    from lmncell.scenarios.drive import run_cycle, stop_title
+
+    cold = run_cycle(native_fmu, "us06", soc0=0.9, temperature_c=-40.0, cutoff_v=3.9)
+    assert re.fullmatch(r" — stopped at the cut-off after \d+ s, outside the trained range",
+                        stop_title(cold))
     assert re.search(r"stopped after \d+ s, [\d.]+ km: cell voltage 3\.\d{3} V below the cut-off "
                      r"3\.900 V at SoC 8\d\.\d %, with the model outside its trained range", out)
     assert "the cell is empty" not in out
     assert main([*args, "--ambient", "27"]) == 0
     assert "the cell is empty (cell voltage" in capsys.readouterr().out
+    warm = run_cycle(native_fmu, "us06", soc0=0.9, temperature_c=27.0, cutoff_v=3.9)
+    assert re.fullmatch(r" — stopped, the cell empty after \d+ s", stop_title(warm))
 
 
 def test_a_cut_off_beyond_the_model_s_voltages_is_refused(native_fmu, tmp_path, capsys) -> None:

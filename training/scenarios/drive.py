@@ -440,6 +440,19 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
                        out["oor"].astype(bool), figures, cell_t)
 
 
+def stop_title(res: CycleResult) -> str:
+    """What the plot's title adds on a run that stopped early ('' for one that did not): the
+    cell empty or full and when, or, where the voltage crossed the cut-off while the model was
+    outside its trained range (_stop_line), that it stopped at the cut-off there."""
+    f = res.figures
+    if not f["stop"]:
+        return ""
+    if bool(res.out_of_range[-1]) and f["stop"].startswith("cell voltage"):
+        return (f" — stopped at the cut-off after {f['stopped_at_s']:g} s, outside the trained "
+                "range")
+    return f" — stopped, the cell {stop_kind(f['stop'])} after {f['stopped_at_s']:g} s"
+
+
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     """Speed (for a drive cycle), current, voltage, SoC and cell temperature over the run."""
     from lmncell.report.plots import plt
@@ -449,8 +462,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     panels = 4 if res.speed_mps is not None else 3
     fig, axes = plt.subplots(panels, 1, figsize=(10, 2.1 * panels + 0.1), sharex=True,
                              constrained_layout=True)
-    stop = (f" — stopped, the cell {stop_kind(f['stop'])} after {f['stopped_at_s']:g} s"
-            if f["stop"] else "")
+    stop = stop_title(res)
     if res.speed_mps is not None:
         axes[0].plot(t, 3.6 * res.speed_mps)
         axes[0].set(ylabel="speed / km/h", title=f"{trace_title(f['cycle'])} through the FMU "
