@@ -16,6 +16,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 from lmncell.config import ConfigError
+from lmncell.runtime.thermal import CELL_TEMPERATURE_RANGE_C
 
 ZIP_EPOCH_S = 315532800   # 1980-01-01T00:00:00Z, the earliest date a zip member can carry
 
@@ -26,6 +27,13 @@ INITIAL_DEPENDENCIES: dict[str, tuple[str, ...]] = {
     "soc_std": ("observer",),
     "out_of_range": (),
     "cell_temperature": ("temperature", "temperature_is_cell"),
+}
+
+
+INPUT_BOUNDS: dict[str, tuple[float, float]] = {
+    # the Real min and max both FMUs declare for an input: the range outside which a step
+    # with it is refused (fmi2Error); hosts that check min and max catch it before the call
+    "temperature": CELL_TEMPERATURE_RANGE_C,
 }
 
 

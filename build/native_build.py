@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 from lmncell.fmu.interface import (
+    INPUT_BOUNDS,
     NativeBuildError,
     build_time,
     dependency_indices,
@@ -30,6 +31,8 @@ from lmncell.runtime.cosim import (
     CURRENT_MARGIN,
     CURRENT_MARGIN_A,
     MAX_STEPS_PER_CALL,
+    MAX_TEMPERATURE_C,
+    MIN_TEMPERATURE_C,
     OUT_OF_RANGE_DESCRIPTION,
     SOC_MARGIN,
     TEMPERATURE_MARGIN_K,
@@ -184,6 +187,8 @@ def _limit_defines(m: LmnModel) -> list[str]:
         f"#define CURRENT_MARGIN {CURRENT_MARGIN!r}",
         f"#define CURRENT_MARGIN_A {CURRENT_MARGIN_A!r}",
         f"#define SOC_MARGIN {SOC_MARGIN!r}", f"#define T_MARGIN {TEMPERATURE_MARGIN_K!r}",
+        f"#define MIN_TEMPERATURE_C {MIN_TEMPERATURE_C!r}",
+        f"#define MAX_TEMPERATURE_C {MAX_TEMPERATURE_C!r}",
         f"#define LINEAR_STATES {int('filtered_current' not in m.partition_variables)}"]
 
 
@@ -364,6 +369,8 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
         inner = f"<{typ}"
         if unit:
             inner += f' unit="{unit}"'
+        if name in INPUT_BOUNDS:
+            inner += ' min="{!r}" max="{!r}"'.format(*INPUT_BOUNDS[name])
         if start is not None:
             inner += f' start="{start}"'
         rows.append(f"    <ScalarVariable {attrs}>\n      {inner}/>\n    </ScalarVariable>")

@@ -33,7 +33,13 @@ from pathlib import Path
 from xml.etree import ElementTree as ET
 
 import lmncell.runtime as runtime_package
-from lmncell.fmu.interface import build_time, dependency_indices, fmu_path, zip_entry
+from lmncell.fmu.interface import (
+    INPUT_BOUNDS,
+    build_time,
+    dependency_indices,
+    fmu_path,
+    zip_entry,
+)
 from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, VOLTAGE_MARGIN_V
 from lmncell.runtime.model import LmnModel, load_model
 
@@ -234,6 +240,9 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
         if real is not None and name in UNITS:
             real.set("unit", UNITS[name])
             used.add(UNITS[name])
+        if real is not None and name in INPUT_BOUNDS:
+            real.set("min", repr(INPUT_BOUNDS[name][0]))
+            real.set("max", repr(INPUT_BOUNDS[name][1]))
     units = ET.Element("UnitDefinitions")
     for u in sorted(used):
         unit = ET.SubElement(units, "Unit", {"name": u})

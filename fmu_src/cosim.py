@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from .model import LmnModel
 from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
+from .thermal import CELL_TEMPERATURE_RANGE_C
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
@@ -35,7 +36,8 @@ TEMPERATURE_MARGIN_K = 2.0  # the cell temperature by 2 K (where the model has a
 OUT_OF_RANGE_DESCRIPTION = (
     "true while current, SoC or temperature leave the trained region or the model's voltage "
     f"its trained range by more than {VOLTAGE_MARGIN_V:g} V (the model extrapolates)")
-MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = -273.15, 1000.0
+MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = CELL_TEMPERATURE_RANGE_C   # a `temperature` input
+# outside it is refused: no cell runs there, and 298.15 is a temperature in K
 MAX_STEPS_PER_CALL = 10_000_000   # model steps one communication step may span (116 days at
 # Ts = 1 s, about 2.5 min of this engine): a longer step is refused, where it would hold the
 # host for hours, or for ever once Ts no longer changes the remaining time (h ≳ 1e16·Ts)
@@ -218,8 +220,7 @@ class CellCosim:
         voltage_measured_v ≤ 0 means "not measured". Raises InputError, with the state as it
         was, for an input that is not acceptable (naming the variable, or the step size where
         it spans more than MAX_STEPS_PER_CALL model steps) and where the model's arithmetic
-        fails or its outputs are not finite (inputs far outside the trained region, such as a
-        cell a few kelvin above absolute zero), as the native FMU does.
+        fails or its outputs are not finite, as the native FMU does.
         """
         i_max = self._i_max
         ts = self.model.sample_time_s
@@ -308,7 +309,7 @@ class CellCosim:
             raise InputError(f"input 'current' = {current_a:g} A: beyond {MAX_C_RATE:g} C of "
                              f"{self.params.capacity_ah:g} Ah, not a current a cell carries")
         raise InputError(f"input 'temperature' = {temperature_c:g} degC: expected "
-                         f"{MIN_TEMPERATURE_C:g}..{MAX_TEMPERATURE_C:g} degC")
+                         f"{MIN_TEMPERATURE_C:g}..{MAX_TEMPERATURE_C:g} degC (degC, not K)")
 
     def _model_step(self) -> None:
         ts = self.model.sample_time_s

@@ -19,6 +19,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # a cell's or an ambient temperature (degC) in
+# the records the readers take, in --ambient and in the FMUs' `temperature` input: outside it a
+# value is refused (298.15 is a temperature in K given as degC)
+
 TEMPERATURE_DESCRIPTION = ("ambient temperature (the model computes the cell temperature); the "
                            "measured cell temperature with temperature_is_cell = true [degC]")
 

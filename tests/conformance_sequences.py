@@ -75,9 +75,9 @@ def state_machine(fmu: str) -> dict:
 
 
 def impossible_inputs(fmu: str) -> dict:
-    """Row 5: a finite but absurd current, a temperature below absolute zero and a step of
-    more model steps than one call may take are refused; the outputs stay finite and
-    unchanged."""
+    """Row 5: a finite but absurd current, a temperature below absolute zero (outside the
+    accepted −60…100 °C) and a step of more model steps than one call may take are refused;
+    the outputs stay finite and unchanged."""
     inst = Instance(fmu)
     inst.step(-2.0)
     before = inst.get("voltage", "soc")
@@ -100,8 +100,8 @@ def logged_messages(fmu: str) -> dict:
     """Every message the FMU logs (the instance's name left out), the statuses and the final
     outputs over one sequence: doStep before and during initialisation, bad parameters at
     exitInitializationMode and then good ones, an out-of-range warning, each input refused,
-    a partial model step, a near-absolute-zero step whose arithmetic overflows, a wrong
-    communication point, a step after terminate."""
+    a partial model step, a temperature in K given as degC, a wrong communication point, a
+    step after terminate."""
     from lmncell.evaluation.fmueval import fmu_log
 
     md = read_model_description(fmu)
@@ -123,7 +123,7 @@ def logged_messages(fmu: str) -> dict:
         statuses.append(_status(slave.exitInitializationMode))
         statuses.append(_status(slave.exitInitializationMode))
         t = 0.0
-        for current, temperature, h in ((2.0, -273.0, 1.0), (1.0, 60.0, 1.0),
+        for current, temperature, h in ((2.0, 298.15, 1.0), (1.0, 60.0, 1.0),
                                         (math.nan, 25.0, 1.0), (0.0, math.inf, 1.0),
                                         (1.0, -300.0, 1.0), (1e6, 25.0, 1.0), (0.0, 25.0, 0.5),
                                         (0.0, 25.0, -1.0), (0.0, 25.0, 1e30),

@@ -270,6 +270,34 @@ def test_a_state_of_another_shape_is_refused_before_anything_changes(quick_model
     assert cosim.steps == 3
 
 
+def test_a_step_whose_model_fails_is_refused_and_changes_nothing(quick_model,
+                                                                   monkeypatch) -> None:
+    """Where the model step raises (an overflow) or gives a non-finite voltage, advance()
+    restores the state from before the call and raises InputError, as the native FMU restores
+    its state (before, the pythonfmu FMU's SoC had moved when 'math range error' came)."""
+    from lmncell.runtime import cosim as engine
+
+    cosim = engine.CellCosim(load_model(quick_model), engine.Parameters(0.8, 2.85))
+    cosim.advance(1.0, -2.0)
+    before = cosim.get_state()
+
+    def overflow(self, *args):
+        raise OverflowError("math range error")
+
+    def nan_voltage(self, *args):
+        self.voltage_v = math.nan
+        return math.nan
+
+    for step in (overflow, nan_voltage):
+        monkeypatch.setattr(engine.CellStepper, "step", step)
+        for h in (1.0, 0.4, 2.5):           # the one-step path, a partial step, two and a half
+            with pytest.raises(engine.InputError, match="the model produced a non-finite output"):
+                cosim.advance(h, -2.0)
+            assert cosim.get_state() == before
+    monkeypatch.undo()
+    assert cosim.advance(1.0, -2.0) == 1 and math.isfinite(cosim.voltage_v)
+
+
 def test_a_step_of_more_model_steps_than_the_limit_is_refused_at_once(quick_model,
                                                                       monkeypatch) -> None:
     """A communication step beyond MAX_STEPS_PER_CALL model steps is refused before anything

@@ -36,8 +36,6 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
                                       time constant, LMN5 before ob_hist, LMN4 before
                                       dep_source, LMN3 before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
-#define MIN_TEMPERATURE_C -273.15
-#define MAX_TEMPERATURE_C 1000.0
 
 /* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
 typedef struct {
@@ -1135,7 +1133,7 @@ static fmi2Status cosim_advance(Instance *in, double h) {
     }
     if (s->temperature < MIN_TEMPERATURE_C || s->temperature > MAX_TEMPERATURE_C) {
         logf_(in, fmi2Error, "logStatusError", "t = %.9g s: input 'temperature' = %g degC: "
-              "expected %g..%g degC; the step was not taken", s->time, s->temperature,
+              "expected %g..%g degC (degC, not K); the step was not taken", s->time, s->temperature,
               MIN_TEMPERATURE_C, MAX_TEMPERATURE_C);
         return fmi2Error;
     }

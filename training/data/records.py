@@ -12,6 +12,7 @@ import itertools
 from dataclasses import dataclass, field
 
 import numpy as np
+from lmncell.runtime.thermal import CELL_TEMPERATURE_RANGE_C
 
 
 class DataError(ValueError):
@@ -147,7 +148,8 @@ def _check_finite(name: str, values: np.ndarray, meta: RecordMeta) -> None:
 
 
 CELL_VOLTAGE_RANGE_V = (0.0, 6.0)           # a record's terminal voltage must lie in it
-CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # and its cell or chamber temperature in this
+# and its cell or chamber temperature in CELL_TEMPERATURE_RANGE_C (lmncell.runtime.thermal, where
+# the FMUs refuse a `temperature` input outside it too)
 SOC_SLACK = 0.05   # a reference SoC this far beyond 0…1 is refused (start SoC or capacity)
 
 
