@@ -40,7 +40,13 @@ from lmncell.fmu.interface import (
     fmu_path,
     zip_entry,
 )
-from lmncell.runtime.cosim import MAX_STEPS_PER_CALL, VOLTAGE_MARGIN_V
+from lmncell.runtime.cosim import (
+    MAX_C_RATE,
+    MAX_STEPS_PER_CALL,
+    MAX_TEMPERATURE_C,
+    MIN_TEMPERATURE_C,
+    VOLTAGE_MARGIN_V,
+)
 from lmncell.runtime.model import LmnModel, load_model
 
 RUNTIME_DIR = Path(runtime_package.__file__).resolve().parent
@@ -197,9 +203,10 @@ parameters. The observers compare the model with <b>voltage_measured</b> (0 = no
 model step with the mean inputs over it. A step that is a multiple of Ts gives that many
 sub-steps; other steps are accumulated exactly across calls. The outputs hold the last completed
 model step (the voltage between model steps: the step in progress previewed). A NaN or
-infinite input, and a communication step of more than {MAX_STEPS_PER_CALL:,} model steps, are
-refused with fmi2Error and a logged message; the step is
-not taken.</p>
+infinite input, a current beyond {MAX_C_RATE:g} C, a temperature outside
+{MIN_TEMPERATURE_C:g}…{MAX_TEMPERATURE_C:g} °C (°C, not K: the input's min and max) and a
+communication step of more than {MAX_STEPS_PER_CALL:,} model steps are refused with fmi2Error
+and a logged message; the step is not taken.</p>
 <h2>Training data</h2><ul>{files}</ul>
 <h2>Trained region</h2><table border="1"><tr><th>quantity</th><th>range</th></tr>{rows}</table>
 <h2>Free-run accuracy on the training records</h2><table border="1"><tr><th>segment</th>

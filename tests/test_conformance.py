@@ -234,8 +234,10 @@ def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> No
     assert "with numpy and pythonfmu on the importing side" in doc(quick_fmu)
     assert "LMNCELL_LIBPYTHON" in doc(quick_fmu)
     assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
-    for path in (quick_fmu, native_fmu):       # the step-size limit both refuse beyond
-        assert "more than 10,000,000 model steps" in " ".join(doc(path).split())
+    for path in (quick_fmu, native_fmu):       # the limits beyond which both refuse a step
+        text = " ".join(doc(path).split())
+        assert "more than 10,000,000 model steps" in text and "beyond 1000 C" in text
+        assert "a temperature outside -60…100 °C (°C, not K" in text
 
 
 def test_random_call_sequences_never_crash_or_return_nan_with_ok(fmu) -> None:
