@@ -11,6 +11,7 @@ dependencies.
 from __future__ import annotations
 
 import os
+import uuid
 import zipfile
 from datetime import UTC, datetime
 from pathlib import Path
@@ -41,6 +42,13 @@ def dependency_indices(output: str, names: list[str]) -> str:
     """The `dependencies` attribute of an output: 1-based indices of its initial dependencies
     among the model variables `names` (in their order)."""
     return " ".join(str(names.index(n) + 1) for n in INITIAL_DEPENDENCIES[output])
+
+
+def fmu_guid(flavour: str, model_hash: str) -> str:
+    """An FMU's GUID: a fingerprint of its flavour ("native" or "pythonfmu") and its model file
+    (the file's hash), as the FMI standard suggests, so that one model gives the same GUID in
+    every build of a flavour (pythonfmu's own is time-based, new at each build)."""
+    return str(uuid.uuid5(uuid.NAMESPACE_URL, f"lmncell-{flavour}:{model_hash}"))
 
 
 class NativeBuildError(RuntimeError):

@@ -14,7 +14,6 @@ import math
 import shutil
 import subprocess
 import tempfile
-import uuid
 import zipfile
 from pathlib import Path
 
@@ -24,6 +23,7 @@ from lmncell.fmu.interface import (
     NativeBuildError,
     build_time,
     dependency_indices,
+    fmu_guid,
     fmu_path,
     zip_entry,
 )
@@ -469,7 +469,7 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
     model = load_model(model_path)
     when = build_time()
     version = model_hash(model_path)
-    guid = str(uuid.uuid5(uuid.NAMESPACE_URL, f"lmncell-native:{version}"))
+    guid = fmu_guid("native", version)
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="lmncell_native_") as tmp:
         src = Path(tmp) / "sources"

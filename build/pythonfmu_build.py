@@ -26,9 +26,9 @@ import subprocess
 import sys
 import sysconfig
 import tempfile
-import uuid
 import warnings
 import zipfile
+from datetime import datetime
 from pathlib import Path
 from xml.etree import ElementTree as ET
 
@@ -37,6 +37,7 @@ from lmncell.fmu.interface import (
     INPUT_BOUNDS,
     build_time,
     dependency_indices,
+    fmu_guid,
     fmu_path,
     zip_entry,
 )
@@ -219,22 +220,16 @@ def _indent(elem: ET.Element) -> None:
     ET.indent(elem, space="  ")
 
 
-def pythonfmu_guid(module_hash: str) -> str:
-    """The FMU's GUID: a fingerprint of the model file (its hash), as the FMI standard suggests
-    and the native FMU's is, so that the same model gives the same GUID in every build
-    (pythonfmu's own is time-based, new at each build)."""
-    return str(uuid.uuid5(uuid.NAMESPACE_URL, f"lmncell-pythonfmu:{module_hash}"))
-
-
 def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
-                            wrapper: str = STOCK) -> str:
-    """Set the GUID (pythonfmu_guid) and add units, InitialUnknowns, default experiment,
-    version and generation tool (which names the wrapper in the linux64 binary)."""
+                            wrapper: str = STOCK, when: datetime | None = None) -> str:
+    """Set the GUID (interface.fmu_guid) and add units, InitialUnknowns, default experiment,
+    version and generation tool (which names the wrapper in the linux64 binary); with `when`
+    (interface.build_time) also the generation time."""
     from lmncell import __version__
 
     root = ET.fromstring(xml_text)
-    root.set("guid", pythonfmu_guid(module_hash))
-    if (when := build_time()) is not None:
+    root.set("guid", fmu_guid("pythonfmu", module_hash))
+    if when is not None:
         root.set("generationDateAndTime", when.strftime("%Y-%m-%dT%H:%M:%SZ"))
     root.set("generationTool", f"LMNCell {__version__} ({wrapper})")
     root.set("version", module_hash)
@@ -285,11 +280,12 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode")
 
 
-def _rewrite_members(fmu: Path, members: dict[str, bytes]) -> None:
+def _rewrite_members(fmu: Path, members: dict[str, bytes], when: datetime | None = None
+                     ) -> None:
     """Replace the contents of the named zip members (same names, same order) and add, at the
-    end, those the FMU does not have yet."""
+    end, those the FMU does not have yet; with `when` (interface.build_time) every member dated
+    then, else the existing ones as pythonfmu dated them."""
     tmp = fmu.with_suffix(".tmp")
-    when = build_time()
     with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
         for item in zin.infolist():
             header = item if when is None else zip_entry(item.filename, when)
@@ -361,7 +357,7 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
 
     model_path, out = Path(model_path), fmu_path(out)
     model = load_model(model_path)
-    build_time()      # a bad SOURCE_DATE_EPOCH is refused before the build, not after it
+    when = build_time()       # a bad SOURCE_DATE_EPOCH is refused before the build
     h = model_hash(model_path)
     out.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="lmncell_fmu_") as tmp:
@@ -389,11 +385,12 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
     with zipfile.ZipFile(out) as z:
         xml_text = z.read("modelDescription.xml").decode("utf-8")
     root = ET.fromstring(xml_text)
-    members = patched_binary(pythonfmu_guid(h), root.find("CoSimulation").get("modelIdentifier"))
+    members = patched_binary(fmu_guid("pythonfmu", h),
+                             root.find("CoSimulation").get("modelIdentifier"))
     wrapper = PATCHED if members else STOCK
-    members["modelDescription.xml"] = patch_model_description(xml_text, model, h,
-                                                              wrapper).encode("utf-8")
+    members["modelDescription.xml"] = patch_model_description(xml_text, model, h, wrapper,
+                                                              when).encode("utf-8")
     members["documentation/index.html"] = documentation_html(
         model, model_path, "pythonfmu", wrapper).encode("utf-8")
-    _rewrite_members(out, members)
+    _rewrite_members(out, members, when)
     return out

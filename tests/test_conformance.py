@@ -80,9 +80,10 @@ def test_the_guid_is_the_models_fingerprint(quick_model, quick_fmu, stock_fmu,
     """Every build of one model's pythonfmu FMU has the same GUID, a name-based UUID of the
     model file's hash, as the native FMU's is (pythonfmu's own is time-based: a new GUID at
     each build); the two flavours differ."""
-    from lmncell.fmu.pythonfmu_build import model_hash, pythonfmu_guid
+    from lmncell.fmu.interface import fmu_guid
+    from lmncell.fmu.pythonfmu_build import model_hash
 
-    guid = pythonfmu_guid(model_hash(quick_model))
+    guid = fmu_guid("pythonfmu", model_hash(quick_model))
     assert _guid(quick_fmu) == _guid(stock_fmu) == guid != _guid(native_fmu)
     assert uuid.UUID(guid).version == 5 == uuid.UUID(_guid(native_fmu)).version
 
