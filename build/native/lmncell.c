@@ -101,9 +101,10 @@ typedef struct {
     char name[128];
     int logging;
     int mode;
-    /* the last out-of-range model step's values, for the warning fmi2DoStep logs */
-    int range_inputs, range_volt;
-    double range_i, range_t, range_soc, range_v;
+    /* the last out-of-range model step's inputs, for the warning fmi2DoStep logs (its
+       voltage is the state's: the warning follows only a doStep whose last step was out) */
+    int range_inputs;
+    double range_i, range_t, range_soc;
 } Instance;
 
 static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt, ...) {
@@ -997,19 +998,16 @@ static size_t append_part(char *buf, size_t n, size_t size, const char *fmt, ...
     return n < size ? n : size - 1;
 }
 
-/* out_of_range after a model step; where it is set, what left the trained region is kept for
-   the warning (log_range) */
+/* out_of_range after a model step; where it is set, the step's inputs are kept for the
+   warning (log_range) */
 static void check_range(Instance *in, int inputs_out, double i, double t, double soc) {
     State *s = &in->s;
-    int volt_out = voltage_out_of_range(s->voltage);
-    s->out_of_range = inputs_out || volt_out;
+    s->out_of_range = inputs_out || voltage_out_of_range(s->voltage);
     if (s->out_of_range) {
         in->range_inputs = inputs_out;
-        in->range_volt = volt_out;
         in->range_i = i;
         in->range_t = t;
         in->range_soc = soc;
-        in->range_v = s->voltage;
     }
 }
 
@@ -1030,9 +1028,9 @@ static void log_range(Instance *in, double t0) {
         n = append_part(msg, n, sizeof msg, "temperature %.1f degC outside the trained "
                         "%.1f..%.1f degC", in->range_t, T_MIN, T_MAX);
 #endif
-    if (in->range_volt)
+    if (voltage_out_of_range(in->s.voltage))
         n = append_part(msg, n, sizeof msg, "model voltage %.3f V outside the trained "
-                        "%.3f..%.3f V", in->range_v, V_MIN, V_MAX);
+                        "%.3f..%.3f V", in->s.voltage, V_MIN, V_MAX);
     logf_(in, fmi2Warning, "logStatusWarning", "t = %.9g s: %s", t0, msg);
 }
 
