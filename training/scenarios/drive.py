@@ -440,14 +440,21 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
                        out["oor"].astype(bool), figures, cell_t)
 
 
+def stopped_outside_range(res: CycleResult) -> bool:
+    """Whether the run stopped on a voltage cut-off at a step where the model was outside its
+    trained range: the voltage is then its extrapolation (a cold ambient far below the trained
+    temperatures collapses it at a SoC of 0.9), not a cell that is empty or full."""
+    return res.figures["stop"].startswith("cell voltage") and bool(res.out_of_range[-1])
+
+
 def stop_title(res: CycleResult) -> str:
     """What the plot's title adds on a run that stopped early ('' for one that did not): the
-    cell empty or full and when, or, where the voltage crossed the cut-off while the model was
-    outside its trained range (_stop_line), that it stopped at the cut-off there."""
+    cell empty or full and when, or, where it stopped outside the trained range
+    (stopped_outside_range), that it stopped at the cut-off there."""
     f = res.figures
     if not f["stop"]:
         return ""
-    if bool(res.out_of_range[-1]) and f["stop"].startswith("cell voltage"):
+    if stopped_outside_range(res):
         return (f" — stopped at the cut-off after {f['stopped_at_s']:g} s, outside the trained "
                 "range")
     return f" — stopped, the cell {stop_kind(f['stop'])} after {f['stopped_at_s']:g} s"
@@ -512,7 +519,7 @@ def simulate_cycle_cli(a) -> int:
     else:
         print(_run_line(f))
         if f["stop"]:
-            print(_stop_line(f, bool(res.out_of_range[-1]), float(res.soc[-1])))
+            print(_stop_line(res))
     if f["out_of_range_steps"]:
         first = f["out_of_range_first"]
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
@@ -524,20 +531,20 @@ def simulate_cycle_cli(a) -> int:
     return 0
 
 
-def _stop_line(f: dict, outside: bool, soc: float) -> str:
-    """The line on a run that stopped early (f: its figures, with a stop reason): the cell empty
-    or full, with the option that sets the cut-off. Where the voltage crossed a cut-off while
-    the model was outside its trained range (outside, at the last step) it says so, with the
-    SoC: the voltage is then the model's extrapolation (a cold ambient far below the trained
-    temperatures collapses it at a SoC of 0.9), not a cell that is empty or full."""
+def _stop_line(res: CycleResult) -> str:
+    """The line on a run that stopped early: the cell empty or full, with the option that sets
+    the cut-off; where it stopped outside the trained range (stopped_outside_range), that, with
+    the SoC there."""
+    f = res.figures
     where = f", {f['distance_km']:.1f} km" if "distance_km" in f else ""
     state = stop_kind(f["stop"])
     hint = ("; --cutoff sets the cut-off voltage" if state == "empty" else
             "; --charge-cutoff sets the charge cut-off voltage" if "voltage" in f["stop"] else "")
-    if outside and f["stop"].startswith("cell voltage"):
+    if stopped_outside_range(res):
         return (f"stopped after {f['stopped_at_s']:g} s{where}: {f['stop']} at SoC "
-                f"{100 * soc:.1f} %, with the model outside its trained range (the warning "
-                f"below): an extrapolated voltage, not necessarily a cell that is {state}{hint}")
+                f"{100 * float(res.soc[-1]):.1f} %, with the model outside its trained range "
+                f"(the warning below): an extrapolated voltage, not necessarily a cell that is "
+                f"{state}{hint}")
     return f"stopped after {f['stopped_at_s']:g} s{where}: the cell is {state} ({f['stop']}){hint}"
 
 
