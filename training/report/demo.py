@@ -1,11 +1,11 @@
 """`lmncell demo`: the paper's story on the shipped A123 data, from measurements to a validated FMU.
 
-Training: the dynamic tests at −5, 5 and 45 °C (temperature through an Arrhenius gain and, with
-three training temperatures, linear temperature terms; the 20–80 % SoC window weighted fully, the
-rest at OUTSIDE_WEIGHT). Validation: the 25 °C test, a
-temperature the training never saw. Then the pythonfmu FMU, the WLTC and US06 scenarios through
-fmpy, FMU against pipeline, the SoC observers on the unseen record from a wrong start under load,
-and report.html with its figures.
+Training: the dynamic tests at −15, −5, 5 and 45 °C with the 25 °C C/30 OCV test, as the README
+advises (temperature through an Arrhenius gain and, with four training temperatures, temperature
+terms of degree 2; every other setting the default of `lmncell train`). Validation: the 25 °C
+test, a temperature the training never saw. Then the pythonfmu FMU, the WLTC and US06 scenarios
+through fmpy, FMU against pipeline, the SoC observers on the unseen record from a wrong start
+under load, and report.html with its figures.
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ from lmncell.data.soc import (
 from lmncell.evaluation.evaluate import evaluate_model, evaluate_records
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
 from lmncell.evaluation.interpret import local_model_table
-from lmncell.evaluation.metrics import WINDOW
 from lmncell.evaluation.observe import observer_figure, observer_runs, soc_metrics
 from lmncell.identification.train import train_files
 from lmncell.report.html import Report
@@ -37,11 +36,13 @@ from lmncell.scenarios.drive import load_vehicle, plot_cycle, run_cycle
 from lmncell.scenarios.traces import data_dir
 
 A123 = "a123_plett"
-TRAIN = ["A123_DYN_30_N05_s1.csv.gz", "A123_DYN_45_P05_s1.csv.gz", "A123_DYN_50_P45_s1.csv.gz"]
+TRAIN = ["A123_DYN_10_N15_s1.csv.gz", "A123_DYN_30_N05_s1.csv.gz", "A123_DYN_45_P05_s1.csv.gz",
+         "A123_DYN_50_P45_s1.csv.gz"]
+OCV_TESTS = ["A123_OCV_P25_S1.csv.gz", "A123_OCV_P25_S3.csv.gz"]   # C/30 down and up, 25 °C
+SHOWN_TRAINING = "A123_DYN_45_P05_s1.csv.gz"   # the training record drawn in the report (5 °C)
 VALIDATE = "A123_DYN_50_P25_s1.csv.gz"
 CHARGE_25C = "A123_DYN_50_P25_s3.csv.gz"   # the same test's CC/CV charge from empty (25 °C)
 EMPTY_25C = "A123_DYN_50_P25_s2.csv.gz"
-OUTSIDE_WEIGHT = 0.2
 OBSERVER_START, OBSERVER_GUESS = 0.6, 0.3
 
 
@@ -115,7 +116,8 @@ def _data_section(rep: Report, dyn: Path, capacity: float, out: Path) -> None:
 
     rep.section("Data")
     rep.text("A123 26650 LFP cell, dynamic tests of G. L. Plett (Battery Management Systems, "
-             "Vol. I, 2015; ESC toolbox data). Training: the tests at −5, 5 and 45 °C; "
+             "Vol. I, 2015; ESC toolbox data). Training: the tests at −15, −5, 5 and 45 °C "
+             "with the 25 °C C/30 OCV test; "
              "validation: the 25 °C test, which the training never saw. Current > 0 charges; "
              f"capacity {capacity:.4f} Ah from the 25 °C discharge to 2.0 V (s1 + s2).")
     fig1, hyst_mv = ocv_figure(out)
@@ -123,7 +125,7 @@ def _data_section(rep: Report, dyn: Path, capacity: float, out: Path) -> None:
                      f"charge branch lies {hyst_mv:.0f} mV above the discharge branch between "
                      "20 and 80 % SoC (median). Whether the model carries a hysteresis state is "
                      "decided in the identification (below).")
-    train_rec = read_record(dyn / TRAIN[1])
+    train_rec = read_record(dyn / SHOWN_TRAINING)
     soc_train = coulomb_count(train_rec, 1.0, capacity)
     rep.figure(plots.record_figure(train_rec, out / "fig06_training_record.png", soc_train),
                "Fig. 6 — one training record (5 °C): repeated UDDS-derived blocks with rests "
@@ -135,10 +137,9 @@ def _train(dyn: Path, capacity: float, out: Path) -> Path:
     """Train the LMN and its baselines on the training records; returns the model file."""
     _say("training the LMN and the baselines (ARX, 2RC, 2RC with hysteresis) …")
     model_path = out / "a123_lmn.json"
+    ocv = [str(dyn.parent / "ocv" / f) for f in OCV_TESTS]
     train_files([dyn / f for f in TRAIN], model_path, capacity_ah=capacity, soc0=1.0,
-                partition=["soc"], baselines=True,
-                progress=lambda m: _say(m), soc_window=list(WINDOW),
-                outside_weight=OUTSIDE_WEIGHT)
+                baselines=True, progress=lambda m: _say(m), ocv_tests=ocv)
     return model_path
 
 
@@ -162,8 +163,8 @@ def _identification_section(rep: Report, model: LmnModel, out: Path) -> None:
              "which interpolate between the training temperatures.")
     rep.figure(plots.curve_figure(tr["curve"], out / "fig_local_models_curve.png",
                                   model.n_local_models),
-               "Error against the number of local models (the 20–80 % SoC window weighted "
-               f"fully, the rest at {OUTSIDE_WEIGHT}): the free-run validation error"
+               "Error against the number of local models (each sample weighted as in the "
+               "fit): the free-run validation error"
                + (", the geometric mean of each training temperature's,"
                   if info.get("stop") == "validation_level_score_mv" else "")
                + f" chose M = {model.n_local_models}. "
@@ -231,7 +232,7 @@ def _accuracy_section(rep: Report, model: LmnModel, dyn: Path, out: Path) -> lis
     _say("evaluating free-run on the training records and on the unseen 25 °C record …")
     traces, rows = evaluate_model(model, [dyn / f for f in TRAIN] + [dyn / VALIDATE], soc0=1.0)
     for t in traces[:-1]:
-        if t.segment.name.startswith(TRAIN[1].split(".")[0]):
+        if t.segment.name.startswith(SHOWN_TRAINING.split(".")[0]):
             rep.figure(plots.fit_figure(t, out / "fig07_08_training_fit.png",
                                         f"training record {t.segment.name}"),
                        "Fig. 7/8 — measured and simulated (free-run) voltage on a training "

@@ -27,8 +27,9 @@ def render_figures(summary: dict) -> str:
     record = summary["validation_record"]
     whole, window = summary["validation_rmse_mv"], summary["validation_window_rmse_mv"]
     lines = [FIGURES_BEGIN, "",
-             f"What `lmncell demo` measures (A123 LFP, trained at −5/5/45 °C, free run on the "
-             f"unseen 25 °C record `{record}` from full to empty):", "",
+             "What `lmncell demo` measures (A123 LFP, trained at −15/−5/5/45 °C with the 25 °C "
+             f"C/30 OCV test, free run on the unseen 25 °C record `{record}` from full to "
+             "empty):", "",
              "| model | RMSE whole record / mV | RMSE 20–80 % SoC / mV |", "|---|---|---|"]
     lines += [f"| {MODEL_NAMES.get(k, k)} | {whole[k]:.2f} | {window[k]:.2f} |" for k in window]
     if "validation_soc_drift_pct" in summary:
