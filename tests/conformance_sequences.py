@@ -141,6 +141,55 @@ def logged_messages(fmu: str) -> dict:
     return {"messages": messages, "statuses": statuses, "outputs": outputs}
 
 
+def debug_logging_categories(fmu: str) -> dict:
+    """fmi2SetDebugLogging with each kind of category list, each followed by a step outside
+    the trained temperatures (a warning where warnings are on) and one back inside, then a
+    NULL array and a NULL entry: the messages, the statuses and the voltage of a last step."""
+    from fmpy.fmi2 import fmi2False, fmi2String, fmi2True
+    from lmncell.evaluation.fmueval import fmu_log
+
+    md = read_model_description(fmu)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    statuses, after = [], {}
+    with fmu_log("dbg") as (name, callbacks, log):
+        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu), instanceName=name,
+                          modelIdentifier=md.coSimulation.modelIdentifier)
+        slave.instantiate(callbacks=callbacks, loggingOn=False)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.setBoolean([vr["temperature_is_cell"]], [True])   # the input is the cell's
+        slave.exitInitializationMode()
+        t = 0.0
+        settings = (("off", fmi2False, []), ("all", fmi2True, []),
+                    ("errors only", fmi2True, ["logStatusError"]),
+                    ("warnings", fmi2True, ["logStatusWarning", "logStatusError"]),
+                    ("unknown only", fmi2True, ["noSuchCategory"]),
+                    ("warnings off", fmi2False, ["logStatusWarning"]))
+        for label, on, cats in settings:
+            array = (fmi2String * len(cats))(*(c.encode() for c in cats)) if cats else None
+            statuses.append(_status(lambda on=on, cats=cats, array=array:
+                                    slave.fmi2SetDebugLogging(slave.component, on, len(cats),
+                                                              array)))
+            log.append(f"[{label}]")
+            for temperature in (60.0, 27.0):      # out of the trained range, and back in
+                slave.setReal([vr["current"], vr["temperature"]], [-1.0, temperature])
+                statuses.append(_status(lambda t=t: slave.doStep(t, 1.0)))
+                t += 1.0
+        slave.fmi2SetDebugLogging(slave.component, fmi2True, 0, None)
+        statuses.append(_status(lambda: slave.fmi2SetDebugLogging(slave.component, fmi2True, 2,
+                                                                  None)))
+        statuses.append(_status(lambda: slave.fmi2SetDebugLogging(
+            slave.component, fmi2False, 2, (fmi2String * 2)(b"logStatusError", None))))
+        log.append("[after the NULLs]")           # still on for all: this step warns
+        slave.setReal([vr["temperature"]], [60.0])
+        statuses.append(_status(lambda: slave.doStep(t, 1.0)))
+        after["voltage"] = slave.getReal([vr["voltage"]])[0]
+        slave.terminate()
+        slave.freeInstance()
+        messages = [entry.replace(name, "NAME") for entry in log]
+    return {"messages": messages, "statuses": statuses, **after}
+
+
 def observers_at_full(fmu: str) -> dict:
     """Issue 19: each observer from SoC 1.0 with a ±2 A square wave that starts by charging,
     the FMU's own voltage fed back as the measurement, then contradictory measurements."""
@@ -411,7 +460,7 @@ def random_calls_long(fmu: str) -> dict:
 
 
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
-                                     logged_messages,
+                                     logged_messages, debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       instantiate_many, random_calls, random_calls_long)}
 

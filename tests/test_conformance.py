@@ -197,6 +197,28 @@ def test_both_fmus_log_the_same_messages(quick_fmu, native_fmu) -> None:
     assert native["statuses"].count(0) == 4 and all(math.isfinite(x) for x in native["outputs"])
 
 
+def test_debug_logging_follows_its_categories_and_refuses_null_ones(quick_fmu,
+                                                                    native_fmu) -> None:
+    """fmi2SetDebugLogging turns on the categories it names (all where it names none), in both
+    FMUs alike: before, the native FMU turned warnings on whatever the list, and a NULL array
+    or entry terminated a host of the pythonfmu FMU (std::string from NULL). Now both refuse
+    the NULLs with a message and keep their logging as it was."""
+    py, native = (_run(f, "debug_logging_categories") for f in (quick_fmu, native_fmu))
+    assert py == native
+    blocks, label = {}, None
+    for entry in native["messages"]:
+        if entry.startswith("["):
+            label = entry
+            blocks[label] = []
+        else:
+            blocks[label].append(entry)
+    warned = {k for k, v in blocks.items() if any("outside the trained" in m for m in v)}
+    assert warned == {"[all]", "[warnings]", "[after the NULLs]"}, blocks
+    nulls = blocks["[warnings off]"]
+    assert len(nulls) == 2 and all("is NULL; logging left as it was" in m for m in nulls)
+    assert native["statuses"][-3:] == [ERROR, ERROR, 0] and math.isfinite(native["voltage"])
+
+
 def test_observers_stay_finite_from_full_charge(fmu) -> None:
     for observer, res in _run(fmu, "observers_at_full").items():
         assert res == {"worst_status": 0, "finite": True}, observer

@@ -1223,10 +1223,28 @@ static void defaults(State *s) {
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
+/* Logging on for the categories named (all with none named), as the pythonfmu FMU's logger
+   does: warnings ("logStatusWarning") are logged only where it is on; errors always. A NULL
+   array or entry is refused and the logging left as it was. */
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]) {
-    (void)n; (void)cats;
-    if (!c) return fmi2Error;
-    ((Instance *)c)->logging = on;
+    Instance *in = (Instance *)c;
+    int warnings = n == 0;
+    size_t k;
+    if (!in) return fmi2Error;
+    if (n > 0 && !cats) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2SetDebugLogging: nCategories = %zu but "
+              "categories is NULL; logging left as it was", n);
+        return fmi2Error;
+    }
+    for (k = 0; k < n; k++) {
+        if (!cats[k]) {
+            logf_(in, fmi2Error, "logStatusError", "fmi2SetDebugLogging: nCategories = %zu but "
+                  "categories[%zu] is NULL; logging left as it was", n, k);
+            return fmi2Error;
+        }
+        if (strcmp(cats[k], "logStatusWarning") == 0) warnings = 1;
+    }
+    in->logging = on && warnings;
     return fmi2OK;
 }
 

@@ -4,6 +4,7 @@
 #include "fmi2Functions.h"
 #include "fmu_except.hpp"
 
+#include <cstdio>
 #include <exception>
 #include <limits>
 #include <memory>
@@ -174,13 +175,30 @@ fmi2Status fmi2SetDebugLogging(
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
 
+    // LMNCell: a NULL array or entry is refused (it was a std::string from NULL, an exception
+    // out of a C function: the host terminated); the logging stays as it was
+    char why[160];
+    if (nCategories > 0 && categories == nullptr) {
+        std::snprintf(why, sizeof why, "fmi2SetDebugLogging: nCategories = %zu but categories is "
+                      "NULL; logging left as it was", nCategories);
+        component->logger->log(fmi2Error, why);
+        return fmi2Error;
+    }
     std::vector<std::string> categoriesVec;
-    if (nCategories > 0) {
-        // Convert categories to std::vector<std::string>
+    try {
         categoriesVec.reserve(nCategories);
         for (size_t i = 0; i < nCategories; ++i) {
+            if (categories[i] == nullptr) {
+                std::snprintf(why, sizeof why, "fmi2SetDebugLogging: nCategories = %zu but "
+                              "categories[%zu] is NULL; logging left as it was", nCategories, i);
+                component->logger->log(fmi2Error, why);
+                return fmi2Error;
+            }
             categoriesVec.emplace_back(categories[i]);
         }
+    } catch (const std::exception& e) {
+        component->logger->log(fmi2Error, e.what());
+        return fmi2Error;
     }
 
     component->logger->setDebugLogging(loggingOn, categoriesVec);
