@@ -322,7 +322,8 @@ STEP_SIZES = (1.0, 1.0, 1.0, 0.1, 10.0, 3600.0, 1e5, 1e-12, 0.0, -1.0, math.nan,
 class RandomHost:
     """A host that makes the FMI 2.0 calls of one instance in an order and with arguments
     chosen by a seeded random generator: NaN, ±inf, ±1e308, negative or zero step sizes,
-    communication points that are not the FMU's time, unknown references."""
+    communication points that are not the FMU's time, unknown references, NULL log
+    categories."""
 
     def __init__(self, slave: FMU2Slave, md: ModelDescription, rng: random.Random) -> None:
         self.slave, self.rng, self.clock = slave, rng, 0.0
@@ -337,7 +338,8 @@ class RandomHost:
             "set_boolean": (self.set_boolean, 0.5), "get_outputs": (self.get_outputs, 3.0),
             "get_others": (self.get_others, 0.5), "step": (self.step, 6.0),
             "reset": (self.reset, 0.2), "terminate": (self.terminate, 0.2),
-            "unknown_reference": (self.unknown_reference, 0.5)}
+            "unknown_reference": (self.unknown_reference, 0.5),
+            "debug_logging": (self.debug_logging, 0.3)}
 
     def call(self) -> str:
         """One random call: its name, arguments and status; AssertionError where an OK status
@@ -427,6 +429,20 @@ class RandomHost:
     def unknown_reference(self) -> tuple[str, int]:
         ref = self.rng.choice((9999, 2**31, 2**32 - 1))
         return f" {ref}", _status(lambda: self.slave.getReal([ref]))
+
+    def debug_logging(self) -> tuple[str, int]:
+        """fmi2SetDebugLogging on or off with a random category list: declared, undeclared or
+        NULL entries, or a NULL array with nCategories > 0."""
+        from fmpy.fmi2 import fmi2String
+
+        on = self.rng.random() < 0.5
+        names = [self.rng.choice((b"logStatusWarning", b"logStatusError", b"logAll",
+                                  b"noSuchCategory", None)) for _ in range(self.rng.randint(0, 3))]
+        n, array = len(names), (fmi2String * len(names))(*names) if names else None
+        if self.rng.random() < 0.1:
+            n, array = self.rng.randint(1, 3), None
+        return f" {on} {names if array is not None else f'NULL x{n}'}", _status(
+            lambda: self.slave.fmi2SetDebugLogging(self.slave.component, on, n, array))
 
 
 def random_calls(fmu: str, seed: int = 1, sequences: int = 20) -> dict:
