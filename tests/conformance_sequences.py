@@ -33,11 +33,13 @@ def _status(call) -> int:
         return int(exc.status)
 
 
-def _raw(fmu: str, logging: bool = True):
+def _raw(fmu: str, logging: bool = True, name: str = "raw", callbacks=None):
+    """An instantiated FMU2Slave of the FMU (with fmu_log's instance name and callbacks where
+    its messages are kept) and its value references by variable name."""
     md = read_model_description(fmu)
     slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu),
-                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName="raw")
-    slave.instantiate(loggingOn=logging)
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+    slave.instantiate(callbacks=callbacks, loggingOn=logging)
     return slave, {v.name: v.valueReference for v in md.modelVariables}
 
 
@@ -104,13 +106,9 @@ def logged_messages(fmu: str) -> dict:
     step after terminate."""
     from lmncell.evaluation.fmueval import fmu_log
 
-    md = read_model_description(fmu)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
     statuses = []
     with fmu_log("seq") as (name, callbacks, log):
-        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu), instanceName=name,
-                          modelIdentifier=md.coSimulation.modelIdentifier)
-        slave.instantiate(callbacks=callbacks, loggingOn=True)
+        slave, vr = _raw(fmu, True, name, callbacks)
         statuses.append(_status(lambda: slave.doStep(0.0, 1.0)))
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
@@ -148,13 +146,9 @@ def debug_logging_categories(fmu: str) -> dict:
     from fmpy.fmi2 import fmi2False, fmi2String, fmi2True
     from lmncell.evaluation.fmueval import fmu_log
 
-    md = read_model_description(fmu)
-    vr = {v.name: v.valueReference for v in md.modelVariables}
     statuses, after = [], {}
     with fmu_log("dbg") as (name, callbacks, log):
-        slave = FMU2Slave(guid=md.guid, unzipDirectory=extract(fmu), instanceName=name,
-                          modelIdentifier=md.coSimulation.modelIdentifier)
-        slave.instantiate(callbacks=callbacks, loggingOn=False)
+        slave, vr = _raw(fmu, False, name, callbacks)
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
         slave.setBoolean([vr["temperature_is_cell"]], [True])   # the input is the cell's
