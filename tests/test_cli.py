@@ -131,6 +131,45 @@ def test_missing_soc0_is_explained(tmp_path, capsys) -> None:
             "starts fully charged)") in capsys.readouterr().err
 
 
+def test_a_record_that_starts_rested_part_way_down_is_not_taken_as_full(
+        a123_model, tmp_path, capsys) -> None:
+    """The A123 OCV test's S2 part starts rested near empty, at its own top voltage, and
+    dithers down to 2.0 V from there: without --soc0 it is refused where an OCV tells, by the
+    model's OCV in evaluate (model file and FMU) and by the slow tests' in train, with the
+    voltage, the SoC the OCV gives it and what to give (before, it was taken as full and
+    scored 1.3 V off); with --soc0 it is evaluated."""
+    from lmncell.data.dataset import START_FULL_MIN_SOC
+    from lmncell.fmu.pythonfmu_build import build_fmu
+
+    fmu = build_fmu(a123_model, tmp_path / "a123.fmu")
+    dither = DATA / "a123_plett/ocv/A123_OCV_P25_S2.csv.gz"
+    expected = re.compile(r"A123_OCV_P25_S2\.csv\.gz: starts rested at 2\.68 V, which the "
+                          r"model's OCV puts at SoC 0\.[01]\d, not full charge \(3\.\d+ V at SoC "
+                          r"1\); give the record's start SoC: --soc0 on the command line")
+    for model in (a123_model, fmu):
+        assert main(["evaluate", str(model), str(dither)]) == 2
+        assert expected.search(capsys.readouterr().err)
+    ocv = [str(DATA / f"a123_plett/ocv/A123_OCV_P25_{k}.csv.gz") for k in ("S1", "S3")]
+    assert main(["train", str(A123_S1), str(dither), "--out", str(tmp_path / "m.json"),
+                 "--capacity", "2.2", "--ocv-tests", *ocv]) == 2
+    assert ("A123_OCV_P25_S2.csv.gz: starts rested at 2.68 V, which the OCV of the slow tests "
+            "(--ocv-tests) puts at SoC 0.0") in capsys.readouterr().err
+    assert main(["evaluate", str(a123_model), str(dither), "--soc0", "0.01"]) == 0
+    assert "A123_OCV_P25_S2.csv.gz" in capsys.readouterr().out
+    readme = " ".join((DATA.parent / "README.md").read_text(encoding="utf-8").split())
+    assert f"below SoC {START_FULL_MIN_SOC:g}, such as a rest part-way down" in readme
+
+
+def test_ocv_soc_reads_the_last_rise_through_a_voltage() -> None:
+    from lmncell.data.dataset import ocv_soc
+
+    soc, volts = np.linspace(0.0, 1.0, 5), np.array([2.5, 3.2, 3.3, 3.3, 3.5])
+    assert ocv_soc(2.85, soc, volts) == pytest.approx(0.125)
+    assert ocv_soc(3.4, soc, volts) == pytest.approx(0.875)
+    assert ocv_soc(3.3, soc, volts) == pytest.approx(0.75)     # the top of the plateau
+    assert ocv_soc(2.0, soc, volts) == 0.0 and ocv_soc(3.6, soc, volts) == 1.0
+
+
 def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, tmp_path,
                                                                   capsys) -> None:
     assert main(["explain", str(quick_model)]) == 0

@@ -62,15 +62,54 @@ def starts_rested_full(rec: Record) -> bool:
     return bool(rested[0] and rec.voltage_v[0] >= rec.voltage_v[rested].max() - 0.005)
 
 
-def start_soc(rec: Record, soc0: float | None) -> float:
-    """The given start SoC, or 1.0 for a record that starts rested at full charge."""
+START_FULL_MIN_SOC = 0.8   # a record whose rested start voltage an OCV puts below this SoC
+#                            does not start full (start_soc)
+
+
+def start_soc(rec: Record, soc0: float | None,
+              ocv: tuple[np.ndarray, np.ndarray] | None = None,
+              ocv_name: str = "the model's OCV") -> float:
+    """The given start SoC, or 1.0 for a record that starts rested at full charge. ocv: a
+    known OCV (SoC knots, V), named ocv_name in messages; a record that starts rested at its
+    top voltage but where that OCV puts the voltage below START_FULL_MIN_SOC (a record that
+    starts rested part-way down, and only discharges from there) is refused, not taken as
+    full."""
     if soc0 is not None:
         return float(soc0)
     if starts_rested_full(rec):
+        if ocv is not None:
+            _check_full_start(rec, *ocv, ocv_name)
         return 1.0
     raise DataError(f"{rec.meta.source}: cannot tell the start SoC (the record does not start "
                     "with a rest at its top voltage); give it: --soc0 on the command line, "
                     "soc0= in Python (1.0 for a record that starts fully charged)")
+
+
+def ocv_soc(voltage_v: float, ocv_soc: np.ndarray, ocv_v: np.ndarray) -> float:
+    """The SoC (fraction) at which a piecewise linear OCV curve last rises through voltage_v
+    (V): 1 at or above the curve's last value, 0 where it never rises through it."""
+    s, v = np.asarray(ocv_soc, dtype=float), np.asarray(ocv_v, dtype=float)
+    if voltage_v >= v[-1]:
+        return 1.0
+    rises = np.flatnonzero((v[:-1] <= voltage_v) & (v[1:] > voltage_v))
+    if rises.size == 0:
+        return 0.0
+    k = int(rises[-1])
+    return float(s[k] + (s[k + 1] - s[k]) * (voltage_v - v[k]) / (v[k + 1] - v[k]))
+
+
+def _check_full_start(rec: Record, ocv_soc_knots: np.ndarray, ocv_v: np.ndarray,
+                      ocv_name: str) -> None:
+    """DataError where the record's rested start voltage lies below START_FULL_MIN_SOC on the
+    OCV."""
+    v0 = float(rec.voltage_v[0])
+    soc = ocv_soc(v0, ocv_soc_knots, ocv_v)
+    if soc < START_FULL_MIN_SOC:
+        raise DataError(f"{rec.meta.source}: starts rested at {v0:.4g} V, which {ocv_name} "
+                        f"puts at SoC {soc:.2f}, not full charge ({float(ocv_v[-1]):.4g} V at "
+                        "SoC 1); give the record's start SoC: "
+                        "--soc0 on the command line, soc0= in Python (a value from 0 to 1, "
+                        f"e.g. {soc:.2f} from that OCV)")
 
 
 def start_socs(soc0: float | Sequence[float] | None, n: int) -> list[float | None]:

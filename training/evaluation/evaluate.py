@@ -84,16 +84,24 @@ def temperature_words(seg: Segment, ambient: bool) -> str:
 
 def read_records(paths: Sequence[str | Path], soc0: float | Sequence[float] | None = None,
                  read_options: Mapping[str, Any] | None = None,
-                 through_hidden_pauses: bool = False
+                 through_hidden_pauses: bool = False,
+                 ocv: tuple[np.ndarray, np.ndarray] | None = None
                  ) -> Iterator[tuple[Path, Record, float]]:
     """Each record to evaluate with its start SoC: read (read_options go to read_record), not
     split at its hidden pauses where through_hidden_pauses, soc0 as in start_socs (None: 1.0
-    for a record that starts rested at full charge)."""
+    for a record that starts rested at full charge, checked against the model's OCV where
+    given: see start_soc)."""
     for p, rec_soc0 in zip(paths, start_socs(soc0, len(paths)), strict=True):
         rec = read_record(p, **(read_options or {}))
         if through_hidden_pauses:
             rec = rec.through_hidden_pauses()
-        yield Path(p), rec, start_soc(rec, rec_soc0)
+        yield Path(p), rec, start_soc(rec, rec_soc0, ocv)
+
+
+def model_ocv(model: LmnModel) -> tuple[np.ndarray, np.ndarray] | None:
+    """The model's OCV (SoC knots, V) to check a full start against, None where it carries no
+    rising OCV (an absolute-output model's may be flat)."""
+    return (model.ocv_soc, model.ocv_v) if model.ocv_v[-1] > model.ocv_v[0] else None
 
 
 def evaluate_model(model: LmnModel, paths: list[str | Path],
@@ -113,7 +121,8 @@ def evaluate_model(model: LmnModel, paths: list[str | Path],
     SoC (what the cell did); True: no split there, as a host that drives the FMU through the
     record's time column sees it (the model's state runs on through the pause)."""
     return evaluate_records(model, [(rec, rec_soc0) for _, rec, rec_soc0 in read_records(
-        paths, soc0, read_options, through_hidden_pauses)], capacity_ah, ambient)
+        paths, soc0, read_options, through_hidden_pauses, model_ocv(model))], capacity_ah,
+        ambient)
 
 
 def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc
 from lmncell.data.readers import read_record
-from lmncell.evaluation.evaluate import ambient_of, simulate_segment
+from lmncell.evaluation.evaluate import ambient_of, model_ocv, simulate_segment
 from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import load_model
 from lmncell.runtime.step import initial_hysteresis, simulate_ambient
@@ -56,7 +56,8 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
     them itself, and the pipeline is given what it then takes (held_delayed_currents)."""
     model = load_model(model_path)
     rec = read_record(record)
-    seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0), model.capacity_ah)[0]
+    seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0, model_ocv(model)),
+                             model.capacity_ah)[0]
     if max_steps is not None and len(seg) > max_steps:
         seg = Segment(seg.name, seg.time_s[:max_steps], seg.current_a[:max_steps],
                       seg.voltage_v[:max_steps],

@@ -116,6 +116,20 @@ def shipped_model_doc(path: str | Path) -> dict:
     return doc if isinstance(doc, dict) else {}
 
 
+def shipped_ocv(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
+    """The OCV (SoC knots, V) of the model file an LMNCell FMU ships, to check a full start
+    against (read_records); None where it has none that rises from its first knot to its last."""
+    ocv = shipped_model_doc(path).get("ocv")
+    try:
+        soc, volts = (np.asarray(ocv[k], dtype=float) for k in ("soc", "voltage_v"))
+    except (TypeError, KeyError, ValueError):
+        return None
+    ok = (soc.ndim == 1 and soc.shape == volts.shape and soc.size >= 2
+          and bool(np.all(np.isfinite(soc)) and np.all(np.isfinite(volts)))
+          and volts[-1] > volts[0])
+    return (soc, volts) if ok else None
+
+
 def shipped_model(path: str | Path) -> LmnModel:
     """The model an LMNCell FMU ships (resources/model.json), checked as a model file is;
     ConfigError naming the FMU where it is none or carries no model."""
@@ -450,7 +464,8 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
     traces, rows = [], []
     how = "in steps of Ts with mean inputs" if at_model_steps else "through the samples"
     try:
-        for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+        for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses,
+                                             shipped_ocv(info.path)):
             notes = record_notes(rec, info.capacity_ah)
             for part, seg in record_parts(rec, info.step_s, rec_soc0, info.capacity_ah):
                 progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
@@ -549,7 +564,8 @@ def evaluate_fmu_observer_files(fmu: str | Path, paths: Sequence[str | Path], ki
     unzipped = extract(str(info.path))
     results = []
     try:
-        for p, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+        for p, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses,
+                                             shipped_ocv(info.path)):
             parts = record_parts(rec, info.step_s, rec_soc0, info.capacity_ah)
             seg = observer_segment([s for _, s in parts], start_at)
             part = next(pt for pt, s in parts if s is seg)

@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments
 from lmncell.data.records import DataError
-from lmncell.evaluation.evaluate import read_records
+from lmncell.evaluation.evaluate import model_ocv, read_records
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.observers import ObserverSettings, SocObserver
 from lmncell.runtime.step import exo_series
@@ -152,7 +152,8 @@ def evaluate_observer_files(model_path: str | Path, paths: list[str | Path], kin
     read_record; through_hidden_pauses as in lmncell.evaluation.evaluate.evaluate_model)."""
     model = load_model(model_path)
     results = []
-    for p, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses):
+    for p, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses,
+                                         model_ocv(model)):
         seg = observer_segment(record_to_segments(rec, model.sample_time_s, rec_soc0,
                                                   model.capacity_ah,
                                                   current_delay_s=model.current_delay_s),

@@ -29,7 +29,7 @@ from lmncell.evaluation.evaluate import simulate_segment
 from lmncell.evaluation.metrics import ENDS, pooled, record_metrics
 from lmncell.identification.baselines import fit_ecm2rc
 from lmncell.identification.construction import TrainResult, train_lmn
-from lmncell.identification.ocvfit import lowpass
+from lmncell.identification.ocvfit import lowpass, measured_ocv
 from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.thermal import fit_thermal
 from lmncell.progress import Progress
@@ -74,6 +74,20 @@ def read_training_records(paths: list[str | Path], cfg: TrainConfig,
                         "the cell's response to current needs one; expected the current column "
                         "in A (check the column, and --current-unit for mA)")
     return records
+
+
+def check_full_starts(records: list[Record], soc0: float | Sequence[float] | None,
+                      cfg: TrainConfig) -> None:
+    """Where slow OCV tests are given, refuse a record taken as starting full (no start SoC
+    given, rested at its top voltage) whose start voltage the tests' OCV puts part-way down
+    (start_soc); the SoC scale is that of the records' largest discharge from full."""
+    given = start_socs(soc0, len(records))
+    if not cfg.ocv_tests or all(g is not None for g in given):
+        return
+    knots = np.linspace(0.0, 1.0, 101)
+    ocv = (knots, measured_ocv(cfg.ocv_tests, estimate_capacity(records, given), knots))
+    for rec, rec_soc0 in zip(records, given, strict=True):
+        start_soc(rec, rec_soc0, ocv, "the OCV of the slow tests (--ocv-tests)")
 
 
 def lower_bound_capacity(records: list[Record], soc0: float | Sequence[float] | None,
@@ -286,6 +300,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     if problem:
         raise ConfigError(f"{out}: {problem}")
     records = read_training_records(paths, cfg, progress, read_options)
+    check_full_starts(records, soc0, cfg)
     note = sampling_note(records, cfg.sample_time_s)
     if note:
         progress(note)
