@@ -55,6 +55,7 @@ from lmncell.runtime.observers import (
     state_columns,
 )
 from lmncell.runtime.step import filter_coefficients, tree_plan
+from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
@@ -189,6 +190,7 @@ def _limit_defines(m: LmnModel) -> list[str]:
         f"#define SOC_MARGIN {SOC_MARGIN!r}", f"#define T_MARGIN {TEMPERATURE_MARGIN_K!r}",
         f"#define MIN_TEMPERATURE_C {MIN_TEMPERATURE_C!r}",
         f"#define MAX_TEMPERATURE_C {MAX_TEMPERATURE_C!r}",
+        f"#define DEFAULT_TEMPERATURE_C {DEFAULT_TEMPERATURE_C!r}",
         f"#define LINEAR_STATES {int('filtered_current' not in m.partition_variables)}"]
 
 
@@ -320,7 +322,7 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
      "cell current held over the step, > 0 charges [A]"),
     ("voltage_measured", 1, "input", "continuous", "Real", "V", "0",
      "measured terminal voltage, mean over the step, for the observer; 0 = not measured [V]"),
-    ("temperature", 2, "input", "continuous", "Real", "degC", "25",
+    ("temperature", 2, "input", "continuous", "Real", "degC", f"{DEFAULT_TEMPERATURE_C:g}",
      "see temperature_description"),
     ("voltage", 3, "output", "continuous", "Real", "V", None,
      "model terminal voltage now: the last model step's, or between model steps the step in "

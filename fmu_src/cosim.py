@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from .model import LmnModel
 from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
-from .thermal import CELL_TEMPERATURE_RANGE_C
+from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
@@ -100,7 +100,7 @@ class CellCosim:
         self.params = params
         self.reset()
 
-    def reset(self, temperature_c: float = 25.0) -> None:
+    def reset(self, temperature_c: float = DEFAULT_TEMPERATURE_C) -> None:
         p = self.params
         if not 0.0 <= p.soc0 <= 1.0 or not math.isfinite(p.soc0):
             raise InputError(f"parameter 'soc0' = {p.soc0:g}: expected a fraction within 0..1")
@@ -213,7 +213,7 @@ class CellCosim:
             return ""
         return f"model voltage {v:.3f} V outside the trained {lim[0]:.3f}..{lim[1]:.3f} V"
 
-    def advance(self, step_s: float, current_a: float, temperature_c: float = 25.0,
+    def advance(self, step_s: float, current_a: float, temperature_c: float = DEFAULT_TEMPERATURE_C,
                 voltage_measured_v: float = 0.0) -> int:
         """Advance by one communication step with held inputs; returns model steps taken.
 

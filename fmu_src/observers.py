@@ -87,6 +87,7 @@ import numpy as np
 
 from .model import LmnModel
 from .step import CellStepper, ExoState, interp_one, picker
+from .thermal import DEFAULT_TEMPERATURE_C
 
 OBSERVER_NAMES = {0: "none", 1: "ekf", 2: "fuzzy", 3: "imm"}
 GATE_V = 0.5
@@ -215,7 +216,7 @@ class SocObserver:
     """One observer kind ('ekf', 'fuzzy' or 'imm') around a CellStepper."""
 
     def __init__(self, model: LmnModel, kind: str, soc0_est: float,
-                 capacity_ah: float | None = None, temperature_c: float = 25.0,
+                 capacity_ah: float | None = None, temperature_c: float = DEFAULT_TEMPERATURE_C,
                  settings: ObserverSettings | None = None) -> None:
         if kind not in ("ekf", "fuzzy", "imm"):
             raise ValueError(f"observer {kind!r}: expected 'ekf', 'fuzzy' or 'imm'")
@@ -378,7 +379,7 @@ class SocObserver:
 
     # ----- one step ------------------------------------------------------------------------
     def step(self, current_a: float, voltage_measured_v: float,
-             temperature_c: float = 25.0) -> float:
+             temperature_c: float = DEFAULT_TEMPERATURE_C) -> float:
         """Predict with the current held over the step, correct with the mean measured voltage
         over it; returns the SoC estimate."""
         st, s = self.stepper, self.state

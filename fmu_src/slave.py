@@ -21,7 +21,7 @@ from pythonfmu.enums import Fmi2Status
 from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
 from .model import ModelFileError, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
-from .thermal import TEMPERATURE_DESCRIPTION
+from .thermal import DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never
@@ -95,7 +95,7 @@ class LmnCellSlave(Fmi2Slave):
         m = self._model
         self.current = 0.0
         self.voltage_measured = 0.0
-        self.temperature = 25.0
+        self.temperature = DEFAULT_TEMPERATURE_C
         self.soc0 = 1.0
         self.capacity = float(m.capacity_ah)
         self.observer = 0
@@ -181,7 +181,7 @@ class LmnCellSlave(Fmi2Slave):
         cap = float(self.capacity)
         cap = cap if math.isfinite(cap) and cap > 0 else float(m.capacity_ah)
         observer = int(self.observer) if self.observer in OBSERVERS else 0
-        temp = float(self.temperature) if math.isfinite(self.temperature) else 25.0
+        temp = float(self.temperature) if math.isfinite(self.temperature) else DEFAULT_TEMPERATURE_C
         cosim = CellCosim(m, Parameters(soc0, cap, observer, bool(self.temperature_is_cell)))
         cosim.reset(temp)
         return cosim
@@ -296,7 +296,7 @@ class LmnCellSlave(Fmi2Slave):
                                                             int(self.observer),
                                                             bool(self.temperature_is_cell)))
             self._cosim.reset(float(self.temperature) if math.isfinite(self.temperature)
-                              else 25.0)
+                              else DEFAULT_TEMPERATURE_C)
         except InputError as exc:
             self._cosim = None
             self._error(f"{exc}; not initialised, every step will be refused")

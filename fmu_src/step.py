@@ -26,7 +26,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from .model import DEPLETION_COLUMNS, LmnModel
-from .thermal import heat_w, next_temperature, rested_temperature, step_coefficients
+from .thermal import (
+    DEFAULT_TEMPERATURE_C,
+    heat_w,
+    next_temperature,
+    rested_temperature,
+    step_coefficients,
+)
 
 CHARGE, DISCHARGE = 1, 2
 
@@ -261,7 +267,7 @@ def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray
     Z = np.zeros((n, len(model.partition_variables)))
     D = np.zeros(n, dtype=np.intp)
     S = np.zeros(n)
-    temp = np.full(n, 25.0) if temperature_c is None else temperature_c
+    temp = np.full(n, DEFAULT_TEMPERATURE_C) if temperature_c is None else temperature_c
     cur = current_a.tolist()
     tl = temp.tolist()
     for k in range(n):
@@ -346,7 +352,7 @@ def simulate(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray |
         h0 = initial_hysteresis(soc0)
     ex = exo_series(model, np.asarray(current_a, dtype=float), temperature_c, soc0, capacity_ah,
                     h0, soc)
-    t0 = 25.0 if temperature_c is None else float(temperature_c[0])
+    t0 = DEFAULT_TEMPERATURE_C if temperature_c is None else float(temperature_c[0])
     return simulate_exo(model, ex, soc0, h0, t0)
 
 
@@ -511,7 +517,7 @@ class CellStepper:
     """Step-by-step free-run simulation (the FMU's engine): one call per model sample."""
 
     def __init__(self, model: LmnModel, soc0: float, capacity_ah: float | None = None,
-                 temperature_c: float = 25.0, h0: float | None = None) -> None:
+                 temperature_c: float = DEFAULT_TEMPERATURE_C, h0: float | None = None) -> None:
         self.model = model
         self.exo = ExoStepper(model, capacity_ah)
         h0 = initial_hysteresis(soc0) if h0 is None else h0
@@ -546,7 +552,7 @@ class CellStepper:
         last_soc, last_ocv = self._last_ocv
         return last_ocv if soc == last_soc else self._one.ocv(soc)
 
-    def step(self, current_a: float, temperature_c: float = 25.0) -> float:
+    def step(self, current_a: float, temperature_c: float = DEFAULT_TEMPERATURE_C) -> float:
         """Advance one sample with the current held over it; returns the terminal voltage (V)."""
         m, s, exo = self.model, self.state, self.exo
         exo.update(s, current_a, temperature_c)
@@ -760,7 +766,7 @@ def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarr
     current = np.asarray(current_a, dtype=float)
     ambient = np.broadcast_to(np.asarray(ambient_c, dtype=float), current.shape)
     thermal = CellThermal(model)
-    t_start = thermal.rested(float(ambient[0])) if current.size else 25.0
+    t_start = thermal.rested(float(ambient[0])) if current.size else DEFAULT_TEMPERATURE_C
     stepper = CellStepper(model, soc0, capacity_ah, t_start, h0)
     n = current.size
     u, soc, y = np.empty(n), np.empty(n), np.empty(n)

@@ -23,6 +23,10 @@ CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # a cell's or an ambient temperature
 # the records the readers take, in --ambient and in the FMUs' `temperature` input: outside it a
 # value is refused (298.15 is a temperature in K given as degC)
 
+DEFAULT_TEMPERATURE_C = 25.0   # the temperature (degC) taken where none is given: a record
+# without a temperature, a model step, simulation or FMU whose temperature is not set or not
+# finite (the native FMU's generated header carries it too)
+
 TEMPERATURE_DESCRIPTION = ("ambient temperature (the model computes the cell temperature); the "
                            "measured cell temperature with temperature_is_cell = true [degC]")
 

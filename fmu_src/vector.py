@@ -22,7 +22,7 @@ from .step import (
     fixed_point,
     initial_hysteresis,
 )
-from .thermal import heat_w, next_temperature, rested_temperature
+from .thermal import DEFAULT_TEMPERATURE_C, heat_w, next_temperature, rested_temperature
 
 
 class VectorCells:
@@ -34,7 +34,8 @@ class VectorCells:
     def __init__(self, model: LmnModel, soc0: np.ndarray | float, n: int | None = None,
                  capacity_ah: np.ndarray | float | None = None,
                  resistance_scale: np.ndarray | float = 1.0,
-                 temperature_c: float = 25.0, temperature_is_cell: bool = True) -> None:
+                 temperature_c: float = DEFAULT_TEMPERATURE_C,
+                 temperature_is_cell: bool = True) -> None:
         soc0 = np.atleast_1d(np.asarray(soc0, dtype=float))
         n = int(n if n is not None else soc0.size)
         self.model, self.n = model, n

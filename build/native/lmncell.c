@@ -1172,7 +1172,7 @@ static int outputs_finite(const State *s) {
 
 /* the state right after initialisation, from the parameters and the temperature input */
 static void init_state(State *s) {
-    double t_in = isfinite(s->temperature) ? s->temperature : 25.0;
+    double t_in = isfinite(s->temperature) ? s->temperature : DEFAULT_TEMPERATURE_C;
     double soc0 = s->soc0 >= 0.0 && s->soc0 <= 1.0 ? s->soc0 : (s->soc0 > 1.0 ? 1.0 : 0.0);
     s->t_cell_set = 0;
     s->t_last_input = cell_temperature(s, t_in);
@@ -1213,7 +1213,7 @@ static fmi2Status initialise(Instance *in) {
 static void defaults(State *s) {
     memset(s, 0, sizeof *s);
     s->magic = STATE_MAGIC;
-    s->temperature = 25.0;
+    s->temperature = DEFAULT_TEMPERATURE_C;
     s->soc0 = 1.0;
     s->capacity = CAPACITY_AH;
     s->voltage = RELATIVE_OCV ? ocv(1.0) : 0.0;

@@ -11,6 +11,7 @@ import numpy as np
 from lmncell.data.records import DataError, Record
 from lmncell.data.resample import resample_segment
 from lmncell.data.soc import REST_CURRENT_A, discharged_ah, reference_soc
+from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 
 @dataclass
@@ -41,6 +42,13 @@ class Segment:
 
     def __len__(self) -> int:
         return int(self.time_s.size)
+
+    def temperatures(self) -> np.ndarray:
+        """The temperature of each step (°C): temperature_c, or DEFAULT_TEMPERATURE_C where the
+        segment has none."""
+        if self.temperature_c is None:
+            return np.full(len(self), DEFAULT_TEMPERATURE_C)
+        return self.temperature_c
 
 
 def rested_mask(rec: Record, min_rest_s: float = 60.0) -> np.ndarray:

@@ -25,8 +25,7 @@ def fmu_input(seg: Segment, ts: float, temperature_c: np.ndarray | None = None) 
     sig["time"] = ts * np.arange(n + 1)
     sig["current"][:n] = seg.current_a
     sig["current"][n] = seg.current_a[-1]
-    temp = temperature_c if temperature_c is not None else seg.temperature_c
-    temp = temp if temp is not None else np.full(n, 25.0)
+    temp = temperature_c if temperature_c is not None else seg.temperatures()
     sig["temperature"][:n] = temp
     sig["temperature"][n] = temp[-1]
     return sig
@@ -72,7 +71,7 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
                                      initial_hysteresis(seg.soc0))
     else:
         sim = simulate_segment(model, seg)
-        cell = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
+        cell = seg.temperatures()
     res = run_fmu_on_segment(fmu, fmu_seg, model.sample_time_s, ambient=ambient)
     n = len(seg)
     v, s, t = res["voltage"][1:n + 1], res["soc"][1:n + 1], res["cell_temperature"][1:n + 1]

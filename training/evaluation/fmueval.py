@@ -35,6 +35,7 @@ from lmncell.evaluation.metrics import record_metrics
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
 from lmncell.runtime.model import LmnModel, model_from_dict
+from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 # the variables evaluate needs; every LMNCell FMU has them
 REQUIRED_VARIABLES = ("current", "temperature", "voltage", "soc", "out_of_range", "soc0",
@@ -348,7 +349,7 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     temperature = (np.full(len(part), float(ambient_of(seg)[0])) if ambient
                    else part.temperature_or_chamber())
     if temperature is None:
-        temperature = np.full(len(part), 25.0)
+        temperature = np.full(len(part), DEFAULT_TEMPERATURE_C)
     start_s = start_step * ts
     points = communication_points(part.time_s - part.time_s[0], ts, n, info.current_delay_s)
     points = points[points > start_s * (1.0 + 1e-12)]
@@ -430,9 +431,7 @@ def drive_at_model_steps(info: FmuInfo, unzipped: str, seg: Segment, ambient: bo
     current delay the FMU then has only (δ·i(k−1) + (Ts − δ)·i(k))/Ts, not what the current
     did within the step."""
     n, ts = len(seg), info.step_s
-    temperature = ambient_of(seg) if ambient else seg.temperature_c
-    if temperature is None:
-        temperature = np.full(n, 25.0)
+    temperature = ambient_of(seg) if ambient else seg.temperatures()
     inputs = np.column_stack([seg.current_a, temperature]).tolist()
     out = np.empty((n, 4))
 

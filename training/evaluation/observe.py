@@ -39,7 +39,7 @@ def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
     if kind == "coulomb":
         est = exo_series(model, seg.current_a[k0:], None, soc0_est).soc
         return ObserverRun(kind, seg.time_s[k0:], seg.soc_ref[k0:], est, np.zeros_like(est), 0)
-    temp = seg.temperature_c if seg.temperature_c is not None else np.full(len(seg), 25.0)
+    temp = seg.temperatures()
     settings = ObserverSettings.for_model(model)
     ob = SocObserver(model, kind, soc0_est, temperature_c=float(temp[k0]), settings=settings)
     est, std = np.empty(len(seg) - k0), np.empty(len(seg) - k0)

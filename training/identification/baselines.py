@@ -19,6 +19,7 @@ import numpy as np
 from lmncell.data.dataset import Segment
 from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ocvfit import hat_basis, second_difference
+from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 from scipy.optimize import least_squares
 from scipy.signal import lfilter
 
@@ -63,7 +64,7 @@ class Ecm2rc:
         """Free-run terminal voltage (V) for the current held over each step and SoC at its end
         (h: the hysteresis state series, if already computed)."""
         B = hat_basis(soc, SOC_KNOTS)
-        T = np.full(soc.size, 25.0) if temperature_c is None else temperature_c
+        T = np.full(soc.size, DEFAULT_TEMPERATURE_C) if temperature_c is None else temperature_c
         f = np.exp(self.beta * (25.0 - T) / 10.0)
         u = np.interp(soc, self.ocv_soc, self.ocv_v) + f * (B @ self.r0) * current_a
         for r, tau in ((self.r1, self.tau1_s), (self.r2, self.tau2_s)):

@@ -135,7 +135,7 @@ def raw_partition_inputs(base: LmnModel, seg: Segment) -> tuple[np.ndarray, np.n
     gain = base.sample_time_s / (3600.0 * base.capacity_ah)     # ExoStepper.soc_gain
     eta = np.where(i > 0, base.efficiency_charge, base.efficiency_discharge)
     soc = np.add.accumulate(np.concatenate([[float(seg.soc0)], gain * eta * i]))[1:]
-    temp = np.full(i.size, 25.0) if seg.temperature_c is None else seg.temperature_c
+    temp = seg.temperatures()
     columns = {"soc": soc, "current": i, "temperature": temp}
     return np.column_stack([columns[v] for v in base.partition_variables]), soc
 
