@@ -157,7 +157,7 @@ def test_a_record_that_starts_rested_part_way_down_is_not_taken_as_full(
     assert main(["evaluate", str(a123_model), str(dither), "--soc0", "0.01"]) == 0
     assert "A123_OCV_P25_S2.csv.gz" in capsys.readouterr().out
     readme = " ".join((DATA.parent / "README.md").read_text(encoding="utf-8").split())
-    assert f"below SoC {START_FULL_MIN_SOC:g}, such as a rest part-way down" in readme
+    assert f"puts below SoC {START_FULL_MIN_SOC:g}, such as a rest part-way down" in readme
 
 
 def test_ocv_soc_reads_the_last_rise_through_a_voltage() -> None:
