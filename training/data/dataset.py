@@ -93,10 +93,11 @@ def start_soc(rec: Record, soc0: float | None,
                     "soc0= in Python (1.0 for a record that starts fully charged)")
 
 
-def ocv_soc(voltage_v: float, ocv_soc: np.ndarray, ocv_v: np.ndarray) -> float:
-    """The SoC (fraction) at which a piecewise linear OCV curve last rises through voltage_v
-    (V): 1 at or above the curve's last value, 0 where it never rises through it."""
-    s, v = np.asarray(ocv_soc, dtype=float), np.asarray(ocv_v, dtype=float)
+def ocv_soc(voltage_v: float, soc_knots: np.ndarray, ocv_v: np.ndarray) -> float:
+    """The SoC (fraction) at which a piecewise linear OCV curve (ocv_v, V, at soc_knots) last
+    rises through voltage_v (V): 1 at or above the curve's last value, 0 where it never rises
+    through it."""
+    s, v = np.asarray(soc_knots, dtype=float), np.asarray(ocv_v, dtype=float)
     if voltage_v >= v[-1]:
         return 1.0
     rises = np.flatnonzero((v[:-1] <= voltage_v) & (v[1:] > voltage_v))
@@ -106,12 +107,12 @@ def ocv_soc(voltage_v: float, ocv_soc: np.ndarray, ocv_v: np.ndarray) -> float:
     return float(s[k] + (s[k + 1] - s[k]) * (voltage_v - v[k]) / (v[k + 1] - v[k]))
 
 
-def _check_full_start(rec: Record, ocv_soc_knots: np.ndarray, ocv_v: np.ndarray,
+def _check_full_start(rec: Record, soc_knots: np.ndarray, ocv_v: np.ndarray,
                       ocv_name: str) -> None:
     """DataError where the record's rested start voltage lies below START_FULL_MIN_SOC on the
     OCV."""
     v0 = float(rec.voltage_v[0])
-    soc = ocv_soc(v0, ocv_soc_knots, ocv_v)
+    soc = ocv_soc(v0, soc_knots, ocv_v)
     if soc < START_FULL_MIN_SOC:
         raise DataError(f"{rec.meta.source}: starts rested at {v0:.4g} V, which {ocv_name} "
                         f"puts at SoC {soc:.2f}, not full charge ({float(ocv_v[-1]):.4g} V at "
