@@ -181,10 +181,15 @@ class LmnCellSlave(Fmi2Slave):
         cap = float(self.capacity)
         cap = cap if math.isfinite(cap) and cap > 0 else float(m.capacity_ah)
         observer = int(self.observer) if self.observer in OBSERVERS else 0
-        temp = float(self.temperature) if math.isfinite(self.temperature) else DEFAULT_TEMPERATURE_C
         cosim = CellCosim(m, Parameters(soc0, cap, observer, bool(self.temperature_is_cell)))
-        cosim.reset(temp)
+        cosim.reset(self._start_temperature())
         return cosim
+
+    def _start_temperature(self) -> float:
+        """The temperature input the engine starts from (degC): as set, or
+        DEFAULT_TEMPERATURE_C where it is not finite."""
+        return (float(self.temperature) if math.isfinite(self.temperature)
+                else DEFAULT_TEMPERATURE_C)
 
     # ----- guarded access. With LMNCell's build of the wrapper an ordinary call error raises
     # CallError, which the wrapper logs and returns as fmi2Error (nothing is changed). pythonfmu
@@ -295,8 +300,7 @@ class LmnCellSlave(Fmi2Slave):
                                                             float(self.capacity),
                                                             int(self.observer),
                                                             bool(self.temperature_is_cell)))
-            self._cosim.reset(float(self.temperature) if math.isfinite(self.temperature)
-                              else DEFAULT_TEMPERATURE_C)
+            self._cosim.reset(self._start_temperature())
         except InputError as exc:
             self._cosim = None
             self._error(f"{exc}; not initialised, every step will be refused")

@@ -50,6 +50,12 @@ class Segment:
             return np.full(len(self), DEFAULT_TEMPERATURE_C)
         return self.temperature_c
 
+    def start_temperature(self) -> float:
+        """The temperature at the segment's first step (°C), or DEFAULT_TEMPERATURE_C where
+        the segment has none."""
+        return (DEFAULT_TEMPERATURE_C if self.temperature_c is None
+                else float(self.temperature_c[0]))
+
 
 def rested_mask(rec: Record, min_rest_s: float = 60.0) -> np.ndarray:
     """Samples inside rests (|i| < REST_CURRENT_A) that last at least min_rest_s, and the first

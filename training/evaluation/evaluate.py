@@ -24,7 +24,6 @@ from lmncell.progress import print_progress as _print
 from lmncell.runtime.cosim import trained_bounds
 from lmncell.runtime.model import LmnModel, load_model, model_from_dict
 from lmncell.runtime.step import initial_hysteresis, simulate, simulate_ambient
-from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 
 def simulate_segment(model: LmnModel, seg: Segment, capacity_ah: float | None = None):
@@ -57,9 +56,7 @@ def ambient_of(seg: Segment) -> np.ndarray:
     the record's own (chamber) temperature, else 25 °C."""
     if seg.ambient_c is not None:
         return np.full(len(seg), float(seg.ambient_c))
-    if seg.temperature_c is not None:
-        return np.asarray(seg.temperature_c, dtype=float)
-    return np.full(len(seg), DEFAULT_TEMPERATURE_C)
+    return np.asarray(seg.temperatures(), dtype=float)
 
 
 def temperature_input(seg: Segment, ambient: bool) -> str:

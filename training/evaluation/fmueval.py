@@ -24,6 +24,7 @@ from lmncell.data.records import Record
 from lmncell.evaluation.evaluate import (
     Trace,
     ambient_of,
+    model_ocv,
     print_rows,
     read_records,
     record_notes,
@@ -118,17 +119,13 @@ def shipped_model_doc(path: str | Path) -> dict:
 
 
 def shipped_ocv(path: str | Path) -> tuple[np.ndarray, np.ndarray] | None:
-    """The OCV (SoC knots, V) of the model file an LMNCell FMU ships, to check a full start
-    against (read_records); None where it has none that rises from its first knot to its last."""
-    ocv = shipped_model_doc(path).get("ocv")
+    """The OCV (model_ocv) of the model file an LMNCell FMU ships, to check a full start
+    against (read_records); None where the FMU ships none that the model loader reads."""
     try:
-        soc, volts = (np.asarray(ocv[k], dtype=float) for k in ("soc", "voltage_v"))
-    except (TypeError, KeyError, ValueError):
+        return model_ocv(model_from_dict(shipped_model_doc(path),
+                                         f"{path}: resources/model.json"))
+    except ValueError:      # ModelFileError: no model file, or one this LMNCell refuses
         return None
-    ok = (soc.ndim == 1 and soc.shape == volts.shape and soc.size >= 2
-          and bool(np.all(np.isfinite(soc)) and np.all(np.isfinite(volts)))
-          and volts[-1] > volts[0])
-    return (soc, volts) if ok else None
 
 
 def shipped_model(path: str | Path) -> LmnModel:

@@ -21,7 +21,6 @@ from lmncell.identification.prefit import temperature_levels
 from lmncell.identification.tree import Design, _lags, freerun_rmse, stabilise
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.step import fixed_point, initial_hysteresis, recursion
-from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 from scipy.optimize import least_squares, lsq_linear
 
 Progress = Callable[[str], None]
@@ -67,8 +66,7 @@ class _FreeRunProblem:
         self.Phis = [model.validities(ex.z, ex.direction) for ex in design.exo]
         self.Bs = [hat_basis(ex.soc, knots) for ex in design.exo] if self.with_ocv else []
         self.h0s = [initial_hysteresis(s.soc0) for s in segs]
-        self.t0s = [DEFAULT_TEMPERATURE_C if s.temperature_c is None else float(s.temperature_c[0])
-                    for s in segs]
+        self.t0s = [s.start_temperature() for s in segs]
         self.theta0 = model.theta.copy()
         self.sqrt_ridge = np.sqrt(float(cfg.oe_ridge))
         n_total = float(sum(float(np.sum(w * w)) for w in self.w_all))

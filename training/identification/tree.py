@@ -13,7 +13,6 @@ from lmncell.data.dataset import Segment
 from lmncell.identification.ladder import Ladder
 from lmncell.runtime.model import Depletion, LmnModel
 from lmncell.runtime.step import ExoSeries, exo_series, initial_hysteresis, simulate_exo
-from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 
 def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: np.ndarray,
@@ -177,8 +176,8 @@ def freerun_squares(model: LmnModel, segs: list[Segment], design: Design,
         w = (design.w_val if which == "val" else design.w_fit)[a:b]
         if w.sum() == 0:
             continue
-        t0 = DEFAULT_TEMPERATURE_C if seg.temperature_c is None else float(seg.temperature_c[0])
-        sim = simulate_exo(model, ex, seg.soc0, initial_hysteresis(seg.soc0), t0)
+        sim = simulate_exo(model, ex, seg.soc0, initial_hysteresis(seg.soc0),
+                           seg.start_temperature())
         err = seg.voltage_v - sim.voltage_v
         if not np.isfinite(err).all():
             out[k] = np.inf
