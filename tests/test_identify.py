@@ -14,6 +14,7 @@ from lmncell.data.records import Record, RecordMeta
 from lmncell.identification.construction import validation_masks
 from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.refinement import (
+    _downweighted,
     _offset_ridge,
     _robust_linear_solve,
     _solve_in_knot_values,
@@ -65,6 +66,28 @@ def test_huber_refinement_is_not_pulled_by_a_burst_of_large_errors() -> None:
     err_plain, err_huber = np.abs(plain - [0.3, 2.0]).max(), np.abs(huber - [0.3, 2.0]).max()
     assert err_plain > 0.1
     assert err_huber < err_plain / 4
+
+
+def test_constrained_huber_solve_equals_the_bounded_one_where_no_constraint_binds() -> None:
+    # the constrained path reweights the normal equations by downdating J'J (only the
+    # down-weighted rows are multiplied again); with constraints that do not bind it must find
+    # the same Huber solution as the bounded solver, which reweights the rows themselves
+    rng = np.random.default_rng(1)
+    t = np.linspace(0.0, 1.0, 3000)
+    J = np.column_stack([np.ones_like(t), t, t**2])
+    b = 0.3 + 2.0 * t - t**2 + 0.01 * rng.standard_normal(t.size)
+    b[-150:] -= 0.5
+    cfg = load_config(robust_loss="huber")
+    free = (np.full(3, -np.inf), np.full(3, np.inf))
+    bounded = _robust_linear_solve(J, b, b.size, free, cfg).x
+    loose = (np.eye(3), np.full(3, -100.0))               # x ≥ −100: never binds
+    constrained = _robust_linear_solve(J, b, b.size, free, cfg, loose).x
+    assert np.abs(bounded - [0.3, 2.0, -1.0]).max() > 1e-3      # the outliers do pull a little
+    np.testing.assert_allclose(constrained, bounded, rtol=0, atol=1e-6)   # lsi's 1e-9 ridge
+    w = np.where(np.arange(t.size) % 7 == 0, rng.uniform(0.0, 1.0, t.size), 1.0)
+    H, c = _downweighted((J.T @ J, J.T @ b), J, b, w)
+    np.testing.assert_allclose(H, J.T @ (J * w[:, None]), rtol=1e-12)
+    np.testing.assert_allclose(c, (J * w[:, None]).T @ b, rtol=1e-12)
 
 
 def test_soc_reference_weights_follow_the_ocv_slope() -> None:

@@ -345,6 +345,20 @@ def _solve_in_knot_values(J: np.ndarray, b: np.ndarray, n_res: int, cfg: TrainCo
     return sol
 
 
+def _downweighted(normal: tuple[np.ndarray, np.ndarray], J: np.ndarray, b: np.ndarray,
+                  weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """J'·W·J and J'·W·b from the unweighted J'·J and J'·b, less the rows whose weight is
+    below 1: the Huber iterations down-weight a minority of rows, so this costs that
+    minority's product instead of all rows'."""
+    JtJ, Jtb = normal
+    low = np.flatnonzero(weights < 1.0)
+    if low.size == 0:
+        return JtJ, Jtb
+    Js = J[low]
+    cut = (1.0 - weights[low])[:, None] * Js
+    return JtJ - Js.T @ cut, Jtb - cut.T @ b[low]
+
+
 HUBER_K = 1.345      # Huber threshold in robust standard deviations (95 % efficiency)
 IRLS_ITERATIONS = 8
 
@@ -365,11 +379,11 @@ def _robust_linear_solve(J: np.ndarray, b: np.ndarray, n_res: int,
     squares with the scale fixed from the unweighted solution). Deterministic.
     constraints: (G, h) of G·x ≥ h (_ladder_constraints), which then replace `bounds`."""
     method = "bvls" if np.isfinite(bounds[0]).any() else "trf"
+    normal = (J.T @ J, J.T @ b) if constraints is not None else None
 
     def solve(weights: np.ndarray):
-        if constraints is not None:
-            Jw = J * weights[:, None]
-            x = lsi(J.T @ Jw, Jw.T @ b, *constraints)
+        if normal is not None:
+            x = lsi(*_downweighted(normal, J, b, weights), *constraints)
             return _Solution(x, 0.0, 1, 0)
         sw = np.sqrt(weights)
         return lsq_linear(J * sw[:, None], b * sw, bounds=bounds, method=method,
