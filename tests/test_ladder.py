@@ -7,8 +7,14 @@ import pytest
 from lmncell.config import ConfigError, load_config
 from lmncell.data.dataset import Segment
 from lmncell.evaluation.interpret import explain_text, ladder_parameters, local_model_table
+from lmncell.identification import ladder as ladder_module
 from lmncell.identification.construction import train_lmn
-from lmncell.identification.ladder import constraint_temperatures_c, is_ladder, ladder_for
+from lmncell.identification.ladder import (
+    constraint_temperatures_c,
+    is_ladder,
+    ladder_for,
+    verified_nnls,
+)
 from lmncell.identification.ocvfit import lowpass
 from lmncell.identification.tree import skeleton, wls
 
@@ -67,6 +73,41 @@ def test_ladder_solution_equals_least_squares_where_that_is_feasible_and_bounds_
     theta = ladder.solve(X, X @ theta_bad, w)
     assert ladder.holds(theta, 1e-12)
     assert ladder.C[k] @ theta == pytest.approx(0.0, abs=1e-9)
+
+
+def _nnls_problem(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """A non-negative least-squares problem with unit columns whose optimum has some v = 0."""
+    rng = np.random.default_rng(seed)
+    A = rng.standard_normal((40, 25))
+    return A / np.linalg.norm(A, axis=0), rng.standard_normal(40)
+
+
+def _kkt_gap(A: np.ndarray, b: np.ndarray, v: np.ndarray) -> float:
+    """How far v is from the NNLS optimum's conditions, g = A'(b − Av) ≤ 0 and v·g = 0."""
+    g = A.T @ (b - A @ v)
+    return float(max(g.max(), np.abs(v * g).max()))
+
+
+def test_verified_nnls_returns_the_optimum() -> None:
+    for seed in range(5):
+        A, b = _nnls_problem(seed)
+        v = verified_nnls(A, b)
+        assert v.min() >= 0.0 and (v == 0.0).any()
+        assert _kkt_gap(A, b, v) < 1e-9
+
+
+def test_verified_nnls_replaces_an_nnls_answer_that_is_not_optimal(monkeypatch) -> None:
+    # SciPy's NNLS can return a point that is not the optimum, with a residual norm that is
+    # not the point's (scipy/scipy#25389; seen on an A123 refinement): such an answer is
+    # checked against the optimality conditions and solved again
+    A, b = _nnls_problem(0)
+    best = verified_nnls(A, b)
+    wrong = np.where(best > 0.0, 0.5 * best, 0.0)                # feasible, not optimal
+    assert _kkt_gap(A, b, wrong) > 1e-3
+    monkeypatch.setattr(ladder_module, "nnls", lambda *_a, **_k: (wrong, 0.0))
+    v = verified_nnls(A, b)
+    assert _kkt_gap(A, b, v) < 1e-9
+    np.testing.assert_allclose(A @ v, A @ best, atol=1e-9)
 
 
 def test_both_depletion_resistances_are_held_non_negative() -> None:
