@@ -138,9 +138,9 @@ def verified_nnls(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     residual, g ≤ NNLS_KKT_TOL, and v·|g| ≤ NNLS_KKT_TOL, g = 0 where v > 0), else the
     bounded-variable solver's. SciPy ≥ 1.15's NNLS can stop at a point that fails them and
     report a residual norm that is not the point's (scipy/scipy#25389): on an A123 refinement
-    with 4004 ladder rows, perturbations of 1e-15 in the normal matrix gave residual norms
-    0.903 … 1.000 where the optimum is 0.903, and a refined model 3.5 % worse on its own fit
-    that broke its constraints by 1e-5."""
+    with 4004 ladder rows, relative perturbations of 1e-15 in its matrix gave residual norms
+    0.903 … 1.000 where the optimum is 0.903, and the normal matrix summed in another order a
+    refinement step 3.5 % worse on its own fit that broke its constraints by 1e-5."""
     with np.errstate(over="ignore", invalid="ignore"):
         v, _ = nnls(A, b, maxiter=50 * A.shape[1])
         grad = A.T @ (b - A @ v)
