@@ -723,13 +723,13 @@ def ocv_interval_sigma(soc: float, error_v: float, xs: list[float], ys: list[flo
         return 0.0
     u0 = interp_one(soc, xs, ys)
     j = bisect.bisect_right(xs, soc)
-    high = _first_crossing(soc, u0, u0 + error_v, xs[j:], ys[j:], 1.0)
+    high = first_crossing(soc, u0, u0 + error_v, xs[j:], ys[j:], 1.0)
     below = bisect.bisect_left(xs, soc)
-    low = _first_crossing(soc, u0, u0 - error_v, xs[:below][::-1], ys[:below][::-1], 0.0)
+    low = first_crossing(soc, u0, u0 - error_v, xs[:below][::-1], ys[:below][::-1], 0.0)
     return 0.5 * (high - low)
 
 
-def _first_crossing(x0: float, y0: float, target: float, xs: list[float], ys: list[float],
+def first_crossing(x0: float, y0: float, target: float, xs: list[float], ys: list[float],
                     end: float) -> float:
     """Walking from (x0, y0) through the knots (xs, ys) in the order given, the first x where
     the piecewise-linear curve reaches target; end if it never does."""

@@ -689,7 +689,7 @@ static double soc_variance_floor(double err, double slope) {
     return f < 1.0 ? f : 1.0;
 }
 
-/* observers._first_crossing: walking from (x0, y0) through the OCV knots k = from, from + step,
+/* observers.first_crossing: walking from (x0, y0) through the OCV knots k = from, from + step,
    …, the first SoC where the curve reaches target; end if it never does */
 static double first_crossing(double x0, double y0, double target, int from, int step,
                              double end) {

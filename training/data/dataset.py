@@ -11,6 +11,7 @@ import numpy as np
 from lmncell.data.records import DataError, Record
 from lmncell.data.resample import resample_segment
 from lmncell.data.soc import REST_CURRENT_A, discharged_ah, reference_soc
+from lmncell.runtime.observers import first_crossing
 from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 
@@ -103,14 +104,12 @@ def ocv_soc(voltage_v: float, soc_knots: np.ndarray, ocv_v: np.ndarray) -> float
     """The SoC (fraction) at which a piecewise linear OCV curve (ocv_v, V, at soc_knots) last
     rises through voltage_v (V): 1 at or above the curve's last value, 0 where it never rises
     through it."""
-    s, v = np.asarray(soc_knots, dtype=float), np.asarray(ocv_v, dtype=float)
+    s = [float(x) for x in soc_knots]
+    v = [float(x) for x in ocv_v]
     if voltage_v >= v[-1]:
         return 1.0
-    rises = np.flatnonzero((v[:-1] <= voltage_v) & (v[1:] > voltage_v))
-    if rises.size == 0:
-        return 0.0
-    k = int(rises[-1])
-    return float(s[k] + (s[k + 1] - s[k]) * (voltage_v - v[k]) / (v[k + 1] - v[k]))
+    # walking down from the top knot, the first point at or below voltage_v
+    return first_crossing(s[-1], v[-1], voltage_v, s[-2::-1], v[-2::-1], 0.0)
 
 
 def _check_full_start(rec: Record, soc_knots: np.ndarray, ocv_v: np.ndarray,
