@@ -110,6 +110,21 @@ def test_verified_nnls_replaces_an_nnls_answer_that_is_not_optimal(monkeypatch) 
     np.testing.assert_allclose(A @ v, A @ best, atol=1e-9)
 
 
+def test_verified_nnls_keeps_the_nnls_answer_where_bvls_fails(monkeypatch) -> None:
+    # LAPACK's SVD inside BVLS can fail to converge (an A123 refinement with charge records,
+    # 204 × 2638): the training goes on with NNLS's answer, not a LinAlgError traceback
+    A, b = _nnls_problem(1)
+    best = verified_nnls(A, b)
+    near = np.where(best > 0.0, 0.999 * best, 0.0)
+    monkeypatch.setattr(ladder_module, "nnls", lambda *_a, **_k: (near, 0.0))
+
+    def no_convergence(*_a, **_k):
+        raise np.linalg.LinAlgError("SVD did not converge in Linear Least Squares")
+
+    monkeypatch.setattr(ladder_module, "lsq_linear", no_convergence)
+    np.testing.assert_array_equal(verified_nnls(A, b), near)
+
+
 def test_both_depletion_resistances_are_held_non_negative() -> None:
     """With the fast depletion regressor d2(k) the ladder has R_depletion_fast ≥ 0 beside
     R_depletion ≥ 0: a fit whose d2 coefficient comes out negative ends on 0."""
