@@ -419,6 +419,27 @@ def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:
     assert np.all((m.ocv_v[mid] > 3.2) & (m.ocv_v[mid] < 3.4))     # LFP plateau
 
 
+def test_absolute_output_with_slow_ocv_tests_keeps_its_offsets_free(tmp_path) -> None:
+    """An absolute-output model's offset is the voltage level itself: with an OCV test beside
+    it, offset_bound_mv "auto" must not bound it to 50 mV (it did: a ladder model 3.2 V below
+    the cell), and a bound given for it is refused."""
+    from tests.conftest import A123_S1, DATA
+
+    tests = [str(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"),
+             str(DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz")]
+    assert load_config(ocv_tests=tests).offset_bound_v() == pytest.approx(0.05)
+    assert load_config(ocv_tests=tests, output="absolute").offset_bound_v() == 0.0
+    assert load_config(ocv_tests=tests, ocv_input=True).offset_bound_v() == 0.0
+    assert load_config(output="absolute", offset_bound_mv=0).offset_bound_v() == 0.0
+    with pytest.raises(ConfigError, match="offset_bound_mv.*absolute"):
+        load_config(output="absolute", offset_bound_mv=50)
+    m, info = train_files([A123_S1], tmp_path / "m.json", capacity_ah=2.03, soc0=1.0,
+                          progress=lambda _m: None, max_local_models=2, ocv_tests=tests,
+                          output="absolute", hysteresis="off", oe_max_iterations=2)
+    assert not m.relative_ocv
+    assert info["train_window_rmse_mv"] < 30.0
+
+
 def _two_chamber_cell() -> tuple[list, float]:
     """Segments of a synthetic cell at chamber temperatures 10 and 25 °C that warms up by up to
     6 K inside each (R0 twice as large at 10 °C, rising towards empty), and its capacity."""

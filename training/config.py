@@ -103,7 +103,8 @@ class TrainConfig:
     time constants (s), for a collapse that follows the load within seconds; 0: none; "auto":
     the one nearest 5 s where the network has temperature regions, else none.
     offset_bound_mv: in an RC ladder, |U_off| ≤ this (mV) for every local model's OCV offset;
-    0: free; "auto": 50 mV where ocv_tests fix the OCV, else free.
+    0: free; "auto": 50 mV where ocv_tests fix the OCV, else free (and free for output
+    "absolute" or ocv_input, where the offset is not one from the OCV).
 
     Temperature
     temperature_scaling: an Arrhenius gain g(T) = exp(E·(1/T − 1/T_ref)) on the current and
@@ -228,10 +229,14 @@ class TrainConfig:
 
     def offset_bound_v(self) -> float:
         """The bound on |U_off| (V; 0: none): offset_bound_mv, or for "auto"
-        OFFSET_BOUND_MV where slow OCV tests fix the OCV, else none (an OCV estimated from
-        dynamic records can be off by more, and the offsets carry that error)."""
+        OFFSET_BOUND_MV where slow OCV tests fix the OCV and the offset is one from the OCV
+        (output "relative_ocv" without ocv_input), else none (an OCV estimated from dynamic
+        records can be off by more, and the offsets carry that error; an absolute output's
+        offset is the voltage level itself, and with the OCV as an input its coefficient
+        shifts the offset)."""
         if self.offset_bound_mv == "auto":
-            return 1e-3 * OFFSET_BOUND_MV if self.ocv_tests else 0.0
+            from_ocv = self.output == "relative_ocv" and not self.ocv_input
+            return 1e-3 * OFFSET_BOUND_MV if self.ocv_tests and from_ocv else 0.0
         return 1e-3 * float(self.offset_bound_mv)
 
     def offset_ridge_weight(self) -> float:
@@ -379,6 +384,10 @@ class TrainConfig:
         bound = self.offset_bound_mv
         if not (bound == "auto" or (is_real_number(bound) and 0 <= bound < 1e4)):
             raise self._bad("offset_bound_mv", "expected 'auto', 0 (unbounded) or a bound in mV")
+        if self.output == "absolute" and bound not in ("auto", 0):
+            raise self._bad("offset_bound_mv", "bounds each local model's offset from the OCV; "
+                            "with output = 'absolute' the offset is the voltage level itself "
+                            "(volts): expected 'auto' or 0 (unbounded)")
         ridge = self.offset_ridge
         if not (ridge == "auto" or (is_real_number(ridge) and 0 <= ridge <= 1)):
             raise self._bad("offset_ridge", "expected 'auto' or a weight ρ within 0…1 (0: off)")
