@@ -144,9 +144,9 @@ class TrainConfig:
     stop: "validation" (M with the lowest free-run validation error; at several temperature
     levels the geometric mean of each level's) or "aicc" (M with the lowest corrected Akaike
     criterion of the one-step loss).
-    validation / validation_fraction: the validation samples of stop: "block" (the middle
-    validation_fraction of every record's time), "record" (the last record given) or "none"
-    (then stop is "aicc").
+    validation / validation_fraction: the validation samples of stop: "block"
+    (validation_fraction of every record's time, in five blocks centred at 10, 30, 50, 70 and
+    90 % of it), "record" (the last record given) or "none" (then stop is "aicc").
     max_pole: largest allowed magnitude of a local model's pole (stability repair; 1).
 
     Weights

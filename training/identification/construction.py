@@ -66,7 +66,8 @@ from lmncell.identification.tree import (
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.step import exo_series
 
-VALIDATION_BLOCKS = 5   # 'auto' keeps hysteresis only if it cuts the pre-fit RMSE by 3 %
+VALIDATION_BLOCKS = 5   # validation 'block': time blocks centred at 10, 30, … 90 % of each
+#                         record (validation_masks)
 
 
 Progress = Callable[[str], None]
