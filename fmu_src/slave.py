@@ -21,7 +21,7 @@ from pythonfmu.enums import Fmi2Status
 from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
 from .model import ModelFileError, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
-from .thermal import DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
+from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never
@@ -187,9 +187,12 @@ class LmnCellSlave(Fmi2Slave):
 
     def _start_temperature(self) -> float:
         """The temperature input the engine starts from (degC): as set, or
-        DEFAULT_TEMPERATURE_C where it is not finite."""
-        return (float(self.temperature) if math.isfinite(self.temperature)
-                else DEFAULT_TEMPERATURE_C)
+        DEFAULT_TEMPERATURE_C where it is not one that a step takes (not finite, or outside
+        CELL_TEMPERATURE_RANGE_C: the first step refuses it; the outputs until then stay
+        finite, a model with temperature terms read NaN at −1e308 °C)."""
+        low, high = CELL_TEMPERATURE_RANGE_C
+        t = float(self.temperature)
+        return t if math.isfinite(t) and low <= t <= high else DEFAULT_TEMPERATURE_C
 
     # ----- guarded access. With LMNCell's build of the wrapper an ordinary call error raises
     # CallError, which the wrapper logs and returns as fmi2Error (nothing is changed). pythonfmu

@@ -58,6 +58,29 @@ def init_mode_outputs(fmu: str) -> dict:
     return {"before": before, "after": after}
 
 
+def temperature_outside_range_at_start(fmu: str) -> dict:
+    """A temperature input no step takes (−1e308 °C), set before initialisation: the outputs
+    read in Initialization Mode and after it stay finite (a model with temperature terms read
+    NaN with OK), the first step is refused, and one at 25 °C then runs."""
+    slave, vr = _raw(fmu)
+    names = ["voltage", "soc", "soc_std", "cell_temperature"]
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.setReal([vr["temperature"]], [-1e308])
+    out = {"init": slave.getReal([vr[n] for n in names])}
+    out["exit"] = _status(slave.exitInitializationMode)
+    out["after_exit"] = slave.getReal([vr[n] for n in names])
+    slave.setReal([vr["current"]], [-1.0])
+    out["step"] = _status(lambda: slave.doStep(0.0, 1.0))
+    out["after_step"] = slave.getReal([vr[n] for n in names])
+    slave.setReal([vr["temperature"]], [25.0])
+    out["step_25"] = _status(lambda: slave.doStep(0.0, 1.0))
+    out["after_25"] = slave.getReal([vr[n] for n in names])
+    slave.terminate()
+    slave.freeInstance()
+    return out
+
+
 def state_machine(fmu: str) -> dict:
     """Row 4: calls out of order and a communication point that is not the FMU's time."""
     out = {}
@@ -469,7 +492,8 @@ def random_calls_long(fmu: str) -> dict:
     return random_calls(fmu, seed=2, sequences=300)
 
 
-SEQUENCES = {f.__name__: f for f in (init_mode_outputs, state_machine, impossible_inputs,
+SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_range_at_start,
+                                     state_machine, impossible_inputs,
                                      logged_messages, debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       instantiate_many, random_calls, random_calls_long)}

@@ -151,6 +151,36 @@ def test_the_patched_wrapper_is_only_built_for_linux64(monkeypatch, tmp_path) ->
         pb.compile_wrapper("{guid}", tmp_path)
 
 
+@pytest.fixture(scope="module")
+def temperature_terms_fmus(tmp_path_factory) -> list[Path]:
+    """Both FMUs of a small model with quadratic temperature terms (forced; the shipped records
+    lie near 25 °C), where the voltage at an absurd temperature is not finite."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.api import build_fmu
+    from lmncell.identification.train import train_files
+
+    from tests.conftest import PAN_HPPC, PAN_HWFET
+
+    tmp = tmp_path_factory.mktemp("tterms")
+    path = tmp / "t.json"
+    train_files([PAN_HWFET, PAN_HPPC], path, capacity_ah=2.85, soc0=1.0,
+                progress=lambda _m: None, max_local_models=2, oe_max_iterations=2,
+                hysteresis="off", temperature_terms=2, temperature_scaling=3000.0)
+    return [build_fmu(path, tmp / "t.fmu"), build_fmu(path, tmp / "t_native.fmu", native=True)]
+
+
+def test_a_temperature_no_step_takes_leaves_the_start_outputs_finite(
+        temperature_terms_fmus) -> None:
+    for fmu in temperature_terms_fmus:
+        res = _run(fmu, "temperature_outside_range_at_start")
+        for key in ("init", "after_exit", "after_step", "after_25"):
+            assert all(math.isfinite(x) for x in res[key]), (fmu.name, key, res[key])
+        assert res["init"] == res["after_exit"] == res["after_step"], fmu.name
+        assert res["exit"] == 0 and res["step"] == ERROR and res["step_25"] == 0, fmu.name
+        assert res["after_25"][1] < res["after_step"][1]      # the step at 25 °C discharged
+
+
 def test_state_machine(fmu) -> None:
     res = _run(fmu, "state_machine")
     assert res["first_step"] == 0 and res["right_point"] == 0

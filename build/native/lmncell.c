@@ -1172,7 +1172,10 @@ static int outputs_finite(const State *s) {
 
 /* the state right after initialisation, from the parameters and the temperature input */
 static void init_state(State *s) {
-    double t_in = isfinite(s->temperature) ? s->temperature : DEFAULT_TEMPERATURE_C;
+    /* the temperature input where a step takes it, else the default (the first step
+       refuses it; the outputs until then stay finite), as the pythonfmu FMU's slave */
+    double t_in = isfinite(s->temperature) && s->temperature >= MIN_TEMPERATURE_C &&
+                  s->temperature <= MAX_TEMPERATURE_C ? s->temperature : DEFAULT_TEMPERATURE_C;
     double soc0 = s->soc0 >= 0.0 && s->soc0 <= 1.0 ? s->soc0 : (s->soc0 > 1.0 ? 1.0 : 0.0);
     s->t_cell_set = 0;
     s->t_last_input = cell_temperature(s, t_in);
