@@ -77,6 +77,26 @@ def test_a_table_name_that_cannot_be_written_is_refused_before_any_run(
     assert "r.txt: --out must end in .csv or .parquet" in capsys.readouterr().err
 
 
+@pytest.mark.parametrize("args, message", [
+    (["--cycles", "udds", "--repeat", "100000"],
+     "sweep: --repeat 100000: 137000000 steps of 1 s over 100000 × the UDDS cycle, more than "
+     "2000000, which would take hours and gigabytes; expected at most 1459 repeats"),
+    (["--cycles", "udds", "--repeat", "100000", "--pack", "4s2p"], "--repeat 100000"),
+    (["--cycles", "TINY"], "--cycles 'tiny.csv': 0.2 s long, shorter than one step of 1 s"),
+])
+def test_a_run_too_long_or_too_short_is_refused_before_any_worker_starts(
+        native_fmu, tmp_path, capsys, monkeypatch, args, message) -> None:
+    """Each scenario's number of steps is checked before the cluster starts: a worker refusing
+    it logged a failed task with a traceback before the error."""
+    import lmncell.scenarios.sweep as sw
+
+    monkeypatch.setattr(sw, "_local_cluster", lambda *_a: pytest.fail("a cluster started"))
+    (tmp_path / "tiny.csv").write_text("time_s,speed_kmh\n0,0\n0.1,10\n")
+    args = [str(tmp_path / "tiny.csv") if a == "TINY" else a for a in args]
+    assert main(["sweep", str(native_fmu), "--out", str(tmp_path / "r.csv"), *args]) == 2
+    assert message in capsys.readouterr().err
+
+
 def test_a_scheduler_address_that_answers_nothing_is_named(native_fmu, tmp_path,
                                                            capsys) -> None:
     """(It raised a ValueError or, after dask's timeout, an OSError traceback.)"""

@@ -280,8 +280,20 @@ def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
     from fmpy import read_model_description
 
     md = read_model_description(str(fmu))
+    h = step_s or default_step_s(md)
+    return md, h, whole_steps(h, span_s, what)
+
+
+def default_step_s(md: Any) -> float:
+    """The communication step of an FMU's default experiment (s; fmpy's model description),
+    1 s where it gives none."""
     default = md.defaultExperiment
-    h = step_s or (float(default.stepSize) if default and default.stepSize else 1.0)
+    return float(default.stepSize) if default and default.stepSize else 1.0
+
+
+def whole_steps(h: float, span_s: float, what: str) -> int:
+    """The number of whole steps of h (s) over span_s (s); DataError where there are none or
+    more than MAX_CYCLE_STEPS. what: the run as messages name it ("the UDDS cycle")."""
     n = math.floor(span_s / h + 1e-9)
     if n < 1:
         raise DataError(f"communication step {h:g} s: longer than {what} ({span_s:g} s); "
@@ -290,7 +302,7 @@ def _communication_steps(fmu: str | Path, step_s: float | None, span_s: float,
         raise DataError(f"communication step {h:g} s: {n} steps over {what} ({span_s:g} s), "
                         f"more than {MAX_CYCLE_STEPS}, which would take hours and gigabytes; "
                         f"expected a step of at least {span_s / MAX_CYCLE_STEPS:.3g} s")
-    return md, h, n
+    return n
 
 
 def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: float,

@@ -26,12 +26,14 @@ import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
+    MAX_CYCLE_STEPS,
     STEP_ERROR_PREFIX,
     FmuStepError,
     Vehicle,
     cell_cutoff_v,
     check_cutoff,
     check_cutoff_in_range,
+    default_step_s,
     load_vehicle,
     pack_power,
     run_cycle,
@@ -198,7 +200,10 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
 def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None) -> Path:
     """The FMU's path, once it is known to be an LMNCell FMU (ConfigError naming the file if
     not) whose model's voltages the scenarios' cut-off lies within (check_cutoff_in_range),
-    and workers a whole number ≥ 1 or None; DataError naming the option otherwise."""
+    every scenario a whole number of steps within MAX_CYCLE_STEPS (check_steps), and workers a
+    whole number ≥ 1 or None; DataError naming the option otherwise. So a user's mistake is
+    refused here, before any worker starts, not logged by a worker as a failed task."""
+    from fmpy import read_model_description
     from lmncell.evaluation.fmueval import read_fmu_info
 
     fmu = Path(fmu)
@@ -206,9 +211,31 @@ def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = No
     cell = shipped_cell(fmu)
     for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
         check_cutoff_in_range(cell, cutoff_v, "sweep: --cutoff")
+    check_steps(cases, default_step_s(read_model_description(str(fmu))),
+                _model_of(fmu.read_bytes()).sample_time_s)
     if workers is not None and workers < 1:
         raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
     return fmu
+
+
+def check_steps(cases: list[Scenario], fmu_step_s: float, model_step_s: float) -> None:
+    """DataError naming --repeat or the cycle where a scenario's repeated cycle holds no whole
+    step or more than MAX_CYCLE_STEPS (as run_cycle would refuse it on a worker): steps of the
+    FMU's default communication step fmu_step_s (s) for a one-cell scenario, of the model's
+    sample time model_step_s (s) for a pack scenario (run_pack_scenario)."""
+    for sc in cases:
+        h = model_step_s if sc.pack is not None else fmu_step_s
+        cycle_s = sc.cycle.speed_mps.size * sc.cycle.step_s
+        n = math.floor(cycle_s * sc.repeat / h + 1e-9)
+        if n < 1:
+            raise DataError(f"sweep: --cycles {sc.cycle.title!r}: {cycle_s * sc.repeat:g} s "
+                            f"long, shorter than one step of {h:g} s; expected a longer trace "
+                            "or more --repeat")
+        if n > MAX_CYCLE_STEPS:
+            raise DataError(f"sweep: --repeat {sc.repeat}: {n} steps of {h:g} s over "
+                            f"{sc.repeat} × the {sc.cycle.title} cycle, more than "
+                            f"{MAX_CYCLE_STEPS}, which would take hours and gigabytes; expected "
+                            f"at most {math.floor(MAX_CYCLE_STEPS * h / cycle_s)} repeats")
 
 
 def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
