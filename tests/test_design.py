@@ -15,6 +15,7 @@ from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
     DesignSpec,
+    check_sampling,
     design_programme,
     log_det_information,
     parse_profile,
@@ -112,11 +113,27 @@ def test_bad_design_inputs() -> None:
     # a sequence shorter than the hold: 'needs inf A on average'
     ({}, {"hold_s": 10.0}, {"sequence_s": 5.0, "duration_s": 600.0},
      "--sequence 5 s holds fewer than two levels of the cycler's hold time --hold 10 s"),
+    # a sample time longer than the hold: an IndexError in predict
+    ({}, {"sample_time_s": 1000.0}, {},
+     "--hold 10 s is shorter than 1 sample.* of --sample-time 1000 s; expected at least 1000 s"),
+    # 7.2e9 samples, or 1e9 seconds: a MemoryError or days of design
+    ({}, {"sample_time_s": 1e-6, "hold_s": 1e-6}, {},
+     r"--duration 7200 s at --sample-time 1e-06 s is 7.2e\+09 samples, more than 2000000"),
+    ({}, {}, {"duration_s": 1e9}, r"expected a duration of at most 2e\+06 s"),
 ])
 def test_limits_no_programme_can_meet_are_refused(cell, cycler, design, message) -> None:
     with pytest.raises(DataError, match=message):
         design_programme(CellSpec(capacity_ah=2.3, **cell), CyclerSpec(**cycler),
                          DesignSpec([0.8, 0.2], **design), progress=lambda _m: None)
+
+
+def test_sampling_is_checked_before_a_virtual_cell_is_characterised() -> None:
+    """`lmncell design` checks the sampling first (the limits need the cell, which the virtual
+    cell's characterisation gives only after minutes)."""
+    with pytest.raises(DataError, match="--sequence 2 s is shorter than 2 sample.* 1.5 s"):
+        check_sampling(CyclerSpec(hold_s=1.5, sample_time_s=1.5), DesignSpec([0.8, 0.2],
+                                                                            sequence_s=2.0))
+    check_sampling(CyclerSpec(hold_s=1.0, sample_time_s=1.0), DesignSpec([0.8, 0.2]))
 
 
 def test_random_programme_has_the_designs_amplitude_bands_and_limits() -> None:

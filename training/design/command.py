@@ -11,6 +11,7 @@ from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
     DesignSpec,
+    check_sampling,
     design_programme,
     parse_profile,
     plot_programme,
@@ -204,6 +205,7 @@ def run_design(a) -> int:
     cyc = CyclerSpec(max_current_a=a.max_current, hold_s=a.hold, sample_time_s=a.sample_time)
     spec = DesignSpec(parse_profile(a.soc_profile), a.duration, a.sequence, method=a.method,
                       information=a.information)
+    check_sampling(cyc, spec)        # before a virtual cell is characterised
 
     def design(c: CellSpec):
         say(f"designing {sequence_count(spec)} sequence(s) of "

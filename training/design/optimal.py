@@ -422,6 +422,28 @@ def check_design(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec) -> None:
         raise DataError(f"--sequence {spec.sequence_s:g} s holds fewer than two levels of the "
                         f"cycler's hold time --hold {cyc.hold_s:g} s; expected a sequence of at "
                         f"least {2 * cyc.hold_s:g} s (or a shorter --hold)")
+    check_sampling(cyc, spec)
+
+
+MAX_PROGRAMME_SAMPLES = 2_000_000   # 23 days at 1 s; as a drive cycle run's steps
+
+
+def check_sampling(cyc: CyclerSpec, spec: DesignSpec) -> None:
+    """DataError where the hold time (--hold) is shorter than one sample (--sample-time), a
+    sequence shorter than two, or the programme more than MAX_PROGRAMME_SAMPLES samples (hours
+    of design and gigabytes; an IndexError or a MemoryError before)."""
+    ts = cyc.sample_time_s
+    for option, length, least in (("--hold", cyc.hold_s, 1), ("--sequence", spec.sequence_s, 2)):
+        if length < least * ts * (1 - 1e-9):
+            raise DataError(f"{option} {length:g} s is shorter than {least} sample(s) of "
+                            f"--sample-time {ts:g} s; expected at least {least * ts:g} s (or a "
+                            "shorter --sample-time)")
+    samples = spec.duration_s / ts
+    if samples > MAX_PROGRAMME_SAMPLES:
+        raise DataError(f"--duration {spec.duration_s:g} s at --sample-time {ts:g} s is "
+                        f"{samples:.3g} samples, more than {MAX_PROGRAMME_SAMPLES}, which would "
+                        "take hours and gigabytes; expected a duration of at most "
+                        f"{MAX_PROGRAMME_SAMPLES * ts:g} s (or a longer --sample-time)")
 
 
 def check_voltages(prog_voltage_v: np.ndarray, cell: CellSpec) -> None:
