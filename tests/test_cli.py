@@ -432,3 +432,18 @@ def test_ctrl_c_ends_a_command_with_a_message_and_code_130(monkeypatch, capsys) 
     monkeypatch.setattr(cli, "cmd_inspect", interrupted)
     assert cli.main(["inspect", "x.csv"]) == 130
     assert "lmncell inspect: interrupted" in capsys.readouterr().err
+
+
+def test_out_of_memory_ends_a_command_with_a_message_and_code_2(monkeypatch, capsys) -> None:
+    """A MemoryError (data too large for the machine at those settings) is said in a line,
+    with what numpy could not allocate, not as a traceback."""
+    import lmncell.cli as cli
+
+    def too_big(_args):
+        raise MemoryError("Unable to allocate 1.76 GiB for an array with shape (7612046, 31)")
+
+    monkeypatch.setattr(cli, "cmd_inspect", too_big)
+    assert cli.main(["inspect", "x.csv"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("lmncell inspect: error: out of memory (Unable to allocate 1.76 GiB")
+    assert "expected fewer or shorter records, a longer sample time" in err

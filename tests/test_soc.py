@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from lmncell.data.dataset import starts_rested_full
+from lmncell.data.dataset import record_parts, starts_rested_full
 from lmncell.data.lag import channel_lag_samples, estimate_current_delay
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record, RecordMeta
@@ -281,3 +281,15 @@ def test_a_counted_soc_beyond_0_to_1_names_where_and_the_charge_moved(tmp_path) 
                                         r"From its start the record discharges up to 2\.\d+ Ah"):
         record_to_segments(rec, 1.0, 1.0, 0.1)
     assert record_to_segments(rec, 1.0, 1.0, 2.85)     # the right capacity reads as before
+
+
+def test_a_sample_time_finer_than_the_log_is_refused_naming_the_file() -> None:
+    """A 1 s log trained at 0.1 s would be learnt as its interpolation (a 1 ms sample time on
+    the 10 Hz Panasonic log ran out of memory); half the log's interval is still taken."""
+    t = np.arange(600.0)
+    rec = Record(t, np.where(t % 60 < 30, -1.0, 0.0), 3.6 - 0.01 * (t % 60 < 30),
+                 RecordMeta("one_hertz.csv", "test"))
+    with pytest.raises(DataError, match=r"one_hertz.csv: logged every 1 s \(the median time "
+                       r"step\); a model sample time of 0.1 s, .* expected sample_time_s ≥ 0.5"):
+        record_parts(rec, 0.1, 1.0, 2.0)
+    assert len(record_parts(rec, 0.5, 1.0, 2.0)[0][1].time_s) == 1198

@@ -680,6 +680,16 @@ def run_script(main_function: Callable[[], None], script: str) -> None:
     except USER_ERRORS as exc:
         print(f"{name}: error: {exc}", file=sys.stderr)
         sys.exit(2)
+    except MemoryError as exc:
+        print(f"{name}: error: {out_of_memory(exc)}", file=sys.stderr)
+        sys.exit(2)
+
+
+def out_of_memory(exc: MemoryError) -> str:
+    """The message for a MemoryError: what numpy could not allocate and what to change."""
+    return (f"out of memory ({exc or 'MemoryError'}): the data at these settings need more "
+            "memory than this machine has; expected fewer or shorter records, a longer sample "
+            "time or a shorter run")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -693,6 +703,9 @@ def main(argv: list[str] | None = None) -> int:
             return int(args.func(args) or 0)
     except USER_ERRORS as exc:
         print(f"lmncell {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except MemoryError as exc:
+        print(f"lmncell {args.command}: error: {out_of_memory(exc)}", file=sys.stderr)
         return 2
     except BrokenPipeError:         # the output piped into a reader that stopped (| head)
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
