@@ -244,6 +244,8 @@ def test_api_takes_one_data_file_on_its_own(monkeypatch, tmp_path, quick_model) 
         lmncell.evaluate(quick_model, [PAN_US06, 3])
     with pytest.raises(DataError, match=r"train: paths is 3\.0; expected a data file's path"):
         lmncell.train(3.0, tmp_path / "m.json")
+    with pytest.raises(DataError, match=r"evaluate: no data files given"):   # [] before
+        lmncell.evaluate(quick_model, [])
 
 
 def test_api_sweep_takes_one_value_per_axis_on_its_own(native_fmu) -> None:
@@ -278,13 +280,31 @@ def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -
     ({"temperature_c": "warm"}, "temperature_c is 'warm'"),
     ({"capacity_ah": 0}, r"capacity_ah = 0; expected a finite number > 0 \(Ah"),
     ({"capacity_ah": float("nan")}, "capacity_ah = nan; expected a finite number > 0"),
+    # numpy dropped the imaginary parts (a ComplexWarning), the load function's TypeError
+    ({"current_a": np.full(5, -1.0 + 0.5j)}, "current_a holds complex numbers; expected real"),
+    ({"model": None}, "simulate: model is None; expected an LmnModel or a model file's path"),
 ])
 def test_api_simulate_names_what_is_wrong_with_its_inputs(quick_model, kwargs, message) -> None:
     import lmncell
 
-    args = {"current_a": np.full(5, -1.0), **kwargs}
+    args = {"model": quick_model, "current_a": np.full(5, -1.0), **kwargs}
     with pytest.raises(lmncell.api.DataError, match=message):
-        lmncell.simulate(quick_model, args.pop("current_a"), **args)
+        lmncell.simulate(args.pop("model"), args.pop("current_a"), **args)
+
+
+def test_api_builds_an_fmu_of_a_loaded_model_as_of_its_file(quick_model, tmp_path) -> None:
+    """build_fmu takes the LmnModel that load_model, train and simulate use (a TypeError
+    before); its FMU ships the same model file."""
+    import zipfile
+
+    import lmncell
+
+    a = lmncell.build_fmu(quick_model, tmp_path / "a.fmu")
+    b = lmncell.build_fmu(lmncell.load_model(quick_model), tmp_path / "b.fmu")
+    assert (zipfile.ZipFile(a).read("resources/model.json")
+            == zipfile.ZipFile(b).read("resources/model.json"))
+    with pytest.raises(lmncell.api.DataError, match="build_fmu: model_path is 3; expected"):
+        lmncell.build_fmu(3, tmp_path / "c.fmu")
 
 
 def test_api_reads_a123(tmp_path) -> None:

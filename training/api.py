@@ -83,7 +83,21 @@ def _path_list(caller: str, paths: Any) -> list[str | Path]:
     if bad:
         raise DataError(f"{caller}: paths holds {bad[0]!r:.60}; expected data files' paths "
                         "(str or pathlib.Path)")
+    if not out:
+        raise DataError(f"{caller}: no data files given; expected a data file's path or a list "
+                        "of them")
     return out
+
+
+def _model(caller: str, model: Any) -> LmnModel:
+    """The model itself, or the one in the model file at that path; DataError naming the
+    caller's argument for anything else (load_model's TypeError said only 'expected str')."""
+    if isinstance(model, LmnModel):
+        return model
+    if not isinstance(model, (str, os.PathLike)):
+        raise DataError(f"{caller}: model is {model!r:.60}; expected an LmnModel or a model "
+                        "file's path")
+    return load_model(model)
 
 
 def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
@@ -104,8 +118,7 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     stepped at Ts with the same profile does: (δ·i(k−1) + (Ts − δ)·i(k))/Ts, i(−1) = i(0).
     Where the current, temperature or SoC leaves what the model was trained on, a UserWarning
     says so (the model extrapolates there; below SoC 0 the cell is past empty)."""
-    if not isinstance(model, LmnModel):
-        model = load_model(model)
+    model = _model("simulate", model)
     current = _profile("current_a", current_a, "A")
     if not 0.0 <= float(soc0) <= 1.0:
         raise DataError(f"simulate: soc0 = {float(soc0)!r}; expected a fraction within 0…1")
@@ -141,7 +154,9 @@ def _positive(name: str, value: Any, unit: str) -> float:
 
 def _profile(name: str, values: Any, unit: str) -> np.ndarray:
     """A non-empty 1-D array of finite floats (one number: an array of one), or DataError
-    naming `name`."""
+    naming `name` (complex numbers too: numpy would drop their imaginary parts)."""
+    if np.iscomplexobj(values):
+        raise DataError(f"simulate: {name} holds complex numbers; expected real numbers ({unit})")
     try:
         arr = np.atleast_1d(np.asarray(values, dtype=float))
     except (TypeError, ValueError):
@@ -196,8 +211,7 @@ def evaluate(model: LmnModel | str | Path, paths: str | Path | Sequence[str | Pa
         _, rows = evaluate_fmu(model, _path_list("evaluate", paths), soc0, ambient, read_options,
                                through_hidden_pauses, progress=lambda _m: None)
         return rows
-    if not isinstance(model, LmnModel):
-        model = load_model(model)
+    model = _model("evaluate", model)
     from lmncell.evaluation.evaluate import evaluate_model
 
     _, rows = evaluate_model(model, _path_list("evaluate", paths), soc0, read_options=read_options,
@@ -205,9 +219,22 @@ def evaluate(model: LmnModel | str | Path, paths: str | Path | Sequence[str | Pa
     return rows
 
 
-def build_fmu(model_path: str | Path, out: str | Path, native: bool = False) -> Path:
-    """Package a model file as an FMI 2.0 co-simulation FMU: pythonfmu (the importer needs
-    Python with numpy) or, with native=True, generated C compiled here (no Python needed)."""
+def build_fmu(model_path: LmnModel | str | Path, out: str | Path, native: bool = False) -> Path:
+    """Package a model file (or a loaded model, written as its file) as an FMI 2.0
+    co-simulation FMU: pythonfmu (the importer needs Python with numpy) or, with native=True,
+    generated C compiled here (no Python needed)."""
+    if isinstance(model_path, LmnModel):
+        import tempfile
+
+        from lmncell.runtime.model import save_model
+
+        with tempfile.TemporaryDirectory(prefix="lmncell-build-") as tmp:
+            path = Path(tmp) / "model.json"
+            save_model(model_path, path)
+            return build_fmu(path, out, native)
+    if not isinstance(model_path, (str, os.PathLike)):
+        raise DataError(f"build_fmu: model_path is {model_path!r:.60}; expected a model file's "
+                        "path or an LmnModel")
     if native:
         from lmncell.fmu.native_build import build_native_fmu
 
