@@ -26,6 +26,8 @@ from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
+CAPACITY_RANGE_AH = (1e-4, 1e5)   # a 'capacity' parameter outside is refused (0.1 mAh
+                                  # ... 100 kAh; 1e-300 overflowed the observers)
 VOLTAGE_MARGIN_V = 0.1   # out_of_range also when the model's voltage leaves the trained
 # voltage range by more than this (a free run beyond its data: a cold knee extrapolated below
 # the SoC its records reached went to −1.1 V with current, SoC and temperature in range)
@@ -104,8 +106,10 @@ class CellCosim:
         p = self.params
         if not 0.0 <= p.soc0 <= 1.0 or not math.isfinite(p.soc0):
             raise InputError(f"parameter 'soc0' = {p.soc0:g}: expected a fraction within 0..1")
-        if not (math.isfinite(p.capacity_ah) and p.capacity_ah > 0):
-            raise InputError(f"parameter 'capacity' = {p.capacity_ah:g}: expected > 0 Ah")
+        lo, hi = CAPACITY_RANGE_AH
+        if not (math.isfinite(p.capacity_ah) and lo <= p.capacity_ah <= hi):
+            raise InputError(f"parameter 'capacity' = {p.capacity_ah:g}: expected a cell's "
+                             f"capacity within {lo:g}...{hi:g} Ah")
         if p.observer not in OBSERVER_NAMES:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")

@@ -18,7 +18,13 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
+from .cosim import (
+    CAPACITY_RANGE_AH,
+    OUT_OF_RANGE_DESCRIPTION,
+    CellCosim,
+    InputError,
+    Parameters,
+)
 from .model import ModelFileError, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
@@ -178,8 +184,8 @@ class LmnCellSlave(Fmi2Slave):
         changed in between, nothing differs)."""
         m = self._model
         soc0 = min(max(float(self.soc0), 0.0), 1.0) if math.isfinite(self.soc0) else 1.0
-        cap = float(self.capacity)
-        cap = cap if math.isfinite(cap) and cap > 0 else float(m.capacity_ah)
+        cap, (low, high) = float(self.capacity), CAPACITY_RANGE_AH
+        cap = cap if math.isfinite(cap) and low <= cap <= high else float(m.capacity_ah)
         observer = int(self.observer) if self.observer in OBSERVERS else 0
         cosim = CellCosim(m, Parameters(soc0, cap, observer, bool(self.temperature_is_cell)))
         cosim.reset(self._start_temperature())

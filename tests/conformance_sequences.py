@@ -124,7 +124,7 @@ def impossible_inputs(fmu: str) -> dict:
 def logged_messages(fmu: str) -> dict:
     """Every message the FMU logs (the instance's name left out), the statuses and the final
     outputs over one sequence: doStep before and during initialisation, bad parameters at
-    exitInitializationMode and then good ones, an out-of-range warning, each input refused,
+    exitInitializationMode (a capacity of 1e-300 Ah with the EKF among them) and then good ones, an out-of-range warning, each input refused,
     a partial model step, a temperature in K given as degC, a wrong communication point, a
     step after terminate."""
     from lmncell.evaluation.fmueval import fmu_log
@@ -136,7 +136,9 @@ def logged_messages(fmu: str) -> dict:
         slave.setupExperiment(startTime=0.0)
         slave.enterInitializationMode()
         statuses.append(_status(lambda: slave.doStep(0.0, 1.0)))
-        for ref, bad, good in (("soc0", 1.5, 0.5), ("observer", 7, 0), ("capacity", -1.0, 2.0)):
+        slave.setInteger([vr["observer"]], [1])     # 1e-300 Ah overflowed the EKF's noise
+        for ref, bad, good in (("capacity", 1e-300, 2.0), ("soc0", 1.5, 0.5), ("observer", 7, 0),
+                               ("capacity", -1.0, 2.0)):
             setter = slave.setInteger if ref == "observer" else slave.setReal
             setter([vr[ref]], [bad])
             statuses.append(_status(slave.exitInitializationMode))

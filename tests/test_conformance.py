@@ -215,6 +215,8 @@ def test_both_fmus_log_the_same_messages(quick_fmu, native_fmu) -> None:
     text = "\n".join(native["messages"])
     assert text.isascii() and "NAME" not in text
     expected = ["fmi2DoStep is not allowed in instantiated",
+                "parameter 'capacity' = 1e-300: expected a cell's capacity within "
+                "0.0001...100000 Ah; not initialised",
                 "parameter 'soc0' = 1.5: expected a fraction within 0..1; not initialised",
                 "t = 0 s: input 'temperature' = 298.15 degC: expected -60..100 degC (degC, not "
                 "K); the step was not taken",

@@ -36,6 +36,8 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
                                       time constant, LMN5 before ob_hist, LMN4 before
                                       dep_source, LMN3 before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
+#define CAPACITY_MIN_AH 1e-4     /* a 'capacity' parameter outside is refused */
+#define CAPACITY_MAX_AH 1e5
 
 /* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
 typedef struct {
@@ -1198,10 +1200,11 @@ static fmi2Status initialise(Instance *in) {
               "within 0..1; not initialised, every step will be refused", s->soc0);
         return fmi2Error;
     }
-    if (!(isfinite(s->capacity) && s->capacity > 0)) {
-        logf_(in, fmi2Error, "logStatusError", "parameter 'capacity' = %g: expected > 0 Ah; "
-              "not initialised, every step will be refused",
-              s->capacity);
+    if (!(isfinite(s->capacity) && s->capacity >= CAPACITY_MIN_AH
+          && s->capacity <= CAPACITY_MAX_AH)) {
+        logf_(in, fmi2Error, "logStatusError", "parameter 'capacity' = %g: expected a cell's "
+              "capacity within %g...%g Ah; not initialised, every step will be refused",
+              s->capacity, CAPACITY_MIN_AH, CAPACITY_MAX_AH);
         return fmi2Error;
     }
     if (s->observer < 0 || s->observer > 3) {
@@ -1339,7 +1342,8 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
                              vr == VR_CELL_TEMPERATURE)) {
         tmp = *s0;                       /* what exitInitializationMode will give, unchanged */
         if (!(tmp.observer >= 0 && tmp.observer <= 3)) tmp.observer = 0;
-        if (!(isfinite(tmp.capacity) && tmp.capacity > 0)) tmp.capacity = CAPACITY_AH;
+        if (!(isfinite(tmp.capacity) && tmp.capacity >= CAPACITY_MIN_AH
+              && tmp.capacity <= CAPACITY_MAX_AH)) tmp.capacity = CAPACITY_AH;
         init_state(&tmp);
         s = &tmp;
     }
