@@ -19,15 +19,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .model import LmnModel
+from .model import CAPACITY_RANGE_AH, LmnModel
 from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
-CAPACITY_RANGE_AH = (1e-4, 1e5)   # a 'capacity' parameter outside is refused (0.1 mAh
-                                  # ... 100 kAh; 1e-300 overflowed the observers)
 VOLTAGE_MARGIN_V = 0.1   # out_of_range also when the model's voltage leaves the trained
 # voltage range by more than this (a free run beyond its data: a cold knee extrapolated below
 # the SoC its records reached went to −1.1 V with current, SoC and temperature in range)

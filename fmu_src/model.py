@@ -5,17 +5,19 @@ Format ``lmncell-model``, version 7 (versions 1 to 6, which have no ``thermal``,
 no ``depletion.fast_tau_s`` or no ``regressors.hysteresis_terms`` key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
-- ``sample_time_s``: the model's fixed sample time Ts.
+- ``sample_time_s``: the model's fixed sample time Ts (1e-4 … 3600 s).
 - ``current_delay_s`` (version 4; absent: 0): δ, 0 ≤ δ < Ts. The model is driven by the current
   δ seconds late: step k takes the mean current over [t_k − Ts − δ, t_k − δ] (before the first
   input, the first input held). It is the lag of a tester's voltage channel behind its current
   channel (Panasonic 18650PF drive cycles: 0.1 s), which the model reproduces so that its
   voltage lines up with such measurements when the current is given finer than Ts.
-- ``cell``: ``capacity_ah``, ``efficiency_charge``, ``efficiency_discharge`` (coulombic, η(i)),
-  ``voltage_min_v``, ``voltage_max_v``, ``name``.
+- ``cell``: ``capacity_ah`` (1e-4 … 1e5), ``efficiency_charge``, ``efficiency_discharge``
+  (coulombic, η(i), 0 < η ≤ 1, absent: 1), ``voltage_min_v`` < ``voltage_max_v`` (0 … 10 V),
+  ``name``.
 - ``output``: ``"relative_ocv"`` (local models describe u − OCV(SoC)) or ``"absolute"`` (the
   paper's form: local models describe u itself, OCV carried by their offsets).
-- ``ocv``: ``soc`` and ``voltage_v`` knots, linear between them (held beyond the ends).
+- ``ocv``: ``soc`` (increasing, within −1 … 2) and ``voltage_v`` (0 … 10 V) knots, linear
+  between them (held beyond the ends).
 - ``regressors``: ``output_lags`` na, ``current_terms`` nb (i(k) … i(k−nb+1)), ``filters``: list of
   ``[tau_fast_s, tau_slow_s]`` each giving v = LP_fast(i) − LP_slow(i) (zero DC gain, eq. 19),
   ``hysteresis_gamma`` (null, or γ > 0 of h(k) = e·h(k−1) + (1−e)·sgn(i),
@@ -37,7 +39,8 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   resistances do,
   ``depletion`` (version 3; null or absent: none, or {``tau_s``, ``power``, ``soc_scale``,
   ``soc_min``, ``fast_tau_s``}: the regressor d(k) = g(T)·LP_τ(i)·(soc_scale/max(SoC,
-  soc_min))^power, LP_τ the filters' low-pass state of time constant τ = ``tau_s``: a
+  soc_min))^power (0 < power ≤ 8; soc_scale, soc_min within 0…1), LP_τ the filters' low-pass
+  state of time constant τ = ``tau_s``: a
   polarisation that grows as the cell nears empty, the voltage collapse before cut-off; its
   coefficient is a resistance at SoC = soc_scale, ≥ 0 in an RC-ladder model. ``fast_tau_s``
   (version 6; null or absent: none): a second such regressor d2(k), the same factor times the
@@ -55,10 +58,11 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   [{``weights``: [w0, w_1…w_d], ``children``: [[kind, index], [kind, index]]}], kind ``node`` or
   ``leaf``. The first child gets φ = 1/(1+exp(−(w0 + w·z))), the second 1 − φ; a leaf's validity is
   the product along its path (and 0 outside its gate).
-- ``local_models``: ``theta`` (M rows of the columns above).
+- ``local_models``: ``theta`` (M rows of the columns above, each within ±1e9).
 - ``limits``: the ranges seen in training (``current_a``, ``soc``, ``temperature_c``,
-  ``voltage_v``).
-- ``noise``: ``residual_std_v`` of the free-run training error, (optional)
+  ``voltage_v``), each [low, high] finite, low ≤ high.
+- ``noise`` (σ and RMS within 0 … 10 V): ``residual_std_v`` of the free-run training error,
+  (optional)
   ``residual_std_by_soc`` {``soc``: bin centres, ``std_v``: that error's RMS per bin of the
   reference SoC, never below ``residual_std_v``, times the identification's validation / fit
   free-run RMSE ratio (≥ 1; the error to expect on new data); the observers' SoC-variance
@@ -86,7 +90,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .thermal import ThermalModel, is_real_number
+from .thermal import CELL_TEMPERATURE_RANGE_C, ThermalModel, is_real_number
 
 FORMAT = "lmncell-model"
 DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
@@ -97,6 +101,13 @@ READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7)
 HYSTERESIS_TERMS = ("constant", "polynomial", "arrhenius")   # h's temperature terms, if any
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
+CAPACITY_RANGE_AH = (1e-4, 1e5)        # a cell's capacity (0.1 mAh … 100 kAh)
+SAMPLE_TIME_RANGE_S = (1e-4, 3600.0)   # a model's sample time
+VOLTAGE_RANGE_V = (0.0, 10.0)          # a cell's voltage (OCV knots, limits)
+MAX_DEPLETION_POWER = 8.0              # as training's depletion_power (a step loops p times)
+MAX_NOISE_V = 10.0                     # a voltage error's σ or RMS (V)
+MAX_THETA = 1e9                        # |θ| beyond it is no cell's (squares overflowed)
+LIMIT_KEYS = ("current_a", "soc", "voltage_v", "temperature_c")
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
 GATES = ("all", "charge", "discharge")
 
@@ -407,6 +418,21 @@ def _array(doc: dict, key: str, where: str, ndim: int) -> np.ndarray:
     return arr
 
 
+def _real(doc: dict, key: str, where: str, low: float, high: float, default: float | None = None,
+          low_open: bool = False) -> float:
+    """doc[key] (or default where it is absent and a default is given) as a finite real number
+    within low…high (low excluded with low_open), else ModelFileError naming the key, the
+    value and the range (a NaN, a string or 1e300 there gave NaN outputs, TypeErrors or
+    endless loops)."""
+    if key not in doc and default is not None:
+        return float(default)
+    val = _get(doc, key, where, (int, float))
+    if not (math.isfinite(val) and (low < val if low_open else low <= val) and val <= high):
+        raise ModelFileError(f"{where}: '{key}' is {val!r}, expected a number within "
+                             f"{low:g}{' (excluded)' if low_open else ''}…{high:g}")
+    return float(val)
+
+
 def _ref(val, where: str) -> tuple[str, int]:
     if (not isinstance(val, list) or len(val) != 2 or val[0] not in ("node", "leaf")
             or not isinstance(val[1], int)):
@@ -444,6 +470,11 @@ def _depletion(doc: object, filters: list[tuple[float, float]], where: str, vers
                              f"{sorted(keys)} and optionally 'fast_tau_s' (null: none), each a "
                              f"finite number > 0, got {doc!r}")
     fast = doc.get("fast_tau_s")
+    if doc["power"] > MAX_DEPLETION_POWER or doc["soc_min"] > 1.0 or doc["soc_scale"] > 1.0:
+        raise ModelFileError(f"{where}: 'depletion' power {doc['power']!r}, soc_scale "
+                             f"{doc['soc_scale']!r} and soc_min {doc['soc_min']!r}: expected "
+                             f"a power within 0…{MAX_DEPLETION_POWER:g}, soc_scale and soc_min "
+                             "within 0…1")
     dep = Depletion(**{k: float(doc[k]) for k in keys},
                     fast_tau_s=None if fast is None else float(fast))
     try:
@@ -467,10 +498,56 @@ def _noise(doc: object, source: str) -> dict:
             raise ModelFileError(f"{where} must be an object with 'soc' and '{values}'")
         soc, std = _array(by_soc, "soc", where, 1), _array(by_soc, values, where, 1)
         if (soc.size == 0 or soc.size != std.size or np.any(np.diff(soc) <= 0)
-                or soc[0] < 0 or soc[-1] > 1 or np.any(std < 0)):
-            raise ModelFileError(f"{where}: expected increasing SoC within 0…1 and one σ ≥ 0 "
-                                 f"(V) per SoC, got {by_soc!r}")
+                or soc[0] < 0 or soc[-1] > 1 or np.any(std < 0) or np.any(std > MAX_NOISE_V)):
+            raise ModelFileError(f"{where}: expected increasing SoC within 0…1 and one σ within "
+                                 f"0…{MAX_NOISE_V:g} V per SoC, got {by_soc!r}")
+    for key, high in (("residual_std_v", MAX_NOISE_V), ("recent_current_rms_a", 1e6)):
+        _real(doc, key, f"{source}: noise", 0.0, high, 0.0)
     return dict(doc)
+
+
+def _limits(doc: object, source: str) -> dict:
+    """The 'limits' object: each of LIMIT_KEYS present a [low, high] pair of finite numbers,
+    low ≤ high (the trained ranges the out-of-range flag and the warnings compare with)."""
+    if not isinstance(doc, dict):
+        raise ModelFileError(f"{source}: 'limits' must be an object, got {doc!r:.60}")
+    for key in LIMIT_KEYS:
+        pair = doc.get(key)
+        if pair is None and key not in doc:
+            continue
+        if not (isinstance(pair, list) and len(pair) == 2
+                and all(is_real_number(x) and math.isfinite(x) for x in pair)
+                and pair[0] <= pair[1]):
+            raise ModelFileError(f"{source}: limits.{key} is {pair!r:.60}, expected [low, high] "
+                                 "finite numbers, low ≤ high")
+    return dict(doc)
+
+
+def _observers(doc: object, source: str, n_local_models: int) -> object:
+    """The 'observers' object: its fuzzy observer's offline design where present (q, r > 0,
+    gains, variances and ocv_slopes_v one finite number per local model), which the fuzzy
+    observer takes where its q and r are the ones it would design with."""
+    if doc is None:
+        return doc
+    if not isinstance(doc, dict):
+        raise ModelFileError(f"{source}: 'observers' must be an object, got {doc!r:.60}")
+    fuzzy = doc.get("fuzzy")
+    if fuzzy is None:
+        return doc
+    where = f"{source}: observers.fuzzy"
+    if not isinstance(fuzzy, dict):
+        raise ModelFileError(f"{where} must be an object, got {fuzzy!r:.60}")
+    for key in ("q", "r"):
+        _real(fuzzy, key, where, 0.0, 1e6, low_open=True)
+    for key in ("gains", "variances", "ocv_slopes_v"):
+        if key not in fuzzy:
+            continue
+        values = _array(fuzzy, key, where, 1)
+        low = 0.0 if key == "variances" else -1e6
+        if values.size != n_local_models or (values < low).any() or (values > 1e6).any():
+            raise ModelFileError(f"{where}: '{key}' is {fuzzy[key]!r:.80}, expected one number "
+                                 f"within {low:g}…1e+06 per local model ({n_local_models})")
+    return doc
 
 
 def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
@@ -478,9 +555,10 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     ver = _check_format(doc, source)
     ts, delay = _read_timing(doc, source)
     cell = _get(doc, "cell", source, dict)
-    cap = float(_get(cell, "capacity_ah", f"{source}: cell", (int, float)))
-    if not cap > 0:
-        raise ModelFileError(f"{source}: cell.capacity_ah is {cap}, expected > 0")
+    cap = _real(cell, "capacity_ah", f"{source}: cell", *CAPACITY_RANGE_AH)
+    efficiency = [_real(cell, f"efficiency_{k}", f"{source}: cell", 0.0, 1.0, 1.0, low_open=True)
+                  for k in ("charge", "discharge")]
+    _check_cell_voltages(cell, f"{source}: cell")
     output = _get(doc, "output", source, str)
     if output not in ("relative_ocv", "absolute"):
         raise ModelFileError(f"{source}: 'output' is {output!r}, expected 'relative_ocv' or "
@@ -495,7 +573,11 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     weights, children, roots = _read_tree(doc, source, len(variables))
     lm = _get(doc, "local_models", source, dict)
     theta = _array(lm, "theta", f"{source}: local_models", 2)
-    gating = doc.get("gating", {"mode": "none"})
+    if theta.size and np.abs(theta).max() > MAX_THETA:
+        raise ModelFileError(f"{source}: local_models.theta holds {np.abs(theta).max():g}, "
+                             f"expected coefficients within ±{MAX_THETA:g}")
+    gating = _gating(doc.get("gating", {"mode": "none"}), f"{source}: gating")
+    t_low, t_high = CELL_TEMPERATURE_RANGE_C
     model = LmnModel(
         sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
         current_terms=nb, filters=filters,
@@ -504,22 +586,23 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         offset=bool(reg.get("offset", True)), relative_ocv=output == "relative_ocv",
         partition_variables=list(variables), partition_center=center, partition_scale=scale,
         roots=roots, node_weights=weights, node_children=children,
-        theta=theta, efficiency_charge=float(cell.get("efficiency_charge", 1.0)),
-        efficiency_discharge=float(cell.get("efficiency_discharge", 1.0)),
+        theta=theta, efficiency_charge=efficiency[0], efficiency_discharge=efficiency[1],
         gating_mode=str(gating.get("mode", "none")),
-        rest_current_a=float(gating.get("rest_current_a", 0.01)),
+        rest_current_a=_real(gating, "rest_current_a", f"{source}: gating", 0.0, 1e3, 0.01,
+                             low_open=True),
         initial_direction=str(gating.get("initial_direction", "discharge")),
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         tau_activation_k=None if tau_activation is None else float(tau_activation),
-        reference_temperature_c=float(reg.get("reference_temperature_c", 25.0)),
+        reference_temperature_c=_real(reg, "reference_temperature_c", w, t_low, t_high, 25.0),
         temperature_terms=temperature_terms,
         hysteresis_terms=_read_hysteresis_terms(reg, w, arrhenius, ver),
         depletion=_depletion(reg.get("depletion"), filters, w, ver),
         thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
-        limits=dict(doc.get("limits", {})), cell=dict(cell),
+        limits=_limits(doc.get("limits", {}), source), cell=dict(cell),
         noise=_noise(doc.get("noise", {}), source),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
                if k in doc})
+    _observers(doc.get("observers"), source, model.n_local_models)
     _check_local_models(model, lm, source)
     return model
 
@@ -540,9 +623,7 @@ def _check_format(doc: dict, source: str) -> int:
 
 def _read_timing(doc: dict, source: str) -> tuple[float, float]:
     """Sample time Ts (s, > 0) and current delay δ (s, 0 ≤ δ < Ts)."""
-    ts = float(_get(doc, "sample_time_s", source, (int, float)))
-    if not ts > 0:
-        raise ModelFileError(f"{source}: 'sample_time_s' is {ts}, expected > 0")
+    ts = _real(doc, "sample_time_s", source, *SAMPLE_TIME_RANGE_S)
     delay = doc.get("current_delay_s", 0.0)
     if not is_real_number(delay) or not 0.0 <= delay < ts:
         raise ModelFileError(f"{source}: 'current_delay_s' is {delay!r}, expected a number "
@@ -558,14 +639,45 @@ def _read_ocv(doc: dict, source: str) -> tuple[np.ndarray, np.ndarray]:
     if ocv_soc.shape != ocv_v.shape or ocv_soc.size < 2 or (np.diff(ocv_soc) <= 0).any():
         raise ModelFileError(f"{source}: ocv.soc and ocv.voltage_v must have the same length "
                              "(≥ 2) and soc must increase")
+    low, high = VOLTAGE_RANGE_V
+    if ((ocv_v < low) | (ocv_v > high)).any() or ocv_soc[0] < -1.0 or ocv_soc[-1] > 2.0:
+        raise ModelFileError(f"{source}: ocv spans SoC {ocv_soc[0]:g}…{ocv_soc[-1]:g} and "
+                             f"{ocv_v.min():g}…{ocv_v.max():g} V; expected SoC knots within "
+                             f"-1…2 and a cell's voltages within {low:g}…{high:g} V")
     return ocv_soc, ocv_v
+
+
+def _check_cell_voltages(cell: dict, where: str) -> None:
+    """The cell's voltage_min_v and voltage_max_v where given: within VOLTAGE_RANGE_V, the
+    minimum below the maximum (drive cycles take their cut-off from them)."""
+    given = [_real(cell, k, where, *VOLTAGE_RANGE_V) for k in ("voltage_min_v", "voltage_max_v")
+             if k in cell]
+    if len(given) == 2 and not given[0] < given[1]:
+        raise ModelFileError(f"{where}: voltage_min_v {given[0]:g} V is not below voltage_max_v "
+                             f"{given[1]:g} V")
+
+
+def _gating(doc: object, where: str) -> dict:
+    """The 'gating' object: mode and initial_direction as strings (checked by the model)."""
+    if not isinstance(doc, dict):
+        raise ModelFileError(f"{where}: expected an object, got {doc!r:.60}")
+    direction = doc.get("initial_direction", "discharge")
+    if direction not in ("discharge", "charge"):
+        raise ModelFileError(f"{where}: 'initial_direction' is {direction!r}, expected "
+                             "'discharge' or 'charge'")
+    return doc
 
 
 def _read_structure(reg: dict, where: str) -> tuple[int, int, list[tuple[float, ...]]]:
     """Output lags na ≥ 0, current terms nb ≥ 1 and the filters [(τ_fast, τ_slow)] (s)."""
     na = _get(reg, "output_lags", where, int)
     nb = _get(reg, "current_terms", where, int)
-    filters = [tuple(float(x) for x in f) for f in _get(reg, "filters", where, list)]
+    given = _get(reg, "filters", where, list)
+    if not all(isinstance(f, list) and all(is_real_number(x) and math.isfinite(x) for x in f)
+               for f in given):
+        raise ModelFileError(f"{where}: 'filters' is {given!r:.80}, expected a list of "
+                             "[tau_fast_s, tau_slow_s] pairs of finite numbers")
+    filters = [tuple(float(x) for x in f) for f in given]
     if na < 0 or nb < 1 or any(len(f) != 2 or not 0 < f[0] < f[1] for f in filters):
         raise ModelFileError(f"{where}: need output_lags ≥ 0, current_terms ≥ 1 and filters "
                              "[tau_fast_s, tau_slow_s] with 0 < fast < slow")

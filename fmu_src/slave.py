@@ -18,14 +18,8 @@ from pathlib import Path
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from .cosim import (
-    CAPACITY_RANGE_AH,
-    OUT_OF_RANGE_DESCRIPTION,
-    CellCosim,
-    InputError,
-    Parameters,
-)
-from .model import ModelFileError, load_model
+from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
+from .model import CAPACITY_RANGE_AH, ModelFileError, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
