@@ -697,3 +697,26 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
         with pytest.raises(DataError, match="unknown format") as info:
             read_record(path)
         assert "perhaps" not in str(info.value)
+
+
+@pytest.mark.parametrize("field, edit, message", [
+    ("Voltage", lambda a: a[:-10], r"field 'Voltage' holds 3990 value\(s\) for 4000 times "
+                                   r"\(field 'Time'\); expected one per sample"),
+    ("Current", lambda a: np.full(5, "x"), "field 'Current' is not numeric"),
+    ("Time", lambda a: a[:1], r"field 'Time' holds 1 sample\(s\); expected at least two"),
+    ("Time", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 7, np.nan, a),
+     "field 'Time' holds 1 NaN or infinite value.*, the first at sample 8"),
+    ("TimeStamp", lambda a: a[:3], "field 'TimeStamp' holds 3 value.* for 4000 times"),
+    ("TimeStamp", lambda a: np.array([["not a time"]] * a.size, dtype=object),
+     "field 'TimeStamp': .*expected wall-clock times"),
+])
+def test_a_panasonic_file_with_a_broken_field_is_named(tmp_path, field, edit, message) -> None:
+    """A field of the 'meas' struct that is not numeric or not one value per sample gave an
+    IndexError or a ValueError traceback (found by editing each field of the shipped file)."""
+    meas = scipy.io.loadmat(str(PAN_US06))["meas"][0, 0]
+    fields = {k: np.asarray(meas[k])[:4000] for k in meas.dtype.names}
+    fields[field] = edit(fields[field])
+    path = tmp_path / "broken_Pan18650PF.mat"
+    scipy.io.savemat(str(path), {"meas": fields})
+    with pytest.raises(DataError, match=rf"broken_Pan18650PF.mat: {message}"):
+        read_record(path)

@@ -403,6 +403,20 @@ def _parse_timestamps(stamps: np.ndarray) -> np.ndarray:
     return out - out[0]
 
 
+def _mat_field(meas: np.ndarray, name: str, path: Path, size: int | None = None) -> np.ndarray:
+    """A field of a MATLAB struct as a flat float array of `size` values (any where None), or
+    DataError naming the file and field (an IndexError or ValueError before)."""
+    try:
+        values = np.asarray(meas[name], dtype=float).ravel()
+    except (TypeError, ValueError):
+        raise DataError(f"{path}: field '{name}' is not numeric; expected one number per "
+                        "sample") from None
+    if size is not None and values.size != size:
+        raise DataError(f"{path}: field '{name}' holds {values.size} value(s) for {size} times "
+                        "(field 'Time'); expected one per sample")
+    return values
+
+
 def read_panasonic(path: Path) -> Record:
     """Kollmeyer Panasonic 18650PF ``.mat`` (struct ``meas``); discharge < 0 already.
 
@@ -433,7 +447,14 @@ def read_panasonic(path: Path) -> Record:
     missing = [f for f in need if f not in fields]
     if missing:
         raise DataError(f"{path}: struct 'meas' lacks field(s) {missing}; found {list(fields)}")
-    t = np.asarray(meas["Time"], dtype=float).ravel()
+    t = _mat_field(meas, "Time", path)
+    if t.size < 2:
+        raise DataError(f"{path}: field 'Time' holds {t.size} sample(s); expected at least two")
+    if not np.isfinite(t).all():
+        first = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise DataError(f"{path}: field 'Time' holds {int((~np.isfinite(t)).sum())} NaN or "
+                        f"infinite value(s), the first at sample {first + 1}; expected finite "
+                        "times (s)")
     keep = np.ones(t.size, dtype=bool)
     keep[1:] = np.diff(t) > 0
     notes = []
@@ -446,13 +467,21 @@ def read_panasonic(path: Path) -> Record:
         notes.append(f"dropped {int((~keep).sum())} sample(s) with a repeated time stamp")
 
     def field_(name: str) -> np.ndarray:
-        return np.asarray(meas[name], dtype=float).ravel()[keep]
+        return _mat_field(meas, name, path, keep.size)[keep]
 
     t = t[keep]
     gaps = set(_segment_starts_from_gaps(t, field_("Current"), field_("Ah")))
     pauses: set[int] = set()
     if "TimeStamp" in fields:
-        wall = _parse_timestamps(np.ravel(meas["TimeStamp"])[keep])
+        stamps = np.ravel(meas["TimeStamp"])
+        if stamps.size != keep.size:
+            raise DataError(f"{path}: field 'TimeStamp' holds {stamps.size} value(s) for "
+                            f"{keep.size} times; expected one per sample")
+        try:
+            wall = _parse_timestamps(stamps[keep])
+        except ValueError as exc:
+            raise DataError(f"{path}: field 'TimeStamp': {exc}; expected wall-clock times "
+                            "such as '3/20/2017 5:56:01 AM'") from None
         hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
         for k in hidden:
             notes.append(f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at sample {k}")
