@@ -618,3 +618,25 @@ def test_workers_that_do_not_start_say_the_usual_cause() -> None:
     with pytest.raises(RuntimeError, match=r"Nanny failed to start\.\)\. A script that calls "
                                            r"lmncell.sweep must call it under `if __name__"):
         _local_cluster(FailingCluster, 1)
+
+
+def test_a_users_mistake_found_on_a_worker_is_raised_not_logged_as_a_failed_task(
+        native_fmu, monkeypatch, caplog) -> None:
+    """A DataError inside a scenario's run comes back to sweep, which raises it; the worker
+    does not log "Compute Failed" with a traceback ahead of it (as it did where --repeat was
+    too large, before check_steps)."""
+    import lmncell.scenarios.sweep as sw
+    from dask.distributed import Client
+    from lmncell.data.records import DataError
+
+    def refused(_fmu_bytes, sc):
+        raise DataError(f"the {sc.cycle.title} cycle: refused on the worker")
+
+    monkeypatch.setattr(sw, "run_scenario", refused)
+    cases = sw.scenarios(["udds"], [25.0], [0.9])
+    with (Client(processes=False, n_workers=1, threads_per_worker=1,
+                 dashboard_address=None) as client,
+          pytest.raises(DataError, match="the UDDS cycle: refused on the worker")):
+        sw.sweep(native_fmu, cases, client=client, progress=False)
+    logged = [r.getMessage() for r in caplog.records if r.name.startswith("distributed")]
+    assert not [m for m in logged if "Compute Failed" in m], logged

@@ -197,6 +197,19 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
            "wall_s": time.perf_counter() - t0}
 
 
+USER_ERROR_KEY = "user_error"   # a worker's row that carries a DataError's message instead
+
+
+def run_on_worker(fmu_bytes: bytes, sc: Scenario) -> dict:
+    """run_scenario as a Dask task: a DataError (the user's mistake) comes back as a row
+    {USER_ERROR_KEY: message}, which sweep raises again, so that no worker logs it as a
+    failed task with a traceback."""
+    try:
+        return run_scenario(fmu_bytes, sc)
+    except DataError as exc:
+        return {USER_ERROR_KEY: str(exc)}
+
+
 def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None) -> Path:
     """The FMU's path, once it is known to be an LMNCell FMU (ConfigError naming the file if
     not) whose model's voltages the scenarios' cut-off lies within (check_cutoff_in_range),
@@ -259,11 +272,14 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
         client = _connect(Client, scheduler)
     try:
         blob = client.scatter(data, broadcast=True, hash=False)   # own key per sweep
-        futures = [client.submit(run_scenario, blob, sc, pure=False) for sc in cases]
+        futures = [client.submit(run_on_worker, blob, sc, pure=False) for sc in cases]
         if progress:
             dask_progress(futures)
             print(flush=True)
         rows = client.gather(futures)
+        refused = [row[USER_ERROR_KEY] for row in rows if USER_ERROR_KEY in row]
+        if refused:
+            raise DataError(refused[0])
     finally:
         if own:
             client.close()
