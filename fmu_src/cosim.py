@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from .model import CAPACITY_RANGE_AH, LmnModel
+from .model import CAPACITY_RANGE_AH, LmnModel, is_cell_capacity
 from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
@@ -104,10 +104,9 @@ class CellCosim:
         p = self.params
         if not 0.0 <= p.soc0 <= 1.0 or not math.isfinite(p.soc0):
             raise InputError(f"parameter 'soc0' = {p.soc0:g}: expected a fraction within 0..1")
-        lo, hi = CAPACITY_RANGE_AH
-        if not (math.isfinite(p.capacity_ah) and lo <= p.capacity_ah <= hi):
+        if not is_cell_capacity(p.capacity_ah):
             raise InputError(f"parameter 'capacity' = {p.capacity_ah:g}: expected a cell's "
-                             f"capacity within {lo:g}...{hi:g} Ah")
+                             "capacity within {:g}...{:g} Ah".format(*CAPACITY_RANGE_AH))
         if p.observer not in OBSERVER_NAMES:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")

@@ -418,6 +418,13 @@ def _array(doc: dict, key: str, where: str, ndim: int) -> np.ndarray:
     return arr
 
 
+def is_cell_capacity(value: float) -> bool:
+    """Whether value (Ah) is a finite capacity within CAPACITY_RANGE_AH (the FMUs' 'capacity'
+    parameter is refused outside it, as the model file's cell.capacity_ah)."""
+    low, high = CAPACITY_RANGE_AH
+    return math.isfinite(value) and low <= value <= high
+
+
 def _real(doc: dict, key: str, where: str, low: float, high: float, default: float | None = None,
           low_open: bool = False) -> float:
     """doc[key] (or default where it is absent and a default is given) as a finite real number
@@ -511,10 +518,8 @@ def _limits(doc: object, source: str) -> dict:
     low ≤ high (the trained ranges the out-of-range flag and the warnings compare with)."""
     if not isinstance(doc, dict):
         raise ModelFileError(f"{source}: 'limits' must be an object, got {doc!r:.60}")
-    for key in LIMIT_KEYS:
-        pair = doc.get(key)
-        if pair is None and key not in doc:
-            continue
+    for key in set(LIMIT_KEYS) & set(doc):
+        pair = doc[key]
         if not (isinstance(pair, list) and len(pair) == 2
                 and all(is_real_number(x) and math.isfinite(x) for x in pair)
                 and pair[0] <= pair[1]):
@@ -523,17 +528,17 @@ def _limits(doc: object, source: str) -> dict:
     return dict(doc)
 
 
-def _observers(doc: object, source: str, n_local_models: int) -> object:
+def _check_observers(doc: object, source: str, n_local_models: int) -> None:
     """The 'observers' object: its fuzzy observer's offline design where present (q, r > 0,
     gains, variances and ocv_slopes_v one finite number per local model), which the fuzzy
     observer takes where its q and r are the ones it would design with."""
     if doc is None:
-        return doc
+        return
     if not isinstance(doc, dict):
         raise ModelFileError(f"{source}: 'observers' must be an object, got {doc!r:.60}")
     fuzzy = doc.get("fuzzy")
     if fuzzy is None:
-        return doc
+        return
     where = f"{source}: observers.fuzzy"
     if not isinstance(fuzzy, dict):
         raise ModelFileError(f"{where} must be an object, got {fuzzy!r:.60}")
@@ -547,7 +552,6 @@ def _observers(doc: object, source: str, n_local_models: int) -> object:
         if values.size != n_local_models or (values < low).any() or (values > 1e6).any():
             raise ModelFileError(f"{where}: '{key}' is {fuzzy[key]!r:.80}, expected one number "
                                  f"within {low:g}…1e+06 per local model ({n_local_models})")
-    return doc
 
 
 def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
@@ -602,7 +606,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         noise=_noise(doc.get("noise", {}), source),
         extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
                if k in doc})
-    _observers(doc.get("observers"), source, model.n_local_models)
+    _check_observers(doc.get("observers"), source, model.n_local_models)
     _check_local_models(model, lm, source)
     return model
 

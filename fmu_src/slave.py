@@ -19,7 +19,7 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Intege
 from pythonfmu.enums import Fmi2Status
 
 from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
-from .model import CAPACITY_RANGE_AH, ModelFileError, load_model
+from .model import ModelFileError, is_cell_capacity, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
@@ -178,8 +178,8 @@ class LmnCellSlave(Fmi2Slave):
         changed in between, nothing differs)."""
         m = self._model
         soc0 = min(max(float(self.soc0), 0.0), 1.0) if math.isfinite(self.soc0) else 1.0
-        cap, (low, high) = float(self.capacity), CAPACITY_RANGE_AH
-        cap = cap if math.isfinite(cap) and low <= cap <= high else float(m.capacity_ah)
+        cap = float(self.capacity)
+        cap = cap if is_cell_capacity(cap) else float(m.capacity_ah)
         observer = int(self.observer) if self.observer in OBSERVERS else 0
         cosim = CellCosim(m, Parameters(soc0, cap, observer, bool(self.temperature_is_cell)))
         cosim.reset(self._start_temperature())

@@ -291,10 +291,17 @@ def default_step_s(md: Any) -> float:
     return float(default.stepSize) if default and default.stepSize else 1.0
 
 
+def step_count(span_s: float, h: float) -> int:
+    """The number of whole steps of h (s) over span_s (s), a step that ends within 1e-9 of a
+    step's length past the span counted: the runs and the sweep's pre-check count alike."""
+    return math.floor(span_s / h + 1e-9)
+
+
 def whole_steps(h: float, span_s: float, what: str) -> int:
-    """The number of whole steps of h (s) over span_s (s); DataError where there are none or
-    more than MAX_CYCLE_STEPS. what: the run as messages name it ("the UDDS cycle")."""
-    n = math.floor(span_s / h + 1e-9)
+    """The number of whole steps of h (s) over span_s (s) (step_count); DataError where there
+    are none or more than MAX_CYCLE_STEPS. what: the run as messages name it ("the UDDS
+    cycle")."""
+    n = step_count(span_s, h)
     if n < 1:
         raise DataError(f"communication step {h:g} s: longer than {what} ({span_s:g} s); "
                         f"expected at most {span_s:g} s")

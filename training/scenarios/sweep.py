@@ -37,7 +37,7 @@ from lmncell.scenarios.drive import (
     load_vehicle,
     pack_power,
     run_cycle,
-    shipped_cell,
+    step_count,
     step_means,
 )
 from lmncell.scenarios.pack import PackSpec, drive_pack, parse_pack, parse_spread
@@ -153,7 +153,7 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     power = (np.tile(pack_power(sc.vehicle, sc.cycle.speed_mps, sc.cycle.grade, dt), sc.repeat)
              * sc.pack.power_share)
     ts = model.sample_time_s
-    steps = math.floor(power.size * dt / ts + 1e-9)
+    steps = step_count(power.size * dt, ts)
     cutoff = cell_cutoff_v(model.cell) if sc.cutoff_v is None else sc.cutoff_v
     f = drive_pack(model, sc.pack, step_means(power, dt, ts, steps), sc.ambient_c, sc.soc0,
                    cutoff)
@@ -217,15 +217,15 @@ def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = No
     whole number ≥ 1 or None; DataError naming the option otherwise. So a user's mistake is
     refused here, before any worker starts, not logged by a worker as a failed task."""
     from fmpy import read_model_description
-    from lmncell.evaluation.fmueval import read_fmu_info
+    from lmncell.evaluation.fmueval import read_fmu_info, shipped_model_doc
 
     fmu = Path(fmu)
     read_fmu_info(fmu)
-    cell = shipped_cell(fmu)
+    doc = shipped_model_doc(fmu)
     for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
-        check_cutoff_in_range(cell, cutoff_v, "sweep: --cutoff")
+        check_cutoff_in_range(doc.get("cell"), cutoff_v, "sweep: --cutoff")
     check_steps(cases, default_step_s(read_model_description(str(fmu))),
-                _model_of(fmu.read_bytes()).sample_time_s)
+                model_from_dict(doc, f"{fmu}: resources/model.json").sample_time_s)
     if workers is not None and workers < 1:
         raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
     return fmu
@@ -239,7 +239,7 @@ def check_steps(cases: list[Scenario], fmu_step_s: float, model_step_s: float) -
     for sc in cases:
         h = model_step_s if sc.pack is not None else fmu_step_s
         cycle_s = sc.cycle.speed_mps.size * sc.cycle.step_s
-        n = math.floor(cycle_s * sc.repeat / h + 1e-9)
+        n = step_count(sc.cycle.speed_mps.size * sc.repeat * sc.cycle.step_s, h)   # as the runs
         if n < 1:
             raise DataError(f"sweep: --cycles {sc.cycle.title!r}: {cycle_s * sc.repeat:g} s "
                             f"long, shorter than one step of {h:g} s; expected a longer trace "
