@@ -703,7 +703,7 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
     ("Voltage", lambda a: a[:-10], r"field 'Voltage' holds 3990 value\(s\) for 4000 times "
                                    r"\(field 'Time'\); expected one per sample"),
     ("Current", lambda a: np.full(5, "x"), "field 'Current' is not numeric"),
-    ("Time", lambda a: a[:1], r"field 'Time' holds 1 sample\(s\); expected at least two"),
+    ("Time", lambda a: a[:0], r"field 'Time' is empty; expected one time \(s\) per sample"),
     ("Time", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 7, np.nan, a),
      "field 'Time' holds 1 NaN or infinite value.*, the first at sample 8"),
     ("TimeStamp", lambda a: a[:3], "field 'TimeStamp' holds 3 value.* for 4000 times"),
@@ -720,3 +720,19 @@ def test_a_panasonic_file_with_a_broken_field_is_named(tmp_path, field, edit, me
     scipy.io.savemat(str(path), {"meas": fields})
     with pytest.raises(DataError, match=rf"broken_Pan18650PF.mat: {message}"):
         read_record(path)
+
+
+def test_a_one_sample_panasonic_file_is_inspected_not_refused(tmp_path, capsys) -> None:
+    """The shared Panasonic set holds a one-sample file (03-09-17_15.12_3349_TS002973.mat, a
+    tester stub); inspect summarises it and says it is too short, as for a one-row CSV, and
+    training refuses it by its current, not by a reader error."""
+    from lmncell.cli import main
+
+    meas = scipy.io.loadmat(str(PAN_US06))["meas"][0, 0]
+    fields = {k: np.asarray(meas[k])[:1] for k in meas.dtype.names}
+    path = tmp_path / "stub_Pan18650PF.mat"
+    scipy.io.savemat(str(path), {"meas": fields})
+    assert len(read_record(path)) == 1
+    assert main(["inspect", str(path)]) == 0
+    assert "1 samples, 0.00 h, no sample time (too short to train on or evaluate)" in (
+        capsys.readouterr().out)

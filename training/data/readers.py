@@ -448,8 +448,8 @@ def read_panasonic(path: Path) -> Record:
     if missing:
         raise DataError(f"{path}: struct 'meas' lacks field(s) {missing}; found {list(fields)}")
     t = _mat_field(meas, "Time", path)
-    if t.size < 2:
-        raise DataError(f"{path}: field 'Time' holds {t.size} sample(s); expected at least two")
+    if t.size == 0:
+        raise DataError(f"{path}: field 'Time' is empty; expected one time (s) per sample")
     if not np.isfinite(t).all():
         first = int(np.flatnonzero(~np.isfinite(t))[0])
         raise DataError(f"{path}: field 'Time' holds {int((~np.isfinite(t)).sum())} NaN or "

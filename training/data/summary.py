@@ -35,7 +35,8 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
     q = charge_throughput_ah(rec)
     out = {
         "file": rec.meta.source, "format": rec.meta.fmt, "samples": len(rec),
-        "duration_s": rec.duration_s, "sample_time_s": rec.meta.sample_time_s,
+        "duration_s": rec.duration_s,
+        "sample_time_s": rec.meta.sample_time_s if len(rec) > 1 else None,
         "segments": len(rec.meta.segment_starts), "sign": rec.meta.sign_note,
         "current_a": [float(rec.current_a.min()), float(rec.current_a.max())],
         "voltage_v": [float(rec.voltage_v.min()), float(rec.voltage_v.max())],
@@ -66,9 +67,13 @@ def format_summary(s: dict) -> str:
     def rng(v: list[float], fmt: str) -> str:
         return f"{v[0]:{fmt}} … {v[1]:{fmt}}"
 
+    if s["samples"] < 2:        # the shared set holds a one-sample file (a tester stub)
+        step = "no sample time (too short to train on or evaluate)"
+    else:
+        step = f"sample time {s['sample_time_s']:.3g} s"
     lines = [f"{s['file']}  [{s['format']}]",
-             f"  {s['samples']} samples, {s['duration_s'] / 3600:.2f} h, sample time "
-             f"{s['sample_time_s']:.3g} s, {s['segments']} segment(s); sign: {s['sign']}",
+             f"  {s['samples']} samples, {s['duration_s'] / 3600:.2f} h, {step}, "
+             f"{s['segments']} segment(s); sign: {s['sign']}",
              f"  current {rng(s['current_a'], '.3f')} A"
              + (f" ({rng(s['c_rate'], '.2f')} C at {s['capacity_ah_assumed']} Ah)"
                 if "c_rate" in s else ""),
