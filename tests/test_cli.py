@@ -9,11 +9,12 @@ import re
 import numpy as np
 import pytest
 from lmncell.cli import main
+from lmncell.data.records import DataError
 from lmncell.evaluation.metrics import pooled, record_metrics
 from lmncell.fmu.pythonfmu_build import native_host_environment
 from lmncell.runtime.model import Depletion
 
-from tests.conftest import A123_S1, DATA, PAN_US06, SHARED, shared_or_skip
+from tests.conftest import A123_S1, DATA, PAN_HWFET, PAN_US06, SHARED, shared_or_skip
 
 
 def test_inspect_reads_every_shared_file(capsys) -> None:
@@ -447,3 +448,26 @@ def test_out_of_memory_ends_a_command_with_a_message_and_code_2(monkeypatch, cap
     err = capsys.readouterr().err
     assert err.startswith("lmncell inspect: error: out of memory (Unable to allocate 1.76 GiB")
     assert "expected fewer or shorter records, a longer sample time" in err
+
+
+@pytest.mark.parametrize("command", [
+    ["train", "x.csv", "--out", "m.json"], ["inspect", "x.csv"],
+    ["design", "--soc-profile", "0.8,0.2", "--out", "p.csv"]])
+@pytest.mark.parametrize("capacity", ["1e9", "1e-9", "0"])
+def test_a_capacity_no_model_file_holds_is_refused_at_once(capsys, command, capacity) -> None:
+    """`train --capacity 1e9` wrote a model that no loader would read (capacity_ah outside
+    CAPACITY_RANGE_AH); `design --capacity 1e-9` designed a 0 A programme."""
+    with pytest.raises(SystemExit) as info:
+        main([*command, "--capacity", capacity])
+    assert info.value.code == 2
+    assert (f"argument --capacity: '{capacity}': expected a cell capacity in Ah within "
+            "0.0001…100000") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("capacity", [1e9, -1.0, float("nan"), "two", True])
+def test_api_train_refuses_a_capacity_no_model_file_holds(tmp_path, capacity) -> None:
+    import lmncell
+
+    with pytest.raises(DataError, match=r"train: capacity_ah = .*; expected None \(estimated "
+                                        r"from the records\) or a cell capacity in Ah within"):
+        lmncell.train([PAN_HWFET], tmp_path / "m.json", capacity_ah=capacity)

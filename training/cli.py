@@ -23,7 +23,7 @@ from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.fmu.interface import NativeBuildError
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
-from lmncell.runtime.model import ModelFileError
+from lmncell.runtime.model import CAPACITY_RANGE_AH, ModelFileError, is_cell_capacity
 from lmncell.scenarios.drive import CUTOFF_EXPECTED, is_cutoff
 from lmncell.scenarios.traces import cycle_problem
 
@@ -115,6 +115,8 @@ def output_folder_argument(text: str) -> str:
 
 _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
+_capacity = number_argument(
+    float, is_cell_capacity, "a cell capacity in Ah within {:g}…{:g}".format(*CAPACITY_RANGE_AH))
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
 _cutoff = number_argument(float, is_cutoff, CUTOFF_EXPECTED)
 _temperature = number_argument(
@@ -423,7 +425,7 @@ def _add_inspect_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("files", nargs="+", help="data files (CSV, .mat, BDF; .gz too)")
     s.add_argument("--plot", type=figure_file_argument, metavar="OUT.png",
                    help="one figure of all files")
-    s.add_argument("--capacity", type=_positive, help="Ah, for C-rates and SoC (default: the "
+    s.add_argument("--capacity", type=_capacity, help="Ah, for C-rates and SoC (default: the "
                    "discharged charge of a record that starts full)")
     _add_reader_options(s)
     s.set_defaults(func=cmd_inspect)
@@ -435,7 +437,7 @@ def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("data", nargs="+", help="training data files")
     s.add_argument("--out", required=True, type=output_file_argument, metavar="MODEL.json",
                    help="model file to write")
-    s.add_argument("--capacity", type=_positive, help="Ah from full to the cut-off at a slow "
+    s.add_argument("--capacity", type=_capacity, help="Ah from full to the cut-off at a slow "
                    "rate (default: with --ocv-tests, of the largest discharge from full among the "
                    "records and up to 15 %% more, the one whose model follows them best; else "
                    "that largest discharge, a lower bound)")
@@ -605,7 +607,7 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell design` subcommand."""
     s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile",
                        **fmt)
-    s.add_argument("--capacity", type=_positive, required=True, help="cell capacity, Ah")
+    s.add_argument("--capacity", type=_capacity, required=True, help="cell capacity, Ah")
     s.add_argument("--soc-profile", required=True, help="SoC points, e.g. 0.8,0.2,0.8 or 0.8:0.2")
     s.add_argument("--max-c-rate", type=_positive, default=20.0, help="current limit, C")
     s.add_argument("--max-current", type=_positive, default=100.0, help="cycler limit, A")

@@ -34,7 +34,13 @@ from lmncell.identification.prefit import with_soc_reference_weights
 from lmncell.identification.thermal import fit_thermal
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
-from lmncell.runtime.model import LmnModel, model_to_dict, save_model
+from lmncell.runtime.model import (
+    CAPACITY_RANGE_AH,
+    LmnModel,
+    is_cell_capacity,
+    model_to_dict,
+    save_model,
+)
 from lmncell.runtime.observers import offline_fuzzy_design
 from lmncell.runtime.step import exo_series, initial_hysteresis
 from lmncell.runtime.thermal import ThermalModel
@@ -94,6 +100,10 @@ def lower_bound_capacity(records: list[Record], soc0: float | Sequence[float] | 
                          progress: Progress = _print) -> float:
     """The largest discharge from full among the records (Ah, estimate_capacity), said."""
     capacity_ah = estimate_capacity(records, start_socs(soc0, len(records)))
+    if not is_cell_capacity(capacity_ah):
+        raise DataError(f"the largest discharge from full among the records is {capacity_ah:.3g} "
+                        "Ah, outside a cell's {:g}…{:g} Ah: too little to estimate the capacity "
+                        "from; give it (--capacity, capacity_ah=)".format(*CAPACITY_RANGE_AH))
     progress(f"capacity estimated from full discharges: {capacity_ah:.4f} Ah "
              "(a lower bound; give --capacity for a measured value)")
     return capacity_ah
@@ -280,6 +290,21 @@ def fit_capacity(records: list[Record], cfg: TrainConfig,
     return cap, segs, result
 
 
+def check_given_capacity(capacity_ah: Any) -> None:
+    """DataError unless capacity_ah is None or a capacity (Ah) the model file can hold
+    (CAPACITY_RANGE_AH); before, 1e9 Ah trained a model that no loader would read."""
+    if capacity_ah is None:
+        return
+    try:
+        ok = not isinstance(capacity_ah, bool) and is_cell_capacity(float(capacity_ah))
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise DataError(f"train: capacity_ah = {capacity_ah!r:.60}; expected None (estimated "
+                        "from the records) or a cell capacity in Ah within "
+                        "{:g}…{:g}".format(*CAPACITY_RANGE_AH))
+
+
 def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | None = None,
                 soc0: float | Sequence[float] | None = None,
                 partition: list[str] | None = None,
@@ -296,6 +321,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
+    check_given_capacity(capacity_ah)
     problem = output_file_problem(out)
     if problem:
         raise ConfigError(f"{out}: {problem}")
