@@ -640,3 +640,17 @@ def test_a_users_mistake_found_on_a_worker_is_raised_not_logged_as_a_failed_task
         sw.sweep(native_fmu, cases, client=client, progress=False)
     logged = [r.getMessage() for r in caplog.records if r.name.startswith("distributed")]
     assert not [m for m in logged if "Compute Failed" in m], logged
+
+
+@pytest.mark.parametrize("lists, message", [
+    ((["wltc", "udds", "wltc"], [25.0], [0.9]), "--cycles names 'wltc' twice"),
+    ((["wltc"], [25.0, 10.0, 25], [0.9]), "--ambient names 25 twice"),
+    ((["wltc"], [25.0], [0.9, 0.9]), "--soc0 names 0.9 twice"),
+])
+def test_a_value_named_twice_in_a_list_is_refused(lists, message) -> None:
+    """`sweep --ambient 25,25` ran every scenario twice and counted both in the summaries."""
+    from lmncell.scenarios.sweep import scenarios
+
+    with pytest.raises(DataError, match=rf"sweep: {message}; expected each value once"):
+        scenarios(*lists)
+    assert len(scenarios(["wltc", "udds"], [25.0, 10.0], [0.9, 0.5])) == 8

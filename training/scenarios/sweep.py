@@ -21,6 +21,7 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
@@ -63,6 +64,17 @@ class Scenario:
     cutoff_v: float | None = None    # discharge cut-off (V); None: the FMU's model's
 
 
+def check_distinct(option: str, values: Sequence[Any]) -> None:
+    """DataError where a list option names one value twice: the product would run the same
+    scenarios again (and count them twice in the summaries)."""
+    seen: set[Any] = set()
+    for v in values:
+        if v in seen:
+            raise DataError(f"sweep: {option} names {v!r} twice; expected each value once (a "
+                            "repeated value runs the same scenarios again)")
+        seen.add(v)
+
+
 def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Sequence[float],
               vehicle_files: Sequence[str | None] = (None,), repeat: int = 1,
               pack: str | None = None, spread: str | None = None,
@@ -78,6 +90,9 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
     voltage, drive.shipped_cutoff_v) or its SoC below 0."""
     if not cycles or not ambients or not soc0s or not vehicle_files:
         raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
+    for option, values in (("--cycles", [str(c) for c in cycles]), ("--ambient", ambients),
+                           ("--soc0", soc0s), ("--vehicle", [str(v) for v in vehicle_files])):
+        check_distinct(option, values)
     traces = [load_cycle(c, "sweep: --cycles") for c in cycles]
     for t in ambients:
         if not is_cell_temperature(t):
