@@ -1252,3 +1252,16 @@ def test_progress_names_weighted_and_whole_record_errors_apart(tmp_path) -> None
     wrote = lines[-1]
     assert (f"free-run RMSE over the training records {summary['train_rmse_mv']:.2f} mV "
             "(unweighted" in wrote)
+
+
+@pytest.mark.parametrize("gamma", [1e-9, 0.5, 2.0])
+def test_a_slow_hysteresis_gamma_keeps_the_ocv_a_cells(tmp_path, gamma) -> None:
+    """Without an OCV test, a γ so small that h barely leaves its start (a function of SoC on
+    a discharge) traded volts between the OCV and H·h: γ = 0.5 wrote an OCV of 11.7…13.5 V
+    that the loader refused, γ = 1e-9 an OCV of 2.8e9 V that failed the ladder solve with a
+    traceback. The pre-fit holds |H| ≤ HYSTERESIS_MAX_V."""
+    out = tmp_path / f"g{gamma:g}.json"
+    train_files([PAN_HWFET], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
+                max_local_models=2, oe_max_iterations=2, hysteresis=gamma)
+    ocv = load_model(out).ocv_v
+    assert 2.3 < ocv.min() and ocv.max() < 4.5

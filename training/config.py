@@ -90,6 +90,8 @@ class TrainConfig:
     hysteresis: "auto" (γ chosen by the OCV pre-fit, kept where it lowers the pre-fit's error
     enough, or where the validation error says so), "off", or γ (1): the state
     h(k) = e·h(k−1) + (1−e)·sgn(i), e = exp(−γ·|i|·Ts/(3600·Cn)), a regressor of every model.
+    Where no OCV test fixes the OCV, the pre-fit that estimates it holds the hysteresis voltage
+    |H| ≤ 0.2 V (a small γ leaves h a function of SoC that trades volts with the OCV).
     local_model_form: "rc_ladder" (every local model an equivalent circuit: R0, RC elements at
     the filters' time constants and the hysteresis voltage, all ≥ 0, by bounded least squares;
     needs output_lags = 0 and a chain of filters), "free" (the paper's unconstrained ARX), or

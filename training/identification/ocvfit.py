@@ -15,6 +15,7 @@ from scipy.optimize import lsq_linear
 from scipy.signal import lfilter
 
 SMOOTHNESS = 3e-3   # penalty weight per knot, relative to the number of samples
+HYSTERESIS_MAX_V = 0.2   # |H| of the pre-fit at most (V): a cell's hysteresis is tens of mV
 
 
 def hat_basis(soc: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -78,14 +79,27 @@ def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.n
     D = np.zeros((n_knots - 2, X.shape[1]))
     D[:, :n_knots] = second_difference(n_knots)
     lam = SMOOTHNESS * max(float(w.sum()), 1.0)
-    G = A.T @ A + lam * D.T @ D
-    G += 1e-10 * (np.trace(G) / G.shape[0]) * np.eye(X.shape[1])
-    coef = np.linalg.solve(G, A.T @ b)
-    if np.any(np.diff(coef[:n_knots]) < 0):
-        coef = _monotone_solve(A, b, D, lam, n_knots)
+    coef = _smooth_solve(A, b, D, lam, n_knots)
+    if hyst is not None and abs(coef[-1]) > HYSTERESIS_MAX_V:
+        # h near a function of SoC (a small γ, records that rarely reverse the current): the
+        # OCV and H·h trade volts for volts (OCV 11.7 V at γ = 0.5); H held at the bound
+        h_v = float(np.copysign(HYSTERESIS_MAX_V, coef[-1]))
+        coef = np.append(_smooth_solve(A[:, :-1], b - h_v * A[:, -1], D[:, :-1], lam, n_knots),
+                         h_v)
     res = y - X @ coef
     rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))
     return OcvFit(knots, coef[:n_knots].copy(), rmse, coef)
+
+
+def _smooth_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
+                  n_knots: int) -> np.ndarray:
+    """min ‖A·x − b‖² + lam·‖D·x‖², the OCV knots (the first n_knots of x) non-decreasing."""
+    G = A.T @ A + lam * D.T @ D
+    G += 1e-10 * (np.trace(G) / G.shape[0]) * np.eye(A.shape[1])
+    coef = np.linalg.solve(G, A.T @ b)
+    if np.any(np.diff(coef[:n_knots]) < 0):
+        coef = _monotone_solve(A, b, D, lam, n_knots)
+    return coef
 
 
 def _monotone_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
