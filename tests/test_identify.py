@@ -1264,4 +1264,25 @@ def test_a_slow_hysteresis_gamma_keeps_the_ocv_a_cells(tmp_path, gamma) -> None:
     train_files([PAN_HWFET], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
                 max_local_models=2, oe_max_iterations=2, hysteresis=gamma)
     ocv = load_model(out).ocv_v
-    assert 2.3 < ocv.min() and ocv.max() < 4.5
+    assert ocv.min() > 2.3 and ocv.max() < 4.5
+
+
+def test_records_that_cannot_support_a_model_are_refused_before_it_is_written(tmp_path) -> None:
+    """A drive cycle whose current is a hundredth of the cell's (a wrong unit) moves the SoC by
+    1 %: without an OCV test the OCV estimated over 0…1 reached −593 V, and training wrote a
+    model file that no loader would read. Now the model is checked as its file will be."""
+    import dataclasses
+
+    from lmncell.data.readers import write_bdf
+    from lmncell.data.records import DataError
+
+    rec = read_record(PAN_HWFET)
+    small = dataclasses.replace(rec, current_a=rec.current_a * 0.01, charge_ah=None)
+    path = write_bdf(small, tmp_path / "milli.csv")
+    out = tmp_path / "m.json"
+    with pytest.raises(DataError, match=r"training gave a model that fails the model file's "
+                                        r"checks \(the trained model: ocv spans .*\); the "
+                                        r"training samples span SoC 0\.99…1\.00 \(of 2\.85 Ah\)"):
+        train_files([path], out, capacity_ah=2.85, progress=lambda _m: None,
+                    max_local_models=3)
+    assert not out.exists()

@@ -37,7 +37,9 @@ from lmncell.progress import print_progress as _print
 from lmncell.runtime.model import (
     CAPACITY_RANGE_AH,
     LmnModel,
+    ModelFileError,
     is_cell_capacity,
+    model_from_dict,
     model_to_dict,
     save_model,
 )
@@ -366,6 +368,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     model.extra["observers"] = {"fuzzy": offline_fuzzy_design(model)}
     if baseline_docs:
         model.extra["baselines"] = baseline_docs
+    check_trained_model(model, segs, cfg)
     save_model(model, out)
     summary = _train_summary(model, train_metrics, result.info, seconds, baseline_docs)
     progress(f"wrote {out}: {model.n_local_models} local models, free-run RMSE over the "
@@ -373,6 +376,27 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
              f"{_mv_or_none(summary['train_window_rmse_mv'])}{_ends_text(summary)}), LMN "
              f"training {result.info['seconds']:.1f} s, total {seconds:.1f} s")
     return model, summary
+
+
+def check_trained_model(model: LmnModel, segs: list[Segment], cfg: TrainConfig) -> None:
+    """DataError, before anything is written, where the identified model fails the checks
+    that loading its file makes (model_from_dict): records that cannot support a model gave
+    one whose file no loader would read (an OCV of -153…-3.4 V from 500 s of one drive cycle
+    without an OCV test, a residual σ of 9 V from a voltage column with spikes)."""
+    try:
+        model_from_dict(model_to_dict(model), "the trained model")
+    except ModelFileError as exc:
+        soc = np.concatenate([s.soc_ref for s in segs])
+        volts = np.concatenate([s.voltage_v for s in segs])
+        hint = (f"the training samples span SoC {soc.min():.2f}…{soc.max():.2f} (of "
+                f"{model.capacity_ah:.4g} Ah) and {volts.min():.3f}…{volts.max():.3f} V")
+        if not cfg.ocv_tests:
+            hint += ("; without slow OCV tests (--ocv-tests) the OCV is estimated from the "
+                     "records alone, which takes records from full to empty at their true "
+                     "capacity and start SoC")
+        raise DataError(f"training gave a model that fails the model file's checks ({exc}); "
+                        f"{hint}. Check the voltage column for spikes or a wrong unit, and "
+                        "settings far from their defaults") from None
 
 
 def _mv_or_none(value: float) -> str:
