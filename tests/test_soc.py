@@ -293,3 +293,15 @@ def test_a_sample_time_finer_than_the_log_is_refused_naming_the_file() -> None:
                        r"step\); a model sample time of 0.1 s, .* expected sample_time_s ≥ 0.5"):
         record_parts(rec, 0.1, 1.0, 2.0)
     assert len(record_parts(rec, 0.5, 1.0, 2.0)[0][1].time_s) == 1198
+
+
+def test_one_half_of_an_ocv_test_given_alone_is_named_with_what_it_holds() -> None:
+    """The charge test S3 given alone as a one-file round trip said 'too few loaded samples'."""
+    from lmncell.data.soc import ocv_from_round_trip
+
+    rec = read_record(DATA / "a123_plett/ocv/A123_OCV_P25_S3.csv.gz")
+    with pytest.raises(DataError, match=r"A123_OCV_P25_S3.csv.gz: expected one slow test with "
+                                        r"a discharge from full and a charge back to full; "
+                                        r"found 0 discharging and \d+ charging sample\(s\).*"
+                                        r"--ocv-tests DISCHARGE CHARGE"):
+        ocv_from_round_trip(rec)

@@ -204,7 +204,10 @@ def ocv_from_round_trip(rec: Record, points: int = 101,
     dis, chg = rec.current_a < -REST_CURRENT_A, rec.current_a > REST_CURRENT_A
     if dis.sum() < 10 or chg.sum() < 10:
         raise DataError(f"{rec.meta.source}: expected one slow test with a discharge from full "
-                        "and a charge back to full; found too few loaded samples")
+                        f"and a charge back to full; found {int(dis.sum())} discharging and "
+                        f"{int(chg.sum())} charging sample(s) (|current| > {REST_CURRENT_A:g} A),"
+                        " fewer than 10 of one. A discharge test and a charge test in two files "
+                        "are given together (--ocv-tests DISCHARGE CHARGE)")
     q_dis = float(-np.sum(rec.current_a[dis] * dt[dis])) / 3600.0
     q_chg = float(np.sum(rec.current_a[chg] * dt[chg])) / 3600.0
     offset = 3600.0 * (q_dis - q_chg) / float(dt[dis].sum() + dt[chg].sum())
