@@ -471,3 +471,22 @@ def test_api_train_refuses_a_capacity_no_model_file_holds(tmp_path, capacity) ->
     with pytest.raises(DataError, match=r"train: capacity_ah = .*; expected None \(estimated "
                                         r"from the records\) or a cell capacity in Ah within"):
         lmncell.train([PAN_HWFET], tmp_path / "m.json", capacity_ah=capacity)
+
+
+def test_observer_json_is_standard_json_with_null_for_never_settled(quick_model, capsys) -> None:
+    """Coulomb counting from a wrong start never comes within 2 %: its time_to_2pct_s was
+    printed as the literal Infinity, which standard JSON readers refuse."""
+    assert main(["evaluate", str(quick_model), str(PAN_US06), "--soc0", "1", "--observer",
+                 "ekf", "--soc0-est", "0.7", "--json"]) == 0
+    text = capsys.readouterr().out
+    rows = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON {c}"))
+    assert rows[0]["coulomb"]["time_to_2pct_s"] is None
+    assert rows[0]["coulomb"]["rmse_pct"] == pytest.approx(30.0, abs=0.5)
+
+
+def test_json_text_turns_every_non_finite_float_into_null() -> None:
+    from lmncell.report.jsontext import json_text
+
+    obj = {"a": float("nan"), "b": [np.float64(np.inf), 1.5, (2, -np.inf)], "c": "x", "d": None}
+    assert json.loads(json_text(obj)) == {"a": None, "b": [None, 1.5, [2, None]], "c": "x",
+                                          "d": None}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
@@ -21,6 +20,7 @@ from lmncell.design.optimal import (
     soc_window,
     write_programme,
 )
+from lmncell.report.jsontext import json_text
 from lmncell.runtime.model import LmnModel
 
 
@@ -237,10 +237,10 @@ def run_design(a) -> int:
     if a.plot:
         plot_programme(prog, Path(a.plot))
     if a.json and result is None:
-        print(json.dumps(programme_figures(prog, files, check), indent=1))
+        print(json_text(programme_figures(prog, files, check)))
     if result is not None:
         proof_json = Path(a.out).with_suffix(".proof.json")
-        proof_json.write_text(json.dumps(result, indent=1))
+        proof_json.write_text(json_text(result))
         fig = plot_proof(result, Path(a.plot) if a.plot else Path(a.out).parent,
                          Path(a.out).stem)
         left_out = result["skipped"]
@@ -248,5 +248,5 @@ def run_design(a) -> int:
             f"every profile: {'yes' if result['designed_beats_every_median'] else 'no'}"
             + (f" ({len(left_out)} random programme(s) left out, the virtual cell could not run "
                f"them: {', '.join(left_out)})" if left_out else ""))
-        print(json.dumps(result if a.json else result["profiles"], indent=1))
+        print(json_text(result if a.json else result["profiles"]))
     return 0

@@ -24,7 +24,6 @@ vs 2.00 mV), with 30 s for all programmes it wins all three profiles (1.67/2.04/
 from __future__ import annotations
 
 import dataclasses
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -32,6 +31,7 @@ import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS
+from lmncell.report.jsontext import json_text
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
@@ -606,7 +606,7 @@ def write_programme(prog: Programme, out: Path) -> list[Path]:
     bdf = out.with_suffix(".bdf.csv")
     write_bdf(prog.to_record(str(out)), bdf)
     meta = out.with_suffix(".json")
-    meta.write_text(json.dumps({"settings": prog.settings, "profile_points": prog.profile_points,
+    meta.write_text(json_text({"settings": prog.settings, "profile_points": prog.profile_points,
                                 "log_det_per_sequence": prog.log_dets,
                                 "note": "the BDF voltage is the design model's prediction"},
                                indent=1))

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import json
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +20,7 @@ from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
+from lmncell.report.jsontext import json_text
 from lmncell.runtime.cosim import trained_bounds
 from lmncell.runtime.model import LmnModel, load_model, model_from_dict
 from lmncell.runtime.step import initial_hysteresis, simulate, simulate_ambient
@@ -315,7 +315,7 @@ def evaluate_files(model_path: str | Path, paths: list[str | Path],
         progress(f"wrote {len(figures)} figure(s) and {len(tables)} table(s) to {plot_dir}: "
                  + ", ".join(f.name for f in files))
     if as_json:
-        print(json.dumps(rows, indent=1))
+        print(json_text(rows))
     else:
         print_rows(rows, progress)
     return rows

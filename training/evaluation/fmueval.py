@@ -35,6 +35,7 @@ from lmncell.evaluation.evaluate import (
 from lmncell.evaluation.metrics import record_metrics
 from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
+from lmncell.report.jsontext import json_text
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
@@ -500,7 +501,7 @@ def evaluate_fmu_files(fmu: str | Path, paths: Sequence[str | Path],
     if plot_dir is not None:
         _plot(Path(fmu), traces, Path(plot_dir), ambient, at_model_steps, progress)
     if as_json:
-        print(json.dumps(rows, indent=1))
+        print(json_text(rows))
         return rows
     print_rows(rows, progress)
     for r in rows:

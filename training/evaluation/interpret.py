@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import itertools
-import json
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +12,7 @@ from lmncell.identification.ladder import (
     is_ladder,
     ladder_keys,
 )
+from lmncell.report.jsontext import json_text
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE_BY_SOC,
@@ -227,6 +227,6 @@ def explain(model_path: str | Path, temperature_c: float | None = None,
 
     model = model_or_shipped(model_path)
     if as_json:
-        return json.dumps(local_model_table(model, temperature_c), indent=1)
+        return json_text(local_model_table(model, temperature_c))
     return explain_text(model, temperature_c)
 

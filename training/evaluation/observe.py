@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -12,6 +11,7 @@ import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments
 from lmncell.data.records import DataError
 from lmncell.evaluation.evaluate import model_ocv, read_records
+from lmncell.report.jsontext import json_text
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.observers import ObserverSettings, SocObserver
 from lmncell.runtime.step import exo_series
@@ -50,7 +50,8 @@ def run_observer(model: LmnModel, seg: Segment, kind: str, soc0_est: float,
 
 
 def soc_metrics(run: ObserverRun) -> dict:
-    """RMSE, MAE, max after the first 10 minutes (%), time until the error stays within 2 %,
+    """RMSE, MAE, max after the first 10 minutes (%), time until the error stays within 2 %
+    (s; None where it is outside 2 % at the end, as coulomb counting from a wrong start is),
     share of time outside ±3σ (consistency), the median half-width of the ±3σ band after the
     first 10 minutes (%; a band can hold the truth by being wide, this says how wide),
     skipped measurements."""
@@ -59,9 +60,9 @@ def soc_metrics(run: ObserverRun) -> dict:
     after = t >= SETTLE_S
     outside = np.abs(err) > BAND
     last_out = np.flatnonzero(outside)
-    settle = float(t[last_out[-1]] + (t[1] - t[0])) if last_out.size else 0.0
+    settle: float | None = float(t[last_out[-1]] + (t[1] - t[0])) if last_out.size else 0.0
     if last_out.size and last_out[-1] == err.size - 1:
-        settle = float("inf")
+        settle = None            # still outside 2 % at the end (JSON null, not Infinity)
     e = err[after] if after.any() else err
     out3 = (np.abs(err) > 3 * run.std) if run.std.any() else np.ones_like(err, dtype=bool)
     return {"rmse_pct": 100 * float(np.sqrt(np.mean(e * e))),
@@ -174,17 +175,22 @@ def observer_result(record: str, runs: list[ObserverRun], soc0_est: float) -> di
             "start_estimate": soc0_est, **{r.name: soc_metrics(r) for r in runs}}
 
 
+def _settle_text(settle_s: float | None) -> str:
+    """'within 2 % after … s', or 'never within 2 %' (None: outside 2 % at the end)."""
+    return "never within 2 %" if settle_s is None else f"within 2 % after {settle_s:.0f} s"
+
+
 def print_observer_results(results: list[dict], kind: str, as_json: bool = False) -> None:
     """The observer table of `lmncell evaluate --observer` (or its JSON): per record the
     observer and coulomb counting from the same wrong start."""
     if as_json:
-        print(json.dumps(results, indent=1))
+        print(json_text(results))
         return
     for r in results:
         for name in (kind, "coulomb"):
             m = r[name]
             print(f"{r['record'][:44]:44s} {name:8s} SoC RMSE {m['rmse_pct']:5.2f} %  MAE "
-                  f"{m['mae_pct']:5.2f} %  max {m['max_pct']:5.2f} %  within 2 % after "
-                  f"{m['time_to_2pct_s']:.0f} s  outside 3σ "
+                  f"{m['mae_pct']:5.2f} %  max {m['max_pct']:5.2f} %  "
+                  f"{_settle_text(m['time_to_2pct_s'])}  outside 3σ "
                   f"{100 * m['outside_3sigma_share']:.0f} % (median ±3σ "
                   f"{m['median_3sigma_pct']:.1f} %)")

@@ -10,7 +10,6 @@ under load, and report.html with its figures.
 
 from __future__ import annotations
 
-import json
 import time
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from lmncell.evaluation.interpret import local_model_table
 from lmncell.evaluation.observe import observer_figure, observer_runs, soc_metrics
 from lmncell.identification.train import train_files
 from lmncell.report.html import Report
+from lmncell.report.jsontext import json_text
 from lmncell.report.readme import drift_sentence
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.scenarios.drive import load_vehicle, plot_cycle, run_cycle
@@ -106,7 +106,7 @@ def run_demo(out: Path) -> Path:
         "soc_outside_3sigma_pct": outside_figures,
         "seconds": time.perf_counter() - t0,
     }
-    (out / "summary.json").write_text(json.dumps(headline, indent=1))
+    (out / "summary.json").write_text(json_text(headline))
     return _finish(rep, headline, model_path, fmu)
 
 
@@ -384,7 +384,7 @@ def _observer_section(rep: Report, model: LmnModel, record: Record, capacity: fl
                      ("median_3sigma_pct", "median 3σ / %", ".1f")],
               "SoC error after the first 10 minutes against the reference (the tester's "
               "counters from the true start); coulomb counting from the same wrong start is "
-              "the baseline.")
+              "the baseline; — in 'within 2 % after': still outside 2 % at the record's end.")
     figures = {r["observer"]: r["rmse_pct"] for r in rows}
     outside = {r["observer"]: 100 * r["outside_3sigma_share"] for r in rows
                if r["observer"] != "coulomb"}

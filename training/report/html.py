@@ -48,7 +48,9 @@ class Report:
             cells = []
             for key, _, fmt in columns:
                 v = r.get(key, "")
-                if isinstance(v, list):
+                if v is None:
+                    txt = "—"           # a figure that does not exist (e.g. never settled)
+                elif isinstance(v, list):
                     txt = ", ".join(format(x, fmt) for x in v) if fmt else str(v)
                 elif isinstance(v, float) and fmt:
                     txt = format(v, fmt)

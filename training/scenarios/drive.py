@@ -17,7 +17,6 @@ default the highest voltage of the training records, `cell.voltage_max_v`).
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import shutil
 import sys
@@ -30,6 +29,7 @@ from typing import Any
 
 import numpy as np
 from lmncell.data.records import DataError
+from lmncell.report.jsontext import json_text
 from lmncell.scenarios.traces import (
     CurrentProfile,
     SpeedTrace,
@@ -534,7 +534,7 @@ def simulate_cycle_cli(a) -> int:
     f = res.figures
     notes = sys.stderr if a.json else sys.stdout    # with --json, stdout is the JSON alone
     if a.json:
-        print(json.dumps(f, indent=1))
+        print(json_text(f))
     else:
         print(_run_line(f))
         if f["stop"]:
