@@ -27,7 +27,7 @@ from lmncell.identification.train import round_step, sampling_note, train_files
 from lmncell.identification.tree import build_design, poles, skeleton, stabilise, wls
 from lmncell.runtime.model import load_model
 
-from tests.conftest import DATA, PAN_HWFET
+from tests.conftest import A123_S1, DATA, PAN_HWFET
 
 
 @pytest.fixture(scope="module")
@@ -1155,12 +1155,16 @@ def test_a_hysteresis_in_doubt_is_decided_per_temperature_level_where_m_was(monk
                                             "by": "final_validation_level_score_mv"}
 
 
-def test_records_that_leave_the_refinement_unidentified_give_a_model_not_a_traceback(
+def test_records_that_leave_the_refinement_unidentified_give_an_error_not_a_traceback(
         tmp_path, monkeypatch) -> None:
     """One current step from full, ten minutes, a 1 mV response: the output-error refinement's
     constrained least squares had its optimum ~1e8 away and ladder.lsi raised InfeasibleError
-    through `lmncell train`. The refinement now keeps the model before it, and says so."""
+    through `lmncell train`. The refinement now keeps the model before it, and says so; that
+    model's OCV, estimated from SoC 0.93…1 alone, reaches −1.2 V, and it is refused before it
+    is written (before, the file was written and no loader read it)."""
     import lmncell.identification.refinement as refinement
+    from lmncell.data.readers import write_bdf
+    from lmncell.data.records import DataError
     from lmncell.identification.ladder import InfeasibleError
 
     t = np.arange(600.0)
@@ -1169,22 +1173,29 @@ def test_records_that_leave_the_refinement_unidentified_give_a_model_not_a_trace
     rec.write_text("t,i,v\n" + "".join(f"{k:g},{-1.0 * s:g},{3.35 - 0.001 * s:g}\n"
                                        for k, s in zip(t, on, strict=True)))
     said: list[str] = []
-    model, _ = train_files([rec], tmp_path / "m.json", capacity_ah=2.0, soc0=1.0,
-                           progress=said.append,
-                           read_options={"columns": {"time": "t", "current": "i",
-                                                     "voltage": "v"}})
-    assert model.n_local_models >= 1 and (tmp_path / "m.json").exists()
-    assert "20–80 % SoC: (none), above 90 %: " in said[-1]     # not 'nan mV'
+    with pytest.raises(DataError, match=r"training gave a model that fails the model file's "
+                                        r"checks \(the trained model: ocv spans SoC 0…1 and "):
+        train_files([rec], tmp_path / "m.json", capacity_ah=2.0, soc0=1.0,
+                    progress=said.append,
+                    read_options={"columns": {"time": "t", "current": "i", "voltage": "v"}})
+    assert any("kept the model before refinement" in s for s in said)
+    assert not (tmp_path / "m.json").exists()
 
     def unsolvable(*_args):
         raise InfeasibleError("the inequality constraints have no solution")
 
+    # the first 5000 s of the A123 25 °C record, SoC 1 → 0.8, with the C/30 OCV test
+    top = write_bdf(read_record(A123_S1).slice(0, 5000), tmp_path / "top.csv")
     monkeypatch.setattr(refinement, "_solve_refinement", unsolvable)
     said.clear()
-    train_files([rec], tmp_path / "m2.json", capacity_ah=2.0, soc0=1.0, progress=said.append,
-                read_options={"columns": {"time": "t", "current": "i", "voltage": "v"}})
+    model, _ = train_files([top], tmp_path / "m2.json", capacity_ah=2.0307, soc0=1.0,
+                           progress=said.append, max_local_models=2,
+                           ocv_tests=[str(DATA / f"a123_plett/ocv/A123_OCV_P25_S{k}.csv.gz")
+                                      for k in (1, 3)])
     assert any("kept the model before refinement" in s and "no usable solution" in s
                for s in said)
+    assert "20–80 % SoC: (none), above 90 %: " in said[-1]     # not 'nan mV'
+    assert load_model(tmp_path / "m2.json").n_local_models == model.n_local_models
     info = json.loads((tmp_path / "m2.json").read_text())["training"]
     assert "unsolved" in json.dumps(info)
 
