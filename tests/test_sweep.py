@@ -257,6 +257,19 @@ def test_a_pack_stops_where_its_weakest_cell_is_empty(quick_model) -> None:
      "unknown key(s) ['mass_g']; missing key(s) ['mass_kg']"),
     (("[pack]", "[battery]"), "no [pack] table"),
     (("[vehicle]", "[vehicle"), "not a TOML file"),
+    # physically impossible values drove runs that made energy from nothing
+    (("rolling_resistance = 0.009", "rolling_resistance = -0.01"),
+     "'rolling_resistance' = -0.01; expected ≥ 0"),
+    (("auxiliary_power_w = 500.0", "auxiliary_power_w = -500.0"),
+     "'auxiliary_power_w' = -500.0; expected ≥ 0"),
+    (("regen_power_limit_w = 40000.0", "regen_power_limit_w = -1.0"),
+     "'regen_power_limit_w' = -1.0; expected ≥ 0"),
+    (("rotational_inertia_factor = 1.05", "rotational_inertia_factor = 0.5"),
+     "'rotational_inertia_factor' = 0.5; expected ≥ 1 (rotating parts add to the mass)"),
+    (("air_density_kg_m3 = 1.2", "air_density_kg_m3 = -1.2"),
+     "'air_density_kg_m3' = -1.2; expected > 0"),
+    (("regen_efficiency = 0.70", "regen_efficiency = 1.5"),
+     "'regen_efficiency' = 1.5; expected 0 < η ≤ 1"),
 ])
 def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None:
     """A string mass raised a TypeError traceback, a string coefficient a numpy one, and a

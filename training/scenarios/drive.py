@@ -59,6 +59,21 @@ class Vehicle:
     n_parallel: int
 
 
+# (key, test, what is expected) of a vehicle file's physical values: a negative rolling
+# resistance, auxiliary power or regen limit, or an inertia factor below 1, drove a run that
+# made energy from nothing (a braking car that draws power, a heater that charges the pack)
+VEHICLE_RANGES = (
+    *((key, lambda v: v > 0, "> 0") for key in (
+        "mass_kg", "drag_coefficient", "frontal_area_m2", "air_density_kg_m3", "n_series",
+        "n_parallel")),
+    ("rotational_inertia_factor", lambda v: v >= 1, "≥ 1 (rotating parts add to the mass)"),
+    *((key, lambda v: v >= 0, "≥ 0") for key in (
+        "rolling_resistance", "regen_power_limit_w", "auxiliary_power_w")),
+    *((key, lambda v: 0 < v <= 1, "0 < η ≤ 1") for key in (
+        "drivetrain_efficiency", "regen_efficiency")),
+)
+
+
 def _check_vehicle_values(values: dict, where: str) -> None:
     """DataError naming the key where a vehicle file's keys are not Vehicle's, or a value is
     not of its type: a finite number (the cell counts whole numbers), the name a string."""
@@ -105,12 +120,9 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
     values = {**doc["vehicle"], **doc["pack"]}
     _check_vehicle_values(values, where)
     veh = Vehicle(**values)
-    for key in ("mass_kg", "drag_coefficient", "frontal_area_m2", "n_series", "n_parallel"):
-        if not getattr(veh, key) > 0:
-            raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected > 0")
-    for key in ("drivetrain_efficiency", "regen_efficiency"):
-        if not 0 < getattr(veh, key) <= 1:
-            raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected 0 < η ≤ 1")
+    for key, ok, expected in VEHICLE_RANGES:
+        if not ok(getattr(veh, key)):
+            raise DataError(f"{where}: '{key}' = {getattr(veh, key)!r}; expected {expected}")
     return veh
 
 
