@@ -490,3 +490,15 @@ def test_json_text_turns_every_non_finite_float_into_null() -> None:
     obj = {"a": float("nan"), "b": [np.float64(np.inf), 1.5, (2, -np.inf)], "c": "x", "d": None}
     assert json.loads(json_text(obj)) == {"a": None, "b": [None, 1.5, [2, None]], "c": "x",
                                           "d": None}
+
+
+@pytest.mark.parametrize("option, value", [("--voltage-min", "-1"), ("--voltage-max", "inf"),
+                                           ("--voltage-max", "1e300")])
+def test_design_voltage_limits_outside_a_cells_are_refused(capsys, option, value) -> None:
+    """A negative lower limit or an infinite upper one designed a programme against no limit."""
+    with pytest.raises(SystemExit) as info:
+        main(["design", "--capacity", "2.3", "--soc-profile", "0.8,0.2", "--out", "p.csv",
+              option, value])
+    assert info.value.code == 2
+    assert (f"argument {option}: '{value}': expected a cell voltage in V within 0…10"
+            in capsys.readouterr().err)

@@ -23,7 +23,12 @@ from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS, VIRTUAL_CELLS
 from lmncell.fmu.interface import NativeBuildError
 from lmncell.progress import Progress, print_progress, print_progress_stderr
 from lmncell.runtime.cosim import InputError
-from lmncell.runtime.model import CAPACITY_RANGE_AH, ModelFileError, is_cell_capacity
+from lmncell.runtime.model import (
+    CAPACITY_RANGE_AH,
+    VOLTAGE_RANGE_V,
+    ModelFileError,
+    is_cell_capacity,
+)
 from lmncell.scenarios.drive import CUTOFF_EXPECTED, is_cutoff
 from lmncell.scenarios.traces import cycle_problem
 
@@ -117,6 +122,9 @@ _float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction wit
 _positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _capacity = number_argument(
     float, is_cell_capacity, "a cell capacity in Ah within {:g}…{:g}".format(*CAPACITY_RANGE_AH))
+_cell_voltage = number_argument(
+    float, lambda v: VOLTAGE_RANGE_V[0] <= v <= VOLTAGE_RANGE_V[1],
+    "a cell voltage in V within {:g}…{:g}".format(*VOLTAGE_RANGE_V))
 _positive_int = number_argument(int, lambda v: v >= 1, "a whole number ≥ 1")
 _cutoff = number_argument(float, is_cutoff, CUTOFF_EXPECTED)
 _temperature = number_argument(
@@ -611,9 +619,9 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--soc-profile", required=True, help="SoC points, e.g. 0.8,0.2,0.8 or 0.8:0.2")
     s.add_argument("--max-c-rate", type=_positive, default=20.0, help="current limit, C")
     s.add_argument("--max-current", type=_positive, default=100.0, help="cycler limit, A")
-    s.add_argument("--voltage-min", type=float, default=None, help="V (default: 2.0 or the "
+    s.add_argument("--voltage-min", type=_cell_voltage, default=None, help="V (default: 2.0 or the "
                    "model's)")
-    s.add_argument("--voltage-max", type=float, default=None, help="V (default: 3.6 or the "
+    s.add_argument("--voltage-max", type=_cell_voltage, default=None, help="V (default: 3.6 or the "
                    "model's)")
     s.add_argument("--hold", type=_positive, default=10.0,
                    help="the cycler's minimum hold time, s (levels are held for a multiple of "
