@@ -3,6 +3,8 @@ parallel cells share the current by their impedance."""
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 from lmncell.data.records import DataError
@@ -124,7 +126,33 @@ def test_bad_pack_text(text) -> None:
         parse_pack(text)
 
 
-@pytest.mark.parametrize("text", ["mass=0.1", "capacity=big", "resistance=0.9"])
+@pytest.mark.parametrize("text", ["mass=0.1", "capacity=big", "resistance=0.9",
+                                  "capacity=0.02,capacity=0.03"])
 def test_bad_spread_text(text) -> None:
     with pytest.raises(DataError, match="--spread"):
         parse_spread(text)
+
+
+@pytest.mark.parametrize("pack, cells, vehicle_pack, source", [
+    ("100000s100000p", None, None, "--pack: 10000000000 cells"),
+    (None, 2_000_000, None, "--cells: 2000000 cells"),
+    (None, None, (10000, 1000), "the [pack] of the vehicle "),
+])
+def test_a_pack_too_large_to_simulate_is_refused(tmp_path, pack, cells, vehicle_pack,
+                                                 source) -> None:
+    """100000s100000p was accepted and ran a worker out of memory (about 0.7 kB a cell)."""
+    from importlib import resources
+
+    from lmncell.scenarios.sweep import scenarios
+
+    vehicles = [None]
+    if vehicle_pack:
+        text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml")
+        path = tmp_path / "v.toml"
+        path.write_text(text.read_text().replace("n_series = 100", f"n_series = {vehicle_pack[0]}")
+                        .replace("n_parallel = 40", f"n_parallel = {vehicle_pack[1]}"))
+        vehicles = [str(path)]
+    with pytest.raises(DataError, match=re.escape(f"sweep: {source}") + r".*more than 1000000"):
+        scenarios(["wltc"], [25.0], [0.9], vehicles, 1, pack,
+                  "capacity=0.01" if vehicle_pack else None, 0, cells)
+    assert scenarios(["wltc"], [25.0], [0.9], [None], 1, "1000s1000p")[0].pack.n_series == 1000

@@ -81,6 +81,8 @@ def parse_spread(text: str) -> dict[str, float]:
             raise DataError(f"--spread {key}={value!r}: expected a number") from None
         if not 0.0 <= v < 0.3:
             raise DataError(f"--spread {key}={v!r}: expected a relative spread within 0…0.3")
+        if key in out:
+            raise DataError(f"--spread {text!r}: names {key} twice; expected each once")
         out[key] = v
     return out
 

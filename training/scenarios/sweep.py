@@ -111,17 +111,34 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
         raise DataError(f"sweep: --cells {cells!r}: expected a whole number ≥ 1, without --pack")
     size = parse_pack(pack) if pack else None
 
-    def spec(veh: Vehicle) -> PackSpec | None:
+    def spec(veh: Vehicle, source: str) -> PackSpec | None:
         if size is None and not spreads and cells is None:
             return None
         whole = veh.n_series * veh.n_parallel
         ns, npar = (cells, 1) if cells is not None else size or (veh.n_series, veh.n_parallel)
+        check_pack_size(int(ns) * int(npar), "--cells" if cells is not None else
+                        "--pack" if size else f"the [pack] of the vehicle {source}")
         return PackSpec(int(ns), int(npar), spreads.get("capacity", 0.0),
                         spreads.get("resistance", 0.0), int(seed),
                         whole if cells is not None else None)
 
-    return [Scenario(c, veh, vf, float(t), float(s), int(repeat), spec(veh), cutoff_v)
+    specs = {vf: spec(veh, vf) for veh, vf in vehicles}
+    return [Scenario(c, veh, vf, float(t), float(s), int(repeat), specs[vf], cutoff_v)
             for c, (veh, vf), t, s in itertools.product(traces, vehicles, ambients, soc0s)]
+
+
+MAX_PACK_CELLS = 1_000_000   # cells one pack scenario simulates at once (about 0.7 kB each and
+#                              2 µs per model step on one core: 1e6 cells, 1 h for a WLTC)
+
+
+def check_pack_size(n_cells: int, source: str) -> None:
+    """DataError naming the source where a pack scenario would simulate more than
+    MAX_PACK_CELLS cells (100000s100000p was accepted, and ran out of memory on a worker)."""
+    if n_cells > MAX_PACK_CELLS:
+        sample = "" if source == "--cells" else " (or a sample string of it: --cells N)"
+        raise DataError(f"sweep: {source}: {n_cells} cells, more than {MAX_PACK_CELLS} in one "
+                        "pack scenario, which would take hours and gigabytes; expected a pack "
+                        f"of at most that many cells{sample}")
 
 
 _UNPACKED: dict[str, Path] = {}
