@@ -90,6 +90,33 @@ def test_bdf_round_trip_is_identical(tmp_path) -> None:
         assert np.array_equal(getattr(rec, name), getattr(back, name)), name
 
 
+def test_a_bdf_temperature_read_every_few_rows_holds_each_reading(tmp_path) -> None:
+    """A BDF file whose thermocouple is read every few rows, blank between readings, was
+    refused as NaN; it is read as the generic reader reads such a column (a literal NaN is
+    still refused)."""
+    path = write_bdf(read_record(PAN_US06).slice(0, 300), tmp_path / "r.bdf.csv")
+    lines = path.read_text().splitlines()
+    j = lines[0].split(",").index("Temperature T1 / degC")
+
+    def blank(k: int, cell: str = "") -> None:
+        cells = lines[k].split(",")
+        cells[j] = cell
+        lines[k] = ",".join(cells)
+
+    readings = {k: float(lines[k].split(",")[j]) for k in range(1, len(lines))}
+    for k in range(1, len(lines)):     # file line k + 1 holds sample k − 1
+        if (k - 1) % 10:
+            blank(k)
+    path.write_text("\n".join(lines) + "\n")
+    rec = read_record(path)
+    assert rec.temperature_c.tolist() == [readings[1 + 10 * (n // 10)] for n in range(300)]
+    assert any("270 of 300 rows blank between readings" in n for n in rec.meta.notes)
+    blank(10, "nan")
+    path.write_text("\n".join(lines) + "\n")
+    with pytest.raises(DataError, match="NaN or infinite value"):
+        read_record(path)
+
+
 def test_generic_csv_with_mapping_and_sign(tmp_path) -> None:
     p = tmp_path / "g.csv"
     p.write_text("t,I_mA,U\n0,0,3.3\n1,-1000,3.2\n2,-1000,3.19\n3,0,3.25\n")

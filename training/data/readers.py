@@ -504,10 +504,17 @@ def read_panasonic(path: Path) -> Record:
 
 
 def read_bdf(path: Path) -> Record:
-    """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …)."""
-    cols = _read_csv_columns(path)
+    """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …). A
+    temperature column read every few rows, blank between readings, holds each reading until
+    the next (noted), as the generic reader's does."""
+    cols = _read_csv_columns(path, keep_text={BDF_T1, BDF_AMBIENT})
     _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
     t = cols[BDF_TIME]
+    notes: list[str] = []
+    for name in (BDF_T1, BDF_AMBIENT):
+        if name in cols:
+            cols[name], held = _held_readings(cols, name, path)
+            notes += held
     temp = cols.get(BDF_T1, cols.get(BDF_AMBIENT))
     return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE],
                   _meta(path, "bdf", "none (BDF: charge > 0)", t,
@@ -518,7 +525,7 @@ def read_bdf(path: Path) -> Record:
                                       "charge_ah": BDF_NET_AH,
                                       "temperature_c": BDF_T1 if BDF_T1 in cols
                                       else BDF_AMBIENT},
-                        first_line=cols.first_line),
+                        first_line=cols.first_line, notes=notes),
                   temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
 
 
@@ -706,7 +713,7 @@ def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray,
     read = np.flatnonzero(~blank)
     if not read.size:
         raise DataError(f"{path}: column '{name}' has no reading (every cell blank); expected "
-                        "numbers, or leave the column out of --columns")
+                        "numbers, or leave the column out (of --columns, or of a BDF file)")
     before = np.maximum(np.searchsorted(read, np.arange(values.size), "right") - 1, 0)
     return values[read[before]], [
         f"column '{name}': {int(blank.sum())} of {values.size} rows blank between readings, "
