@@ -115,6 +115,14 @@ def test_a_bdf_temperature_read_every_few_rows_holds_each_reading(tmp_path) -> N
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(DataError, match="NaN or infinite value"):
         read_record(path)
+    # a blank chamber column beside the cell's, which the record does not take, stays unread
+    lines = path.read_text().splitlines()
+    lines[0] += ",Ambient Temperature / degC"
+    lines[1:] = [ln + "," for ln in lines[1:]]
+    blank(10, repr(readings[10]))
+    path.write_text("\n".join(lines) + "\n")
+    assert read_record(path).temperature_c.tolist() == [readings[1 + 10 * (n // 10)]
+                                                        for n in range(300)]
 
 
 def test_generic_csv_with_mapping_and_sign(tmp_path) -> None:

@@ -510,12 +510,8 @@ def read_bdf(path: Path) -> Record:
     cols = _read_csv_columns(path, keep_text={BDF_T1, BDF_AMBIENT})
     _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
     t = cols[BDF_TIME]
-    notes: list[str] = []
-    for name in (BDF_T1, BDF_AMBIENT):
-        if name in cols:
-            cols[name], held = _held_readings(cols, name, path)
-            notes += held
-    temp = cols.get(BDF_T1, cols.get(BDF_AMBIENT))
+    temp_col = BDF_T1 if BDF_T1 in cols else BDF_AMBIENT   # the cell's, else the chamber's
+    temp, notes = _held_readings(cols, temp_col, path) if temp_col in cols else (None, [])
     return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE],
                   _meta(path, "bdf", "none (BDF: charge > 0)", t,
                         segment_starts=_segment_starts_from_gaps(
@@ -523,8 +519,7 @@ def read_bdf(path: Path) -> Record:
                         file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
                                       "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
                                       "charge_ah": BDF_NET_AH,
-                                      "temperature_c": BDF_T1 if BDF_T1 in cols
-                                      else BDF_AMBIENT},
+                                      "temperature_c": temp_col},
                         first_line=cols.first_line, notes=notes),
                   temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
 
