@@ -38,7 +38,12 @@ from lmncell.runtime.cosim import (
     TEMPERATURE_MARGIN_K,
     VOLTAGE_MARGIN_V,
 )
-from lmncell.runtime.model import TEMPERATURE_STEP_K, LmnModel, load_model
+from lmncell.runtime.model import (
+    CAPACITY_RANGE_AH,
+    TEMPERATURE_STEP_K,
+    LmnModel,
+    load_model,
+)
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE,
     EKF_ERROR_SCALE_BY_SOC,
@@ -102,12 +107,15 @@ def model_header(model: LmnModel, guid: str) -> str:
 
 
 def _dimension_defines(m: LmnModel, n_slots: int) -> list[str]:
-    """Sample time, capacity, the model steps one communication step may span, delay,
-    efficiencies and the sizes of every table (n_slots: the tree's, tree_plan)."""
+    """Sample time, capacity and the range of the 'capacity' parameter, the model steps one
+    communication step may span, delay, efficiencies and the sizes of every table (n_slots:
+    the tree's, tree_plan)."""
     cols = m.columns()
     return [
         f"#define TS {m.sample_time_s!r}", f"#define CAPACITY_AH {m.capacity_ah!r}",
         f"#define MAX_STEPS_PER_CALL {float(MAX_STEPS_PER_CALL)!r}",
+        f"#define CAPACITY_MIN_AH {CAPACITY_RANGE_AH[0]!r}",
+        f"#define CAPACITY_MAX_AH {CAPACITY_RANGE_AH[1]!r}",
         f"#define DELAY_S {float(m.current_delay_s)!r}",
         f"#define ETA_CHARGE {m.efficiency_charge!r}",
         f"#define ETA_DISCHARGE {m.efficiency_discharge!r}",

@@ -36,8 +36,12 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
                                       time constant, LMN5 before ob_hist, LMN4 before
                                       dep_source, LMN3 before the innovation RMS) */
 #define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
-#define CAPACITY_MIN_AH 1e-4     /* a 'capacity' parameter outside is refused */
-#define CAPACITY_MAX_AH 1e5
+
+/* A 'capacity' parameter (Ah) the FMU takes: finite, within CAPACITY_MIN_AH...CAPACITY_MAX_AH
+   (the generated header's, model.CAPACITY_RANGE_AH; the pythonfmu FMU's is_cell_capacity). */
+static int is_cell_capacity(double ah) {
+    return isfinite(ah) && ah >= CAPACITY_MIN_AH && ah <= CAPACITY_MAX_AH;
+}
 
 /* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
 typedef struct {
@@ -1200,8 +1204,7 @@ static fmi2Status initialise(Instance *in) {
               "within 0..1; not initialised, every step will be refused", s->soc0);
         return fmi2Error;
     }
-    if (!(isfinite(s->capacity) && s->capacity >= CAPACITY_MIN_AH
-          && s->capacity <= CAPACITY_MAX_AH)) {
+    if (!is_cell_capacity(s->capacity)) {
         logf_(in, fmi2Error, "logStatusError", "parameter 'capacity' = %g: expected a cell's "
               "capacity within %g...%g Ah; not initialised, every step will be refused",
               s->capacity, CAPACITY_MIN_AH, CAPACITY_MAX_AH);
@@ -1342,8 +1345,7 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
                              vr == VR_CELL_TEMPERATURE)) {
         tmp = *s0;                       /* what exitInitializationMode will give, unchanged */
         if (!(tmp.observer >= 0 && tmp.observer <= 3)) tmp.observer = 0;
-        if (!(isfinite(tmp.capacity) && tmp.capacity >= CAPACITY_MIN_AH
-              && tmp.capacity <= CAPACITY_MAX_AH)) tmp.capacity = CAPACITY_AH;
+        if (!is_cell_capacity(tmp.capacity)) tmp.capacity = CAPACITY_AH;
         init_state(&tmp);
         s = &tmp;
     }
