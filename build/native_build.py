@@ -30,6 +30,7 @@ from lmncell.fmu.interface import (
 from lmncell.runtime.cosim import (
     CURRENT_MARGIN,
     CURRENT_MARGIN_A,
+    MAX_C_RATE,
     MAX_STEPS_PER_CALL,
     MAX_TEMPERATURE_C,
     MIN_TEMPERATURE_C,
@@ -107,13 +108,14 @@ def model_header(model: LmnModel, guid: str) -> str:
 
 
 def _dimension_defines(m: LmnModel, n_slots: int) -> list[str]:
-    """Sample time, capacity and the range of the 'capacity' parameter, the model steps one
-    communication step may span, delay, efficiencies and the sizes of every table (n_slots:
-    the tree's, tree_plan)."""
+    """Sample time, capacity and the range of the 'capacity' parameter, the largest C-rate of
+    the current input, the model steps one communication step may span, delay, efficiencies
+    and the sizes of every table (n_slots: the tree's, tree_plan)."""
     cols = m.columns()
     return [
         f"#define TS {m.sample_time_s!r}", f"#define CAPACITY_AH {m.capacity_ah!r}",
         f"#define MAX_STEPS_PER_CALL {float(MAX_STEPS_PER_CALL)!r}",
+        f"#define MAX_C_RATE {MAX_C_RATE!r}",
         f"#define CAPACITY_MIN_AH {CAPACITY_RANGE_AH[0]!r}",
         f"#define CAPACITY_MAX_AH {CAPACITY_RANGE_AH[1]!r}",
         f"#define DELAY_S {float(m.current_delay_s)!r}",

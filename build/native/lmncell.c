@@ -35,7 +35,6 @@ enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, 
                                       before one EKF state per distinct low-pass
                                       time constant, LMN5 before ob_hist, LMN4 before
                                       dep_source, LMN3 before the innovation RMS) */
-#define MAX_C_RATE 1000.0        /* |current| beyond 1000 C is refused as not physical */
 
 /* A 'capacity' parameter (Ah) the FMU takes: finite, within CAPACITY_MIN_AH...CAPACITY_MAX_AH
    (the generated header's, model.CAPACITY_RANGE_AH; the pythonfmu FMU's is_cell_capacity). */
