@@ -502,3 +502,33 @@ def test_design_voltage_limits_outside_a_cells_are_refused(capsys, option, value
     assert info.value.code == 2
     assert (f"argument {option}: '{value}': expected a cell voltage in V within 0…10"
             in capsys.readouterr().err)
+
+
+def test_a_record_logged_every_10_s_is_evaluated_by_a_1_s_model_and_fmu(
+        quick_model, quick_fmu, tmp_path, capsys) -> None:
+    """The README's check of a 1C discharge logged every 10 s (the Panasonic Dis1C files) was
+    refused as 'would learn the interpolation': evaluating is not learning. The model and its
+    FMU score such a log alike; training on it at 0.5 s (20 steps per sample) is refused."""
+    from lmncell.data.readers import read_record
+
+    rec = read_record(PAN_HWFET)
+    keep = np.flatnonzero(np.diff(np.floor(rec.time_s / 10.0), prepend=-1.0) > 0)
+    slow = tmp_path / "slow.csv"
+    with open(slow, "w", newline="") as fh:
+        out = csv.writer(fh)
+        out.writerow(["t", "I", "U"])
+        out.writerows(zip(rec.time_s[keep], rec.current_a[keep], rec.voltage_v[keep],
+                          strict=True))
+    columns = ["--columns", "time=t,current=I,voltage=U", "--soc0", "1"]
+    figures = []
+    for model in (quick_model, quick_fmu):
+        assert main(["evaluate", str(model), str(slow), *columns, "--json"]) == 0, (
+            capsys.readouterr().err)
+        out = capsys.readouterr().out
+        row = json.loads(out[out.index("["):])[0]
+        figures.append(next(v["rmse_mv"] for v in row.values() if isinstance(v, dict)))
+    assert figures[0] < 60 and abs(figures[0] - figures[1]) < 1.0, figures
+    assert main(["train", str(slow), *columns, "--out", str(tmp_path / "m.json"),
+                 "--capacity", "2.85", "--set", "sample_time_s=0.5"]) == 2
+    assert ("slow.csv: logged every 10 s (the median time step); a model sample time of 0.5 s "
+            "would hold each sample over 20 model steps") in capsys.readouterr().err

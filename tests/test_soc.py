@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 import pytest
-from lmncell.data.dataset import record_parts, starts_rested_full
+from lmncell.data.dataset import check_sampling_interval, record_parts, starts_rested_full
 from lmncell.data.lag import channel_lag_samples, estimate_current_delay
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record, RecordMeta
@@ -283,16 +283,31 @@ def test_a_counted_soc_beyond_0_to_1_names_where_and_the_charge_moved(tmp_path) 
     assert record_to_segments(rec, 1.0, 1.0, 2.85)     # the right capacity reads as before
 
 
-def test_a_sample_time_finer_than_the_log_is_refused_naming_the_file() -> None:
-    """A 1 s log trained at 0.1 s would be learnt as its interpolation (a 1 ms sample time on
-    the 10 Hz Panasonic log ran out of memory); half the log's interval is still taken."""
+def test_a_sample_time_far_finer_than_the_log_is_refused_for_training_naming_the_file() -> None:
+    """A 1 s log trained at 0.05 s would be learnt as its interpolation (a 1 ms sample time on
+    the 10 Hz Panasonic log ran out of memory); ten model steps per logged sample are taken (a
+    cycler's constant-current phase logged every 10 s, a 1 s model)."""
     t = np.arange(600.0)
     rec = Record(t, np.where(t % 60 < 30, -1.0, 0.0), 3.6 - 0.01 * (t % 60 < 30),
                  RecordMeta("one_hertz.csv", "test"))
     with pytest.raises(DataError, match=r"one_hertz.csv: logged every 1 s \(the median time "
-                       r"step\); a model sample time of 0.1 s, .* expected sample_time_s ≥ 0.5"):
-        record_parts(rec, 0.1, 1.0, 2.0)
+                       r"step\); a model sample time of 0.05 s would hold each sample over 20 "
+                       r"model steps, more than 10: .* expected sample_time_s ≥ 0.1 s"):
+        check_sampling_interval(rec, 0.05)
+    check_sampling_interval(rec, 0.1)
     assert len(record_parts(rec, 0.5, 1.0, 2.0)[0][1].time_s) == 1198
+
+
+def test_a_record_logged_slower_than_the_model_is_evaluated_held_over_its_intervals() -> None:
+    """Evaluation takes any log (the README's Panasonic 1C discharge, logged every 10 s, with a
+    1 s model): each step's current is the mean over its logged interval (trapezoid rule)."""
+    t = np.arange(0.0, 600.0, 30.0)
+    rec = Record(t, np.where(t < 300, -1.0, 0.0), np.full(t.size, 3.3),
+                 RecordMeta("slow.csv", "test"))
+    (_, seg), = record_parts(rec, 0.5, 1.0, 2.0)
+    assert len(seg.time_s) == 1140
+    assert np.allclose(seg.current_a[:540], -1.0) and np.allclose(seg.current_a[600:], 0.0)
+    assert np.allclose(seg.current_a[540:600], -0.5)   # 270…300 s: the trapezoid's mean
 
 
 def test_one_half_of_an_ocv_test_given_alone_is_named_with_what_it_holds() -> None:

@@ -78,7 +78,7 @@ class TrainConfig:
 
     Model structure
     sample_time_s: model sample time Ts (s); records are resampled to it (step means); at
-    least half of each record's logging interval (a finer Ts is refused).
+    least a tenth of each training record's logging interval (a finer Ts is refused).
     current_delay_s: δ (s, 0 ≤ δ < Ts), the lag of the tester's voltage channel behind its
     current channel, which the model reproduces: the current enters δ late; "auto": estimated
     from the records (lmncell.data.lag; 0 for records sampled at Ts or slower).

@@ -174,28 +174,36 @@ def record_to_segments(rec: Record, sample_time_s: float, soc0: float, capacity_
 MIN_SEGMENT_STEPS = 10   # a segment shorter than this many model steps is left out
 
 
+MAX_STEPS_PER_LOG_INTERVAL = 10   # training holds a log's sample over at most this many steps
+
+
 def check_sampling_interval(rec: Record, sample_time_s: float) -> None:
-    """DataError where the model sample time is less than half the record's logging interval
-    (the median of its time steps within its gap-free segments): resampled, such a record is
-    its linear interpolation between samples, which the model would learn instead of the cell
-    (and a 1 ms sample time on a 10 Hz log ran out of memory)."""
+    """DataError where training would hold each of a record's samples over more than
+    MAX_STEPS_PER_LOG_INTERVAL model steps (its logging interval, the median of its time steps
+    within its gap-free segments, that many times the sample time): resampled, such a record is
+    mostly its interpolation between samples, which the model would learn instead of the cell,
+    and its arrays grow with the ratio (a 1 ms sample time on a 10 Hz log ran out of memory).
+    A cycler's constant-current phase logged every 10 s still trains a 1 s model."""
     steps = np.concatenate([np.diff(part.time_s) for part in rec.segments()] or [[]])
     steps = steps[steps > 0]
     interval = float(np.median(steps)) if steps.size else 0.0
-    if sample_time_s < 0.5 * interval:
+    least = interval / MAX_STEPS_PER_LOG_INTERVAL
+    if sample_time_s < least * (1.0 - 1e-6):
         raise DataError(f"{rec.meta.source}: logged every {interval:.3g} s (the median time "
-                        f"step); a model sample time of {sample_time_s:g} s, less than half of "
-                        "that, would learn the interpolation between its samples, not the cell; "
-                        f"expected sample_time_s ≥ {0.5 * interval:.3g} s, or a record logged "
-                        "faster")
+                        f"step); a model sample time of {sample_time_s:g} s would hold each "
+                        f"sample over {interval / sample_time_s:.3g} model steps, more than "
+                        f"{MAX_STEPS_PER_LOG_INTERVAL}: the model would learn the interpolation "
+                        "between its samples, not the cell; expected sample_time_s ≥ "
+                        f"{least:.3g} s, or a record logged faster")
 
 
 def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: float,
                  soc_window: tuple[float, float] = (0.0, 1.0), outside_weight: float = 1.0,
                  current_delay_s: float = 0.0) -> list[tuple[Record, Segment]]:
     """record_to_segments with each segment's gap-free part of the record as measured (its own
-    samples, reference SoC and temperature, the chamber set point where none was measured)."""
-    check_sampling_interval(rec, sample_time_s)
+    samples, reference SoC and temperature, the chamber set point where none was measured).
+    A record logged slower than sample_time_s is held over the steps within each of its
+    intervals (evaluation takes it so; training refuses it, check_sampling_interval)."""
     rec = rec.with_soc(reference_soc(rec, soc0, capacity_ah))
     chamber = rec.meta.chamber_temp_c
     ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None

@@ -16,6 +16,7 @@ from lmncell import __version__
 from lmncell.config import ConfigError, TrainConfig, load_config, output_file_problem
 from lmncell.data.dataset import (
     Segment,
+    check_sampling_interval,
     estimate_capacity,
     file_sha256,
     record_to_segments,
@@ -169,6 +170,7 @@ def training_segments(records: list[Record], cfg: TrainConfig, capacity_ah: floa
     weights = cfg.record_weights or [1.0] * len(records)
     for rec, weight, rec_soc0 in zip(records, weights, start_socs(soc0, len(records)),
                                      strict=True):
+        check_sampling_interval(rec, cfg.sample_time_s)
         for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, rec_soc0),
                                       capacity_ah,
                                       tuple(cfg.soc_window), cfg.outside_weight,
