@@ -188,7 +188,7 @@ def check_sampling_interval(rec: Record, sample_time_s: float) -> None:
     steps = steps[steps > 0]
     interval = float(np.median(steps)) if steps.size else 0.0
     least = interval / MAX_STEPS_PER_LOG_INTERVAL
-    if sample_time_s < least * (1.0 - 1e-6):
+    if sample_time_s * 1.05 < least:      # a tester's 10 s is 10.015 s (A123 OCV tests)
         raise DataError(f"{rec.meta.source}: logged every {interval:.3g} s (the median time "
                         f"step); a model sample time of {sample_time_s:g} s would hold each "
                         f"sample over {interval / sample_time_s:.3g} model steps, more than "

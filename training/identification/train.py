@@ -170,9 +170,9 @@ def training_segments(records: list[Record], cfg: TrainConfig, capacity_ah: floa
     weights = cfg.record_weights or [1.0] * len(records)
     for rec, weight, rec_soc0 in zip(records, weights, start_socs(soc0, len(records)),
                                      strict=True):
+        start = start_soc(rec, rec_soc0)
         check_sampling_interval(rec, cfg.sample_time_s)
-        for seg in record_to_segments(rec, cfg.sample_time_s, start_soc(rec, rec_soc0),
-                                      capacity_ah,
+        for seg in record_to_segments(rec, cfg.sample_time_s, start, capacity_ah,
                                       tuple(cfg.soc_window), cfg.outside_weight,
                                       float(delay)):
             seg.weight = seg.weight * float(weight)
