@@ -174,8 +174,9 @@ def _regressor_defines(m: LmnModel, state_of: list[int]) -> list[str]:
         f"{int(dep.power) if dep and int(dep.power) == dep.power else 0}",
         f"#define HAS_DEPLETION2 {int(fast is not None)}",
         f"#define DEP2_COL {cols.index('d2(k)') - na if fast is not None else 0}",
-        f"#define DEP2_STATE {dep.state_index(m.filters, fast) if fast is not None else 0}",
-        f"#define DEP2_LX {state_of[dep.state_index(m.filters, fast)] if fast is not None else 0}",
+        f"#define DEP2_STATE {dep.state_index(m.filters, fast) if dep and fast is not None else 0}",
+        f"#define DEP2_LX "
+        f"{state_of[dep.state_index(m.filters, fast)] if dep and fast is not None else 0}",
         f"#define DEP_SOC_SCALE {(dep.soc_scale if dep else 1.0)!r}",
         f"#define DEP_SOC_MIN {(dep.soc_min if dep else 1.0)!r}",
         f"#define GATING_CURRENT_SIGN {int(m.gating_mode == 'current_sign')}",
@@ -477,12 +478,12 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
     trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
 
-    model_path, out = Path(model_path), fmu_path(out)
-    model = load_model(model_path)
+    model_file, archive = Path(model_path), fmu_path(out)
+    model = load_model(model_file)
     when = build_time()
-    version = model_hash(model_path)
+    version = model_hash(model_file)
     guid = fmu_guid("native", version)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    archive.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="lmncell_native_") as tmp:
         src = Path(tmp) / "sources"
         src.mkdir()
@@ -494,10 +495,10 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
         members = [("modelDescription.xml", model_description(model, guid, version).encode()),
                    (f"binaries/linux64/{MODEL_IDENTIFIER}.so", binary.read_bytes()),
                    *((f"sources/{f.name}", f.read_bytes()) for f in sorted(src.iterdir())),
-                   ("resources/model.json", model_path.read_bytes()),
+                   ("resources/model.json", model_file.read_bytes()),
                    ("documentation/index.html",
-                    documentation_html(model, model_path, "native").encode())]
-        with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as z:
+                    documentation_html(model, model_file, "native").encode())]
+        with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
             for name, data in members:
                 z.writestr(zip_entry(name, when), data)
-    return out
+    return archive

@@ -220,6 +220,14 @@ def _indent(elem: ET.Element) -> None:
     ET.indent(elem, space="  ")
 
 
+def _element(parent: ET.Element, tag: str) -> ET.Element:
+    """parent's child element tag; ValueError where pythonfmu's model description has none."""
+    child = parent.find(tag)
+    if child is None:
+        raise ValueError(f"pythonfmu's modelDescription.xml has no <{tag}> in <{parent.tag}>")
+    return child
+
+
 def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
                             wrapper: str = STOCK, when: datetime | None = None) -> str:
     """Set the GUID (interface.fmu_guid) and add units, InitialUnknowns, default experiment,
@@ -234,7 +242,7 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
     root.set("generationTool", f"LMNCell {__version__} ({wrapper})")
     root.set("version", module_hash)
     root.set("description", model.extra.get("description", "LMNCell model"))
-    variables = root.find("ModelVariables")
+    variables = _element(root, "ModelVariables")
     used = set()
     for sv in variables.findall("ScalarVariable"):
         name = sv.get("name")
@@ -246,10 +254,10 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
             real.set("min", repr(INPUT_BOUNDS[name][0]))
             real.set("max", repr(INPUT_BOUNDS[name][1]))
     units = ET.Element("UnitDefinitions")
-    for u in sorted(used):
-        unit = ET.SubElement(units, "Unit", {"name": u})
-        if UNIT_BASE[u]:
-            ET.SubElement(unit, "BaseUnit", UNIT_BASE[u])
+    for unit_name in sorted(used):
+        unit = ET.SubElement(units, "Unit", {"name": unit_name})
+        if UNIT_BASE[unit_name]:
+            ET.SubElement(unit, "BaseUnit", UNIT_BASE[unit_name])
     children = list(root)
     pos = next(k for k, c in enumerate(children) if c.tag in ("LogCategories",
                                                               "DefaultExperiment",
@@ -262,17 +270,18 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
     ex.set("startTime", "0.0")
     ex.set("stopTime", repr(3600.0))
     ex.set("stepSize", repr(float(model.sample_time_s)))
-    structure = root.find("ModelStructure")
+    structure = _element(root, "ModelStructure")
     outputs = structure.find("Outputs")
-    names = [sv.get("name") for sv in variables.findall("ScalarVariable")]
+    names = [sv.get("name", "") for sv in variables.findall("ScalarVariable")]
     old = structure.find("InitialUnknowns")
     if old is not None:
         structure.remove(old)
     if outputs is not None:
         init = ET.SubElement(structure, "InitialUnknowns")
         for u in outputs.findall("Unknown"):
-            name = names[int(u.get("index")) - 1]
-            ET.SubElement(init, "Unknown", {"index": u.get("index"),
+            index = u.get("index", "")
+            name = names[int(index) - 1]
+            ET.SubElement(init, "Unknown", {"index": index,
                                             "dependencies": dependency_indices(name, names)})
     for u in outputs.findall("Unknown") if outputs is not None else []:
         u.set("dependencies", "")
@@ -309,7 +318,7 @@ def native_host_environment() -> dict[str, str] | None:
             and libdir and ldlib and (Path(libdir) / ldlib).is_file()):
         return None
     paths = dict.fromkeys(str(Path(m.__file__).resolve().parent.parent)
-                          for m in (numpy, pythonfmu))
+                          for m in (numpy, pythonfmu) if m.__file__)
     return {"LD_PRELOAD": str(Path(libdir) / ldlib), "PYTHONPATH": ":".join(paths)}
 
 
@@ -355,25 +364,25 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
     """Write the pythonfmu FMU of a model file; returns its path."""
     from pythonfmu.builder import FmuBuilder
 
-    model_path, out = Path(model_path), fmu_path(out)
-    model = load_model(model_path)
+    model_file, archive = Path(model_path), fmu_path(out)
+    model = load_model(model_file)
     when = build_time()       # a bad SOURCE_DATE_EPOCH is refused before the build
-    h = model_hash(model_path)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    h = model_hash(model_file)
+    archive.parent.mkdir(parents=True, exist_ok=True)
     with tempfile.TemporaryDirectory(prefix="lmncell_fmu_") as tmp:
         stage = Path(tmp)
         pkg = stage / f"lmncell_rt_{h}"
         pkg.mkdir()
         for f in RUNTIME_DIR.glob("*.py"):
             shutil.copy2(f, pkg / f.name)
-        shutil.copy2(model_path, stage / "model.json")
+        shutil.copy2(model_file, stage / "model.json")
         script = stage / f"lmncell_{h}.py"
         script.write_text(slave_source(h, model), encoding="utf-8")
         doc = stage / "documentation"
         doc.mkdir()
-        (doc / "index.html").write_text(documentation_html(model, model_path), encoding="utf-8")
+        (doc / "index.html").write_text(documentation_html(model, model_file), encoding="utf-8")
         try:
-            FmuBuilder.build_FMU(script, dest=out, project_files=[pkg, stage / "model.json"],
+            FmuBuilder.build_FMU(script, dest=archive, project_files=[pkg, stage / "model.json"],
                                  documentation_folder=doc, canGetAndSetFMUstate=True,
                                  canSerializeFMUstate=True)
         finally:
@@ -382,15 +391,15 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
             for name in [n for n in sys.modules if n.startswith((f"lmncell_rt_{h}",
                                                                   f"lmncell_{h}"))]:
                 del sys.modules[name]
-    with zipfile.ZipFile(out) as z:
+    with zipfile.ZipFile(archive) as z:
         xml_text = z.read("modelDescription.xml").decode("utf-8")
     root = ET.fromstring(xml_text)
     members = patched_binary(fmu_guid("pythonfmu", h),
-                             root.find("CoSimulation").get("modelIdentifier"))
+                             _element(root, "CoSimulation").get("modelIdentifier", ""))
     wrapper = PATCHED if members else STOCK
     members["modelDescription.xml"] = patch_model_description(xml_text, model, h, wrapper,
                                                               when).encode("utf-8")
     members["documentation/index.html"] = documentation_html(
-        model, model_path, "pythonfmu", wrapper).encode("utf-8")
-    _rewrite_members(out, members, when)
-    return out
+        model, model_file, "pythonfmu", wrapper).encode("utf-8")
+    _rewrite_members(archive, members, when)
+    return archive

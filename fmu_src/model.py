@@ -87,6 +87,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import overload
 
 import numpy as np
 
@@ -249,17 +250,18 @@ class LmnModel:
 
         for gate, child in self.roots:
             walk(child, [], gate)
-        if any(p is None for p in paths):
+        leaf_paths = [p for p in paths if p is not None]
+        if len(leaf_paths) < m:
             missing = [k for k, p in enumerate(paths) if p is None]
             raise ModelFileError(f"tree: local model(s) {missing} belong to no leaf")
         n_nodes = self.node_weights.shape[0]
-        depth = max((len(p) for p in paths), default=0)
+        depth = max((len(p) for p in leaf_paths), default=0)
         # Index into q = [φ_0…φ_{n−1}, 1−φ_0…1−φ_{n−1}, 1]; padding points at the trailing 1.
         idx = np.full((m, max(depth, 1)), 2 * n_nodes, dtype=np.intp)
-        for j, p in enumerate(paths):
+        for j, p in enumerate(leaf_paths):
             for k, (node, side) in enumerate(p):
                 idx[j, k] = node + side * n_nodes
-        self.leaf_paths = paths
+        self.leaf_paths = leaf_paths
         self.leaf_gates = gates
         self._path_index = idx
         self._gate_code = np.array([GATES.index(g) for g in gates])
@@ -294,6 +296,13 @@ class LmnModel:
         regressor of "arrhenius" hysteresis terms) rather than of dT."""
         return source == "h(k)" and self.hysteresis_terms == "arrhenius"
 
+    @overload
+    def activation_step(self, temperature_c: float, gain: float) -> float: ...
+
+    @overload
+    def activation_step(self, temperature_c: np.ndarray,
+                        gain: np.ndarray | float) -> np.ndarray: ...
+
     def activation_step(self, temperature_c: np.ndarray | float,
                         gain: np.ndarray | float) -> np.ndarray | float:
         """dA = (1 − g)·T_ref²/(E·TEMPERATURE_STEP_K) (T_ref in K) of "arrhenius" hysteresis
@@ -301,8 +310,11 @@ class LmnModel:
         (temperature_step) for "polynomial" ones."""
         if self.hysteresis_terms != "arrhenius":
             return self.temperature_step(temperature_c)
+        e_k = self.arrhenius_k
+        if e_k is None:
+            raise ModelFileError("'arrhenius' hysteresis terms need the Arrhenius E")
         t_ref = self.reference_temperature_c + 273.15
-        return (1.0 - gain) * (t_ref * t_ref / (self.arrhenius_k * TEMPERATURE_STEP_K))
+        return (1.0 - gain) * (t_ref * t_ref / (e_k * TEMPERATURE_STEP_K))
 
     def _plain_columns(self) -> list[str]:
         """The columns without the temperature terms."""
@@ -331,6 +343,12 @@ class LmnModel:
                     *(("h(k)",) if self.hysteresis_terms == "constant" else ()))
         return [c for c in self._plain_columns()[self.output_lags:] if c not in left_out]
 
+    @overload
+    def temperature_step(self, temperature_c: float) -> float: ...
+
+    @overload
+    def temperature_step(self, temperature_c: np.ndarray) -> np.ndarray: ...
+
     def temperature_step(self, temperature_c: np.ndarray | float) -> np.ndarray | float:
         """dT = (T − T_ref)/TEMPERATURE_STEP_K of the temperature terms at T (°C), one
         temperature or an array of them (activation_step: that of "arrhenius" hysteresis
@@ -342,6 +360,12 @@ class LmnModel:
         output lags), as the step fills them."""
         exo = self.columns()[self.output_lags:]
         return [exo.index(c) for c in self.temperature_term_sources()]
+
+    @overload
+    def ocv(self, soc: float) -> float: ...
+
+    @overload
+    def ocv(self, soc: np.ndarray) -> np.ndarray: ...
 
     def ocv(self, soc: np.ndarray | float) -> np.ndarray | float:
         """Open-circuit voltage (V) at SoC (fraction), linear between knots, held beyond."""
@@ -672,7 +696,7 @@ def _gating(doc: object, where: str) -> dict:
     return doc
 
 
-def _read_structure(reg: dict, where: str) -> tuple[int, int, list[tuple[float, ...]]]:
+def _read_structure(reg: dict, where: str) -> tuple[int, int, list[tuple[float, float]]]:
     """Output lags na ≥ 0, current terms nb ≥ 1 and the filters [(τ_fast, τ_slow)] (s)."""
     na = _get(reg, "output_lags", where, int)
     nb = _get(reg, "current_terms", where, int)
@@ -681,11 +705,11 @@ def _read_structure(reg: dict, where: str) -> tuple[int, int, list[tuple[float, 
                for f in given):
         raise ModelFileError(f"{where}: 'filters' is {given!r:.80}, expected a list of "
                              "[tau_fast_s, tau_slow_s] pairs of finite numbers")
-    filters = [tuple(float(x) for x in f) for f in given]
-    if na < 0 or nb < 1 or any(len(f) != 2 or not 0 < f[0] < f[1] for f in filters):
+    pairs = [tuple(float(x) for x in f) for f in given]
+    if na < 0 or nb < 1 or any(len(f) != 2 or not 0 < f[0] < f[1] for f in pairs):
         raise ModelFileError(f"{where}: need output_lags ≥ 0, current_terms ≥ 1 and filters "
                              "[tau_fast_s, tau_slow_s] with 0 < fast < slow")
-    return na, nb, filters
+    return na, nb, [(f[0], f[1]) for f in pairs]
 
 
 def _read_hysteresis_gamma(reg: dict, where: str) -> float | None:

@@ -127,7 +127,7 @@ class ObserverSettings:
 
     current_sigma_a: float = 0.05
     soc_drift_per_sqrt_h: float | None = None
-    voltage_sigma_v: float | None = None
+    voltage_sigma_v: float = MIN_VOLTAGE_SIGMA_V
     soc0_sigma: float = 0.3
     imm_stay: float = 0.95
     hysteresis_drift_per_sqrt_h: float = 0.06
@@ -242,8 +242,9 @@ class SocObserver:
                    if kind != "ekf" and self.settings.history_current_sigma_a > 0 else [])
         self.state = ObserverState(soc0_est, var0, 0, cov.copy(), [soc0_est] * m,
                                    [var0] * m, [1.0 / m] * m, history=history)
-        self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else None
-        self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else None
+        none = np.zeros(0)        # the other kinds' tables (never read)
+        self.fuzzy_gains = fuzzy_gains(model, self.q, self.r) if kind == "fuzzy" else (none, none)
+        self.fuzzy_slopes = local_ocv_slopes(model) if kind == "fuzzy" else none
         self.state_columns = state_columns(model)
         self._fd_states = "filtered_current" in model.partition_variables
         exo_cols = model.columns()[model.output_lags:]
@@ -258,7 +259,7 @@ class SocObserver:
         self._ekf_q: dict[float, tuple[np.ndarray, np.ndarray]] = {}
         self._lowpass_coef = coef
         self._ekf_fg = (ekf_transition(coef, cov.shape[0]) if kind == "ekf"
-                        else None)
+                        else (none, none))
         self._step_inputs = (0.0, temperature_c, list(self.stepper.state.past_current))
         self._ocv_knots = (model.ocv_soc.tolist(), model.ocv_v.tolist())
         tau = self.settings.innovation_tau_s
@@ -424,7 +425,7 @@ class SocObserver:
         s, exo = self.state, self.stepper.exo
         p = s.covariance()
         ff, q = self._ekf_f_and_q(exo.eta(current_a))
-        if self.model.hysteresis_gamma is not None:
+        if exo.gamma is not None:         # the model's hysteresis rate γ
             f = self._ekf_fg[0].copy()
             f[-1] = math.exp(-exo.gamma * abs(current_a) * exo.soc_gain)
             ff = f[:, None] * f       # np.outer(f, f) without its Python overhead

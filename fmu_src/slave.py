@@ -14,6 +14,7 @@ import math
 import os
 import sys
 from pathlib import Path
+from typing import Any
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
@@ -200,8 +201,8 @@ class LmnCellSlave(Fmi2Slave):
     # while it is still in use (PySlaveInstance::cleanPyObject in handle_py_exception), so the
     # host crashes on the next call: with that wrapper the error is logged through the FMI
     # logger and the call ignored (status OK; a refused step is fmi2Discard).
-    def _problem(self, vr: int, kind: type, setting: bool) -> str:
-        var = self.vars.get(vr)
+    def _problem(self, vr: int, kind: type[Any], setting: bool) -> str:
+        var: Any = self.vars.get(vr)     # a pythonfmu ScalarVariable
         if var is None:
             return f"no variable with value reference {vr}"
         if not isinstance(var, kind):

@@ -92,11 +92,22 @@ class ExoState:
                    list(values[k + 2:k + 2 + n_past]))
 
 
+def _without_depletion(soc: float) -> float:
+    raise ValueError(f"the model has no depletion regressor (asked at SoC {soc})")
+
+
+def depletion_factor_function(model: LmnModel) -> Callable[[float], float]:
+    """The model's depletion factor as a function of SoC (one that refuses where the model has
+    no depletion regressor, whose columns then are never filled)."""
+    return model.depletion.factor if model.depletion is not None else _without_depletion
+
+
 class ExoStepper:
     """Advances ExoState and builds the exogenous regressors and partition inputs of one step."""
 
     def __init__(self, model: LmnModel, capacity_ah: float | None = None) -> None:
         self.model = model
+        self.factor_of_soc = depletion_factor_function(model)
         ts = model.sample_time_s
         self.capacity_ah = float(capacity_ah if capacity_ah is not None else model.capacity_ah)
         self.coef = filter_coefficients(model)      # at T_ref (the file's time constants)
@@ -127,7 +138,7 @@ class ExoStepper:
     def depletion_factor(self, soc: float) -> float:
         """The depletion factor at a SoC, the last features' value where the SoC is theirs."""
         last_soc, factor = self.last_depletion
-        return factor if soc == last_soc else self.model.depletion.factor(soc)
+        return factor if soc == last_soc else self.factor_of_soc(soc)
 
     def temperature_gain(self, temperature_c: float) -> float:
         """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
@@ -194,7 +205,7 @@ class ExoStepper:
             col += 1
         sources = [g * lp[k] for k in self.depletion_states]
         if sources:
-            factor = m.depletion.factor(s.soc)
+            factor = self.factor_of_soc(s.soc)
             self.last_depletion = (s.soc, factor)
             for source in sources:
                 x[col] = source * factor
@@ -586,7 +597,7 @@ class CellStepper:
         for index, is_ocv in self._soc_entries:
             rows[:, index] = ocv if is_ocv else socs
         if self._depletion_entries:
-            factors = [self.model.depletion.factor(soc) for soc in socs]
+            factors = [self.exo.factor_of_soc(soc) for soc in socs]
             for entry, source in zip(self._depletion_entries, self._depletion_sources,
                                      strict=True):
                 rows[:, entry] = [source * factor for factor in factors]
@@ -632,7 +643,7 @@ class CellStepper:
                 ocv0 = self.ocv(soc)
                 d_hi, d_lo = ocv_hi - ocv0, ocv_lo - ocv0
             else:
-                source, factor = self._depletion_sources[which - 2], m.depletion.factor
+                source, factor = self._depletion_sources[which - 2], self.exo.factor_of_soc
                 at = source * self.exo.depletion_factor(soc)
                 d_hi, d_lo = source * factor(hi) - at, source * factor(lo) - at
             u_hi += d_hi * sum(map(mul, phi_hi, column))
@@ -745,15 +756,16 @@ class CellThermal:
 
     def update(self, input_c: float, current_a: float, stepper: CellStepper) -> None:
         """After a step taken at cell_temperature(input_c): heat the cell for the next one."""
-        if not self.active:
+        thermal = self.model.thermal
+        if not self.active or thermal is None:       # active: the model has a thermal model
             self.temperature_c = input_c
             return
-        m, start = self.model, self.temperature_c
+        start = self.temperature_c
         if start is None:
             start = self.cell_temperature(input_c)
         q = heat_w(current_a, stepper.voltage_v, stepper.ocv(stepper.state.soc))
-        self.temperature_c = next_temperature(m.thermal, start, input_c, q, m.sample_time_s,
-                                              self._coefficients)
+        self.temperature_c = next_temperature(thermal, start, input_c, q,
+                                              self.model.sample_time_s, self._coefficients)
 
 
 def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarray | float,

@@ -18,6 +18,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, TypeGuard, TypeVar
+
+if TYPE_CHECKING:
+    import numpy as np
 
 CELL_TEMPERATURE_RANGE_C = (-60.0, 100.0)   # a cell's or an ambient temperature (degC) in
 # the records the readers take, in --ambient and in the FMUs' `temperature` input: outside it a
@@ -31,7 +35,7 @@ TEMPERATURE_DESCRIPTION = ("ambient temperature (the model computes the cell tem
                            "measured cell temperature with temperature_is_cell = true [degC]")
 
 
-def is_real_number(value: object) -> bool:
+def is_real_number(value: object) -> TypeGuard[float]:
     """A real number: an int or a float, not a bool (True is an int); for model files and the
     training settings alike (lmncell.runtime.model re-exports it)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
@@ -65,7 +69,10 @@ class ThermalModel:
                 "time_constant_s": self.time_constant_s, "offset_k": self.offset_k}
 
 
-def heat_w(current_a: float, voltage_v: float, ocv_v: float) -> float:
+Value = TypeVar("Value", float, "np.ndarray")   # one cell's figure, or a pack's array of them
+
+
+def heat_w(current_a: Value, voltage_v: Value, ocv_v: Value) -> Value:
     """Irreversible heat of a step (W): current times overpotential (elementwise on arrays
     too, as the functions below)."""
     return current_a * (voltage_v - ocv_v)
@@ -77,9 +84,9 @@ def step_coefficients(model: ThermalModel, sample_time_s: float) -> tuple[float,
     return a, model.resistance_k_per_w * (1.0 - a)
 
 
-def next_temperature(model: ThermalModel, temperature_c: float, ambient_c: float,
-                     heat: float, sample_time_s: float,
-                     coefficients: tuple[float, float] | None = None) -> float:
+def next_temperature(model: ThermalModel, temperature_c: Value, ambient_c: Value,
+                     heat: Value, sample_time_s: float,
+                     coefficients: tuple[float, float] | None = None) -> Value:
     """The cell temperature at the end of a step (°C) from the one at its start
     (coefficients: step_coefficients(model, sample_time_s), if already at hand)."""
     a, gain = coefficients or step_coefficients(model, sample_time_s)
@@ -87,6 +94,6 @@ def next_temperature(model: ThermalModel, temperature_c: float, ambient_c: float
     return rest + a * (temperature_c - rest) + gain * heat
 
 
-def rested_temperature(model: ThermalModel | None, ambient_c: float) -> float:
+def rested_temperature(model: ThermalModel | None, ambient_c: Value) -> Value:
     """The temperature of a cell rested at ambient_c (°C)."""
     return ambient_c + (model.offset_k if model is not None else 0.0)

@@ -190,9 +190,10 @@ class VectorCells:
         if self.model.output_lags:
             self.lags = np.column_stack([y, self.lags[:, :-1]])
         self._started = True
-        if self.thermal_active:
+        thermal = self.model.thermal
+        if self.thermal_active and thermal is not None:    # active: the model has one
             q = heat_w(i, self.voltage_v, self.model.ocv(self.soc))
-            self.cell_temperature_c = next_temperature(self.model.thermal, t, t_in, q,
+            self.cell_temperature_c = next_temperature(thermal, t, t_in, q,
                                                        self.model.sample_time_s)
         else:
             self.cell_temperature_c = t_in.copy()

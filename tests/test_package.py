@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -143,6 +144,30 @@ def test_one_package_installed_not_generic_names(tmp_path) -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, env=env,
                          capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+def test_the_package_type_checks(tmp_path) -> None:
+    """mypy finds no type error in the installed package lmncell. It is checked under that name,
+    laid out from the repository's folders as pyproject.toml maps them (training/ is lmncell,
+    fmu_src/ lmncell.runtime, build/ lmncell.fmu), so that every import between them resolves."""
+    pytest.importorskip("mypy", reason="mypy is one of the dev dependencies")
+    root = Path(__file__).resolve().parent.parent
+    folders = tomllib.loads((root / "pyproject.toml").read_text())[
+        "tool"]["setuptools"]["package-dir"]
+    package = tmp_path / "lmncell"
+    package.mkdir()
+    for entry in sorted((root / folders["lmncell"]).iterdir()):
+        if entry.name != "__pycache__":
+            (package / entry.name).symlink_to(entry)
+    for name, folder in folders.items():
+        if name != "lmncell":
+            (package / name.split(".")[1]).symlink_to(root / folder)
+    res = subprocess.run([sys.executable, "-m", "mypy", "--config-file",
+                          str(root / "pyproject.toml"), "--cache-dir", str(tmp_path / "cache"),
+                          "-p", "lmncell"], cwd=tmp_path, capture_output=True, text=True,
+                         timeout=600)
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert "no issues found in" in res.stdout
 
 
 def test_python_api_end_to_end(tmp_path) -> None:

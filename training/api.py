@@ -73,7 +73,7 @@ def _path_list(caller: str, paths: Any) -> list[str | Path]:
     one (iterating over a string would read '/' as a file); anything else must be a sequence
     of paths, or DataError naming the caller's argument."""
     if isinstance(paths, (str, os.PathLike)):
-        return [paths]
+        return [paths if isinstance(paths, str) else Path(paths)]
     try:
         out = list(paths)
     except TypeError:
@@ -97,7 +97,7 @@ def _model(caller: str, model: Any) -> LmnModel:
     if not isinstance(model, (str, os.PathLike)):
         raise DataError(f"{caller}: model is {model!r:.60}; expected an LmnModel or a model "
                         "file's path")
-    return load_model(model)
+    return load_model(Path(model))
 
 
 def simulate(model: LmnModel | str | Path, current_a: np.ndarray,

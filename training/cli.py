@@ -191,7 +191,7 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 def cmd_train(a: argparse.Namespace) -> int:
     from lmncell.identification.train import train_files
 
-    settings = dict(parse_setting(s) for s in a.set)
+    settings: dict[str, Any] = dict(parse_setting(s) for s in a.set)
     for key, value in (("max_local_models", a.max_local_models), ("ocv_tests", a.ocv_tests),
                        ("partition", a.partition.split(",") if a.partition else None)):
         if value is not None:
@@ -408,7 +408,7 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
 
 
 def build_parser() -> argparse.ArgumentParser:
-    fmt = {"formatter_class": _HelpFormatter}
+    fmt: dict[str, Any] = {"formatter_class": _HelpFormatter}
     p = argparse.ArgumentParser(prog="lmncell", description="Local model network cell models "
                                 "from cycler data, exported as FMI 2.0 FMUs. Current > 0 "
                                 "charges; SI units; SoC as a fraction 0…1.", **fmt)

@@ -260,7 +260,7 @@ class TrainConfig:
         """The filters' [tau_fast_s, tau_slow_s] pairs: as given, or for "auto"
         FILTER_CHAIN_S with its first element split at each SUB_SECOND_SPLITS_S of at least
         SPLIT_MIN_SAMPLES·Ts (none at Ts = 1 s; 0.5 and 2 s at 0.1 s)."""
-        if self.filters != "auto":
+        if not isinstance(self.filters, str):          # "auto", the one string allowed
             return [(float(a), float(b)) for a, b in self.filters]
         splits = [t for t in SUB_SECOND_SPLITS_S
                   if t >= SPLIT_MIN_SAMPLES * self.sample_time_s]

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from lmncell.data.records import DataError, Record
+from lmncell.data.records import DataError, Record, present
 from lmncell.data.resample import resample_segment
 from lmncell.data.soc import REST_CURRENT_A, discharged_ah, reference_soc
 from lmncell.runtime.observers import first_crossing
@@ -184,7 +184,7 @@ def check_sampling_interval(rec: Record, sample_time_s: float) -> None:
     mostly its interpolation between samples, which the model would learn instead of the cell,
     and its arrays grow with the ratio (a 1 ms sample time on a 10 Hz log ran out of memory).
     A cycler's constant-current phase logged every 10 s still trains a 1 s model."""
-    steps = np.concatenate([np.diff(part.time_s) for part in rec.segments()] or [[]])
+    steps = np.concatenate([np.diff(part.time_s) for part in rec.segments()] or [np.zeros(0)])
     steps = steps[steps > 0]
     interval = float(np.median(steps)) if steps.size else 0.0
     least = interval / MAX_STEPS_PER_LOG_INTERVAL
@@ -217,11 +217,13 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         if part.duration_s < MIN_SEGMENT_STEPS * sample_time_s:
             continue
         rs = resample_segment(part, sample_time_s, current_delay_s)
+        soc = present(rs.soc_ref, "the segment's reference SoC")
         lo, hi = soc_window
-        w = np.where((rs.soc_ref >= lo) & (rs.soc_ref <= hi), 1.0, outside_weight)
+        w = np.where((soc >= lo) & (soc <= hi), 1.0, outside_weight)
         name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"
         out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
-                                  float(part.soc_ref[0]), rs.soc_ref, w, ambient_c=ambient,
+                                  float(present(part.soc_ref, "the record's SoC")[0]), soc, w,
+                                  ambient_c=ambient,
                                   temperature_kind=kind)))
     if not out:
         longest = max((part.duration_s for part in rec.segments()), default=0.0)

@@ -662,9 +662,9 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     units = _units_row(lines, header_line, numeric, sep, decimal)
     temp_col = columns.get("temperature")
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"], temp_col} - {None},
+                             keep_text={c for c in (columns["time"], temp_col) if c is not None},
                              header_line=header_line, lines=lines, units_row=units is not None,
-                             blank_ok={temp_col} - {None})
+                             blank_ok=set() if temp_col is None else {temp_col})
     _require(path, cols, tuple(columns.values()), sep)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     if temp_col is not None:

@@ -10,13 +10,24 @@ from __future__ import annotations
 import dataclasses
 import itertools
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 from lmncell.runtime.thermal import CELL_TEMPERATURE_RANGE_C
 
+T = TypeVar("T")
+
 
 class DataError(ValueError):
     """Bad measurement data; the message names the file, the column or row and what was expected."""
+
+
+def present(value: T | None, what: str) -> T:
+    """value, which the caller's earlier steps have set (a RuntimeError naming it otherwise: a
+    fault in this package, not in the user's data)."""
+    if value is None:
+        raise RuntimeError(f"{what} is not set")
+    return value
 
 
 @dataclass

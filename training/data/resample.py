@@ -56,7 +56,7 @@ def resample_segment(rec: Record, sample_time_s: float, current_delay_s: float =
     meta = dataclasses.replace(rec.meta, sample_time_s=ts, segment_starts=[0], first_line=None,
                                notes=[*rec.meta.notes, f"resampled to {ts} s (step means)"])
     current = _step_means(t, rec.current_a, grid, ts, current_delay_s)
-    return Record(grid, current, mean(rec.voltage_v), meta,
+    return Record(grid, current, _step_means(t, rec.voltage_v, grid, ts), meta,
                   temperature_c=mean(rec.temperature_c), soc_ref=at(rec.soc_ref),
                   charge_ah=at(rec.charge_ah))
 

@@ -33,12 +33,13 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
     """Duration, sample time, current (A and C-rate), voltage, SoC swing and temperature."""
     cap = capacity_ah or nominal_capacity(rec)
     q = charge_throughput_ah(rec)
-    out = {
+    current = [float(rec.current_a.min()), float(rec.current_a.max())]
+    out: dict = {
         "file": rec.meta.source, "format": rec.meta.fmt, "samples": len(rec),
         "duration_s": rec.duration_s,
         "sample_time_s": rec.meta.sample_time_s if len(rec) > 1 else None,
         "segments": len(rec.meta.segment_starts), "sign": rec.meta.sign_note,
-        "current_a": [float(rec.current_a.min()), float(rec.current_a.max())],
+        "current_a": current,
         "voltage_v": [float(rec.voltage_v.min()), float(rec.voltage_v.max())],
         "net_charge_ah": float(q[-1]), "charge_range_ah": [float(q.min()), float(q.max())],
         "starts_full": starts_rested_full(rec),
@@ -50,7 +51,7 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
         out["gap_charge_ah"] = gap_charge_ah(rec)
     if cap:
         out["capacity_ah_assumed"] = cap
-        out["c_rate"] = [out["current_a"][0] / cap, out["current_a"][1] / cap]
+        out["c_rate"] = [current[0] / cap, current[1] / cap]
         if out["starts_full"]:
             soc = 1.0 + q / cap
             out["soc_range"] = [float(soc.min()), float(soc.max())]

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
 from lmncell.data.readers import read_record
-from lmncell.data.records import Record
+from lmncell.data.records import Record, present
 from lmncell.data.soc import logged_current_drift_ah
 from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
@@ -75,7 +75,8 @@ def temperature_words(seg: Segment, ambient: bool) -> str:
         return ("the ambient (chamber) temperature, the thermal model computing the cell's "
                 "where the model has one")
     if kind == "chamber":
-        return (f"the chamber temperature {float(np.median(seg.temperature_c)):g} °C (the "
+        chamber = present(seg.temperature_c, "the chamber temperature")
+        return (f"the chamber temperature {float(np.median(chamber)):g} °C (the "
                 "record has no cell temperature)")
     return "the measured cell temperature" if kind == "cell" else "25 °C (no temperature given)"
 
@@ -102,7 +103,7 @@ def model_ocv(model: LmnModel) -> tuple[np.ndarray, np.ndarray] | None:
     return (model.ocv_soc, model.ocv_v) if model.ocv_v[-1] > model.ocv_v[0] else None
 
 
-def evaluate_model(model: LmnModel, paths: list[str | Path],
+def evaluate_model(model: LmnModel, paths: Sequence[str | Path],
                    soc0: float | Sequence[float] | None = None,
                    capacity_ah: float | None = None, read_options: Mapping[str, Any] | None = None,
                    ambient: bool = False, through_hidden_pauses: bool = False
@@ -146,7 +147,8 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
             for name, b in model.extra.get("baselines", {}).items():
                 volts[name] = baseline_voltage(b["kind"], b["model"], driven, sim.soc)
             traces.append(Trace(seg, volts, sim.soc, sim.validity, cell))
-            row = {"record": seg.name, "temperature_input": temperature_input(seg, ambient)}
+            row: dict[str, Any] = {"record": seg.name,
+                                   "temperature_input": temperature_input(seg, ambient)}
             for name, v in volts.items():
                 row[name] = record_metrics(seg.voltage_v, v, seg.soc_ref)
             if cell is not None and seg.ambient_c is not None and seg.temperature_c is not None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from lmncell.identification.ladder import (
@@ -112,7 +113,7 @@ def ladder_parameters(model: LmnModel, theta: np.ndarray, temperature_c: float) 
                   strict=True))
     ladder = {"0": _clean(1e3 * g * r0),
               **{f"{k:g}": _clean(1e3 * g * v) for k, v in sorted(rc.items())}}
-    row = {"r0_mohm": ladder["0"], "rc_mohm_by_tau_s": ladder,
+    row: dict[str, Any] = {"r0_mohm": ladder["0"], "rc_mohm_by_tau_s": ladder,
            "r_static_mohm": float(sum(ladder.values())),
            "time_constants_s": [float(k) for k in sorted(rc)]}
     if "h(k)" in c:

@@ -118,9 +118,11 @@ def parameter_bounds(k: int, with_h: bool) -> tuple[np.ndarray, np.ndarray]:
     """Lower and upper bounds of the fit's x = [OCV knots (V, free), log R0, log R1, log R2
     (Ω, N_R knots each), log τ1, log τ2 (s), β, hysteresis M (V)]: physical ranges that keep
     every simulation finite at any temperature and SoC."""
-    lo = [np.full(k, -np.inf), np.full(3 * N_R, np.log(R_BOUNDS_OHM[0])),
+    lo: list[np.ndarray | list[float]] = [
+          np.full(k, -np.inf), np.full(3 * N_R, np.log(R_BOUNDS_OHM[0])),
           np.full(2, np.log(TAU_BOUNDS_S[0])), [BETA_BOUNDS[0]]]
-    hi = [np.full(k, np.inf), np.full(3 * N_R, np.log(R_BOUNDS_OHM[1])),
+    hi: list[np.ndarray | list[float]] = [
+          np.full(k, np.inf), np.full(3 * N_R, np.log(R_BOUNDS_OHM[1])),
           np.full(2, np.log(TAU_BOUNDS_S[1])), [BETA_BOUNDS[1]]]
     if with_h:
         lo.append([-HYSTERESIS_BOUND_V])
@@ -155,7 +157,7 @@ def fit_ecm2rc(segs: list[Segment], socs: list[np.ndarray], ocv_soc: np.ndarray,
     n = sum(len(s) for s in segs)
     lam = np.sqrt(3e-3 * n) * 1e-3
     lam_r = np.sqrt(LOG_R_SMOOTHNESS * n) * 1e-3
-    hs = [hysteresis(s.current_a, gamma, ts, capacity_ah, h0) if with_h else None
+    hs = [None if gamma is None else hysteresis(s.current_a, gamma, ts, capacity_ah, h0)
           for s, h0 in zip(segs, h0s, strict=True)]
 
     calls, last = [0], [time.perf_counter()]

@@ -486,7 +486,7 @@ def grow_regions_separately(grower: Grower, tree: Tree) -> Tree:
     sample_region = np.concatenate([np.full(b - a, levels[k])
                                     for k, (a, b) in enumerate(design.bounds)])
     region_samples = [sample_region == q for q in range(n_regions)]
-    share = max(grower.cfg.max_local_models // n_regions, 1)
+    share = max(int(grower.cfg.max_local_models) // n_regions, 1)    # resolved: an int
     temps = temperature_levels(grower.segs)
     for r in range(n_regions):
         only = [k for k, lv in enumerate(levels) if lv == r]

@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 from lmncell.config import TrainConfig
 from lmncell.data.dataset import Segment
+from lmncell.data.records import present
 from lmncell.identification.baselines import hysteresis
 from lmncell.identification.ladder import Ladder
 from lmncell.identification.ocvfit import OcvFit, fit_ocv, measured_ocv
@@ -368,4 +369,4 @@ def choose_arrhenius_with_temperature_terms(base: LmnModel, segs: list[Segment],
         if best is None or scores[cand] < scores[e_k]:      # the first of equal minima
             e_k, best = cand, design
     progress(f"  temperature scaling with the temperature terms: E = {e_k:g} K")
-    return e_k, {f"{c:g}": 1e3 * v for c, v in scores.items()}, best
+    return e_k, {f"{c:g}": 1e3 * v for c, v in scores.items()}, present(best, "the design")

@@ -101,7 +101,7 @@ class _FreeRunProblem:
         non-negative increments (the OCV rises with SoC)."""
         ocv0 = self.ocv0
         incr0 = (np.concatenate([[ocv0[0]], np.maximum(np.diff(ocv0), 0.0)]) if self.with_ocv
-                 else [])
+                 else np.zeros(0))
         return np.concatenate([self.model.theta.ravel(), incr0])
 
     def lower(self) -> np.ndarray:
@@ -382,7 +382,7 @@ def _robust_linear_solve(J: np.ndarray, b: np.ndarray, n_res: int,
     normal = (J.T @ J, J.T @ b) if constraints is not None else None
 
     def solve(weights: np.ndarray):
-        if normal is not None:
+        if normal is not None and constraints is not None:
             x = lsi(*_downweighted(normal, J, b, weights), *constraints)
             return _Solution(x, 0.0, 1, 0)
         sw = np.sqrt(weights)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 from lmncell.data.dataset import Segment
+from lmncell.data.records import present
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.thermal import ThermalModel, rested_temperature
 from scipy.optimize import least_squares
@@ -45,15 +46,16 @@ def fit_thermal(model: LmnModel, segs: list[Segment]) -> tuple[ThermalModel | No
                       f"rises {MIN_RISE_K} K above a known ambient temperature"}
     ts = model.sample_time_s
     heats = [step_heat(model, s) for s in usable]
+    measured = [(present(s.ambient_c, "ambient"), present(s.temperature_c, "cell temperature"))
+                for s in usable]
 
     def unpack(x: np.ndarray) -> ThermalModel:
         return ThermalModel(float(np.exp(x[0])), float(np.exp(x[1])), float(x[2]))
 
     def residuals(x: np.ndarray) -> np.ndarray:
         p = unpack(x)
-        return np.concatenate([predicted_temperature(p, q, s.ambient_c, float(s.temperature_c[0]),
-                                                     ts) - s.temperature_c
-                               for s, q in zip(usable, heats, strict=True)])
+        return np.concatenate([predicted_temperature(p, q, ambient, float(cell[0]), ts) - cell
+                               for (ambient, cell), q in zip(measured, heats, strict=True)])
 
     x0 = np.array([np.log(5.0), np.log(1000.0), 0.0])
     lower = np.array([np.log(0.05), np.log(10.0 * ts), -5.0])

@@ -25,7 +25,7 @@ from lmncell.data.dataset import (
 )
 from lmncell.data.lag import estimate_current_delay
 from lmncell.data.readers import read_record
-from lmncell.data.records import DataError, Record
+from lmncell.data.records import DataError, Record, present
 from lmncell.evaluation.evaluate import simulate_segment
 from lmncell.evaluation.metrics import ENDS, pooled, record_metrics
 from lmncell.identification.baselines import fit_ecm2rc
@@ -173,7 +173,8 @@ def training_segments(records: list[Record], cfg: TrainConfig, capacity_ah: floa
         start = start_soc(rec, rec_soc0)
         check_sampling_interval(rec, cfg.sample_time_s)
         for seg in record_to_segments(rec, cfg.sample_time_s, start, capacity_ah,
-                                      tuple(cfg.soc_window), cfg.outside_weight,
+                                      (cfg.soc_window[0], cfg.soc_window[1]),
+                                      cfg.outside_weight,
                                       float(delay)):
             seg.weight = seg.weight * float(weight)
             seg.record_weight = float(weight)
@@ -288,7 +289,7 @@ def fit_capacity(records: list[Record], cfg: TrainConfig,
             best, best_k = (rmse, cap, segs, result), k
         elif k - best_k >= CAPACITY_PATIENCE:
             break
-    rmse, cap, segs, result = best
+    rmse, cap, segs, result = present(best, "the best capacity")
     progress(f"capacity {cap:.4f} Ah, chosen by the free-run error ({1e3 * rmse:.2f} mV; give "
              "--capacity for a measured value)")
     return cap, segs, result

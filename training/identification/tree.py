@@ -226,4 +226,4 @@ def _gate_weight(design: Design, gate: str) -> np.ndarray:
     if gate == "all":
         return np.ones_like(design.y)
     code = 1 if gate == "charge" else 2
-    return (code == design.D).astype(float)
+    return np.asarray(code == design.D, dtype=float)

@@ -146,7 +146,7 @@ def pack_power(vehicle: Vehicle, speed: np.ndarray, grade: np.ndarray, dt: float
 @dataclass
 class CycleResult:
     time_s: np.ndarray
-    speed_mps: np.ndarray
+    speed_mps: np.ndarray | None       # None: driven by a current profile, no vehicle
     current_a: np.ndarray
     voltage_v: np.ndarray
     soc: np.ndarray
@@ -189,6 +189,8 @@ def cell_cutoff_v(cell: Mapping[str, Any] | None, key: str = "voltage_min_v") ->
     terminal voltage of the training records (key "voltage_max_v": the charge cut-off, the
     highest); 0 (none) where it gives no positive number."""
     value = cell.get(key) if isinstance(cell, Mapping) else None
+    if value is None:
+        return 0.0
     try:
         volts = float(value)
     except (TypeError, ValueError):

@@ -24,7 +24,12 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, DataError, is_cell_temperature
+from lmncell.data.records import (
+    CELL_TEMPERATURE_RANGE_C,
+    DataError,
+    is_cell_temperature,
+    present,
+)
 from lmncell.runtime.model import LmnModel, model_from_dict
 from lmncell.scenarios.drive import (
     MAX_CYCLE_STEPS,
@@ -181,17 +186,18 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     """A pack scenario: the vehicle's pack power through the vectorised pack model."""
     t0 = time.perf_counter()
     model = _model_of(fmu_bytes)
+    pack = present(sc.pack, "the pack scenario's pack")
     dt = sc.cycle.step_s
     power = (np.tile(pack_power(sc.vehicle, sc.cycle.speed_mps, sc.cycle.grade, dt), sc.repeat)
-             * sc.pack.power_share)
+             * pack.power_share)
     ts = model.sample_time_s
     steps = step_count(power.size * dt, ts)
     cutoff = cell_cutoff_v(model.cell) if sc.cutoff_v is None else sc.cutoff_v
-    f = drive_pack(model, sc.pack, step_means(power, dt, ts, steps), sc.ambient_c, sc.soc0,
+    f = drive_pack(model, pack, step_means(power, dt, ts, steps), sc.ambient_c, sc.soc0,
                    cutoff)
     driven = step_means(np.tile(sc.cycle.speed_mps, sc.repeat), dt, ts, steps)[: f["steps"]]
-    return {**_settings(sc, sc.pack.label), "capacity_spread": sc.pack.capacity_spread,
-            "resistance_spread": sc.pack.resistance_spread, "seed": sc.pack.seed,
+    return {**_settings(sc, pack.label), "capacity_spread": pack.capacity_spread,
+            "resistance_spread": pack.resistance_spread, "seed": pack.seed,
             "distance_km": float(np.sum(driven) * ts / 1000.0),
             "voltage_min_v": f["voltage_min_v"], "voltage_max_v": f["voltage_max_v"],
             "soc_end": f["soc_end"], "soc_end_min": f["soc_end_min"],
@@ -254,7 +260,7 @@ def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = No
     fmu = Path(fmu)
     read_fmu_info(fmu)
     doc = shipped_model_doc(fmu)
-    for cutoff_v in {sc.cutoff_v for sc in cases} - {None}:
+    for cutoff_v in {sc.cutoff_v for sc in cases if sc.cutoff_v is not None}:
         check_cutoff_in_range(doc.get("cell"), cutoff_v, "sweep: --cutoff")
     check_steps(cases, default_step_s(read_model_description(str(fmu))),
                 model_from_dict(doc, f"{fmu}: resources/model.json").sample_time_s)
@@ -300,7 +306,7 @@ def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
     if own and scheduler is None:
         cluster = _local_cluster(LocalCluster, workers)
         client = Client(cluster)
-    elif own:
+    elif own and scheduler is not None:
         client = _connect(Client, scheduler)
     try:
         blob = client.scatter(data, broadcast=True, hash=False)   # own key per sweep
