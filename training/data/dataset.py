@@ -203,7 +203,8 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
     """record_to_segments with each segment's gap-free part of the record as measured (its own
     samples, reference SoC and temperature, the chamber set point where none was measured).
     A record logged slower than sample_time_s is held over the steps within each of its
-    intervals (evaluation takes it so; training refuses it, check_sampling_interval)."""
+    intervals (evaluation takes any rate; training, check_sampling_interval, at most
+    MAX_STEPS_PER_LOG_INTERVAL steps per interval)."""
     rec = rec.with_soc(reference_soc(rec, soc0, capacity_ah))
     chamber = rec.meta.chamber_temp_c
     ambient = (float(chamber) if rec.temperature_c is not None and chamber is not None
