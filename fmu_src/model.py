@@ -542,7 +542,7 @@ def _limits(doc: object, source: str) -> dict:
     low ≤ high (the trained ranges the out-of-range flag and the warnings compare with)."""
     if not isinstance(doc, dict):
         raise ModelFileError(f"{source}: 'limits' must be an object, got {doc!r:.60}")
-    for key in set(LIMIT_KEYS) & set(doc):
+    for key in [k for k in LIMIT_KEYS if k in doc]:      # in LIMIT_KEYS order
         pair = doc[key]
         if not (isinstance(pair, list) and len(pair) == 2
                 and all(is_real_number(x) and math.isfinite(x) for x in pair)

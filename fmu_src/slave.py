@@ -202,7 +202,7 @@ class LmnCellSlave(Fmi2Slave):
     # host crashes on the next call: with that wrapper the error is logged through the FMI
     # logger and the call ignored (status OK; a refused step is fmi2Discard).
     def _problem(self, vr: int, kind: type[Any], setting: bool) -> str:
-        var: Any = self.vars.get(vr)     # a pythonfmu ScalarVariable
+        var = self.vars.get(vr)
         if var is None:
             return f"no variable with value reference {vr}"
         if not isinstance(var, kind):
