@@ -415,7 +415,10 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
   </UnitDefinitions>
   <LogCategories>
     <Category name="logStatusWarning" description="Log messages with fmi2Warning status."/>
+    <Category name="logStatusDiscard" description="Log messages with fmi2Discard status."/>
     <Category name="logStatusError" description="Log messages with fmi2Error status."/>
+    <Category name="logStatusFatal" description="Log messages with fmi2Fatal status."/>
+    <Category name="logAll" description="Log all messages."/>
   </LogCategories>
   <DefaultExperiment startTime="0.0" stopTime="3600.0" stepSize="{model.sample_time_s!r}"/>
   <ModelVariables>

@@ -20,7 +20,7 @@ import pytest
 from tests.conftest import ROOT
 from tests.fmu_helpers import fmu_reports
 
-ERROR, DISCARD = 3, 2
+WARNING, ERROR, DISCARD = 1, 3, 2
 
 
 def _run(fmu, sequence: str) -> dict:
@@ -245,10 +245,26 @@ def test_debug_logging_follows_its_categories_and_refuses_null_ones(quick_fmu,
         else:
             blocks[label].append(entry)
     warned = {k for k, v in blocks.items() if any("outside the trained" in m for m in v)}
-    assert warned == {"[all]", "[warnings]", "[after the NULLs]"}, blocks
+    assert warned == {"[all]", "[warnings]", "[logAll]", "[unknown and warnings]",
+                      "[after the NULLs]"}, blocks
     nulls = blocks["[warnings off]"]
     assert len(nulls) == 2 and all("is NULL; logging left as it was" in m for m in nulls)
     assert native["statuses"][-3:] == [ERROR, ERROR, 0] and math.isfinite(native["voltage"])
+    # an undeclared category: ignored with fmi2Warning and a message naming it, whether or
+    # not warnings are on; the declared ones in the same call still apply
+    undeclared = [m for m in native["messages"] if "'noSuchCategory' is not declared" in m]
+    assert len(undeclared) == 2 and all("declares logStatusWarning" in m for m in undeclared)
+    calls = [native["statuses"][3 * k] for k in range(8)]
+    assert calls == [0, 0, 0, 0, WARNING, 0, WARNING, 0], native["statuses"]
+
+
+def test_both_fmus_declare_the_same_log_categories(quick_fmu, native_fmu) -> None:
+    """fmi2SetDebugLogging accepts the categories modelDescription.xml declares and warns of
+    any other, in both FMUs alike: so both must declare the same ones."""
+    from fmpy import read_model_description
+    py, native = (read_model_description(f).logCategories for f in (quick_fmu, native_fmu))
+    assert [c.name for c in py] == [c.name for c in native] == [
+        "logStatusWarning", "logStatusDiscard", "logStatusError", "logStatusFatal", "logAll"]
 
 
 def test_observers_stay_finite_from_full_charge(fmu) -> None:

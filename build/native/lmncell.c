@@ -1231,12 +1231,26 @@ static void defaults(State *s) {
 const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
 const char *fmi2GetVersion(void) { return fmi2Version; }
 
-/* Logging on for the categories named (all with none named), as the pythonfmu FMU's logger
-   does: warnings ("logStatusWarning") are logged only where it is on; errors always. A NULL
-   array or entry is refused and the logging left as it was. */
+/* The log categories modelDescription.xml declares: those of the pythonfmu FMU */
+#define DECLARED_CATEGORIES \
+    "logStatusWarning, logStatusDiscard, logStatusError, logStatusFatal, logAll"
+static int declared_category(const char *name) {
+    static const char *const declared[] = {"logStatusWarning", "logStatusDiscard",
+                                           "logStatusError", "logStatusFatal", "logAll"};
+    size_t k;
+    for (k = 0; k < sizeof declared / sizeof declared[0]; k++)
+        if (strcmp(name, declared[k]) == 0) return 1;
+    return 0;
+}
+
+/* Logging on for the categories named (all with none named, or with logAll), as the pythonfmu
+   FMU's logger does: warnings ("logStatusWarning") are logged only where it is on; errors
+   always. A NULL array or entry is refused and the logging left as it was; a category that is
+   not declared is ignored with fmi2Warning. */
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const fmi2String cats[]) {
     Instance *in = (Instance *)c;
     int warnings = n == 0;
+    fmi2Status status = fmi2OK;
     size_t k;
     if (!in) return fmi2Error;
     if (n > 0 && !cats) {
@@ -1250,10 +1264,22 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean on, size_t n, const 
                   "categories[%zu] is NULL; logging left as it was", n, k);
             return fmi2Error;
         }
-        if (strcmp(cats[k], "logStatusWarning") == 0) warnings = 1;
+    }
+    for (k = 0; k < n; k++) {
+        if (strcmp(cats[k], "logStatusWarning") == 0 || strcmp(cats[k], "logAll") == 0)
+            warnings = 1;
+        else if (!declared_category(cats[k])) {
+            /* not filtered by the logging switch: the host's own mistake, as it returns */
+            if (in->cb && in->cb->logger)
+                in->cb->logger(in->cb->componentEnvironment, in->name, fmi2Warning,
+                               "logStatusWarning", "fmi2SetDebugLogging: log category '%.40s' "
+                               "is not declared, ignored; this FMU declares %s", cats[k],
+                               DECLARED_CATEGORIES);
+            status = fmi2Warning;
+        }
     }
     in->logging = on && warnings;
-    return fmi2OK;
+    return status;
 }
 
 fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, fmi2String res,

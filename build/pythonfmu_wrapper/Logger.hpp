@@ -38,16 +38,28 @@ public:
         if (s == fmi2Error || s == fmi2Fatal) {
             debugLog(s, category, message);
         } else if (debugLogging_) {
-            if (categories_.empty() || std::find(categories_.begin(), categories_.end(), category) != categories_.end()) {
+            if (categories_.empty() || named(category) || named("logAll")) {   // LMNCell: logAll
                 debugLog(s, category, message);
             }
         }
+    }
+
+    // LMNCell: a message that reaches the logger whether logging is on or not (a host's own
+    // mistake in fmi2SetDebugLogging, reported with the status the call returns)
+    void report(fmi2Status s, const std::string& message)
+    {
+        debugLog(s, "", message);
     }
 
     virtual ~PyLogger() = default;
 
 private:
     bool debugLogging_{false};
+
+    bool named(const std::string& category) const
+    {
+        return std::find(categories_.begin(), categories_.end(), category) != categories_.end();
+    }
 
 protected:
     std::string instanceName_;

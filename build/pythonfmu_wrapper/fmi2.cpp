@@ -4,7 +4,9 @@
 #include "fmi2Functions.h"
 #include "fmu_except.hpp"
 
+#include <algorithm>
 #include <cstdio>
+#include <iterator>
 #include <exception>
 #include <limits>
 #include <memory>
@@ -177,7 +179,7 @@ fmi2Status fmi2SetDebugLogging(
 
     // LMNCell: a NULL array or entry is refused (it was a std::string from NULL, an exception
     // out of a C function: the host terminated); the logging stays as it was
-    char why[160];
+    char why[256];
     if (nCategories > 0 && categories == nullptr) {
         std::snprintf(why, sizeof why, "fmi2SetDebugLogging: nCategories = %zu but categories is "
                       "NULL; logging left as it was", nCategories);
@@ -201,9 +203,24 @@ fmi2Status fmi2SetDebugLogging(
         return fmi2Error;
     }
 
+    // LMNCell: a category that modelDescription.xml does not declare is ignored with a warning
+    // that names it and the declared ones (FMI 2.0: the allowed categories are the FMU's)
+    static const char* const declared[] = {"logStatusWarning", "logStatusDiscard",
+                                           "logStatusError", "logStatusFatal", "logAll"};
+    fmi2Status status = fmi2OK;
+    for (const auto& name : categoriesVec) {
+        if (std::find(std::begin(declared), std::end(declared), name) == std::end(declared)) {
+            std::snprintf(why, sizeof why, "fmi2SetDebugLogging: log category '%.40s' is not "
+                          "declared, ignored; this FMU declares logStatusWarning, "
+                          "logStatusDiscard, logStatusError, logStatusFatal, logAll",
+                          name.c_str());
+            component->logger->report(fmi2Warning, why);
+            status = fmi2Warning;
+        }
+    }
     component->logger->setDebugLogging(loggingOn, categoriesVec);
 
-    return fmi2OK;
+    return status;
 }
 
 
