@@ -526,8 +526,14 @@ def test_a_record_logged_every_10_s_is_evaluated_by_a_1_s_model_and_fmu(
             capsys.readouterr().err)
         out = capsys.readouterr().out
         row = json.loads(out[out.index("["):])[0]
+        assert row["logged_every_s"] == pytest.approx(10.0, rel=1e-5)
         figures.append(next(v["rmse_mv"] for v in row.values() if isinstance(v, dict)))
     assert figures[0] < 60 and abs(figures[0] - figures[1]) < 1e-6, figures   # FMU = model
+    for model in (quick_model, quick_fmu):                # the table says how it was scored
+        assert main(["evaluate", str(model), str(slow), *columns]) == 0
+        said = capsys.readouterr()
+        assert ("slow.csv: logged every 10 s (median), slower than the model's sample time: it "
+                "is scored at the model's steps") in said.out + said.err
     assert main(["train", str(slow), *columns, "--out", str(tmp_path / "m.json"),
                  "--capacity", "2.85", "--set", "sample_time_s=0.5"]) == 2
     assert ("slow.csv: logged every 10 s (the median time step); a model sample time of 0.5 s "

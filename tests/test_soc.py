@@ -182,9 +182,9 @@ def test_evaluate_rows_carry_the_drift_and_the_table_names_it_once(capsys) -> No
     meta = RecordMeta(source="synthetic.csv", fmt="generic")
     counted = -2.0 * 1.01 * (t - t[0]) / 3600.0              # logged current +0.02 Ah high
     rec = Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta, charge_ah=counted)
-    assert record_notes(rec, 2.0)["soc_drift_pct"] == pytest.approx(1.0, rel=1e-9)
+    assert record_notes(rec, 2.0, 1.0)["soc_drift_pct"] == pytest.approx(1.0, rel=1e-9)
     assert "soc_drift_pct" not in record_notes(
-        Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta), 2.0)
+        Record(t, np.full(t.size, -2.0), np.full(t.size, 3.3), meta), 2.0, 1.0)
     metrics = {"rmse_mv": 1.0, "mae_mv": 1.0, "max_mv": 1.0, "window_rmse_mv": 1.0,
                "low_soc_rmse_mv": None, "high_soc_rmse_mv": None}
     rows = [{"record": "a.csv#1", "lmn": metrics, "soc_drift_pct": 1.0},

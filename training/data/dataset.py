@@ -175,6 +175,7 @@ MIN_SEGMENT_STEPS = 10   # a segment shorter than this many model steps is left 
 
 
 MAX_STEPS_PER_LOG_INTERVAL = 10   # training holds a log's sample over at most this many steps
+FAST_LOG_RATIO = 1.5   # the notes speak of a log this many times faster or slower than Ts
 
 
 def check_sampling_interval(rec: Record, sample_time_s: float) -> None:

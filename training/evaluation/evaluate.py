@@ -6,13 +6,20 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import math
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lmncell.data.dataset import Segment, record_to_segments, start_soc, start_socs
+from lmncell.data.dataset import (
+    FAST_LOG_RATIO,
+    Segment,
+    record_to_segments,
+    start_soc,
+    start_socs,
+)
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record, present
 from lmncell.data.soc import logged_current_drift_ah
@@ -131,7 +138,7 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
     traces, rows = [], []
     cap = capacity_ah or model.capacity_ah
     for rec, rec_soc0 in records:
-        notes = record_notes(rec, cap)
+        notes = record_notes(rec, cap, model.sample_time_s)
         for seg in record_to_segments(rec, model.sample_time_s, rec_soc0, cap,
                                       current_delay_s=model.current_delay_s):
             check_range(model, seg)
@@ -161,12 +168,17 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
 DRIFT_NOTE_PCT = 0.1   # print_rows names a record's SoC drift from this much (% of capacity)
 
 
-def record_notes(rec: Record, capacity_ah: float) -> dict:
+def record_notes(rec: Record, capacity_ah: float, sample_time_s: float) -> dict:
     """What a row of a record's figures also says about the record: the hidden pauses it was
-    split at, and where the tester's Ah counters are logged the SoC drift of its logged current
+    split at; where the tester's Ah counters are logged the SoC drift of its logged current
     by its end (soc_drift_pct: net charge of the current minus the counters', % of
-    capacity_ah; > 0: the model's SoC, counted from the current, ends above the counters')."""
+    capacity_ah; > 0: the model's SoC, counted from the current, ends above the counters');
+    where it is logged at least FAST_LOG_RATIO times slower than the model's sample time
+    sample_time_s (s), its median logging interval (logged_every_s, s)."""
     notes: dict = {}
+    interval = rec.meta.sample_time_s
+    if math.isfinite(interval) and interval >= FAST_LOG_RATIO * sample_time_s:
+        notes["logged_every_s"] = float(interval)
     if rec.meta.pause_starts:
         notes["hidden_pauses_split"] = len(rec.meta.pause_starts)
     drift = logged_current_drift_ah(rec)
@@ -350,6 +362,22 @@ def print_rows(rows: list[dict], progress: Progress = _print) -> None:
                      "driven through its time column runs on through them "
                      "(--through-hidden-pauses scores it that way)")
     _print_drifts(rows, progress)
+    _print_slow_logs(rows, progress)
+
+
+def _print_slow_logs(rows: list[dict], progress: Progress) -> None:
+    """One line per record logged at least FAST_LOG_RATIO times slower than the model's
+    sample time (record_notes' logged_every_s)."""
+    told = set()
+    for r in rows:
+        name, interval = r["record"].split("#")[0], r.get("logged_every_s")
+        if interval is None or name in told:
+            continue
+        told.add(name)
+        progress(f"{name}: logged every {interval:.3g} s (median), slower than the model's "
+                 "sample time: it is scored at the model's steps, each against the mean of the "
+                 "two logged voltages around it, so its figures say nothing of what the cell "
+                 "did between the logged samples")
 
 
 def _print_drifts(rows: list[dict], progress: Progress) -> None:

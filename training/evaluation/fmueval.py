@@ -463,7 +463,7 @@ def evaluate_fmu(fmu: str | Path, paths: Sequence[str | Path],
     try:
         for _, rec, rec_soc0 in read_records(paths, soc0, read_options, through_hidden_pauses,
                                              shipped_ocv(info.path)):
-            notes = record_notes(rec, info.capacity_ah)
+            notes = record_notes(rec, info.capacity_ah, info.step_s)
             for part, seg in record_parts(rec, info.step_s, rec_soc0, info.capacity_ah):
                 progress(f"driving {info.path.name} {how} of {seg.name}: {len(seg)} model "
                          f"steps of {info.step_s:g} s")

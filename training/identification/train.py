@@ -15,6 +15,7 @@ import numpy as np
 from lmncell import __version__
 from lmncell.config import ConfigError, TrainConfig, load_config, output_file_problem
 from lmncell.data.dataset import (
+    FAST_LOG_RATIO,
     Segment,
     check_sampling_interval,
     estimate_capacity,
@@ -120,9 +121,6 @@ def current_delay(cfg: TrainConfig, records: list[Record], progress: Progress = 
         progress(f"current delay {delay:.3f} s: the lag of the voltage channel behind the "
                  "current (lmncell.data.lag)")
     return float(delay)
-
-
-FAST_LOG_RATIO = 1.5   # sampling_note speaks from a log this many times faster than Ts
 
 
 def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
