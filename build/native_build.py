@@ -2,19 +2,23 @@
 
 Generates `lmncell_model.h` (the model's numbers as constant arrays) beside the hand-written
 `native/lmncell.c` (which follows fmu_src step by step), compiles a linux64 binary with gcc against
-fmpy's FMI 2.0 headers, and zips the FMU with the same model description (variables, units, value
-references) as the pythonfmu FMU, the sources and `buildDescription.xml` so that `fmpy compile`
-rebuilds it for win64 or darwin64.
+fmpy's FMI 2.0 headers (and, asked for, a win64 one cross-compiled with zig, the `ziglang`
+package), and zips the FMU with the same model description (variables, units, value references)
+as the pythonfmu FMU, the sources and `buildDescription.xml` so that `fmpy compile` rebuilds it
+for another platform (darwin64, say).
 """
 
 from __future__ import annotations
 
 import html
+import importlib.util
 import math
 import shutil
 import subprocess
+import sys
 import tempfile
 import zipfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
@@ -67,6 +71,8 @@ HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
 MODEL_IDENTIFIER = "LMNCell"
 PART_CODES = {"soc": 0, "current": 1, "filtered_current": 2, "temperature": 3}
+PLATFORMS = {"linux64": ".so", "win64": ".dll"}   # FMI 2.0 platform → binary suffix
+ZIG_TARGETS = {"win64": "x86_64-windows-gnu"}     # platforms cross-compiled with zig
 
 
 def fmi_headers() -> Path:
@@ -475,12 +481,45 @@ def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) ->
         raise NativeBuildError(f"gcc failed ({' '.join(cmd)}):\n{res.stderr}")
 
 
-def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = False) -> Path:
-    """Generate, compile and zip the native FMU of a model file; returns its path.
+def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | None = None
+                  ) -> None:
+    """The binary of a platform of ZIG_TARGETS, cross-compiled with zig (the ziglang package:
+    `pip install ziglang`; its first build for a target also builds that target's C library
+    into zig's cache, about a minute)."""
+    if importlib.util.find_spec("ziglang") is None:
+        raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
+                               "installed: pip install ziglang (or lmncell[windows])")
+    cmd = [sys.executable, "-m", "ziglang", "cc", "-target", ZIG_TARGETS[platform], "-std=c99",
+           "-O3", "-shared", "-s", "-Wall", "-Wno-unused-function", *(extra or []),
+           f"-I{fmi_headers()}", f"-I{src_dir}", str(src_dir / "lmncell.c"), "-o", str(out)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise NativeBuildError(f"zig cc failed ({' '.join(cmd)}):\n{res.stderr}")
+
+
+def check_platforms(platforms: Sequence[str]) -> list[str]:
+    """The platforms, each once in the order given; NativeBuildError naming one that is not
+    in PLATFORMS (or none given)."""
+    chosen = list(dict.fromkeys(platforms))
+    for name in chosen:
+        if name not in PLATFORMS:
+            raise NativeBuildError(f"--platforms: {name!r} is not a platform this build "
+                                   f"makes; expected one or more of {', '.join(PLATFORMS)}")
+    if not chosen:
+        raise NativeBuildError(f"--platforms: none given; expected one or more of "
+                               f"{', '.join(PLATFORMS)}")
+    return chosen
+
+
+def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = False,
+                     platforms: Sequence[str] = ("linux64",)) -> Path:
+    """Generate, compile and zip the native FMU of a model file, with a binary for each of
+    platforms (PLATFORMS: linux64 with gcc, win64 cross-compiled with zig); returns its path.
 
     trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
 
+    chosen = check_platforms(platforms)
     model_file, archive = Path(model_path), fmu_path(out)
     model = load_model(model_file)
     when = build_time()
@@ -493,10 +532,18 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
         shutil.copy2(C_SOURCE, src / "lmncell.c")
         (src / "lmncell_model.h").write_text(model_header(model, guid), encoding="utf-8")
         (src / "buildDescription.xml").write_text(BUILD_DESCRIPTION, encoding="utf-8")
-        binary = Path(tmp) / f"{MODEL_IDENTIFIER}.so"
-        compile_linux64(src, binary, ["-DLMNCELL_TRIVIAL"] if trivial else None)
+        binaries = []
+        for platform in chosen:
+            binary = Path(tmp) / platform / f"{MODEL_IDENTIFIER}{PLATFORMS[platform]}"
+            binary.parent.mkdir()
+            extra = ["-DLMNCELL_TRIVIAL"] if trivial else None
+            if platform == "linux64":
+                compile_linux64(src, binary, extra)
+            else:
+                compile_cross(platform, src, binary, extra)
+            binaries.append((f"binaries/{platform}/{binary.name}", binary.read_bytes()))
         members = [("modelDescription.xml", model_description(model, guid, version).encode()),
-                   (f"binaries/linux64/{MODEL_IDENTIFIER}.so", binary.read_bytes()),
+                   *binaries,
                    *((f"sources/{f.name}", f.read_bytes()) for f in sorted(src.iterdir())),
                    ("resources/model.json", model_file.read_bytes()),
                    ("documentation/index.html",

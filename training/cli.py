@@ -270,11 +270,15 @@ def cmd_explain(a: argparse.Namespace) -> int:
 def cmd_build_fmu(a: argparse.Namespace) -> int:
     from lmncell.evaluation.fmueval import model_file_of
 
+    if a.platforms is not None and not a.native:
+        raise NativeBuildError("--platforms: the pythonfmu FMU is built for this machine's "
+                               "platform only; expected --native with --platforms")
     with model_file_of(a.model) as model:
         if a.native:
             from lmncell.fmu.native_build import build_native_fmu
 
-            path = build_native_fmu(model, a.out)
+            path = build_native_fmu(model, a.out, platforms=a.platforms if a.platforms is not None
+                                    else ["linux64"])
         else:
             from lmncell.fmu.pythonfmu_build import build_fmu, native_host_hint
 
@@ -529,7 +533,15 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
                    "importer (linux64 binary built here with gcc, sources included)")
+    s.add_argument("--platforms", type=_platform_list, metavar="linux64,win64",
+                   help="with --native: the binaries to put in (default linux64; win64 is "
+                   "cross-compiled with zig: pip install ziglang)")
     s.set_defaults(func=cmd_build_fmu)
+
+
+def _platform_list(text: str) -> list[str]:
+    """--platforms: comma-separated FMI platform names (checked by the build)."""
+    return [name.strip() for name in text.split(",") if name.strip()]
 
 
 def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:

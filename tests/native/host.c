@@ -1,22 +1,46 @@
-/* A minimal native FMI 2.0 co-simulation host for the tests: dlopen the FMU binary, run a
+/* A minimal native FMI 2.0 co-simulation host for the tests: load the FMU binary, run a
  * drive cycle read from a text file (one current in A per line, held for one step of h s),
  * print the final voltage and SoC, and whether libpython is mapped into this process.
- * Usage: host BINARY.so RESOURCE_URI GUID CURRENTS.txt STEP_S SOC0 OBSERVER VOLTAGES.txt|-
+ * Usage: host BINARY RESOURCE_URI GUID CURRENTS.txt STEP_S SOC0 OBSERVER VOLTAGES.txt|-
  * With HOST_PRIVATE_LIB=path set it first maps that library RTLD_LOCAL (as a host that embeds
- * Python for itself). */
+ * Python for itself). Built for Linux (dlopen, BINARY.so) and for Windows (LoadLibrary,
+ * BINARY.dll: the win64 binary under Wine; libpython is then reported as -1). */
+#ifdef _WIN32
+#include <windows.h>
+#else
 #define _POSIX_C_SOURCE 199309L
 #include <dlfcn.h>
+#include <time.h>
+#endif
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "fmi2Functions.h"
 #include "test_logger.h"
 
-#define LOAD(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)dlsym(lib, "fmi2" #name); \
-    if (!name) { fprintf(stderr, "missing fmi2" #name "\n"); return 2; }
-
+#ifdef _WIN32
+typedef HMODULE Library;
+#define open_library(path) LoadLibraryA(path)
+#define symbol(lib, name) ((void *)GetProcAddress(lib, name))
+#define close_library(lib) FreeLibrary(lib)
+static double seconds(void) {
+    LARGE_INTEGER now, freq;
+    QueryPerformanceCounter(&now);
+    QueryPerformanceFrequency(&freq);
+    return (double)now.QuadPart / (double)freq.QuadPart;
+}
+static int libpython_mapped(void) { return -1; }
+#else
+typedef void *Library;
+#define open_library(path) dlopen(path, RTLD_NOW | RTLD_LOCAL)
+#define symbol(lib, name) dlsym(lib, name)
+#define close_library(lib) dlclose(lib)
+static double seconds(void) {
+    struct timespec now;
+    clock_gettime(CLOCK_MONOTONIC, &now);
+    return now.tv_sec + 1e-9 * now.tv_nsec;
+}
 static int libpython_mapped(void) {
     char line[1024];
     int found = 0;
@@ -27,9 +51,13 @@ static int libpython_mapped(void) {
     fclose(f);
     return found;
 }
+#endif
+
+#define LOAD(name) fmi2##name##TYPE *name = (fmi2##name##TYPE *)symbol(lib, "fmi2" #name); \
+    if (!name) { fprintf(stderr, "missing fmi2" #name "\n"); return 2; }
 
 int main(int argc, char **argv) {
-    void *lib;
+    Library lib;
     fmi2CallbackFunctions cb = {logger, calloc, free, NULL, NULL};
     fmi2ValueReference vr_in[] = {0, 1}, vr_out[] = {3, 4, 5}, vr_soc0 = 7, vr_obs = 9;
     double h, soc0, out[3], cur, volt = 0.0, t = 0.0;
@@ -38,13 +66,13 @@ int main(int argc, char **argv) {
     fmi2Component c;
     if (argc < 9) { fprintf(stderr, "usage: see source\n"); return 2; }
     if (getenv("HOST_PRIVATE_LIB")) {   /* a library the host maps for itself, not global */
-        if (!dlopen(getenv("HOST_PRIVATE_LIB"), RTLD_NOW | RTLD_LOCAL)) {
-            fprintf(stderr, "dlopen: %s\n", dlerror());
+        if (!open_library(getenv("HOST_PRIVATE_LIB"))) {
+            fprintf(stderr, "cannot load %s\n", getenv("HOST_PRIVATE_LIB"));
             return 2;
         }
     }
-    lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
-    if (!lib) { fprintf(stderr, "dlopen: %s\n", dlerror()); return 2; }
+    lib = open_library(argv[1]);
+    if (!lib) { fprintf(stderr, "cannot load %s\n", argv[1]); return 2; }
     LOAD(Instantiate) LOAD(SetupExperiment) LOAD(EnterInitializationMode)
     LOAD(ExitInitializationMode) LOAD(SetReal) LOAD(SetInteger) LOAD(GetReal) LOAD(DoStep)
     LOAD(Terminate) LOAD(FreeInstance)
@@ -63,8 +91,7 @@ int main(int argc, char **argv) {
     {
         /* read the inputs first, so that the timed loop only sets, steps and gets */
         size_t cap = 1024, n = 0, k;
-        double *ci = malloc(cap * sizeof *ci), *vi = malloc(cap * sizeof *vi), elapsed;
-        struct timespec t0, t1;
+        double *ci = malloc(cap * sizeof *ci), *vi = malloc(cap * sizeof *vi), elapsed, t0;
         while (fscanf(fc, "%lf", &cur) == 1) {
             if (fv && fscanf(fv, "%lf", &volt) != 1) volt = 0.0;
             if (n == cap) {
@@ -75,7 +102,7 @@ int main(int argc, char **argv) {
             ci[n] = cur;
             vi[n++] = volt;
         }
-        clock_gettime(CLOCK_MONOTONIC, &t0);
+        t0 = seconds();
         for (k = 0; k < n; k++) {
             double in[2];
             in[0] = ci[k];
@@ -86,8 +113,7 @@ int main(int argc, char **argv) {
             GetReal(c, vr_out, 3, out);
             steps++;
         }
-        clock_gettime(CLOCK_MONOTONIC, &t1);
-        elapsed = (t1.tv_sec - t0.tv_sec) + 1e-9 * (t1.tv_nsec - t0.tv_nsec);
+        elapsed = seconds() - t0;
         printf("us_per_step %.4f\n", n ? 1e6 * elapsed / n : 0.0);
         free(ci);
         free(vi);
@@ -99,6 +125,6 @@ int main(int argc, char **argv) {
     if (fv) fclose(fv);
     printf("steps %d errors %d voltage %.17g soc %.17g soc_std %.17g libpython %d\n", steps,
            errors, out[0], out[1], out[2], libpython_mapped());
-    dlclose(lib);
+    close_library(lib);
     return 0;
 }

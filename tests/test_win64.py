@@ -1,0 +1,150 @@
+"""The native FMU's win64 binary (`lmncell build-fmu --native --platforms linux64,win64`),
+cross-compiled with zig: a 64-bit Windows DLL that exports the whole FMI 2.0 co-simulation API
+and needs nothing beyond Windows' own libraries, and, where Wine is installed, runs a drive
+cycle with hostile inputs exactly as the linux64 binary does."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import re
+import shutil
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from lmncell.cli import main
+
+HOST_C = Path(__file__).parent / "native" / "host.c"
+WINDOWS_LIBRARIES = re.compile(r"(kernel32|api-ms-win-crt-[a-z]+-l1-1-0)\.dll", re.IGNORECASE)
+
+pytestmark = pytest.mark.skipif(importlib.util.find_spec("ziglang") is None,
+                                reason="ziglang is not installed (pip install ziglang)")
+
+
+@pytest.fixture(scope="module")
+def both_fmu(quick_model, tmp_path_factory) -> Path:
+    """The quick model's native FMU with linux64 and win64 binaries."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    from lmncell.fmu.native_build import build_native_fmu
+
+    return build_native_fmu(quick_model, tmp_path_factory.mktemp("win64") / "cell.fmu",
+                            platforms=("linux64", "win64"))
+
+
+MODEL_EXCHANGE_ONLY = {f"fmi2{name}" for name in (
+    "EnterEventMode", "NewDiscreteStates", "EnterContinuousTimeMode", "CompletedIntegratorStep",
+    "SetTime", "SetContinuousStates", "GetDerivatives", "GetEventIndicators",
+    "GetContinuousStates", "GetNominalsOfContinuousStates")}
+
+
+def _co_simulation_functions() -> set[str]:
+    """Every function of the FMI 2.0 API (fmpy's fmi2Functions.h) that a co-simulation FMU
+    exports: the common ones and those for co-simulation."""
+    from lmncell.fmu.native_build import fmi_headers
+
+    text = (fmi_headers() / "fmi2Functions.h").read_text()
+    return set(re.findall(r"FMI2_Export\s+fmi2\w+TYPE\s+(fmi2\w+);", text)) - MODEL_EXCHANGE_ONLY
+
+
+def test_the_win64_binary_is_a_windows_dll_with_the_whole_fmi_api(both_fmu) -> None:
+    import pefile
+
+    with zipfile.ZipFile(both_fmu) as z:
+        names = set(z.namelist())
+        dll = pefile.PE(data=z.read("binaries/win64/LMNCell.dll"))
+    assert {"binaries/linux64/LMNCell.so", "binaries/win64/LMNCell.dll"} <= names
+    assert dll.is_dll() and dll.FILE_HEADER.Machine == 0x8664        # x86-64
+    assert dll.OPTIONAL_HEADER.Magic == 0x20B                         # PE32+
+    exported = {e.name.decode() for e in dll.DIRECTORY_ENTRY_EXPORT.symbols if e.name}
+    wanted = _co_simulation_functions()
+    assert len(wanted) > 30 and wanted <= exported, wanted - exported
+    imported = [i.dll.decode() for i in dll.DIRECTORY_ENTRY_IMPORT]
+    assert all(WINDOWS_LIBRARIES.fullmatch(name) for name in imported), imported
+
+
+def test_platforms_are_checked(quick_model, tmp_path, capsys) -> None:
+    """An unknown platform, none, or --platforms without --native: exit 2 and a message."""
+    out = str(tmp_path / "x.fmu")
+    assert main(["build-fmu", str(quick_model), "--native", "--platforms", "win32",
+                 "--out", out]) == 2
+    assert ("--platforms: 'win32' is not a platform this build makes; expected one or more of "
+            "linux64, win64") in capsys.readouterr().err
+    assert main(["build-fmu", str(quick_model), "--native", "--platforms", ",", "--out", out]) == 2
+    assert "--platforms: none given" in capsys.readouterr().err
+    assert main(["build-fmu", str(quick_model), "--platforms", "win64", "--out", out]) == 2
+    assert "expected --native with --platforms" in capsys.readouterr().err
+    assert not Path(out).exists()
+
+
+def test_without_zig_a_win64_build_says_what_to_install(quick_model, tmp_path, monkeypatch,
+                                                        capsys) -> None:
+    from lmncell.fmu import native_build
+
+    monkeypatch.setattr(native_build.importlib.util, "find_spec", lambda name: None)
+    assert main(["build-fmu", str(quick_model), "--native", "--platforms", "linux64,win64",
+                 "--out", str(tmp_path / "x.fmu")]) == 2
+    assert "pip install ziglang" in capsys.readouterr().err
+
+
+def _hostile_inputs(n: int, seed: int) -> tuple[list[str], list[str]]:
+    """n currents of a noisy square-and-sine drive (A) and measured voltages (V), a tenth of
+    each replaced by NaN, ±inf, ±1e308 or nonsense, as text for host.c."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    cur = (-2.0 * np.sin(t / 30.0) - 0.5 + rng.normal(0.0, 1.0, n)).astype(object)
+    volts = (3.3 + 0.2 * np.sin(t / 300.0)).astype(object)
+    cur[rng.choice(n, n // 10, replace=False)] = rng.choice(
+        ["nan", "inf", "-inf", "1e308", "-1e308", "0"], n // 10)
+    volts[rng.choice(n, n // 10, replace=False)] = rng.choice(["nan", "0.5", "4.9", "-1"], n // 10)
+    return [str(x) for x in cur], [str(x) for x in volts]
+
+
+def _comparable(stdout: str) -> list[str]:
+    """host.c's output without its timing and its libpython probe (-1 on Windows)."""
+    lines = [ln for ln in stdout.splitlines() if not ln.startswith("us_per_step")]
+    return [re.sub(r" libpython -?\d$", "", ln) for ln in lines]
+
+
+@pytest.mark.skipif(shutil.which("wine") is None, reason="Wine is not installed")
+@pytest.mark.parametrize("observer", [0, 1, 2, 3])
+def test_under_wine_the_win64_binary_runs_as_the_linux64_one(both_fmu, observer,
+                                                            tmp_path) -> None:
+    """host.c built for Windows loads the DLL under Wine and drives 3000 steps with hostile
+    inputs (each observer in turn): every logged message, the refused steps and the final
+    voltage, SoC and σ equal the linux64 binary's driven by host.c built for Linux."""
+    from lmncell.fmu.native_build import fmi_headers
+
+    with zipfile.ZipFile(both_fmu) as z:
+        z.extractall(tmp_path / "fmu")
+        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    cur, volts = _hostile_inputs(3000, observer)
+    (tmp_path / "c.txt").write_text("\n".join(cur))
+    (tmp_path / "v.txt").write_text("\n".join(volts))
+    include = [f"-I{fmi_headers()}", f"-I{HOST_C.parent}"]
+    subprocess.run(["gcc", "-std=c99", "-O1", *include, str(HOST_C), "-o",
+                    str(tmp_path / "host"), "-ldl"], check=True)
+    subprocess.run([sys.executable, "-m", "ziglang", "cc", "-target", "x86_64-windows-gnu",
+                    "-std=c99", "-O1", *include, str(HOST_C), "-o", str(tmp_path / "host.exe")],
+                   check=True, capture_output=True)
+    args = ["file:///C:/", guid, "c.txt", "1.0", "0.9", str(observer), "v.txt"]
+    linux = subprocess.run([str(tmp_path / "host"), "fmu/binaries/linux64/LMNCell.so", *args],
+                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wine")}
+    windows = subprocess.run(["wine", "host.exe", "fmu/binaries/win64/LMNCell.dll", *args],
+                             cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+    assert linux.returncode == 0 and windows.returncode == 0, windows.stderr[-2000:]
+    expected = _comparable(linux.stdout)
+    assert re.search(r"steps 3000 errors [1-9]\d+ voltage", expected[-1]), expected[-1]
+    assert any("the step was not taken" in ln for ln in expected)   # refusals logged
+    got = _comparable(windows.stdout.replace("\r\n", "\n"))
+    assert got[:-1] == expected[:-1]                       # every message, in order
+    # the final figures: the C libraries' exp and log may differ in the last bit
+    numbers = [[float(x) for x in re.findall(r"-?\d[\d.e+-]*", ln)] for ln in (got[-1],
+                                                                          expected[-1])]
+    assert numbers[0][:2] == numbers[1][:2]                # steps, refused steps
+    assert np.allclose(numbers[0][2:], numbers[1][2:], rtol=0.0, atol=1e-12), numbers
