@@ -110,33 +110,48 @@ def _comparable(stdout: str) -> list[str]:
     return [re.sub(r" libpython -?\d$", "", ln) for ln in lines]
 
 
-@pytest.mark.skipif(shutil.which("wine") is None, reason="Wine is not installed")
+@pytest.fixture(scope="module")
+def hosts(both_fmu, tmp_path_factory) -> tuple[Path, str]:
+    """A folder with the FMU unzipped (fmu/), host.c built for Linux (host) and for Windows
+    (host.exe), and a Wine prefix (wine/, made once: about 10 s); and the FMU's GUID."""
+    from lmncell.fmu.native_build import fmi_headers
+
+    if shutil.which("wine") is None:
+        pytest.skip("Wine is not installed")
+    d = tmp_path_factory.mktemp("hosts")
+    with zipfile.ZipFile(both_fmu) as z:
+        z.extractall(d / "fmu")
+        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    include = [f"-I{fmi_headers()}", f"-I{HOST_C.parent}"]
+    subprocess.run(["gcc", "-std=c99", "-O1", *include, str(HOST_C), "-o", str(d / "host"),
+                    "-ldl"], check=True)
+    subprocess.run([sys.executable, "-m", "ziglang", "cc", "-target", "x86_64-windows-gnu",
+                    "-std=c99", "-O1", *include, str(HOST_C), "-o", str(d / "host.exe")],
+                   check=True, capture_output=True)
+    subprocess.run(["wineboot", "-i"], env=_wine_env(d), capture_output=True, timeout=300)
+    return d, guid
+
+
+def _wine_env(d: Path) -> dict[str, str]:
+    return {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(d / "wine")}
+
+
 @pytest.mark.parametrize("observer", [0, 1, 2, 3])
-def test_under_wine_the_win64_binary_runs_as_the_linux64_one(both_fmu, observer,
-                                                            tmp_path) -> None:
+def test_under_wine_the_win64_binary_runs_as_the_linux64_one(hosts, observer) -> None:
     """host.c built for Windows loads the DLL under Wine and drives 3000 steps with hostile
     inputs (each observer in turn): every logged message, the refused steps and the final
     voltage, SoC and σ equal the linux64 binary's driven by host.c built for Linux."""
-    from lmncell.fmu.native_build import fmi_headers
-
-    with zipfile.ZipFile(both_fmu) as z:
-        z.extractall(tmp_path / "fmu")
-        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    d, guid = hosts
     cur, volts = _hostile_inputs(3000, observer)
-    (tmp_path / "c.txt").write_text("\n".join(cur))
-    (tmp_path / "v.txt").write_text("\n".join(volts))
-    include = [f"-I{fmi_headers()}", f"-I{HOST_C.parent}"]
-    subprocess.run(["gcc", "-std=c99", "-O1", *include, str(HOST_C), "-o",
-                    str(tmp_path / "host"), "-ldl"], check=True)
-    subprocess.run([sys.executable, "-m", "ziglang", "cc", "-target", "x86_64-windows-gnu",
-                    "-std=c99", "-O1", *include, str(HOST_C), "-o", str(tmp_path / "host.exe")],
-                   check=True, capture_output=True)
-    args = ["file:///C:/", guid, "c.txt", "1.0", "0.9", str(observer), "v.txt"]
-    linux = subprocess.run([str(tmp_path / "host"), "fmu/binaries/linux64/LMNCell.so", *args],
-                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    env = {**os.environ, "WINEDEBUG": "-all", "WINEPREFIX": str(tmp_path / "wine")}
+    (d / f"c{observer}.txt").write_text("\n".join(cur))
+    (d / f"v{observer}.txt").write_text("\n".join(volts))
+    args = ["file:///C:/", guid, f"c{observer}.txt", "1.0", "0.9", str(observer),
+            f"v{observer}.txt"]
+    linux = subprocess.run([str(d / "host"), "fmu/binaries/linux64/LMNCell.so", *args],
+                           cwd=d, capture_output=True, text=True, timeout=300)
     windows = subprocess.run(["wine", "host.exe", "fmu/binaries/win64/LMNCell.dll", *args],
-                             cwd=tmp_path, capture_output=True, text=True, timeout=600, env=env)
+                             cwd=d, capture_output=True, text=True, timeout=600,
+                             env=_wine_env(d))
     assert linux.returncode == 0 and windows.returncode == 0, windows.stderr[-2000:]
     expected = _comparable(linux.stdout)
     assert re.search(r"steps 3000 errors [1-9]\d+ voltage", expected[-1]), expected[-1]
