@@ -50,6 +50,34 @@ def test_native_fmu_validates_and_ships_sources(native_fmu) -> None:
             "sources/buildDescription.xml", "documentation/index.html"} <= names
 
 
+OLDEST_GLIBC = (2, 17)   # CentOS 7's; RHEL 8 has 2.28, where exp@GLIBC_2.29 failed to load
+
+
+def _glibc_versions(binary: bytes) -> set[tuple[int, ...]]:
+    """The glibc symbol versions an ELF library requires (its version-need names)."""
+    return {tuple(int(x) for x in v.split(b".")) for v in re.findall(rb"GLIBC_(2(?:\.\d+)+)",
+                                                                     binary)}
+
+
+def test_the_linux64_binary_loads_where_glibc_is_older(native_fmu, tmp_path) -> None:
+    """The native FMU's .so requires no glibc symbol newer than OLDEST_GLIBC (built here on
+    glibc 2.36, it required exp@GLIBC_2.29, so no host on glibc 2.28 or older could load it);
+    the source's binding of exp, exp2, log, log2 and pow holds for each of them."""
+    with zipfile.ZipFile(native_fmu) as z:
+        versions = _glibc_versions(z.read("binaries/linux64/LMNCell.so"))
+    assert versions and max(versions) <= OLDEST_GLIBC, sorted(versions)
+    source = (Path(__file__).parents[1] / "build" / "native" / "lmncell.c").read_text()
+    binding = re.search(r"#if defined\(__linux__\).*?#endif\n", source, re.DOTALL)
+    assert binding, "lmncell.c binds no glibc math symbols"
+    probe = tmp_path / "probe.c"
+    probe.write_text("#include <math.h>\n" + binding.group(0) + "double f(double x, double y) "
+                     "{ return exp(x) + exp2(x) + log(x) + log2(x) + pow(x, y); }\n")
+    subprocess.run(["gcc", "-std=c99", "-O2", "-fPIC", "-shared", str(probe), "-o",
+                    str(tmp_path / "probe.so"), "-lm"], check=True)
+    probed = _glibc_versions((tmp_path / "probe.so").read_bytes())
+    assert probed and max(probed) <= OLDEST_GLIBC, sorted(probed)
+
+
 def test_without_a_c_compiler_build_fmu_says_what_to_install(quick_model, tmp_path,
                                                               monkeypatch, capsys) -> None:
     """No gcc: `lmncell build-fmu --native` ends with the message and exit status 2, no

@@ -19,6 +19,18 @@
 #include "fmi2Functions.h"
 #include "lmncell_model.h"
 
+/* A linux64 binary that loads on older Linux hosts too: glibc 2.29 (2019) gave exp, exp2, log,
+   log2 and pow a new symbol version (the same results; only the SVID error-handling wrapper
+   dropped), which a binary built on a newer system requires by default, so that it would not
+   load where glibc is older (RHEL 8: 2.28, CentOS 7: 2.17). Bind the x86-64 baseline ones. */
+#if defined(__linux__) && defined(__x86_64__) && defined(__GLIBC__)
+__asm__(".symver exp,exp@GLIBC_2.2.5");
+__asm__(".symver exp2,exp2@GLIBC_2.2.5");
+__asm__(".symver log,log@GLIBC_2.2.5");
+__asm__(".symver log2,log2@GLIBC_2.2.5");
+__asm__(".symver pow,pow@GLIBC_2.2.5");
+#endif
+
 /* value references: the same as the pythonfmu FMU */
 enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, VR_SOC_STD,
        VR_OUT_OF_RANGE, VR_SOC0, VR_CAPACITY, VR_OBSERVER, VR_TEMPERATURE_IS_CELL,
