@@ -473,7 +473,7 @@ def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) ->
     if gcc is None:
         raise NativeBuildError("no C compiler (gcc) found: install gcc to build the native FMU")
     cmd = [gcc, "-std=c99", "-O3", "-fPIC", "-shared", "-Wall", "-Wno-unused-function",
-           *(extra or []),
+           "-DLMNCELL_GLIBC_BASELINE", *(extra or []),
            "-fvisibility=default", f"-I{fmi_headers()}", f"-I{src_dir}",
            str(src_dir / "lmncell.c"), "-o", str(out), "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)

@@ -22,8 +22,11 @@
 /* A linux64 binary that loads on older Linux hosts too: glibc 2.29 (2019) gave exp, exp2, log,
    log2 and pow a new symbol version (the same results; only the SVID error-handling wrapper
    dropped), which a binary built on a newer system requires by default, so that it would not
-   load where glibc is older (RHEL 8: 2.28, CentOS 7: 2.17). Bind the x86-64 baseline ones. */
-#if defined(__linux__) && defined(__x86_64__) && defined(__GLIBC__)
+   load where glibc is older (RHEL 8: 2.28, CentOS 7: 2.17). Bind the x86-64 baseline ones
+   where LMNCell's build asks for it (-DLMNCELL_GLIBC_BASELINE, linking libm: a versioned
+   symbol must be found at link time; a rebuild on the host itself, fmpy compile, needs none). */
+#if defined(LMNCELL_GLIBC_BASELINE) && defined(__linux__) && defined(__x86_64__) && \
+    defined(__GLIBC__)
 __asm__(".symver exp,exp@GLIBC_2.2.5");
 __asm__(".symver exp2,exp2@GLIBC_2.2.5");
 __asm__(".symver log,log@GLIBC_2.2.5");
