@@ -30,10 +30,10 @@ def both_fmu(quick_model, tmp_path_factory) -> Path:
     """The quick model's native FMU with linux64 and win64 binaries."""
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell.fmu.native_build import build_native_fmu
+    import lmncell
 
-    return build_native_fmu(quick_model, tmp_path_factory.mktemp("win64") / "cell.fmu",
-                            platforms=("linux64", "win64"))
+    return lmncell.build_fmu(quick_model, tmp_path_factory.mktemp("win64") / "cell.fmu",
+                             native=True, platforms=("linux64", "win64"))
 
 
 MODEL_EXCHANGE_ONLY = {f"fmi2{name}" for name in (
@@ -79,6 +79,11 @@ def test_platforms_are_checked(quick_model, tmp_path, capsys) -> None:
     assert main(["build-fmu", str(quick_model), "--platforms", "win64", "--out", out]) == 2
     assert "expected --native with --platforms" in capsys.readouterr().err
     assert not Path(out).exists()
+    import lmncell
+    from lmncell.fmu.interface import NativeBuildError
+
+    with pytest.raises(NativeBuildError, match="platforms are for native=True"):
+        lmncell.build_fmu(quick_model, out, platforms=["win64"])
 
 
 def test_without_zig_a_win64_build_says_what_to_install(quick_model, tmp_path, monkeypatch,

@@ -22,6 +22,7 @@ import numpy as np
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
 from lmncell.evaluation.evaluate import warn_outside_training
+from lmncell.fmu.interface import NativeBuildError
 from lmncell.progress import Progress, print_progress
 from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import LmnModel, load_model
@@ -219,10 +220,15 @@ def evaluate(model: LmnModel | str | Path, paths: str | Path | Sequence[str | Pa
     return rows
 
 
-def build_fmu(model_path: LmnModel | str | Path, out: str | Path, native: bool = False) -> Path:
+def build_fmu(model_path: LmnModel | str | Path, out: str | Path, native: bool = False,
+              platforms: Sequence[str] | None = None) -> Path:
     """Package a model file (or a loaded model, written as its file) as an FMI 2.0
     co-simulation FMU: pythonfmu (the importer needs Python with numpy) or, with native=True,
-    generated C compiled here (no Python needed)."""
+    generated C compiled here (no Python needed) with a binary for each of platforms
+    ("linux64", the default; "win64", cross-compiled with zig: pip install ziglang)."""
+    if platforms is not None and not native:
+        raise NativeBuildError("build_fmu: platforms are for native=True (the pythonfmu FMU "
+                               "is built for this machine's platform only)")
     if isinstance(model_path, LmnModel):
         import tempfile
 
@@ -231,14 +237,15 @@ def build_fmu(model_path: LmnModel | str | Path, out: str | Path, native: bool =
         with tempfile.TemporaryDirectory(prefix="lmncell-build-") as tmp:
             path = Path(tmp) / "model.json"
             save_model(model_path, path)
-            return build_fmu(path, out, native)
+            return build_fmu(path, out, native, platforms)
     if not isinstance(model_path, (str, os.PathLike)):
         raise DataError(f"build_fmu: model_path is {model_path!r:.60}; expected a model file's "
                         "path or an LmnModel")
     if native:
         from lmncell.fmu.native_build import build_native_fmu
 
-        return build_native_fmu(model_path, out)
+        return build_native_fmu(model_path, out,
+                                platforms=("linux64",) if platforms is None else platforms)
     from lmncell.fmu.pythonfmu_build import build_fmu as _build
 
     return _build(model_path, out)
