@@ -485,7 +485,7 @@ def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | No
                   ) -> None:
     """The binary of a platform of ZIG_TARGETS, cross-compiled with zig (the ziglang package:
     `pip install ziglang`; its first build for a target also builds that target's C library
-    into zig's cache, about a minute)."""
+    into zig's cache, which takes longer)."""
     if importlib.util.find_spec("ziglang") is None:
         raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
                                "installed: pip install ziglang (or lmncell[windows])")

@@ -118,7 +118,7 @@ def _comparable(stdout: str) -> list[str]:
 @pytest.fixture(scope="module")
 def hosts(both_fmu, tmp_path_factory) -> tuple[Path, str]:
     """A folder with the FMU unzipped (fmu/), host.c built for Linux (host) and for Windows
-    (host.exe), and a Wine prefix (wine/, made once: about 10 s); and the FMU's GUID."""
+    (host.exe), and a Wine prefix (wine/, made once for all the runs); and the FMU's GUID."""
     from lmncell.fmu.native_build import fmi_headers
 
     if shutil.which("wine") is None:
