@@ -1297,3 +1297,36 @@ def test_records_that_cannot_support_a_model_are_refused_before_it_is_written(tm
         train_files([path], out, capacity_ah=2.85, progress=lambda _m: None,
                     max_local_models=3)
     assert not out.exists()
+
+
+def _rested_then_discharged(name: str, v0: float) -> Record:
+    """A record that rests 120 s at v0 (V), then discharges at 1 A, its voltage falling."""
+    t = np.arange(0.0, 1200.0, 1.0)
+    current = np.where(t < 120.0, 0.0, -1.0)
+    return Record(t, current, np.where(t < 120.0, v0, v0 - 0.1 - 1e-4 * (t - 120.0)),
+                  RecordMeta(name, "test"))
+
+
+def test_without_an_ocv_test_a_full_start_far_below_the_others_gets_a_note() -> None:
+    """Without --ocv-tests nothing checked that a record taken as full (rested at its top
+    voltage) is full: one that starts rested part-way down looks the same. Among several, one
+    that starts FULL_START_SPREAD_V below the highest start is now named with what to give."""
+    from lmncell.config import load_config
+    from lmncell.identification.train import check_full_starts, full_start_note
+
+    full, low = _rested_then_discharged("full.csv", 4.18), _rested_then_discharged("low.csv",
+                                                                                  4.05)
+    near = _rested_then_discharged("near.csv", 4.14)          # 40 mV: temperature, relaxation
+    note = full_start_note([full, low, near])
+    assert note == ("note: low.csv is taken as starting full (rested at its top voltage, no "
+                    "--soc0), but starts at 4.05 V, 130 mV below full.csv (4.18 V): if it starts "
+                    "part-way down, give its start SoC (--soc0, one per file in order) or an "
+                    "OCV test (--ocv-tests), which checks it")
+    assert full_start_note([full, near]) is None and full_start_note([low]) is None
+    said: list[str] = []
+    check_full_starts([full, low], None, load_config(None), said.append)
+    assert said == [full_start_note([full, low])]
+    said.clear()
+    check_full_starts([full, low], [1.0, 0.9], load_config(None), said.append)   # given
+    check_full_starts([full, low], [None, 0.9], load_config(None), said.append)  # one given
+    assert said == []

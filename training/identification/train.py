@@ -23,6 +23,7 @@ from lmncell.data.dataset import (
     record_to_segments,
     start_soc,
     start_socs,
+    starts_rested_full,
 )
 from lmncell.data.lag import estimate_current_delay
 from lmncell.data.readers import read_record
@@ -86,18 +87,47 @@ def read_training_records(paths: list[str | Path], cfg: TrainConfig,
     return records
 
 
+FULL_START_SPREAD_V = 0.08   # records taken as full whose rested start voltages lie further
+#                              apart than this (V) get a note (full_start_note)
+
+
 def check_full_starts(records: list[Record], soc0: float | Sequence[float] | None,
-                      cfg: TrainConfig) -> None:
+                      cfg: TrainConfig, progress: Progress = _print) -> None:
     """Where slow OCV tests are given, refuse a record taken as starting full (no start SoC
     given, rested at its top voltage) whose start voltage the tests' OCV puts part-way down
-    (start_soc); the SoC scale is that of the records' largest discharge from full."""
+    (start_soc); the SoC scale is that of the records' largest discharge from full. Without
+    them, say full_start_note's note, if any."""
     given = start_socs(soc0, len(records))
-    if not cfg.ocv_tests or all(g is not None for g in given):
+    if all(g is not None for g in given):
+        return
+    if not cfg.ocv_tests:
+        note = full_start_note([r for r, g in zip(records, given, strict=True)
+                                if g is None and starts_rested_full(r)])
+        if note:
+            progress(note)
         return
     knots = np.linspace(0.0, 1.0, 101)
     ocv = (knots, measured_ocv(cfg.ocv_tests, estimate_capacity(records, given), knots))
     for rec, rec_soc0 in zip(records, given, strict=True):
         start_soc(rec, rec_soc0, ocv, "the OCV of the slow tests (--ocv-tests)")
+
+
+def full_start_note(full: list[Record]) -> str | None:
+    """A note on each record taken as starting full (rested at its top voltage, no start SoC
+    given) whose start voltage lies more than FULL_START_SPREAD_V below the highest such start
+    among them: with no OCV test to check it against, a record that starts rested part-way
+    down looks the same. None where there is none (or fewer than two records)."""
+    if len(full) < 2:
+        return None
+    top = max(full, key=lambda r: float(r.voltage_v[0]))
+    v_top = float(top.voltage_v[0])
+    notes = [f"note: {r.meta.source} is taken as starting full (rested at its top voltage, no "
+             f"--soc0), but starts at {float(r.voltage_v[0]):.4g} V, "
+             f"{1000.0 * (v_top - float(r.voltage_v[0])):.0f} mV below {top.meta.source} "
+             f"({v_top:.4g} V): if it starts part-way down, give its start SoC (--soc0, one "
+             "per file in order) or an OCV test (--ocv-tests), which checks it"
+             for r in full if float(r.voltage_v[0]) < v_top - FULL_START_SPREAD_V]
+    return "\n".join(notes) or None
 
 
 def lower_bound_capacity(records: list[Record], soc0: float | Sequence[float] | None,
@@ -329,7 +359,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     if problem:
         raise ConfigError(f"{out}: {problem}")
     records = read_training_records(paths, cfg, progress, read_options)
-    check_full_starts(records, soc0, cfg)
+    check_full_starts(records, soc0, cfg, progress)
     note = sampling_note(records, cfg.sample_time_s)
     if note:
         progress(note)
