@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -1312,7 +1313,14 @@ def test_without_an_ocv_test_a_full_start_far_below_the_others_gets_a_note() -> 
     voltage) is full: one that starts rested part-way down looks the same. Among several, one
     that starts FULL_START_SPREAD_V below the highest start is now named with what to give."""
     from lmncell.config import load_config
-    from lmncell.identification.train import check_full_starts, full_start_note
+    from lmncell.identification.train import (
+        FULL_START_SPREAD_V,
+        check_full_starts,
+        full_start_note,
+    )
+
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    assert f"more than {1000 * FULL_START_SPREAD_V:.0f} mV below the highest" in readme
 
     full, low = _rested_then_discharged("full.csv", 4.18), _rested_then_discharged("low.csv",
                                                                                   4.05)
