@@ -2,10 +2,38 @@
 
 from __future__ import annotations
 
+import re
+import shutil
+import subprocess
+import zipfile
 from pathlib import Path
 
+import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
+
+HOST_C = Path(__file__).parent / "native" / "host.c"         # a C host of the native FMU
+THREADS_C = Path(__file__).parent / "native" / "threads.c"   # the same, many threads
+
+
+def compile_host(source: Path, exe: Path, *libs: str) -> Path:
+    """A test host from tests/native/ compiled with gcc (skip without it)."""
+    from lmncell.fmu.native_build import fmi_headers
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed")
+    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(source), "-o", str(exe),
+                    "-ldl", *libs], check=True)
+    return exe
+
+
+def unzip_fmu(fmu: Path, d: Path) -> str:
+    """Extract an FMU into d; returns its GUID."""
+    with zipfile.ZipFile(fmu) as z:
+        z.extractall(d)
+        found = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode())
+    assert found, f"{fmu}: no GUID in modelDescription.xml"
+    return found.group(1)
 
 
 class Instance:

@@ -25,16 +25,17 @@ from lmncell.runtime.step import CellStepper, simulate_ambient
 
 from tests.conftest import A123_S1, PAN_US06, import_or_skip
 from tests.fmu_helpers import (
+    HOST_C,
+    THREADS_C,
     Instance,
     assert_state_round_trips,
+    compile_host,
     fmpy_run,
     fmu_reports,
     libcosim_run,
     refuse_bad_current,
+    unzip_fmu,
 )
-
-HOST_C = Path(__file__).parent / "native" / "host.c"
-THREADS_C = Path(__file__).parent / "native" / "threads.c"
 
 
 @pytest.fixture(scope="module")
@@ -230,32 +231,14 @@ def test_many_instances_are_independent(native_fmu) -> None:
         shutil.rmtree(d, ignore_errors=True)
 
 
-def _compile_host(source: Path, exe: Path, *libs: str) -> Path:
-    """A test host from tests/native/ compiled with gcc (skip without it)."""
-    from lmncell.fmu.native_build import fmi_headers
-
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed")
-    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{fmi_headers()}", str(source), "-o", str(exe),
-                    "-ldl", *libs], check=True)
-    return exe
-
-
 @pytest.fixture(scope="module")
 def host(tmp_path_factory) -> Path:
-    return _compile_host(HOST_C, tmp_path_factory.mktemp("host") / "host")
+    return compile_host(HOST_C, tmp_path_factory.mktemp("host") / "host")
 
 
 @pytest.fixture(scope="module")
 def threads_host(tmp_path_factory) -> Path:
-    return _compile_host(THREADS_C, tmp_path_factory.mktemp("threads") / "threads", "-lpthread")
-
-
-def _unzip(fmu: Path, d: Path) -> str:
-    """Extract an FMU into d; returns its GUID."""
-    with zipfile.ZipFile(fmu) as z:
-        z.extractall(d)
-        return re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
+    return compile_host(THREADS_C, tmp_path_factory.mktemp("threads") / "threads", "-lpthread")
 
 
 def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: float,
@@ -264,7 +247,7 @@ def _run_host(host: Path, fmu: Path, currents: np.ndarray, tmp: Path, soc0: floa
               env: dict[str, str] | None = None,
               resources: str | None = None) -> subprocess.CompletedProcess:
     d = tmp / "fmu"
-    guid = _unzip(fmu, d)
+    guid = unzip_fmu(fmu, d)
     (tmp / "cur.txt").write_text("\n".join(repr(float(x)) for x in currents))
     vfile = "-"
     if volts is not None:
@@ -348,7 +331,7 @@ def test_instances_in_parallel_threads_of_a_c_host(threads_host, fmu, quick_mode
     """Four instances of one FMU stepped at once from four threads of a C host (FMI 2.0 allows
     it): each ends where the pipeline does with its own current, no call fails."""
     d = tmp_path / "fmu"
-    guid = _unzip(fmu, d)
+    guid = unzip_fmu(fmu, d)
     out = subprocess.run([str(threads_host), str(d / "binaries/linux64/LMNCell.so"),
                           (d / "resources").as_uri(), guid, "4"], capture_output=True,
                          text=True, timeout=600)

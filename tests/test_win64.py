@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 from lmncell.cli import main
 
-HOST_C = Path(__file__).parent / "native" / "host.c"
+from tests.fmu_helpers import HOST_C, compile_host, unzip_fmu
+
 WINDOWS_LIBRARIES = re.compile(r"(kernel32|api-ms-win-crt-[a-z]+-l1-1-0)\.dll", re.IGNORECASE)
 
 pytestmark = pytest.mark.skipif(importlib.util.find_spec("ziglang") is None,
@@ -124,15 +125,11 @@ def hosts(both_fmu, tmp_path_factory) -> tuple[Path, str]:
     if shutil.which("wine") is None:
         pytest.skip("Wine is not installed")
     d = tmp_path_factory.mktemp("hosts")
-    with zipfile.ZipFile(both_fmu) as z:
-        z.extractall(d / "fmu")
-        guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
-    include = [f"-I{fmi_headers()}", f"-I{HOST_C.parent}"]
-    subprocess.run(["gcc", "-std=c99", "-O1", *include, str(HOST_C), "-o", str(d / "host"),
-                    "-ldl"], check=True)
+    guid = unzip_fmu(both_fmu, d / "fmu")
+    compile_host(HOST_C, d / "host")
     subprocess.run([sys.executable, "-m", "ziglang", "cc", "-target", "x86_64-windows-gnu",
-                    "-std=c99", "-O1", *include, str(HOST_C), "-o", str(d / "host.exe")],
-                   check=True, capture_output=True)
+                    "-std=c99", "-O1", f"-I{fmi_headers()}", str(HOST_C), "-o",
+                    str(d / "host.exe")], check=True, capture_output=True)
     subprocess.run(["wineboot", "-i"], env=_wine_env(d), capture_output=True, timeout=300)
     return d, guid
 
