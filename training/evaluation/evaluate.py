@@ -352,28 +352,30 @@ def print_rows(rows: list[dict], progress: Progress = _print) -> None:
         if "cell_temperature_rmse_k" in r:
             progress(f"{r['record'][:48]:48s} driven by the ambient temperature: cell "
                      f"temperature RMSE {r['cell_temperature_rmse_k']:.2f} K")
-    told = set()
-    for r in rows:
-        name = r["record"].split("#")[0]
-        if r.get("hidden_pauses_split") and name not in told:
-            told.add(name)
-            progress(f"{name}: split at {r['hidden_pauses_split']} pause(s) that only its "
-                     "wall clock shows, each segment after one started rested; an FMU "
-                     "driven through its time column runs on through them "
-                     "(--through-hidden-pauses scores it that way)")
+    for name, pauses in record_notes_once(rows, "hidden_pauses_split"):
+        progress(f"{name}: split at {pauses} pause(s) that only its "
+                 "wall clock shows, each segment after one started rested; an FMU "
+                 "driven through its time column runs on through them "
+                 "(--through-hidden-pauses scores it that way)")
     _print_drifts(rows, progress)
     _print_slow_logs(rows, progress)
+
+
+def record_notes_once(rows: list[dict], key: str) -> Iterator[tuple[str, Any]]:
+    """(record name, note) for each record whose rows carry the record_notes entry key: once
+    per record, however many segments ('#1', '#2') it was split into (each carries the same)."""
+    told = set()
+    for r in rows:
+        name, value = r["record"].split("#")[0], r.get(key)
+        if value is not None and name not in told:
+            told.add(name)
+            yield name, value
 
 
 def _print_slow_logs(rows: list[dict], progress: Progress) -> None:
     """One line per record logged at least FAST_LOG_RATIO times slower than the model's
     sample time (record_notes' logged_every_s)."""
-    told = set()
-    for r in rows:
-        name, interval = r["record"].split("#")[0], r.get("logged_every_s")
-        if interval is None or name in told:
-            continue
-        told.add(name)
+    for name, interval in record_notes_once(rows, "logged_every_s"):
         progress(f"{name}: logged every {interval:.3g} s (median), slower than the model's "
                  "sample time: it is scored at the model's steps, each against the mean of the "
                  "two logged voltages around it, so its figures say nothing of what the cell "
@@ -383,12 +385,9 @@ def _print_slow_logs(rows: list[dict], progress: Progress) -> None:
 def _print_drifts(rows: list[dict], progress: Progress) -> None:
     """One line per record whose logged current drifts from the tester's Ah counters by at
     least DRIFT_NOTE_PCT of the capacity by its end."""
-    told = set()
-    for r in rows:
-        name, drift = r["record"].split("#")[0], r.get("soc_drift_pct")
-        if drift is None or abs(drift) < DRIFT_NOTE_PCT or name in told:
+    for name, drift in record_notes_once(rows, "soc_drift_pct"):
+        if abs(drift) < DRIFT_NOTE_PCT:
             continue
-        told.add(name)
         side = "above" if drift > 0 else "below"
         progress(f"{name}: the SoC counted from its logged current (as the model and an FMU "
                  f"count it) ends {abs(drift):.2f} % of the capacity {side} the SoC of the "
