@@ -266,55 +266,112 @@ def ordinary_errors(fmu: str) -> dict:
     return out
 
 
-def wrong_guid_or_type(fmu: str) -> dict:
-    """Row 7: fmi2Instantiate with another FMU's GUID, as Model Exchange, with an empty or a
-    missing resource location is refused (NULL); the right GUID instantiates."""
-    import pathlib
+def _instantiate_with(fmu: str, unzipped: str, uri: str | None = None, guid: str | None = None,
+                      fmu_type: int | None = None, name: str = "uri",
+                      callbacks=None) -> FMU2Slave | None:
+    """An FMU2Slave of the FMU extracted in `unzipped`, instantiated through fmi2Instantiate with
+    the given resource location (default: the file URI of its resources folder, as fmpy gives
+    it), GUID and FMU type, and fmpy's callbacks or the given ones; None where the FMU refuses
+    (returns NULL)."""
     from ctypes import byref
+    from pathlib import Path
 
-    from fmpy.fmi2 import defaultCallbacks, fmi2CoSimulation, fmi2ModelExchange
-
-    class Raw(FMU2Slave):
-        """fmpy's slave with a chosen FMU type and resource location for fmi2Instantiate."""
-
-        fmu_type, uri = fmi2CoSimulation, None
-
-        def instantiate(self, visible=False, callbacks=None, loggingOn=False):
-            self.callbacks = defaultCallbacks
-            uri = (pathlib.Path(self.unzipDirectory, "resources").as_uri() if self.uri is None
-                   else self.uri)
-            self.component = self.fmi2Instantiate(self.instanceName.encode(), self.fmu_type,
-                                                  self.guid.encode(), uri.encode(),
-                                                  byref(self.callbacks), visible, loggingOn)
-            if self.component is None:
-                raise RuntimeError("Failed to instantiate model")
-
-    class AsModelExchange(Raw):
-        fmu_type = fmi2ModelExchange
-
-    class NoResources(Raw):
-        uri = ""
-
-    class MissingResources(Raw):
-        uri = "file:///nonexistent/lmncell/resources"
+    from fmpy.fmi2 import defaultCallbacks, fmi2CoSimulation
 
     md = read_model_description(fmu)
+    slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
+                      modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
+    slave.callbacks = defaultCallbacks if callbacks is None else callbacks
+    where = Path(unzipped, "resources").as_uri() if uri is None else uri
+    slave.component = slave.fmi2Instantiate(
+        name.encode(), fmi2CoSimulation if fmu_type is None else fmu_type,
+        (md.guid if guid is None else guid).encode(), where.encode(), byref(slave.callbacks),
+        False, False)
+    return None if slave.component is None else slave
+
+
+def wrong_guid_or_type(fmu: str) -> dict:
+    """Row 7: fmi2Instantiate with another FMU's GUID, as Model Exchange, with an empty or a
+    missing resource location: "refused" (NULL) or "instantiated"."""
+    from fmpy.fmi2 import fmi2ModelExchange
+
+    unzipped = extract(fmu)
+    cases = {"wrong_guid": {"guid": "{00000000-0000-0000-0000-000000000000}"},
+             "model_exchange": {"fmu_type": fmi2ModelExchange},
+             "no_resources": {"uri": ""},
+             "missing_resources": {"uri": "file:///nonexistent/lmncell/resources"},
+             "right": {}}
     out = {}
-    for key, guid, cls in (("wrong_guid", "{00000000-0000-0000-0000-000000000000}", FMU2Slave),
-                           ("model_exchange", md.guid, AsModelExchange),
-                           ("no_resources", md.guid, NoResources),
-                           ("missing_resources", md.guid, MissingResources),
-                           ("right", md.guid, FMU2Slave)):
-        slave = cls(guid=guid, unzipDirectory=extract(fmu),
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName=key)
-        try:
-            slave.instantiate(loggingOn=False)
-        except Exception:
+    for key, kw in cases.items():
+        slave = _instantiate_with(fmu, unzipped, name=key, **kw)
+        out[key] = "refused" if slave is None else "instantiated"
+        if slave is not None:
+            slave.freeInstance()
+    return out
+
+
+# Where a host may unpack an FMU: spaces, non-ASCII letters and URI delimiters in the folders
+AWKWARD_FOLDER = "lmn cell #1 50% (ü)"
+
+
+def resource_locations(fmu: str) -> dict:
+    """Row 7: the forms of the resources folder's file URI that FMI 2.0 asks an FMU to take
+    (with and without the authority, localhost, every %XX decoded, the scheme in any case), for
+    an FMU unpacked under AWKWARD_FOLDER, each instantiated, initialised and stepped once (its
+    voltage, or "refused"); and locations that name no local folder ("refused" or, where the
+    FMU needs no resources, "instantiated")."""
+    import tempfile
+    from pathlib import Path
+    from urllib.parse import quote
+
+    unzipped = extract(fmu, unzipdir=str(Path(tempfile.mkdtemp(), AWKWARD_FOLDER, "unzipped")))
+    path = quote(str(Path(unzipped, "resources")))           # /…/lmn%20cell%20%231…
+    forms = {"fmpy": None, "no_authority": f"file:{path}", "localhost": f"file://LocalHost{path}",
+             "upper_scheme": f"FILE://{path}", "trailing_slash": f"file://{path}/",
+             "bare_path": str(Path(unzipped, "resources"))}
+    wrong = {"other_host": f"file://elsewhere.example{path}",
+             "http": "http://example.com/resources", "relative": "file:resources",
+             "bad_escape": f"file://{path}%2"}
+    out = {}
+    for key, uri in {**forms, **wrong}.items():
+        slave = _instantiate_with(fmu, unzipped, uri, name=key)
+        if slave is None:
             out[key] = "refused"
             continue
-        out[key] = "instantiated"
+        if key in wrong:
+            out[key] = "instantiated"
+        else:
+            slave.setupExperiment(startTime=0.0)
+            slave.enterInitializationMode()
+            slave.exitInitializationMode()
+            slave.doStep(0.0, 1.0)
+            out[key] = slave.getReal([_vr(fmu)["voltage"]])[0]
+            slave.terminate()
         slave.freeInstance()
     return out
+
+
+def logged_resource_refusals(fmu: str) -> dict:
+    """Row 7: what the FMU logs when it refuses a resource location that names no local folder
+    (the messages of each attempt)."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    unzipped = extract(fmu)
+    out = {}
+    with fmu_log("res") as (name, callbacks, log):
+        for key, uri in (("other_host", "file://elsewhere.example/x/resources"),
+                         ("bad_escape", "file:///a%2x/resources"),
+                         ("http", "http://example.com/resources")):
+            before = len(log)
+            slave = _instantiate_with(fmu, unzipped, uri, name=name, callbacks=callbacks)
+            if slave is not None:
+                slave.freeInstance()
+            out[key] = " | ".join(log[before:])
+    return out
+
+
+def _vr(fmu: str) -> dict[str, int]:
+    return {v.name: v.valueReference for v in read_model_description(fmu).modelVariables}
 
 
 def _rss_kb() -> int:
@@ -510,6 +567,7 @@ SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_rang
                                      state_machine, impossible_inputs,
                                      logged_messages, debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
+                                      resource_locations, logged_resource_refusals,
                                       instantiate_many, random_calls, random_calls_long)}
 
 if __name__ == "__main__":

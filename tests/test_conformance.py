@@ -284,11 +284,41 @@ def test_ordinary_errors_never_crash_and_change_nothing(fmu) -> None:
     assert res["wrong_type"] == ERROR and res["bad_param_exit"] == ERROR
 
 
+def _needs_resources(fmu: Path) -> bool:
+    """The pythonfmu FMU loads its model from the resources folder; the native FMU has it
+    compiled in and ignores fmuResourceLocation."""
+    return "native C" not in read_model_description(str(fmu)).generationTool
+
+
 def test_wrong_guid_fmu_type_or_resources_are_refused(fmu) -> None:
     res = _run(fmu, "wrong_guid_or_type")
     assert res["right"] == "instantiated"
     assert res["wrong_guid"] == res["model_exchange"] == "refused"
-    assert res["no_resources"] == res["missing_resources"] == "refused"
+    without = "refused" if _needs_resources(fmu) else "instantiated"
+    assert res["no_resources"] == res["missing_resources"] == without
+
+
+def test_every_file_uri_form_of_the_resources_folder_is_taken(fmu) -> None:
+    """FMI 2.0 asks an FMU to take file URIs with and without the authority; a host unpacks it
+    where it likes (a space, ü, # or % in the folder's name, all percent-encoded in the URI).
+    pythonfmu's wrapper decoded only %20 and took file:/p as a relative path."""
+    res = _run(fmu, "resource_locations")
+    voltages = [res[k] for k in ("fmpy", "no_authority", "localhost", "upper_scheme",
+                                 "trailing_slash", "bare_path")]
+    assert all(isinstance(v, float) and math.isfinite(v) for v in voltages), res
+    assert voltages == pytest.approx([voltages[0]] * len(voltages), abs=1e-12)
+    wrong = "refused" if _needs_resources(fmu) else "instantiated"
+    assert {res[k] for k in ("other_host", "http", "relative", "bad_escape")} == {wrong}, res
+
+
+def test_a_refused_resource_location_is_named_in_the_log(quick_fmu, tmp_path) -> None:
+    """The refusal says which location and why, through the host's logger."""
+    res = _run(quick_fmu, "logged_resource_refusals")
+    assert "fmuResourceLocation 'file://elsewhere.example/x/resources': the host " \
+           "'elsewhere.example' is not this machine" in res["other_host"]
+    assert "'%' at character 3 of the path is not followed by two hexadecimal digits" \
+           in res["bad_escape"]
+    assert "only file URIs are supported" in res["http"]
 
 
 def test_memory_does_not_grow_over_instantiations(fmu) -> None:

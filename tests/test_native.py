@@ -319,11 +319,17 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     assert missing.returncode == 2 and "instantiate failed" in missing.stderr
     assert re.search(r"LOG \[host\] 3 \w+: LMNCELL_LIBPYTHON=\S+ cannot be loaded.*native FMU",
                      missing.stdout)
-    # a message with '%' in it (here the resource path) reaches the host's logger as text
-    odd = _run_host(host, quick_fmu, cur, tmp_path, 1.0, resources="file:///nowhere%s%s%s%n/res")
+    # a message with '%' in it (here the resource path, %25 decoded) reaches the host's logger
+    # as text, as does the refusal of a location that is not a percent-encoded URI
+    odd = _run_host(host, quick_fmu, cur, tmp_path, 1.0,
+                    resources="file:///nowhere%25s%25s%25s%25n/res")
     assert odd.returncode == 2
     assert "LOG [host] 4 logStatusFatal: [ctor] no slave class found in the resources folder " \
            "'/nowhere%s%s%s%n/res'" in odd.stdout
+    raw = _run_host(host, quick_fmu, cur, tmp_path, 1.0, resources="file:///nowhere%s%n/res")
+    assert raw.returncode == 2
+    assert "LOG [host] 3 logStatusError: fmi2Instantiate: fmuResourceLocation " \
+           "'file:///nowhere%s%n/res': '%' at character 9 of the path" in raw.stdout
 
 
 def test_instances_in_parallel_threads_of_a_c_host(threads_host, fmu, quick_model,

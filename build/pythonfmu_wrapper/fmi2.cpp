@@ -5,13 +5,14 @@
 #include "fmu_except.hpp"
 
 #include <algorithm>
+#include <cctype>
+#include <string>
 #include <cstdio>
 #include <iterator>
 #include <exception>
 #include <limits>
 #include <memory>
 #include <optional>
-#include <regex>
 
 namespace
 {
@@ -85,6 +86,86 @@ const char* fmi2GetTypesPlatform()
 }
 
 
+namespace
+{
+
+std::string lower_case(std::string text)
+{
+    for (auto& ch : text) ch = static_cast<char>(std::tolower(static_cast<unsigned char>(ch)));
+    return text;
+}
+
+int hex_digit(char ch)
+{
+    if (ch >= '0' && ch <= '9') return ch - '0';
+    if (ch >= 'a' && ch <= 'f') return ch - 'a' + 10;
+    if (ch >= 'A' && ch <= 'F') return ch - 'A' + 10;
+    return -1;
+}
+
+// LMNCell: the local path of the resources folder from fmuResourceLocation. FMI 2.0 (section
+// 2.1.5) asks an FMU to take the "file" scheme with an absolute path, with or without the
+// authority: "file:///p", "file://localhost/p" and "file:/p" (RFC 8089; the scheme and host
+// in any case), each %XX decoded (RFC 3986), a "?" or "#" ending the path. A bare absolute
+// path, which some hosts pass, is taken as it is. Anything else: false, the reason in `why`.
+bool resource_path(const std::string& uri, std::string& path, std::string& why)
+{
+    if (!uri.empty() && uri[0] == '/') {
+        path = uri;
+        return true;
+    }
+    if (lower_case(uri.substr(0, 5)) != "file:") {
+        why = "only file URIs are supported (expected file:///absolute/path/to/resources)";
+        return false;
+    }
+    std::string rest = uri.substr(5);
+    if (rest.compare(0, 2, "//") == 0) {
+        const auto slash = rest.find('/', 2);
+        const auto host = lower_case(rest.substr(2, slash == std::string::npos ? std::string::npos
+                                                                                 : slash - 2));
+        if (!host.empty() && host != "localhost") {
+            why = "the host '" + host.substr(0, 100) + "' is not this machine (expected "
+                  "file:///absolute/path or file://localhost/absolute/path)";
+            return false;
+        }
+        rest = slash == std::string::npos ? std::string() : rest.substr(slash);
+    }
+    rest = rest.substr(0, rest.find_first_of("?#"));
+    if (rest.empty() || rest[0] != '/') {
+        why = "the path is not absolute (expected file:///absolute/path/to/resources)";
+        return false;
+    }
+    path.clear();
+    for (std::size_t k = 0; k < rest.size(); ++k) {
+        if (rest[k] != '%') {
+            path += rest[k];
+            continue;
+        }
+        const int high = k + 2 < rest.size() ? hex_digit(rest[k + 1]) : -1;
+        const int low = k + 2 < rest.size() ? hex_digit(rest[k + 2]) : -1;
+        if (high < 0 || low < 0) {
+            why = "'%' at character " + std::to_string(k + 1) + " of the path is not followed "
+                  "by two hexadecimal digits (expected a percent-encoded URI, e.g. %20 for a "
+                  "space)";
+            return false;
+        }
+        if (high == 0 && low == 0) {
+            why = "%00 (a NUL character) in the path";
+            return false;
+        }
+        path += static_cast<char>(high * 16 + low);
+        k += 2;
+    }
+#ifdef _WIN32
+    // file:///C:/dir names the drive path C:/dir
+    if (path.size() >= 3 && path[0] == '/' && path[2] == ':') path.erase(0, 1);
+#endif
+    return true;
+}
+
+} // namespace
+
+
 const char* fmi2GetVersion()
 {
     return "2.0";
@@ -126,16 +207,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName,
                       "FMU's resources folder)");
     }
 
-    // Convert URI %20 to space
-    auto resources = std::regex_replace(std::string(fmuResourceLocation), std::regex("%20"), " ");
-    const auto find = resources.find("file://");
-
-    if (find != std::string::npos) {
-#ifdef _MSC_VER
-        resources.replace(find, 8, "");
-#else
-        resources.replace(find, 7, "");
-#endif
+    // LMNCell: the resources folder from its file URI as FMI 2.0 asks (pythonfmu decoded only
+    // %20 and took "file:/p" or "file://localhost/p" as relative paths)
+    std::string resources, why;
+    if (!resource_path(fmuResourceLocation, resources, why)) {
+        return refuse("fmi2Instantiate: fmuResourceLocation '" +
+            std::string(fmuResourceLocation).substr(0, 300) + "': " + why);
     }
 
     auto logger = std::make_unique<Fmi2Logger>(instanceName, functions);
