@@ -340,6 +340,12 @@ class LmnCellSlave(Fmi2Slave):
             self.log(f"t = {now:.9g} s: {cosim.range_message}", Fmi2Status.warning)
         return True
 
+    def _last_successful_time(self) -> float:
+        """The FMU's time (s): the end of the last completed communication step, the start time
+        before the first; LMNCell's wrapper answers fmi2GetRealStatus(fmi2LastSuccessfulTime)
+        with it."""
+        return self._time
+
     # ----- FMU state: parameters, inputs and the whole engine state ------------------------
     def _get_fmu_state(self) -> dict:
         return {"inputs": [self.current, self.voltage_measured, self.temperature],

@@ -370,6 +370,100 @@ def logged_resource_refusals(fmu: str) -> dict:
     return out
 
 
+def _untyped(slave: FMU2Slave, fn: str):
+    """The FMU's C function fn returning an int, its arguments passed as given (a function
+    object of its own: fmpy's, which share the library's, keep their argument types)."""
+    raw = getattr(ctypes.CDLL(slave.dll._name), fn)
+    raw.argtypes, raw.restype = None, ctypes.c_int
+    return raw
+
+
+def null_pointers(fmu: str) -> dict:
+    """Row 7: every FMI function that takes an array or a pointer, given NULL for it (with
+    nvr = 1) on an initialised instance: its status and what it logged, per call; then whether
+    the instance still steps (the status of one step and its finite voltage)."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    calls = {
+        "fmi2GetReal": (None, 1, None), "fmi2GetInteger": (None, 1, None),
+        "fmi2GetBoolean": (None, 1, None), "fmi2GetString": (None, 1, None),
+        "fmi2SetReal": (None, 1, None), "fmi2SetInteger": (None, 1, None),
+        "fmi2SetBoolean": (None, 1, None), "fmi2SetString": (None, 1, None),
+        "fmi2GetFMUstate": (None,), "fmi2SetFMUstate": (None,), "fmi2FreeFMUstate": (None,),
+        "fmi2SerializedFMUstateSize": (None, None), "fmi2SerializeFMUstate": (None, None, 8),
+        "fmi2DeSerializeFMUstate": (None, 8, None),
+        "fmi2GetRealStatus": (2, None), "fmi2GetBooleanStatus": (3, None)}
+    out: dict = {}
+    with fmu_log("null") as (name, callbacks, log):
+        slave, vr = _raw(fmu, True, name, callbacks)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        # one real value and value reference, for the calls that need the other array given
+        vr_one, value_one = (ctypes.c_uint * 1)(vr["current"]), (ctypes.c_double * 1)(0.0)
+        calls["fmi2GetReal (value NULL)"] = ("fmi2GetReal", vr_one, 1, None)
+        calls["fmi2SetReal (vr NULL)"] = ("fmi2SetReal", None, 1, value_one)
+        for key, args in calls.items():
+            fn, args = (args[0], args[1:]) if isinstance(args[0], str) else (key, args)
+            raw = _untyped(slave, fn)
+            before = len(log)
+            status = raw(ctypes.c_void_p(slave.component), *args)
+            out[key] = {"status": status,
+                        "log": [entry.replace(name, "NAME") for entry in log[before:]]}
+        slave.setReal([vr["current"]], [-1.0])
+        out["step_after"] = _status(lambda: slave.doStep(0.0, 1.0))
+        out["finite_after"] = math.isfinite(slave.getReal([vr["voltage"]])[0])
+        slave.terminate()
+        slave.freeInstance()
+    return out
+
+
+def status_inquiries(fmu: str) -> dict:
+    """Row 7: fmi2GetXXXStatus of every kind (its status, value and message), and
+    fmi2LastSuccessfulTime through a run: instantiated, set up at 5 s, after two 1-s steps, after
+    a refused step, after fmi2SetFMUstate to the state saved at 6 s; fmi2Terminated after it."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    def inquire(slave, fn: str, kind: int, ctype) -> tuple[int, float | None]:
+        raw = _untyped(slave, fn)
+        value = ctype(-7)
+        status = raw(ctypes.c_void_p(slave.component), kind, ctypes.byref(value))
+        return status, (float(value.value) if status <= 1 else None)
+
+    out: dict = {"last_time": [], "kinds": {}}
+    with fmu_log("status") as (name, callbacks, log):
+        slave, vr = _raw(fmu, True, name, callbacks)
+        last = lambda: inquire(slave, "fmi2GetRealStatus", 2, ctypes.c_double)  # noqa: E731
+        out["last_time"].append(last())
+        slave.setupExperiment(startTime=5.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        out["last_time"].append(last())
+        slave.setReal([vr["current"]], [-1.0])
+        slave.doStep(5.0, 1.0)
+        state = slave.getFMUstate()
+        slave.doStep(6.0, 1.0)
+        out["last_time"].append(last())
+        out["refused_step"] = _status(lambda: slave.doStep(6.0, 1.0))     # not the FMU's time
+        out["last_time"].append(last())
+        slave.setFMUstate(state)
+        out["last_time"].append(last())
+        slave.freeFMUstate(state)
+        for fn, ctype in (("fmi2GetStatus", ctypes.c_int), ("fmi2GetRealStatus", ctypes.c_double),
+                          ("fmi2GetIntegerStatus", ctypes.c_int),
+                          ("fmi2GetBooleanStatus", ctypes.c_int),
+                          ("fmi2GetStringStatus", ctypes.c_void_p)):
+            for kind in range(4):
+                before = len(log)
+                status, value = inquire(slave, fn, kind, ctype)
+                out["kinds"][f"{fn} {kind}"] = {
+                    "status": status, "value": value if ctype is not ctypes.c_void_p else None,
+                    "log": [entry.replace(name, "NAME") for entry in log[before:]]}
+        slave.terminate()
+        slave.freeInstance()
+    return out
+
+
 def _vr(fmu: str) -> dict[str, int]:
     return {v.name: v.valueReference for v in read_model_description(fmu).modelVariables}
 
@@ -568,6 +662,7 @@ SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_rang
                                      logged_messages, debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,
+                                      null_pointers, status_inquiries,
                                       instantiate_many, random_calls, random_calls_long)}
 
 if __name__ == "__main__":

@@ -311,6 +311,48 @@ def test_every_file_uri_form_of_the_resources_folder_is_taken(fmu) -> None:
     assert {res[k] for k in ("other_host", "http", "relative", "bad_escape")} == {wrong}, res
 
 
+def test_null_arrays_and_pointers_are_refused_and_logged(fmu) -> None:
+    """A NULL array (nvr > 0) or a NULL pointer where the FMU would read or write is the host's
+    mistake: fmi2Error and one message that names the call and the argument, nothing read or
+    set, and the instance steps on. Each get and set crashed the host before (SIGSEGV), and
+    the pythonfmu FMU's state calls and status inquiries too."""
+    res = _run(fmu, "null_pointers")
+    calls = {key: got for key, got in res.items() if key.startswith("fmi2")}
+    assert len(calls) == 18
+    for key, got in calls.items():
+        assert got["status"] == ERROR, (key, got)
+        assert len(got["log"]) == 1 and got["log"][0].startswith(key.split()[0] + ": "), key
+        assert "NULL" in got["log"][0], key
+    assert calls["fmi2SetReal (vr NULL)"]["log"][0].startswith(
+        "fmi2SetReal: nvr = 1 but vr is NULL; nothing was set")
+    assert calls["fmi2GetReal (value NULL)"]["log"][0].startswith(
+        "fmi2GetReal: nvr = 1 but value is NULL; nothing was read")
+    assert res["step_after"] == 0 and res["finite_after"]
+
+
+def test_status_inquiries_answer_as_fmi_asks(fmu) -> None:
+    """fmi2LastSuccessfulTime is the end of the last completed step (the start time before the
+    first; restored with the FMU state), fmi2Terminated false; every other kind is fmi2Discard
+    with a message, as FMI 2.0 asks for a status the FMU cannot give (the pythonfmu FMU gave
+    fmi2Error for fmi2GetStatus and NaN as the last successful time before a step)."""
+    res = _run(fmu, "status_inquiries")
+    assert res["last_time"] == [[0, 0.0], [0, 5.0], [0, 7.0], [0, 7.0], [0, 6.0]]
+    assert res["refused_step"] == ERROR
+    answered = {"fmi2GetRealStatus 2": 6.0, "fmi2GetBooleanStatus 3": 0.0}
+    for key, got in res["kinds"].items():
+        if key in answered:
+            assert got == {"status": 0, "value": answered[key], "log": []}, key
+        else:
+            assert got["status"] == DISCARD and len(got["log"]) == 1, key
+            assert got["log"][0].startswith(key.split()[0] + ": no fmi2"), key
+
+
+def test_both_fmus_answer_null_pointers_and_status_inquiries_alike(quick_fmu,
+                                                                  native_fmu) -> None:
+    for sequence in ("null_pointers", "status_inquiries"):
+        assert _run(quick_fmu, sequence) == _run(native_fmu, sequence), sequence
+
+
 def test_a_refused_resource_location_is_named_in_the_log(quick_fmu, tmp_path) -> None:
     """The refusal says which location and why, through the host's logger."""
     res = _run(quick_fmu, "logged_resource_refusals")

@@ -131,7 +131,8 @@ static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt,
     char buf[512];
     va_list ap;
     if (!in || !in->cb || !in->cb->logger) return;
-    if (st == fmi2Warning && !in->logging) return;   /* warnings only with logging on */
+    /* warnings and discards only with logging on */
+    if ((st == fmi2Warning || st == fmi2Discard) && !in->logging) return;
     va_start(ap, fmt);
     vsnprintf(buf, sizeof buf, fmt, ap);
     va_end(ap);
@@ -1410,11 +1411,28 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
     }
 }
 
+/* 1 where the arrays of a get or set call are given (or n is 0), else log and 0: a NULL
+   array with n > 0 is the host's mistake, refused with nothing read or set */
+static int arrays_given(Instance *in, const char *call, size_t n, const void *vr,
+                        const void *values, const char *done) {
+    if (n == 0 || (vr && values)) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s: nvr = %zu but %s is NULL; nothing was %s", call,
+          n, vr ? "value" : "vr", done);
+    return 0;
+}
+
+/* 1 where pointer p is given, else log that the argument `what` of `call` is NULL and 0 */
+static int given(Instance *in, const char *call, const void *p, const char *what) {
+    if (p) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s: %s is NULL", call, what);
+    return 0;
+}
+
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     Instance *in = (Instance *)c;
     size_t k;
     int ok;
-    if (!in) return fmi2Error;
+    if (!in || !arrays_given(in, "fmi2GetReal", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
         v[k] = output_real(&in->s, vr[k], &ok);
         if (!ok) {
@@ -1429,7 +1447,7 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
     Instance *in = (Instance *)c;
     size_t k;
-    if (!in) return fmi2Error;
+    if (!in || !arrays_given(in, "fmi2GetInteger", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] != VR_OBSERVER) {
             logf_(in, fmi2Error, "logStatusError", "fmi2GetInteger: no Integer variable with "
@@ -1444,7 +1462,7 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
     Instance *in = (Instance *)c;
     size_t k;
-    if (!in) return fmi2Error;
+    if (!in || !arrays_given(in, "fmi2GetBoolean", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] == VR_OUT_OF_RANGE) {
             v[k] = in->s.out_of_range ? fmi2True : fmi2False;
@@ -1460,8 +1478,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {
-    (void)vr; (void)v;
-    if (!c) return fmi2Error;
+    if (!c || !arrays_given((Instance *)c, "fmi2GetString", n, vr, v, "read")) return fmi2Error;
     if (n) {
         logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2GetString: the FMU has no String "
               "variables");
@@ -1475,7 +1492,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     State *s;
     size_t k;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
-                        "fmi2SetReal"))
+                        "fmi2SetReal") || !arrays_given(in, "fmi2SetReal", n, vr, v, "set"))
         return fmi2Error;
     s = &in->s;
     for (k = 0; k < n; k++) {
@@ -1506,7 +1523,7 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     Instance *in = (Instance *)c;
     size_t k;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
-                        "fmi2SetInteger"))
+                        "fmi2SetInteger") || !arrays_given(in, "fmi2SetInteger", n, vr, v, "set"))
         return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] != VR_OBSERVER || in->s.initialized) {
@@ -1524,7 +1541,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     Instance *in = (Instance *)c;
     size_t k;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
-                        "fmi2SetBoolean"))
+                        "fmi2SetBoolean") || !arrays_given(in, "fmi2SetBoolean", n, vr, v, "set"))
         return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] != VR_TEMPERATURE_IS_CELL || in->s.initialized) {
@@ -1539,17 +1556,35 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                          const fmi2String v[]) {
-    (void)vr; (void)v;
-    if (!c) return fmi2Error;
-    return n ? fmi2Error : fmi2OK;
+    if (!c || !arrays_given((Instance *)c, "fmi2SetString", n, vr, v, "set")) return fmi2Error;
+    if (n) {
+        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2SetString: the FMU has no String "
+              "variables");
+        return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+/* 1 where st is a state of this model (fmi2GetFMUstate's or fmi2DeSerializeFMUstate's), else
+   log and 0 */
+static int own_state(Instance *in, const char *call, fmi2FMUstate st) {
+    if (!given(in, call, st, "the FMU state")) return 0;
+    if (((const State *)st)->magic == STATE_MAGIC) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s: the FMU state is not one of this model's (from "
+          "another FMU, or freed?)", call);
+    return 0;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
     State *copy;
-    if (!in || !st) return fmi2Error;
+    if (!in || !given(in, "fmi2GetFMUstate", st, "the pointer to the FMU state")) return fmi2Error;
+    if (*st && !own_state(in, "fmi2GetFMUstate", *st)) return fmi2Error;
     copy = *st ? (State *)*st : (State *)malloc(sizeof(State));
-    if (!copy) return fmi2Error;
+    if (!copy) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2GetFMUstate: out of memory");
+        return fmi2Error;
+    }
     *copy = in->s;
     *st = copy;
     return fmi2OK;
@@ -1557,28 +1592,40 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate st) {
     Instance *in = (Instance *)c;
-    if (!in || !st || ((State *)st)->magic != STATE_MAGIC) return fmi2Error;
+    if (!in || !own_state(in, "fmi2SetFMUstate", st)) return fmi2Error;
     in->s = *(State *)st;
     in->mode = in->s.initialized ? MODE_STEP : MODE_INSTANTIATED;
     return fmi2OK;
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *st) {
-    if (!c || !st) return fmi2Error;
+    Instance *in = (Instance *)c;
+    if (!in || !given(in, "fmi2FreeFMUstate", st, "the pointer to the FMU state"))
+        return fmi2Error;
+    if (*st && !own_state(in, "fmi2FreeFMUstate", *st)) return fmi2Error;
+    if (*st) ((State *)*st)->magic = 0;   /* a freed state is never taken for one again */
     free(*st);
     *st = NULL;
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate st, size_t *size) {
-    (void)st;
-    if (!c || !size) return fmi2Error;
+    Instance *in = (Instance *)c;
+    if (!in || !own_state(in, "fmi2SerializedFMUstateSize", st)
+        || !given(in, "fmi2SerializedFMUstateSize", size, "size")) return fmi2Error;
     *size = sizeof(State);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[], size_t size) {
-    if (!c || !st || size != sizeof(State)) return fmi2Error;
+    Instance *in = (Instance *)c;
+    if (!in || !own_state(in, "fmi2SerializeFMUstate", st)
+        || !given(in, "fmi2SerializeFMUstate", b, "serializedState")) return fmi2Error;
+    if (size != sizeof(State)) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2SerializeFMUstate: size %lu, expected %lu "
+              "(fmi2SerializedFMUstateSize)", (unsigned long)size, (unsigned long)sizeof(State));
+        return fmi2Error;
+    }
     memcpy(b, st, sizeof(State));
     return fmi2OK;
 }
@@ -1587,37 +1634,57 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
                                    fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
     State tmp;
-    if (!in || !st || size != sizeof(State)) {
-        if (in) logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: %lu bytes, "
-                      "expected %lu (another model or version?)", (unsigned long)size,
-                      (unsigned long)sizeof(State));
+    if (!in || !given(in, "fmi2DeSerializeFMUstate", b, "serializedState")
+        || !given(in, "fmi2DeSerializeFMUstate", st, "the pointer to the FMU state"))
+        return fmi2Error;
+    if (size != sizeof(State)) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: %lu bytes, "
+              "expected %lu (another model or version?)", (unsigned long)size,
+              (unsigned long)sizeof(State));
         return fmi2Error;
     }
     memcpy(&tmp, b, sizeof(State));
-    if (tmp.magic != STATE_MAGIC) return fmi2Error;
+    if (tmp.magic != STATE_MAGIC) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: the bytes are not a "
+              "state of this model (another model or version?)");
+        return fmi2Error;
+    }
+    if (*st && !own_state(in, "fmi2DeSerializeFMUstate", *st)) return fmi2Error;
     if (!*st) *st = malloc(sizeof(State));
-    if (!*st) return fmi2Error;
+    if (!*st) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: out of memory");
+        return fmi2Error;
+    }
     memcpy(*st, &tmp, sizeof(State));
     return fmi2OK;
+}
+
+/* A function this FMU does not offer: fmi2Error, logged */
+static fmi2Status not_supported(fmi2Component c, const char *message) {
+    if (c) logf_((Instance *)c, fmi2Error, "logStatusError", "%s", message);
+    return fmi2Error;
 }
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference u[], size_t nu,
                                         const fmi2ValueReference z[], size_t nz,
                                         const fmi2Real dv[], fmi2Real dz[]) {
-    (void)c; (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)dz;
-    return fmi2Error;
+    (void)u; (void)nu; (void)z; (void)nz; (void)dv; (void)dz;
+    return not_supported(c, "fmi2GetDirectionalDerivative: not supported "
+                                "(providesDirectionalDerivative is false)");
 }
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                        const fmi2Integer order[], const fmi2Real v[]) {
-    (void)c; (void)vr; (void)n; (void)order; (void)v;
-    return fmi2Error;
+    (void)vr; (void)n; (void)order; (void)v;
+    return not_supported(c, "fmi2SetRealInputDerivatives: not supported "
+                                "(canInterpolateInputs is false)");
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t n,
                                         const fmi2Integer order[], fmi2Real v[]) {
-    (void)c; (void)vr; (void)n; (void)order; (void)v;
-    return fmi2Error;
+    (void)vr; (void)n; (void)order; (void)v;
+    return not_supported(c, "fmi2GetRealOutputDerivatives: not supported "
+                                "(maxOutputDerivativeOrder is 0)");
 }
 
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
@@ -1659,29 +1726,63 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
 #endif
 }
 
-fmi2Status fmi2CancelStep(fmi2Component c) { (void)c; return fmi2Error; }
+fmi2Status fmi2CancelStep(fmi2Component c) {
+    return not_supported(c, "fmi2CancelStep: not supported "
+                                "(its steps never return fmi2Pending)");
+}
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
-    (void)c; (void)k; (void)v;
+/* The status kinds FMI 2.0 defines, by value (fmi2StatusKind) */
+static const char *status_kind(fmi2StatusKind k) {
+    static const char *names[] = {"fmi2DoStepStatus", "fmi2PendingStatus",
+                                  "fmi2LastSuccessfulTime", "fmi2Terminated"};
+    return (unsigned)k < sizeof names / sizeof names[0] ? names[k] : "(unknown kind)";
+}
+
+/* A status this FMU cannot give: fmi2Discard, as FMI 2.0 asks, with a message saying why (its
+   steps are synchronous and never discarded: only fmi2LastSuccessfulTime and fmi2Terminated
+   are answered, by fmi2GetRealStatus and fmi2GetBooleanStatus) */
+static fmi2Status no_status(Instance *in, const char *call, fmi2StatusKind k) {
+    logf_(in, fmi2Discard, "logStatusDiscard", "%s: no %s status (this FMU answers "
+          "fmi2LastSuccessfulTime by fmi2GetRealStatus and fmi2Terminated by "
+          "fmi2GetBooleanStatus; its steps never return fmi2Pending)", call, status_kind(k));
     return fmi2Discard;
 }
 
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind k, fmi2Status *v) {
+    (void)v;
+    if (!c) return fmi2Error;
+    return no_status((Instance *)c, "fmi2GetStatus", k);
+}
+
+/* fmi2LastSuccessfulTime: the end of the last completed communication step (the start time
+   before the first) */
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind k, fmi2Real *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Discard;
+    Instance *in = (Instance *)c;
+    if (!in) return fmi2Error;
+    if (k != fmi2LastSuccessfulTime) return no_status(in, "fmi2GetRealStatus", k);
+    if (!given(in, "fmi2GetRealStatus", v, "value")) return fmi2Error;
+    *v = in->s.time;
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind k, fmi2Integer *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Discard;
+    (void)v;
+    if (!c) return fmi2Error;
+    return no_status((Instance *)c, "fmi2GetIntegerStatus", k);
 }
 
+/* fmi2Terminated: fmi2False, the FMU never asks to end the simulation */
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind k, fmi2Boolean *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Discard;
+    Instance *in = (Instance *)c;
+    if (!in) return fmi2Error;
+    if (k != fmi2Terminated) return no_status(in, "fmi2GetBooleanStatus", k);
+    if (!given(in, "fmi2GetBooleanStatus", v, "value")) return fmi2Error;
+    *v = fmi2False;
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind k, fmi2String *v) {
-    (void)c; (void)k; (void)v;
-    return fmi2Discard;
+    (void)v;
+    if (!c) return fmi2Error;
+    return no_status((Instance *)c, "fmi2GetStringStatus", k);
 }

@@ -530,6 +530,22 @@ public:
         });
     }
 
+    // LMNCell: the slave's time (_last_successful_time), for fmi2GetRealStatus
+    double LastSuccessfulTime() const override
+    {
+        double time = 0.0;
+        py_safe_run([this, &time](PyGILState_STATE gilState) {
+            auto f = PyObject_CallMethod(pInstance_, "_last_successful_time", nullptr);
+            if (f == nullptr) {
+                handle_py_exception("[lastSuccessfulTime] PyObject_CallMethod", gilState);
+            }
+            time = PyFloat_AsDouble(f);
+            Py_DECREF(f);
+            clearLogBuffer();
+        });
+        return time;
+    }
+
     void GetFMUstate(fmi2FMUstate& state) override
     {
         py_safe_run([this, &state](PyGILState_STATE gilState) {

@@ -77,6 +77,9 @@ public:
 
     virtual bool Step(double currentTime, double dt) = 0;
 
+    // LMNCell: the slave's time, where its next step starts (fmi2GetRealStatus)
+    virtual double LastSuccessfulTime() const = 0;
+
     virtual void GetFMUstate(fmi2FMUstate& state) = 0;
     virtual void SetFMUstate(const fmi2FMUstate& state) = 0;
     virtual void FreeFMUstate(fmi2FMUstate& state) = 0;

@@ -57,12 +57,10 @@ struct Fmi2Component
 {
 
     Fmi2Component(std::unique_ptr<pythonfmu::SlaveInstance> slave, std::unique_ptr<Fmi2Logger> logger)
-        : lastSuccessfulTime{std::numeric_limits<double>::quiet_NaN()}
-        , slave(std::move(slave))
+        : slave(std::move(slave))
         , logger(std::move(logger))
     { }
 
-    double lastSuccessfulTime{0};
     bool wantsToTerminate{false};
 
     std::unique_ptr<pythonfmu::SlaveInstance> slave;
@@ -161,6 +159,48 @@ bool resource_path(const std::string& uri, std::string& path, std::string& why)
     if (path.size() >= 3 && path[0] == '/' && path[2] == ':') path.erase(0, 1);
 #endif
     return true;
+}
+
+// LMNCell: a NULL array with nvr > 0 is the host's mistake: refused (fmi2Error, logged) with
+// nothing read or set; the same message as the native FMU's
+bool arrays_given(Fmi2Component* component, const char* call, std::size_t n, const void* vr,
+    const void* values, const char* done)
+{
+    if (n == 0 || (vr != nullptr && values != nullptr)) return true;
+    component->logger->log(fmi2Error, std::string(call) + ": nvr = " + std::to_string(n) +
+        " but " + (vr != nullptr ? "value" : "vr") + " is NULL; nothing was " + done);
+    return false;
+}
+
+// LMNCell: true where pointer p is given, else logs that the argument `what` of `call` is NULL
+bool given(Fmi2Component* component, const char* call, const void* p, const char* what)
+{
+    if (p != nullptr) return true;
+    component->logger->log(fmi2Error, std::string(call) + ": " + what + " is NULL");
+    return false;
+}
+
+// LMNCell: a status this FMU cannot give: fmi2Discard, as FMI 2.0 asks, with the native FMU's
+// message (its steps never return fmi2Pending; an ordinary error returns fmi2Error)
+fmi2Status no_status(Fmi2Component* component, const char* call, fmi2StatusKind kind)
+{
+    static const char* const names[] = {"fmi2DoStepStatus", "fmi2PendingStatus",
+        "fmi2LastSuccessfulTime", "fmi2Terminated"};
+    const auto k = static_cast<unsigned>(kind);
+    component->logger->log(fmi2Discard, std::string(call) + ": no " +
+        (k < 4 ? names[k] : "(unknown kind)") + " status (this FMU answers "
+        "fmi2LastSuccessfulTime by fmi2GetRealStatus and fmi2Terminated by "
+        "fmi2GetBooleanStatus; its steps never return fmi2Pending)");
+    return fmi2Discard;
+}
+
+// LMNCell: a function this FMU does not offer: fmi2Error with the native FMU's message under
+// a declared category (pythonfmu logged under "cppfmu", which no model description declares)
+fmi2Status not_supported(fmi2Component c, const char* message)
+{
+    const auto component = static_cast<Fmi2Component*>(c);
+    if (component != nullptr) component->logger->log(fmi2Error, message);
+    return fmi2Error;
 }
 
 } // namespace
@@ -403,6 +443,7 @@ fmi2Status fmi2GetReal(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2GetReal", nvr, vr, value, "read")) return fmi2Error;
     try {
         component->slave->GetReal(vr, nvr, value);
         return fmi2OK;
@@ -423,6 +464,7 @@ fmi2Status fmi2GetInteger(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2GetInteger", nvr, vr, value, "read")) return fmi2Error;
     try {
         component->slave->GetInteger(vr, nvr, value);
         return fmi2OK;
@@ -443,6 +485,7 @@ fmi2Status fmi2GetBoolean(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2GetBoolean", nvr, vr, value, "read")) return fmi2Error;
     try {
         component->slave->GetBoolean(vr, nvr, value);
         return fmi2OK;
@@ -463,6 +506,7 @@ fmi2Status fmi2GetString(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2GetString", nvr, vr, value, "read")) return fmi2Error;
     try {
         component->slave->GetString(vr, nvr, value);
         return fmi2OK;
@@ -484,6 +528,7 @@ fmi2Status fmi2SetReal(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2SetReal", nvr, vr, value, "set")) return fmi2Error;
     try {
         component->slave->SetReal(vr, nvr, value);
         return fmi2OK;
@@ -504,6 +549,7 @@ fmi2Status fmi2SetInteger(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2SetInteger", nvr, vr, value, "set")) return fmi2Error;
     try {
         component->slave->SetInteger(vr, nvr, value);
         return fmi2OK;
@@ -524,6 +570,7 @@ fmi2Status fmi2SetBoolean(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2SetBoolean", nvr, vr, value, "set")) return fmi2Error;
     try {
         component->slave->SetBoolean(vr, nvr, value);
         return fmi2OK;
@@ -544,6 +591,14 @@ fmi2Status fmi2SetString(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!arrays_given(component, "fmi2SetString", nvr, vr, value, "set")) return fmi2Error;
+    for (std::size_t k = 0; k < nvr; ++k) {   // LMNCell: a NULL string is not read
+        if (value[k] == nullptr) {
+            component->logger->log(fmi2Error, "fmi2SetString: value[" + std::to_string(k) +
+                "] is NULL; nothing was set");
+            return fmi2Error;
+        }
+    }
     try {
         component->slave->SetString(vr, nvr, value);
         return fmi2OK;
@@ -563,6 +618,9 @@ fmi2Status fmi2GetFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!given(component, "fmi2GetFMUstate", state, "the pointer to the FMU state")) {
+        return fmi2Error;   // LMNCell: not written through NULL
+    }
     try {
         component->slave->GetFMUstate(*state);
         return fmi2OK;
@@ -581,6 +639,7 @@ fmi2Status fmi2SetFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!given(component, "fmi2SetFMUstate", state, "the FMU state")) return fmi2Error;
     try {
         component->slave->SetFMUstate(state);
         return fmi2OK;
@@ -599,6 +658,10 @@ fmi2Status fmi2FreeFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!given(component, "fmi2FreeFMUstate", state, "the pointer to the FMU state")) {
+        return fmi2Error;   // LMNCell: not read through NULL
+    }
+    if (*state == nullptr) return fmi2OK;   // nothing to free
     try {
         component->slave->FreeFMUstate(*state);
         return fmi2OK;
@@ -618,6 +681,8 @@ fmi2Status fmi2SerializedFMUstateSize(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!given(component, "fmi2SerializedFMUstateSize", state, "the FMU state") ||
+        !given(component, "fmi2SerializedFMUstateSize", size, "size")) return fmi2Error;
     try {
         *size = component->slave->SerializedFMUstateSize(state);
         return fmi2OK;
@@ -638,6 +703,8 @@ fmi2Status fmi2SerializeFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!given(component, "fmi2SerializeFMUstate", state, "the FMU state") ||
+        !given(component, "fmi2SerializeFMUstate", bytes, "serializedState")) return fmi2Error;
     try {
         component->slave->SerializeFMUstate(state, bytes, size);
         return fmi2OK;
@@ -658,6 +725,10 @@ fmi2Status fmi2DeSerializeFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
+    if (!given(component, "fmi2DeSerializeFMUstate", bytes, "serializedState") ||
+        !given(component, "fmi2DeSerializeFMUstate", state, "the pointer to the FMU state")) {
+        return fmi2Error;
+    }
     try {
         component->slave->DeSerializeFMUstate(bytes, size, *state);
         return fmi2OK;
@@ -680,11 +751,8 @@ fmi2Status fmi2GetDirectionalDerivative(
     const fmi2Real[],
     fmi2Real[])
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Error,
-        "cppfmu",
-        "FMI function not supported: fmi2GetDirectionalDerivative");
-    return fmi2Error;
+    return not_supported(c, "fmi2GetDirectionalDerivative: not supported "
+                                "(providesDirectionalDerivative is false)");
 }
 
 fmi2Status fmi2SetRealInputDerivatives(
@@ -694,11 +762,8 @@ fmi2Status fmi2SetRealInputDerivatives(
     const fmi2Integer[],
     const fmi2Real[])
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Error,
-        "cppfmu",
-        "FMI function not supported: fmi2SetRealInputDerivatives");
-    return fmi2Error;
+    return not_supported(c, "fmi2SetRealInputDerivatives: not supported "
+                                "(canInterpolateInputs is false)");
 }
 
 fmi2Status fmi2GetRealOutputDerivatives(
@@ -708,11 +773,8 @@ fmi2Status fmi2GetRealOutputDerivatives(
     const fmi2Integer[],
     fmi2Real[])
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Error,
-        "cppfmu",
-        "FMI function not supported: fmiGetRealOutputDerivatives");
-    return fmi2Error;
+    return not_supported(c, "fmi2GetRealOutputDerivatives: not supported "
+                                "(maxOutputDerivativeOrder is 0)");
 }
 
 fmi2Status fmi2DoStep(
@@ -724,17 +786,13 @@ fmi2Status fmi2DoStep(
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
     try {
-        double endTime = currentCommunicationPoint;
         const auto ok = component->slave->DoStep(
             currentCommunicationPoint,
             communicationStepSize);
         if (ok) {
-            component->lastSuccessfulTime =
-                currentCommunicationPoint + communicationStepSize;
             return fmi2OK;
         }
 
-        component->lastSuccessfulTime = endTime;
         component->wantsToTerminate = true;
         return fmi2Discard;
     } catch (const pythonfmu::fatal_error& e) {
@@ -748,77 +806,78 @@ fmi2Status fmi2DoStep(
 
 fmi2Status fmi2CancelStep(fmi2Component c)
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Error,
-        "FMI function not supported: fmi2CancelStep");
-    return fmi2Error;
+    return not_supported(c, "fmi2CancelStep: not supported "
+                                "(its steps never return fmi2Pending)");
 }
 
 
-/* Inquire slave status */
+/* Inquire slave status (LMNCell: as the native FMU; pythonfmu returned fmi2Error for
+   fmi2GetStatus, NaN as the last successful time before a step, and wrote through NULL) */
 fmi2Status fmi2GetStatus(
     fmi2Component c,
-    const fmi2StatusKind,
+    const fmi2StatusKind s,
     fmi2Status*)
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Error,
-        "FMI function not supported: fmi2GetStatus");
-    return fmi2Error;
+    const auto component = static_cast<Fmi2Component*>(c);
+    if (component == nullptr) return fmi2Error;
+    return no_status(component, "fmi2GetStatus", s);
 }
 
+// fmi2LastSuccessfulTime: the end of the last completed communication step (the start time
+// before the first), the slave's own time
 fmi2Status fmi2GetRealStatus(
     fmi2Component c,
     const fmi2StatusKind s,
     fmi2Real* value)
 {
     const auto component = static_cast<Fmi2Component*>(c);
-    if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
-    if (s == fmi2LastSuccessfulTime) {
-        *value = component->lastSuccessfulTime;
+    if (component == nullptr) return fmi2Error;
+    if (s != fmi2LastSuccessfulTime) return no_status(component, "fmi2GetRealStatus", s);
+    if (!given(component, "fmi2GetRealStatus", value, "value")) return fmi2Error;
+    try {
+        *value = component->slave->LastSuccessfulTime();
         return fmi2OK;
-    } else {
-        component->logger->log(
-            fmi2Discard,
-            "Invalid status inquiry for fmi2GetRealStatus");
-        return fmi2Discard;
+    } catch (const pythonfmu::fatal_error& e) {
+        component->logger->log(fmi2Fatal, e.what());
+        return fmi2Fatal;
+    } catch (const std::exception& e) {
+        component->logger->log(fmi2Error, e.what());
+        return fmi2Error;
     }
 }
 
 fmi2Status fmi2GetIntegerStatus(
     fmi2Component c,
-    const fmi2StatusKind,
+    const fmi2StatusKind s,
     fmi2Integer*)
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Discard,
-        "FMI function not supported: fmi2GetIntegerStatus");
-    return fmi2Discard;
+    const auto component = static_cast<Fmi2Component*>(c);
+    if (component == nullptr) return fmi2Error;
+    return no_status(component, "fmi2GetIntegerStatus", s);
 }
 
+// fmi2Terminated: whether a discarded step asked to end the simulation (never, with LMNCell's
+// slave, which refuses a bad step with fmi2Error)
 fmi2Status fmi2GetBooleanStatus(
     fmi2Component c,
     const fmi2StatusKind s,
     fmi2Boolean* value)
 {
     const auto component = static_cast<Fmi2Component*>(c);
-    if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
-    if (s == fmi2Terminated) {
-        *value = component->wantsToTerminate ? fmi2True : fmi2False;
-        return fmi2OK;
-    }
-    component->logger->log(
-        fmi2Discard, "FMI function not supported: fmi2GetBooleanStatus");
-    return fmi2Discard;
+    if (component == nullptr) return fmi2Error;
+    if (s != fmi2Terminated) return no_status(component, "fmi2GetBooleanStatus", s);
+    if (!given(component, "fmi2GetBooleanStatus", value, "value")) return fmi2Error;
+    *value = component->wantsToTerminate ? fmi2True : fmi2False;
+    return fmi2OK;
 }
 
 fmi2Status fmi2GetStringStatus(
     fmi2Component c,
-    const fmi2StatusKind,
+    const fmi2StatusKind s,
     fmi2String*)
 {
-    static_cast<Fmi2Component*>(c)->logger->log(
-        fmi2Discard, "FMI function not supported: fmi2GetStringStatus");
-    return fmi2Discard;
+    const auto component = static_cast<Fmi2Component*>(c);
+    if (component == nullptr) return fmi2Error;
+    return no_status(component, "fmi2GetStringStatus", s);
 }
 }
