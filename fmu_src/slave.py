@@ -226,6 +226,8 @@ class LmnCellSlave(Fmi2Slave):
         return out
 
     def _set(self, vrs: list[int], values: list, kind: type, call: str) -> None:
+        if not self._allowed(call, "instantiated", "initialization mode", "step mode"):
+            return
         problems = [(vr, value, self._problem(vr, kind, setting=True))
                     for vr, value in zip(vrs, values, strict=False)]
         bad = [f"{problem}; {value!r} was not set" for _, value, problem in problems if problem]
@@ -260,7 +262,7 @@ class LmnCellSlave(Fmi2Slave):
             names = [self._input_names[vr] for vr in vrs]
         except (KeyError, TypeError):
             names = None
-        if names is not None and len(names) == len(values):
+        if names is not None and len(names) == len(values) and not self._terminated:
             for name, value in zip(names, values, strict=True):
                 setattr(self, name, value)
             return
@@ -283,17 +285,32 @@ class LmnCellSlave(Fmi2Slave):
             raise CallError(msg)
         self.log(msg, Fmi2Status.error)
 
+    def _mode(self) -> str:
+        """The FMI 2.0 co-simulation state, named as the native FMU names it."""
+        if self._terminated:
+            return "terminated"
+        if self._in_initialization:
+            return "initialization mode"
+        return "step mode" if self._cosim is not None else "instantiated"
+
+    def _allowed(self, call: str, *modes: str) -> bool:
+        """True where the FMU is in one of the modes, else an error (see _error) naming the
+        call and the mode, as the native FMU's in_mode."""
+        mode = self._mode()
+        if mode in modes:
+            return True
+        self._error(f"{call} is not allowed in {mode}")
+        return False
+
     def enter_initialization_mode(self) -> None:
-        self._in_initialization = True
+        if self._allowed("fmi2EnterInitializationMode", "instantiated"):
+            self._in_initialization = True
 
     def exit_initialization_mode(self) -> None:
         """Bad parameters are errors (see _error) and leave the FMU in Initialization Mode,
         uninitialised, so that every doStep is refused until the parameters are set right and
         this is called again (as in the native FMU)."""
-        if not self._in_initialization:
-            self._error("fmi2ExitInitializationMode is not allowed in " +
-                        ("terminated" if self._terminated else "step mode" if self._cosim
-                         else "instantiated"))
+        if not self._allowed("fmi2ExitInitializationMode", "initialization mode"):
             return
         if self.observer not in OBSERVERS:
             self._error(f"parameter 'observer' = {self.observer}: expected 0 none, 1 EKF, "
@@ -313,17 +330,22 @@ class LmnCellSlave(Fmi2Slave):
 
     def setup_experiment(self, start_time: float, stop_time: float | None,
                          tolerance: float | None) -> None:
+        """The start time (s), before initialisation only; a non-finite one is refused (it
+        would make every later step's communication point wrong)."""
+        if not self._allowed("fmi2SetupExperiment", "instantiated"):
+            return
+        if not math.isfinite(start_time):
+            self._error(f"fmi2SetupExperiment: startTime {start_time:g} is not finite")
+            return
         self._time = float(start_time)
 
     def terminate(self) -> None:
-        self._terminated = True
+        if self._allowed("fmi2Terminate", "initialization mode", "step mode"):
+            self._terminated = True
 
     def do_step(self, current_time: float, step_size: float) -> bool:
         cosim, now = self._cosim, self._time
-        if cosim is None or self._terminated:
-            mode = ("terminated" if self._terminated else "initialization mode"
-                    if self._in_initialization else "instantiated")
-            self._error(f"fmi2DoStep is not allowed in {mode}")
+        if not self._allowed("fmi2DoStep", "step mode") or cosim is None:
             return False
         if not abs(current_time - now) <= 1e-9 * max(1.0, abs(now)):  # NaN too
             self._error(f"fmi2DoStep: currentCommunicationPoint {current_time:.17g} s is not the "
@@ -357,6 +379,8 @@ class LmnCellSlave(Fmi2Slave):
         self.current, self.voltage_measured, self.temperature = state["inputs"]
         self._time = float(state["time"])
         self.soc0, self.capacity, self.observer, self.temperature_is_cell = state["params"]
+        # as the native FMU: step mode where the state is initialised, else instantiated
+        self._terminated = self._in_initialization = False
         if state["cosim"] is None:
             self._cosim = None
         else:

@@ -110,6 +110,63 @@ def state_machine(fmu: str) -> dict:
     return out
 
 
+MODES = ("instantiated", "initialization mode", "step mode", "terminated")
+
+
+def _in_mode(fmu: str, mode: str) -> tuple[FMU2Slave, dict[str, int]]:
+    """A fresh instance brought into one of the co-simulation MODES by the usual calls."""
+    slave, vr = _raw(fmu, False, f"m{MODES.index(mode)}")
+    if mode != "instantiated":
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+    if mode in ("step mode", "terminated"):
+        slave.exitInitializationMode()
+        slave.doStep(0.0, 1.0)
+    if mode == "terminated":
+        slave.terminate()
+    return slave, vr
+
+
+def mode_rules(fmu: str) -> dict:
+    """Row 4: each call of the co-simulation state machine in each mode, on a fresh instance
+    (its status by "call in mode"); setupExperiment with a non-finite start time; an FMU state
+    saved in step mode and restored after terminate (then a step at its time), and one saved
+    in initialization mode restored in step mode (then a step)."""
+    calls = {"setupExperiment": lambda s, vr: s.setupExperiment(startTime=2.0),
+             "enterInitializationMode": lambda s, vr: s.enterInitializationMode(),
+             "exitInitializationMode": lambda s, vr: s.exitInitializationMode(),
+             "terminate": lambda s, vr: s.terminate(),
+             "doStep": lambda s, vr: s.doStep(1.0, 1.0),
+             "setReal current": lambda s, vr: s.setReal([vr["current"]], [-1.0]),
+             "reset": lambda s, vr: s.reset()}
+    out: dict = {}
+    for mode in MODES:
+        for name, call in calls.items():
+            slave, vr = _in_mode(fmu, mode)
+            out[f"{name} in {mode}"] = _status(lambda c=call, s=slave, v=vr: c(s, v))
+            slave.freeInstance()
+    for start in (math.nan, math.inf):
+        slave, _ = _in_mode(fmu, "instantiated")
+        out[f"setupExperiment at {start}"] = _status(lambda s=slave, t=start: s.setupExperiment(
+            startTime=t))
+        slave.freeInstance()
+    slave, _ = _in_mode(fmu, "step mode")
+    state = slave.getFMUstate()
+    slave.terminate()
+    out["restore after terminate"] = _status(lambda: slave.setFMUstate(state))
+    out["step after restore"] = _status(lambda: slave.doStep(1.0, 1.0))
+    slave.freeFMUstate(state)
+    slave.freeInstance()
+    slave, _ = _in_mode(fmu, "initialization mode")
+    state = slave.getFMUstate()
+    slave.exitInitializationMode()
+    out["restore uninitialised"] = _status(lambda: slave.setFMUstate(state))
+    out["step after restore uninitialised"] = _status(lambda: slave.doStep(0.0, 1.0))
+    slave.freeFMUstate(state)
+    slave.freeInstance()
+    return out
+
+
 def impossible_inputs(fmu: str) -> dict:
     """Row 5: a finite but absurd current, a temperature below absolute zero (outside the
     accepted −60…100 °C) and a step of more model steps than one call may take are refused;
@@ -505,10 +562,11 @@ class RandomHost:
     """A host that makes the FMI 2.0 calls of one instance in an order and with arguments
     chosen by a seeded random generator: NaN, ±inf, ±1e308, negative or zero step sizes,
     communication points that are not the FMU's time, unknown references, NULL log
-    categories."""
+    categories, FMU states saved, restored, serialised and freed in any mode."""
 
     def __init__(self, slave: FMU2Slave, md: ModelDescription, rng: random.Random) -> None:
         self.slave, self.rng, self.clock = slave, rng, 0.0
+        self.states: list[tuple[object, float]] = []     # saved FMU states and their times
         self.vars = {t: [v for v in md.modelVariables if v.type == t]
                      for t in ("Real", "Integer", "Boolean", "String")}
         self.outputs = [v.valueReference for v in self.vars["Real"] if v.causality == "output"]
@@ -521,7 +579,10 @@ class RandomHost:
             "get_others": (self.get_others, 0.5), "step": (self.step, 6.0),
             "reset": (self.reset, 0.2), "terminate": (self.terminate, 0.2),
             "unknown_reference": (self.unknown_reference, 0.5),
-            "debug_logging": (self.debug_logging, 0.3)}
+            "debug_logging": (self.debug_logging, 0.3), "save_state": (self.save_state, 0.4),
+            "restore_state": (self.restore_state, 0.4),
+            "serialize_state": (self.serialize_state, 0.2), "free_state": (self.free_state, 0.2),
+            "last_time": (self.last_time, 0.3)}
 
     def call(self) -> str:
         """One random call: its name, arguments and status; AssertionError where an OK status
@@ -612,6 +673,54 @@ class RandomHost:
         ref = self.rng.choice((9999, 2**31, 2**32 - 1))
         return f" {ref}", _status(lambda: self.slave.getReal([ref]))
 
+    def save_state(self) -> tuple[str, int]:
+        got: list = []
+        status = _status(lambda: got.append(self.slave.getFMUstate()))
+        if status == OK:
+            self.states.append((got[0], self.clock))
+        return f" #{len(self.states)}", status
+
+    def restore_state(self) -> tuple[str, int]:
+        if not self.states:
+            return " (none saved)", -1
+        k = self.rng.randrange(len(self.states))
+        status = _status(lambda: self.slave.setFMUstate(self.states[k][0]))
+        if status == OK:
+            self.clock = self.states[k][1]
+        return f" #{k + 1}", status
+
+    def serialize_state(self) -> tuple[str, int]:
+        """A saved state serialised and read back as a new one."""
+        if not self.states:
+            return " (none saved)", -1
+        k = self.rng.randrange(len(self.states))
+        got: list = []
+        status = _status(lambda: got.append(self.slave.deSerializeFMUstate(
+            self.slave.serializeFMUstate(self.states[k][0]))))
+        if status == OK:
+            self.states.append((got[0], self.states[k][1]))
+        return f" #{k + 1}", status
+
+    def free_state(self) -> tuple[str, int]:
+        if not self.states:
+            return " (none saved)", -1
+        k = self.rng.randrange(len(self.states))
+        state, _ = self.states.pop(k)
+        return f" #{k + 1}", _status(lambda: self.slave.freeFMUstate(state))
+
+    def free_states(self) -> None:
+        """Every saved state freed (before the instance is)."""
+        while self.states:
+            self.slave.freeFMUstate(self.states.pop()[0])
+
+    def last_time(self) -> tuple[str, int]:
+        """fmi2GetRealStatus(fmi2LastSuccessfulTime): a finite time where it says OK."""
+        value = ctypes.c_double(math.nan)
+        status = _untyped(self.slave, "fmi2GetRealStatus")(
+            ctypes.c_void_p(self.slave.component), 2, ctypes.byref(value))
+        assert status != OK or math.isfinite(value.value), f"OK with last time {value.value}"
+        return "", status
+
     def debug_logging(self) -> tuple[str, int]:
         """fmi2SetDebugLogging on or off with a random category list: declared, undeclared or
         NULL entries, or a NULL array with nCategories > 0."""
@@ -648,6 +757,7 @@ def random_calls(fmu: str, seed: int = 1, sequences: int = 20) -> dict:
                 calls += 1
         except AssertionError as exc:
             findings.append({"sequence": k, "finding": str(exc), "calls": log})
+        host.free_states()
         slave.freeInstance()
     return {"sequences": sequences, "calls": calls, "findings": findings}
 
@@ -662,7 +772,7 @@ SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_rang
                                      logged_messages, debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,
-                                      null_pointers, status_inquiries,
+                                      null_pointers, status_inquiries, mode_rules,
                                       instantiate_many, random_calls, random_calls_long)}
 
 if __name__ == "__main__":

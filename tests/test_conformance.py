@@ -191,6 +191,29 @@ def test_state_machine(fmu) -> None:
     assert res["exit_without_enter"] == ERROR
 
 
+ALLOWED = {   # FMI 2.0 co-simulation: the modes each call may be made in (LMNCell also lets
+    # fmi2Terminate end an instance left in initialization mode by bad parameters)
+    "setupExperiment": {"instantiated"}, "enterInitializationMode": {"instantiated"},
+    "exitInitializationMode": {"initialization mode"},
+    "terminate": {"initialization mode", "step mode"}, "doStep": {"step mode"},
+    "setReal current": {"instantiated", "initialization mode", "step mode"},
+    "reset": {"instantiated", "initialization mode", "step mode", "terminated"}}
+
+
+def test_each_call_is_taken_only_in_its_modes(fmu) -> None:
+    """Every call of the co-simulation state machine in every mode: OK where FMI 2.0 allows
+    it, fmi2Error elsewhere (the pythonfmu FMU took setupExperiment and
+    enterInitializationMode in step mode, restarting the run, setReal and terminate after
+    terminate, and a NaN start time that made every later step fail)."""
+    res = _run(fmu, "mode_rules")
+    for call, modes in ALLOWED.items():
+        for mode in ("instantiated", "initialization mode", "step mode", "terminated"):
+            assert res[f"{call} in {mode}"] == (0 if mode in modes else ERROR), (call, mode)
+    assert res["setupExperiment at nan"] == res["setupExperiment at inf"] == ERROR
+    assert res["restore after terminate"] == res["step after restore"] == 0
+    assert res["restore uninitialised"] == 0 and res["step after restore uninitialised"] == ERROR
+
+
 def test_physically_impossible_inputs_are_refused(fmu) -> None:
     res = _run(fmu, "impossible_inputs")
     assert res["huge_current"] == ERROR
@@ -347,9 +370,9 @@ def test_status_inquiries_answer_as_fmi_asks(fmu) -> None:
             assert got["log"][0].startswith(key.split()[0] + ": no fmi2"), key
 
 
-def test_both_fmus_answer_null_pointers_and_status_inquiries_alike(quick_fmu,
+def test_both_fmus_answer_null_pointers_status_inquiries_and_modes_alike(quick_fmu,
                                                                   native_fmu) -> None:
-    for sequence in ("null_pointers", "status_inquiries"):
+    for sequence in ("null_pointers", "status_inquiries", "mode_rules"):
         assert _run(quick_fmu, sequence) == _run(native_fmu, sequence), sequence
 
 
