@@ -521,6 +521,55 @@ def status_inquiries(fmu: str) -> dict:
     return out
 
 
+def state_reuse(fmu: str) -> dict:
+    """Row 7: FMU states as hosts that roll back use them. fmi2GetFMUstate 2,000 times into
+    the same state, as FMI 2.0 allows (the FMU reuses or replaces it): the resident memory (kB)
+    after 200 and after all; fmi2FreeFMUstate empties the host's pointer and takes an empty one;
+    a freed state and a block of zeros, given to fmi2SetFMUstate, fmi2SerializedFMUstateSize,
+    fmi2GetFMUstate (as the state to reuse) and fmi2FreeFMUstate: their statuses and messages;
+    then whether the instance still steps."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    out: dict = {}
+    with fmu_log("reuse") as (name, callbacks, log):
+        slave, vr = _raw(fmu, True, name, callbacks)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.exitInitializationMode()
+        c = ctypes.c_void_p(slave.component)
+        get, put = _untyped(slave, "fmi2GetFMUstate"), _untyped(slave, "fmi2SetFMUstate")
+        free, size = _untyped(slave, "fmi2FreeFMUstate"), _untyped(slave,
+                                                                   "fmi2SerializedFMUstateSize")
+        state, statuses = ctypes.c_void_p(), set()
+        for k in range(2000):
+            statuses.add(get(c, ctypes.byref(state)))
+            if k + 1 in (200, 2000):
+                out[f"rss_{k + 1}"] = _rss_kb()
+        out["reuse_statuses"] = sorted(statuses)
+        out["free"] = free(c, ctypes.byref(state))
+        out["freed_pointer_emptied"] = state.value is None
+        out["free_empty"] = free(c, ctypes.byref(state))
+        zeros = ctypes.create_string_buffer(65536)
+        stale = ctypes.c_void_p()
+        get(c, ctypes.byref(stale))
+        free(c, ctypes.byref(ctypes.c_void_p(stale.value)))      # the host keeps a copy
+        for label, bad in (("freed", stale.value), ("zeros", ctypes.addressof(zeros))):
+            for call, args in (("fmi2SetFMUstate", (put, ctypes.c_void_p(bad))),
+                               ("fmi2SerializedFMUstateSize",
+                                (size, ctypes.c_void_p(bad), ctypes.byref(ctypes.c_size_t()))),
+                               ("fmi2GetFMUstate", (get, ctypes.byref(ctypes.c_void_p(bad)))),
+                               ("fmi2FreeFMUstate", (free, ctypes.byref(ctypes.c_void_p(bad))))):
+                before = len(log)
+                status = args[0](c, *args[1:])
+                out[f"{call} {label}"] = {"status": status, "log": [
+                    entry.replace(name, "NAME") for entry in log[before:]]}
+        slave.setReal([vr["current"]], [-1.0])
+        out["step_after"] = _status(lambda: slave.doStep(0.0, 1.0))
+        slave.terminate()
+        slave.freeInstance()
+    return out
+
+
 def _vr(fmu: str) -> dict[str, int]:
     return {v.name: v.valueReference for v in read_model_description(fmu).modelVariables}
 
@@ -773,6 +822,7 @@ SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_rang
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,
                                       null_pointers, status_inquiries, mode_rules,
+                                      state_reuse,
                                       instantiate_many, random_calls, random_calls_long)}
 
 if __name__ == "__main__":

@@ -125,6 +125,10 @@ typedef struct {
        voltage is the state's: the warning follows only a doStep whose last step was out) */
     int range_inputs;
     double range_i, range_t, range_soc;
+    /* the FMU states this instance handed out (fmi2GetFMUstate, fmi2DeSerializeFMUstate) and
+       not yet freed: only these are taken back, and fmi2FreeInstance frees what is left */
+    State **states;
+    size_t n_states, cap_states;
 } Instance;
 
 static void logf_(Instance *in, fmi2Status st, const char *cat, const char *fmt, ...) {
@@ -1318,7 +1322,14 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     return in;
 }
 
-void fmi2FreeInstance(fmi2Component c) { free(c); }
+void fmi2FreeInstance(fmi2Component c) {
+    Instance *in = (Instance *)c;
+    size_t k;
+    if (!in) return;
+    for (k = 0; k < in->n_states; k++) free(in->states[k]);
+    free(in->states);
+    free(in);
+}
 
 /* 1 if the instance's mode is among `allowed` (a mask of M_(MODE_…)), else log and 0 */
 #define M_(m) (1 << (m))
@@ -1565,27 +1576,58 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return fmi2OK;
 }
 
-/* 1 where st is a state of this model (fmi2GetFMUstate's or fmi2DeSerializeFMUstate's), else
-   log and 0 */
+/* the index of st among the instance's live states, or n_states */
+static size_t state_index(const Instance *in, const void *st) {
+    size_t k;
+    for (k = 0; k < in->n_states && (const void *)in->states[k] != st; k++) {}
+    return k;
+}
+
+/* 1 where st is a live state of this instance (its fmi2GetFMUstate's or
+   fmi2DeSerializeFMUstate's, not freed), else log and 0: a freed or foreign pointer is never
+   read */
 static int own_state(Instance *in, const char *call, fmi2FMUstate st) {
     if (!given(in, call, st, "the FMU state")) return 0;
-    if (((const State *)st)->magic == STATE_MAGIC) return 1;
-    logf_(in, fmi2Error, "logStatusError", "%s: the FMU state is not one of this model's (from "
-          "another FMU, or freed?)", call);
+    if (state_index(in, st) < in->n_states) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s: the FMU state is not one of this instance's "
+          "(freed, or from another instance or FMU?)", call);
     return 0;
+}
+
+/* a new state of this instance, holding a copy of s; NULL (logged) when out of memory */
+static State *new_state(Instance *in, const char *call, const State *s) {
+    State *copy;
+    if (in->n_states == in->cap_states) {
+        size_t cap = in->cap_states ? 2 * in->cap_states : 8;
+        State **grown = (State **)realloc(in->states, cap * sizeof *grown);
+        if (!grown) {
+            logf_(in, fmi2Error, "logStatusError", "%s: out of memory", call);
+            return NULL;
+        }
+        in->states = grown;
+        in->cap_states = cap;
+    }
+    copy = (State *)malloc(sizeof(State));
+    if (!copy) {
+        logf_(in, fmi2Error, "logStatusError", "%s: out of memory", call);
+        return NULL;
+    }
+    *copy = *s;
+    in->states[in->n_states++] = copy;
+    return copy;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
     State *copy;
     if (!in || !given(in, "fmi2GetFMUstate", st, "the pointer to the FMU state")) return fmi2Error;
-    if (*st && !own_state(in, "fmi2GetFMUstate", *st)) return fmi2Error;
-    copy = *st ? (State *)*st : (State *)malloc(sizeof(State));
-    if (!copy) {
-        logf_(in, fmi2Error, "logStatusError", "fmi2GetFMUstate: out of memory");
-        return fmi2Error;
+    if (*st) {   /* a state handed out before: reused, as FMI 2.0 suggests */
+        if (!own_state(in, "fmi2GetFMUstate", *st)) return fmi2Error;
+        *(State *)*st = in->s;
+        return fmi2OK;
     }
-    *copy = in->s;
+    copy = new_state(in, "fmi2GetFMUstate", &in->s);
+    if (!copy) return fmi2Error;
     *st = copy;
     return fmi2OK;
 }
@@ -1602,8 +1644,9 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
     if (!in || !given(in, "fmi2FreeFMUstate", st, "the pointer to the FMU state"))
         return fmi2Error;
-    if (*st && !own_state(in, "fmi2FreeFMUstate", *st)) return fmi2Error;
-    if (*st) ((State *)*st)->magic = 0;   /* a freed state is never taken for one again */
+    if (!*st) return fmi2OK;   /* nothing to free */
+    if (!own_state(in, "fmi2FreeFMUstate", *st)) return fmi2Error;
+    in->states[state_index(in, *st)] = in->states[--in->n_states];
     free(*st);
     *st = NULL;
     return fmi2OK;
@@ -1633,7 +1676,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[],
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size,
                                    fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
-    State tmp;
+    State tmp, *copy;
     if (!in || !given(in, "fmi2DeSerializeFMUstate", b, "serializedState")
         || !given(in, "fmi2DeSerializeFMUstate", st, "the pointer to the FMU state"))
         return fmi2Error;
@@ -1649,13 +1692,14 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
               "state of this model (another model or version?)");
         return fmi2Error;
     }
-    if (*st && !own_state(in, "fmi2DeSerializeFMUstate", *st)) return fmi2Error;
-    if (!*st) *st = malloc(sizeof(State));
-    if (!*st) {
-        logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: out of memory");
-        return fmi2Error;
+    if (*st) {   /* a state handed out before: reused */
+        if (!own_state(in, "fmi2DeSerializeFMUstate", *st)) return fmi2Error;
+        *(State *)*st = tmp;
+        return fmi2OK;
     }
-    memcpy(*st, &tmp, sizeof(State));
+    copy = new_state(in, "fmi2DeSerializeFMUstate", &tmp);
+    if (!copy) return fmi2Error;
+    *st = copy;
     return fmi2OK;
 }
 

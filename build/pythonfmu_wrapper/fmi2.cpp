@@ -13,6 +13,7 @@
 #include <limits>
 #include <memory>
 #include <optional>
+#include <set>
 
 namespace
 {
@@ -62,6 +63,10 @@ struct Fmi2Component
     { }
 
     bool wantsToTerminate{false};
+    // LMNCell: the FMU states this instance handed out (fmi2GetFMUstate,
+    // fmi2DeSerializeFMUstate) and not yet freed: only these are taken back, and
+    // fmi2FreeInstance frees what is left
+    std::set<fmi2FMUstate> states;
 
     std::unique_ptr<pythonfmu::SlaveInstance> slave;
     std::unique_ptr<Fmi2Logger> logger;
@@ -180,6 +185,17 @@ bool given(Fmi2Component* component, const char* call, const void* p, const char
     return false;
 }
 
+// LMNCell: true where state is a live state of this instance, else logs as the native FMU
+// does: a freed or foreign pointer is never read
+bool own_state(Fmi2Component* component, const char* call, fmi2FMUstate state)
+{
+    if (!given(component, call, state, "the FMU state")) return false;
+    if (component->states.count(state) > 0) return true;
+    component->logger->log(fmi2Error, std::string(call) + ": the FMU state is not one of this "
+        "instance's (freed, or from another instance or FMU?)");
+    return false;
+}
+
 // LMNCell: a status this FMU cannot give: fmi2Discard, as FMI 2.0 asks, with the native FMU's
 // message (its steps never return fmi2Pending; an ordinary error returns fmi2Error)
 fmi2Status no_status(Fmi2Component* component, const char* call, fmi2StatusKind kind)
@@ -280,6 +296,12 @@ void fmi2FreeInstance(fmi2Component c)
 {
     if (c) {
         const auto component = static_cast<Fmi2Component*>(c);
+        for (auto state : component->states) {   // LMNCell: the states the host left
+            try {
+                component->slave->FreeFMUstate(state);
+            } catch (const std::exception&) {
+            }
+        }
         delete component;
     }
 }
@@ -621,8 +643,17 @@ fmi2Status fmi2GetFMUstate(
     if (!given(component, "fmi2GetFMUstate", state, "the pointer to the FMU state")) {
         return fmi2Error;   // LMNCell: not written through NULL
     }
+    if (*state != nullptr && !own_state(component, "fmi2GetFMUstate", *state)) return fmi2Error;
     try {
-        component->slave->GetFMUstate(*state);
+        // LMNCell: a state handed out before is replaced (pythonfmu leaked it)
+        fmi2FMUstate fresh = nullptr;
+        component->slave->GetFMUstate(fresh);
+        if (*state != nullptr) {
+            component->states.erase(*state);
+            component->slave->FreeFMUstate(*state);
+        }
+        component->states.insert(fresh);
+        *state = fresh;
         return fmi2OK;
     } catch (const pythonfmu::fatal_error& e) {
         component->logger->log(fmi2Fatal, e.what());
@@ -639,7 +670,7 @@ fmi2Status fmi2SetFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
-    if (!given(component, "fmi2SetFMUstate", state, "the FMU state")) return fmi2Error;
+    if (!own_state(component, "fmi2SetFMUstate", state)) return fmi2Error;
     try {
         component->slave->SetFMUstate(state);
         return fmi2OK;
@@ -662,8 +693,11 @@ fmi2Status fmi2FreeFMUstate(
         return fmi2Error;   // LMNCell: not read through NULL
     }
     if (*state == nullptr) return fmi2OK;   // nothing to free
+    if (!own_state(component, "fmi2FreeFMUstate", *state)) return fmi2Error;
     try {
+        component->states.erase(*state);
         component->slave->FreeFMUstate(*state);
+        *state = nullptr;
         return fmi2OK;
     } catch (const pythonfmu::fatal_error& e) {
         component->logger->log(fmi2Fatal, e.what());
@@ -681,7 +715,7 @@ fmi2Status fmi2SerializedFMUstateSize(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
-    if (!given(component, "fmi2SerializedFMUstateSize", state, "the FMU state") ||
+    if (!own_state(component, "fmi2SerializedFMUstateSize", state) ||
         !given(component, "fmi2SerializedFMUstateSize", size, "size")) return fmi2Error;
     try {
         *size = component->slave->SerializedFMUstateSize(state);
@@ -703,7 +737,7 @@ fmi2Status fmi2SerializeFMUstate(
 {
     const auto component = static_cast<Fmi2Component*>(c);
     if (component == nullptr) return fmi2Error;   // LMNCell: no instance, no crash
-    if (!given(component, "fmi2SerializeFMUstate", state, "the FMU state") ||
+    if (!own_state(component, "fmi2SerializeFMUstate", state) ||
         !given(component, "fmi2SerializeFMUstate", bytes, "serializedState")) return fmi2Error;
     try {
         component->slave->SerializeFMUstate(state, bytes, size);
@@ -729,8 +763,18 @@ fmi2Status fmi2DeSerializeFMUstate(
         !given(component, "fmi2DeSerializeFMUstate", state, "the pointer to the FMU state")) {
         return fmi2Error;
     }
+    if (*state != nullptr && !own_state(component, "fmi2DeSerializeFMUstate", *state)) {
+        return fmi2Error;
+    }
     try {
-        component->slave->DeSerializeFMUstate(bytes, size, *state);
+        fmi2FMUstate fresh = nullptr;   // LMNCell: a state handed out before is replaced
+        component->slave->DeSerializeFMUstate(bytes, size, fresh);
+        if (*state != nullptr) {
+            component->states.erase(*state);
+            component->slave->FreeFMUstate(*state);
+        }
+        component->states.insert(fresh);
+        *state = fresh;
         return fmi2OK;
     } catch (const pythonfmu::fatal_error& e) {
         component->logger->log(fmi2Fatal, e.what());
