@@ -150,21 +150,25 @@ def mode_rules(fmu: str) -> dict:
         out[f"setupExperiment at {start}"] = _status(lambda s=slave, t=start: s.setupExperiment(
             startTime=t))
         slave.freeInstance()
-    slave, _ = _in_mode(fmu, "step mode")
-    state = slave.getFMUstate()
-    slave.terminate()
-    out["restore after terminate"] = _status(lambda: slave.setFMUstate(state))
-    out["step after restore"] = _status(lambda: slave.doStep(1.0, 1.0))
-    slave.freeFMUstate(state)
-    slave.freeInstance()
-    slave, _ = _in_mode(fmu, "initialization mode")
-    state = slave.getFMUstate()
-    slave.exitInitializationMode()
-    out["restore uninitialised"] = _status(lambda: slave.setFMUstate(state))
-    out["step after restore uninitialised"] = _status(lambda: slave.doStep(0.0, 1.0))
-    slave.freeFMUstate(state)
-    slave.freeInstance()
+    out["restore after terminate"], out["step after restore"] = _restore_then_step(
+        fmu, "step mode", FMU2Slave.terminate, 1.0)
+    out["restore uninitialised"], out["step after restore uninitialised"] = _restore_then_step(
+        fmu, "initialization mode", FMU2Slave.exitInitializationMode, 0.0)
     return out
+
+
+def _restore_then_step(fmu: str, saved_in: str, then: Callable[[FMU2Slave], object],
+                       step_at: float) -> tuple[int, int]:
+    """The statuses of fmi2SetFMUstate and of a 1-s step at step_at, for a state saved in the
+    mode saved_in and restored after the call `then`."""
+    slave, _ = _in_mode(fmu, saved_in)
+    state = slave.getFMUstate()
+    then(slave)
+    restored = _status(lambda: slave.setFMUstate(state))
+    stepped = _status(lambda: slave.doStep(step_at, 1.0))
+    slave.freeFMUstate(state)
+    slave.freeInstance()
+    return restored, stepped
 
 
 def impossible_inputs(fmu: str) -> dict:
