@@ -329,11 +329,12 @@ def ordinary_errors(fmu: str) -> dict:
 
 def _instantiate_with(fmu: str, unzipped: str, uri: str | None = None, guid: str | None = None,
                       fmu_type: int | None = None, name: str = "uri",
-                      callbacks=None) -> FMU2Slave | None:
+                      callbacks=None, given_name: str | None = None) -> FMU2Slave | None:
     """An FMU2Slave of the FMU extracted in `unzipped`, instantiated through fmi2Instantiate with
     the given resource location (default: the file URI of its resources folder, as fmpy gives
-    it), GUID and FMU type, and fmpy's callbacks or the given ones; None where the FMU refuses
-    (returns NULL)."""
+    it), GUID and FMU type, and fmpy's callbacks or the given ones (the string "none": no
+    callbacks at all), under the instance name given_name where given (default: name); None
+    where the FMU refuses (returns NULL)."""
     from ctypes import byref
     from pathlib import Path
 
@@ -342,18 +343,20 @@ def _instantiate_with(fmu: str, unzipped: str, uri: str | None = None, guid: str
     md = read_model_description(fmu)
     slave = FMU2Slave(guid=md.guid, unzipDirectory=unzipped,
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
-    slave.callbacks = defaultCallbacks if callbacks is None else callbacks
+    slave.callbacks = defaultCallbacks if callbacks in (None, "none") else callbacks
     where = Path(unzipped, "resources").as_uri() if uri is None else uri
     slave.component = slave.fmi2Instantiate(
-        name.encode(), fmi2CoSimulation if fmu_type is None else fmu_type,
-        (md.guid if guid is None else guid).encode(), where.encode(), byref(slave.callbacks),
-        False, False)
+        (name if given_name is None else given_name).encode(),
+        fmi2CoSimulation if fmu_type is None else fmu_type,
+        (md.guid if guid is None else guid).encode(), where.encode(),
+        None if callbacks == "none" else byref(slave.callbacks), False, False)
     return None if slave.component is None else slave
 
 
 def wrong_guid_or_type(fmu: str) -> dict:
     """Row 7: fmi2Instantiate with another FMU's GUID, as Model Exchange, with an empty or a
-    missing resource location: "refused" (NULL) or "instantiated"."""
+    missing resource location, an empty instance name or no callbacks: "refused" (NULL) or
+    "instantiated"."""
     from fmpy.fmi2 import fmi2ModelExchange
 
     unzipped = extract(fmu)
@@ -361,6 +364,7 @@ def wrong_guid_or_type(fmu: str) -> dict:
              "model_exchange": {"fmu_type": fmi2ModelExchange},
              "no_resources": {"uri": ""},
              "missing_resources": {"uri": "file:///nonexistent/lmncell/resources"},
+             "empty_name": {"given_name": ""}, "no_callbacks": {"callbacks": "none"},
              "right": {}}
     out = {}
     for key, kw in cases.items():

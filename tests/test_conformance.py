@@ -317,6 +317,7 @@ def test_wrong_guid_fmu_type_or_resources_are_refused(fmu) -> None:
     res = _run(fmu, "wrong_guid_or_type")
     assert res["right"] == "instantiated"
     assert res["wrong_guid"] == res["model_exchange"] == "refused"
+    assert res["empty_name"] == res["no_callbacks"] == "refused"      # FMI 2.0 requires both
     without = "refused" if _needs_resources(fmu) else "instantiated"
     assert res["no_resources"] == res["missing_resources"] == without
 

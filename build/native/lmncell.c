@@ -1306,10 +1306,15 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
                               const fmi2CallbackFunctions *cb, fmi2Boolean vis, fmi2Boolean log) {
     Instance *in;
     (void)res; (void)vis;
+    if (!cb || !cb->logger) return NULL;   /* FMI 2.0: the host must give a logger */
+    if (!name || !name[0]) {               /* FMI 2.0: not NULL, not empty */
+        cb->logger(cb->componentEnvironment, "", fmi2Error, "logStatusError",
+                   "fmi2Instantiate: empty instanceName");
+        return NULL;
+    }
     if (type != fmi2CoSimulation || !guid || strcmp(guid, MODEL_GUID) != 0) {
-        if (cb && cb->logger)
-            cb->logger(cb->componentEnvironment, name ? name : "?", fmi2Error, "logStatusError",
-                       "fmi2Instantiate: wrong FMU type or GUID (expected %s)", MODEL_GUID);
+        cb->logger(cb->componentEnvironment, name, fmi2Error, "logStatusError",
+                   "fmi2Instantiate: wrong FMU type or GUID (expected %s)", MODEL_GUID);
         return NULL;
     }
     in = (Instance *)calloc(1, sizeof(Instance));
@@ -1317,7 +1322,7 @@ fmi2Component fmi2Instantiate(fmi2String name, fmi2Type type, fmi2String guid, f
     in->cb = cb;
     in->logging = log;
     in->mode = MODE_INSTANTIATED;
-    snprintf(in->name, sizeof in->name, "%s", name ? name : "lmncell");
+    snprintf(in->name, sizeof in->name, "%s", name);
     defaults(&in->s);
     return in;
 }
