@@ -327,6 +327,15 @@ def ordinary_errors(fmu: str) -> dict:
     return out
 
 
+def _raw_initialised(fmu: str, name: str, callbacks) -> tuple[FMU2Slave, dict[str, int]]:
+    """_raw's instance with logging on, set up at 0 s and initialised with its defaults."""
+    slave, vr = _raw(fmu, True, name, callbacks)
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    return slave, vr
+
+
 def _instantiate_with(fmu: str, unzipped: str, uri: str | None = None, guid: str | None = None,
                       fmu_type: int | None = None, name: str = "uri",
                       callbacks=None, given_name: str | None = None) -> FMU2Slave | None:
@@ -460,10 +469,7 @@ def null_pointers(fmu: str) -> dict:
         "fmi2GetRealStatus": (2, None), "fmi2GetBooleanStatus": (3, None)}
     out: dict = {}
     with fmu_log("null") as (name, callbacks, log):
-        slave, vr = _raw(fmu, True, name, callbacks)
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        slave.exitInitializationMode()
+        slave, vr = _raw_initialised(fmu, name, callbacks)
         # one real value and value reference, for the calls that need the other array given
         vr_one, value_one = (ctypes.c_uint * 1)(vr["current"]), (ctypes.c_double * 1)(0.0)
         calls["fmi2GetReal (value NULL)"] = ("fmi2GetReal", vr_one, 1, None)
@@ -540,10 +546,7 @@ def state_reuse(fmu: str) -> dict:
 
     out: dict = {}
     with fmu_log("reuse") as (name, callbacks, log):
-        slave, vr = _raw(fmu, True, name, callbacks)
-        slave.setupExperiment(startTime=0.0)
-        slave.enterInitializationMode()
-        slave.exitInitializationMode()
+        slave, vr = _raw_initialised(fmu, name, callbacks)
         c = ctypes.c_void_p(slave.component)
         get, put = _untyped(slave, "fmi2GetFMUstate"), _untyped(slave, "fmi2SetFMUstate")
         free, size = _untyped(slave, "fmi2FreeFMUstate"), _untyped(slave,
