@@ -34,13 +34,13 @@ def _status(call) -> int:
         return int(exc.status)
 
 
-def _set_debug_logging(slave: FMU2Slave) -> Callable[..., int]:
-    """The FMU's fmi2SetDebugLogging itself, returning its status as an int (fmpy's wrapper
-    raises only for statuses worse than fmi2Warning, so a warning would read as OK)."""
-    raw = slave.dll.fmi2SetDebugLogging
-    raw.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t,
-                    ctypes.POINTER(ctypes.c_char_p)]
-    raw.restype = ctypes.c_int
+def _c_function(slave: FMU2Slave, fn: str, argtypes: list | None = None) -> Callable[..., int]:
+    """The FMU's C function fn itself, returning its status as an int (fmpy's wrappers raise
+    only for statuses worse than fmi2Warning, so a warning would read as OK), with these
+    argument types or, without them, its arguments passed as given. A function object of its
+    own: fmpy's share the library's, and keep their argument types."""
+    raw = getattr(ctypes.CDLL(slave.dll._name), fn)
+    raw.argtypes, raw.restype = argtypes, ctypes.c_int
     return raw
 
 
@@ -258,7 +258,8 @@ def debug_logging_categories(fmu: str) -> dict:
                     ("logAll", fmi2True, ["logAll"]),
                     ("unknown and warnings", fmi2True, ["noSuchCategory", "logStatusWarning"]),
                     ("warnings off", fmi2False, ["logStatusWarning"]))
-        set_logging = _set_debug_logging(slave)
+        set_logging = _c_function(slave, "fmi2SetDebugLogging", [
+            ctypes.c_void_p, ctypes.c_int, ctypes.c_size_t, ctypes.POINTER(ctypes.c_char_p)])
         for label, on, cats in settings:
             array = (fmi2String * len(cats))(*(c.encode() for c in cats)) if cats else None
             statuses.append(set_logging(slave.component, on, len(cats), array))
@@ -444,14 +445,6 @@ def logged_resource_refusals(fmu: str) -> dict:
     return out
 
 
-def _untyped(slave: FMU2Slave, fn: str):
-    """The FMU's C function fn returning an int, its arguments passed as given (a function
-    object of its own: fmpy's, which share the library's, keep their argument types)."""
-    raw = getattr(ctypes.CDLL(slave.dll._name), fn)
-    raw.argtypes, raw.restype = None, ctypes.c_int
-    return raw
-
-
 def null_pointers(fmu: str) -> dict:
     """Row 7: every FMI function that takes an array or a pointer, given NULL for it (with
     nvr = 1) on an initialised instance: its status and what it logged, per call; then whether
@@ -476,7 +469,7 @@ def null_pointers(fmu: str) -> dict:
         calls["fmi2SetReal (vr NULL)"] = ("fmi2SetReal", None, 1, value_one)
         for key, args in calls.items():
             fn, args = (args[0], args[1:]) if isinstance(args[0], str) else (key, args)
-            raw = _untyped(slave, fn)
+            raw = _c_function(slave, fn)
             before = len(log)
             status = raw(ctypes.c_void_p(slave.component), *args)
             out[key] = {"status": status,
@@ -496,7 +489,7 @@ def status_inquiries(fmu: str) -> dict:
     from lmncell.evaluation.fmueval import fmu_log
 
     def inquire(slave, fn: str, kind: int, ctype) -> tuple[int, float | None]:
-        raw = _untyped(slave, fn)
+        raw = _c_function(slave, fn)
         value = ctype(-7)
         status = raw(ctypes.c_void_p(slave.component), kind, ctypes.byref(value))
         return status, (float(value.value) if status <= 1 else None)
@@ -548,8 +541,8 @@ def state_reuse(fmu: str) -> dict:
     with fmu_log("reuse") as (name, callbacks, log):
         slave, vr = _raw_initialised(fmu, name, callbacks)
         c = ctypes.c_void_p(slave.component)
-        get, put = _untyped(slave, "fmi2GetFMUstate"), _untyped(slave, "fmi2SetFMUstate")
-        free, size = _untyped(slave, "fmi2FreeFMUstate"), _untyped(slave,
+        get, put = _c_function(slave, "fmi2GetFMUstate"), _c_function(slave, "fmi2SetFMUstate")
+        free, size = _c_function(slave, "fmi2FreeFMUstate"), _c_function(slave,
                                                                    "fmi2SerializedFMUstateSize")
         state, statuses = ctypes.c_void_p(), set()
         for k in range(2000):
@@ -776,7 +769,7 @@ class RandomHost:
     def last_time(self) -> tuple[str, int]:
         """fmi2GetRealStatus(fmi2LastSuccessfulTime): a finite time where it says OK."""
         value = ctypes.c_double(math.nan)
-        status = _untyped(self.slave, "fmi2GetRealStatus")(
+        status = _c_function(self.slave, "fmi2GetRealStatus")(
             ctypes.c_void_p(self.slave.component), 2, ctypes.byref(value))
         assert status != OK or math.isfinite(value.value), f"OK with last time {value.value}"
         return "", status

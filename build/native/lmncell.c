@@ -1622,19 +1622,25 @@ static State *new_state(Instance *in, const char *call, const State *s) {
     return copy;
 }
 
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
-    Instance *in = (Instance *)c;
+/* s into the host's *st: a state handed out before is reused, as FMI 2.0 suggests (after
+   own_state), else a new one of this instance is made (fmi2GetFMUstate, ...DeSerialize...) */
+static fmi2Status store_state(Instance *in, const char *call, fmi2FMUstate *st, const State *s) {
     State *copy;
-    if (!in || !given(in, "fmi2GetFMUstate", st, "the pointer to the FMU state")) return fmi2Error;
-    if (*st) {   /* a state handed out before: reused, as FMI 2.0 suggests */
-        if (!own_state(in, "fmi2GetFMUstate", *st)) return fmi2Error;
-        *(State *)*st = in->s;
+    if (*st) {
+        if (!own_state(in, call, *st)) return fmi2Error;
+        *(State *)*st = *s;
         return fmi2OK;
     }
-    copy = new_state(in, "fmi2GetFMUstate", &in->s);
+    copy = new_state(in, call, s);
     if (!copy) return fmi2Error;
     *st = copy;
     return fmi2OK;
+}
+
+fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *st) {
+    Instance *in = (Instance *)c;
+    if (!in || !given(in, "fmi2GetFMUstate", st, "the pointer to the FMU state")) return fmi2Error;
+    return store_state(in, "fmi2GetFMUstate", st, &in->s);
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate st) {
@@ -1681,7 +1687,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[],
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size,
                                    fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
-    State tmp, *copy;
+    State tmp;
     if (!in || !given(in, "fmi2DeSerializeFMUstate", b, "serializedState")
         || !given(in, "fmi2DeSerializeFMUstate", st, "the pointer to the FMU state"))
         return fmi2Error;
@@ -1697,15 +1703,7 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
               "state of this model (another model or version?)");
         return fmi2Error;
     }
-    if (*st) {   /* a state handed out before: reused */
-        if (!own_state(in, "fmi2DeSerializeFMUstate", *st)) return fmi2Error;
-        *(State *)*st = tmp;
-        return fmi2OK;
-    }
-    copy = new_state(in, "fmi2DeSerializeFMUstate", &tmp);
-    if (!copy) return fmi2Error;
-    *st = copy;
-    return fmi2OK;
+    return store_state(in, "fmi2DeSerializeFMUstate", st, &tmp);
 }
 
 /* A function this FMU does not offer: fmi2Error, logged */

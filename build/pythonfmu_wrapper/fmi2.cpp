@@ -10,7 +10,6 @@
 #include <cstdio>
 #include <iterator>
 #include <exception>
-#include <limits>
 #include <memory>
 #include <optional>
 #include <set>
@@ -194,6 +193,19 @@ bool own_state(Fmi2Component* component, const char* call, fmi2FMUstate state)
     component->logger->log(fmi2Error, std::string(call) + ": the FMU state is not one of this "
         "instance's (freed, or from another instance or FMU?)");
     return false;
+}
+
+// LMNCell: fresh becomes the host's *state, a state of this instance; the one *state held
+// before, if any (a live state, checked by own_state), is freed, as FMI 2.0 lets
+// fmi2GetFMUstate and fmi2DeSerializeFMUstate reuse it (pythonfmu leaked it)
+void keep_state(Fmi2Component* component, fmi2FMUstate* state, fmi2FMUstate fresh)
+{
+    if (*state != nullptr) {
+        component->states.erase(*state);
+        component->slave->FreeFMUstate(*state);
+    }
+    component->states.insert(fresh);
+    *state = fresh;
 }
 
 // LMNCell: a status this FMU cannot give: fmi2Discard, as FMI 2.0 asks, with the native FMU's
@@ -645,15 +657,9 @@ fmi2Status fmi2GetFMUstate(
     }
     if (*state != nullptr && !own_state(component, "fmi2GetFMUstate", *state)) return fmi2Error;
     try {
-        // LMNCell: a state handed out before is replaced (pythonfmu leaked it)
         fmi2FMUstate fresh = nullptr;
         component->slave->GetFMUstate(fresh);
-        if (*state != nullptr) {
-            component->states.erase(*state);
-            component->slave->FreeFMUstate(*state);
-        }
-        component->states.insert(fresh);
-        *state = fresh;
+        keep_state(component, state, fresh);
         return fmi2OK;
     } catch (const pythonfmu::fatal_error& e) {
         component->logger->log(fmi2Fatal, e.what());
@@ -767,14 +773,9 @@ fmi2Status fmi2DeSerializeFMUstate(
         return fmi2Error;
     }
     try {
-        fmi2FMUstate fresh = nullptr;   // LMNCell: a state handed out before is replaced
+        fmi2FMUstate fresh = nullptr;
         component->slave->DeSerializeFMUstate(bytes, size, fresh);
-        if (*state != nullptr) {
-            component->states.erase(*state);
-            component->slave->FreeFMUstate(*state);
-        }
-        component->states.insert(fresh);
-        *state = fresh;
+        keep_state(component, state, fresh);
         return fmi2OK;
     } catch (const pythonfmu::fatal_error& e) {
         component->logger->log(fmi2Fatal, e.what());
