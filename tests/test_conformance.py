@@ -3,6 +3,7 @@ fails the test), the model description's InitialUnknowns, the documentation per 
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -29,6 +30,13 @@ def _run(fmu, sequence: str) -> dict:
                            sequence], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, f"the host died ({proc.returncode}): {proc.stderr[-2000:]}"
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+@functools.cache
+def _run_once(fmu: Path, sequence: str) -> dict:
+    """_run's result, kept for the session: the sequences that one test checks on each FMU and
+    another compares between the two FMUs run once per FMU."""
+    return _run(fmu, sequence)
 
 
 def _memory_errors_in_the_fmu(fmu, sequence: str) -> list[str]:
@@ -205,7 +213,7 @@ def test_each_call_is_taken_only_in_its_modes(fmu) -> None:
     it, fmi2Error elsewhere (the pythonfmu FMU took setupExperiment and
     enterInitializationMode in step mode, restarting the run, setReal and terminate after
     terminate, and a NaN start time that made every later step fail)."""
-    res = _run(fmu, "mode_rules")
+    res = _run_once(fmu, "mode_rules")
     for call, modes in ALLOWED.items():
         for mode in ("instantiated", "initialization mode", "step mode", "terminated"):
             assert res[f"{call} in {mode}"] == (0 if mode in modes else ERROR), (call, mode)
@@ -340,7 +348,7 @@ def test_null_arrays_and_pointers_are_refused_and_logged(fmu) -> None:
     mistake: fmi2Error and one message that names the call and the argument, nothing read or
     set, and the instance steps on. Each get and set crashed the host before (SIGSEGV), and
     the pythonfmu FMU's state calls and status inquiries too."""
-    res = _run(fmu, "null_pointers")
+    res = _run_once(fmu, "null_pointers")
     calls = {key: got for key, got in res.items() if key.startswith("fmi2")}
     assert len(calls) == 18
     for key, got in calls.items():
@@ -359,7 +367,7 @@ def test_status_inquiries_answer_as_fmi_asks(fmu) -> None:
     first; restored with the FMU state), fmi2Terminated false; every other kind is fmi2Discard
     with a message, as FMI 2.0 asks for a status the FMU cannot give (the pythonfmu FMU gave
     fmi2Error for fmi2GetStatus and NaN as the last successful time before a step)."""
-    res = _run(fmu, "status_inquiries")
+    res = _run_once(fmu, "status_inquiries")
     assert res["last_time"] == [[0, 0.0], [0, 5.0], [0, 7.0], [0, 7.0], [0, 6.0]]
     assert res["refused_step"] == ERROR
     answered = {"fmi2GetRealStatus 2": 6.0, "fmi2GetBooleanStatus 3": 0.0}
@@ -377,7 +385,7 @@ def test_fmu_states_are_reused_freed_and_checked(fmu) -> None:
     1.3 kB per call, 23 MB over 18,000). fmi2FreeFMUstate empties the host's pointer and takes
     an empty one; a freed state or a foreign pointer is refused with a message, never read (the
     pythonfmu FMU crashed on a freed one), and the instance steps on."""
-    res = _run(fmu, "state_reuse")
+    res = _run_once(fmu, "state_reuse")
     assert res["rss_2000"] - res["rss_200"] < 1000, res       # kB over 1,800 reused saves
     assert res["reuse_statuses"] == [0] and res["free"] == res["free_empty"] == 0
     assert res["freed_pointer_emptied"]
@@ -394,7 +402,8 @@ def test_fmu_states_are_reused_freed_and_checked(fmu) -> None:
 def test_both_fmus_answer_null_pointers_status_inquiries_modes_and_states_alike(quick_fmu,
                                                                   native_fmu) -> None:
     for sequence in ("null_pointers", "status_inquiries", "mode_rules", "state_reuse"):
-        ours, theirs = (_without_memory(_run(f, sequence)) for f in (quick_fmu, native_fmu))
+        ours, theirs = (_without_memory(_run_once(f, sequence))
+                        for f in (quick_fmu, native_fmu))
         assert ours == theirs, sequence
 
 
@@ -403,7 +412,7 @@ def _without_memory(res: dict) -> dict:
     return {key: value for key, value in res.items() if not key.startswith("rss_")}
 
 
-def test_a_refused_resource_location_is_named_in_the_log(quick_fmu, tmp_path) -> None:
+def test_a_refused_resource_location_is_named_in_the_log(quick_fmu) -> None:
     """The refusal says which location and why, through the host's logger."""
     res = _run(quick_fmu, "logged_resource_refusals")
     assert "fmuResourceLocation 'file://elsewhere.example/x/resources': the host " \
