@@ -407,6 +407,8 @@ def resource_locations(fmu: str) -> dict:
     wrong = {"other_host": f"file://elsewhere.example{path}",
              "http": "http://example.com/resources", "relative": "file:resources",
              "bad_escape": f"file://{path}%2"}
+    voltage = next(v.valueReference for v in read_model_description(fmu).modelVariables
+                   if v.name == "voltage")
     out = {}
     for key, uri in {**forms, **wrong}.items():
         slave = _instantiate_with(fmu, unzipped, uri, name=key)
@@ -420,7 +422,7 @@ def resource_locations(fmu: str) -> dict:
             slave.enterInitializationMode()
             slave.exitInitializationMode()
             slave.doStep(0.0, 1.0)
-            out[key] = slave.getReal([_vr(fmu)["voltage"]])[0]
+            out[key] = slave.getReal([voltage])[0]
             slave.terminate()
         slave.freeInstance()
     return out
@@ -572,10 +574,6 @@ def state_reuse(fmu: str) -> dict:
         slave.terminate()
         slave.freeInstance()
     return out
-
-
-def _vr(fmu: str) -> dict[str, int]:
-    return {v.name: v.valueReference for v in read_model_description(fmu).modelVariables}
 
 
 def _rss_kb() -> int:

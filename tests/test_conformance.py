@@ -19,6 +19,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
+from tests.conformance_sequences import MODES
 from tests.conftest import ROOT
 from tests.fmu_helpers import fmu_reports
 
@@ -215,7 +216,7 @@ def test_each_call_is_taken_only_in_its_modes(fmu) -> None:
     terminate, and a NaN start time that made every later step fail)."""
     res = _run_once(fmu, "mode_rules")
     for call, modes in ALLOWED.items():
-        for mode in ("instantiated", "initialization mode", "step mode", "terminated"):
+        for mode in MODES:
             assert res[f"{call} in {mode}"] == (0 if mode in modes else ERROR), (call, mode)
     assert res["setupExperiment at nan"] == res["setupExperiment at inf"] == ERROR
     assert res["restore after terminate"] == res["step after restore"] == 0
