@@ -2,10 +2,10 @@
 
 Generates `lmncell_model.h` (the model's numbers as constant arrays) beside the hand-written
 `native/lmncell.c` (which follows fmu_src step by step), compiles a linux64 binary with gcc against
-fmpy's FMI 2.0 headers (and, asked for, a win64 one cross-compiled with zig, the `ziglang`
-package), and zips the FMU with the same model description (variables, units, value references)
-as the pythonfmu FMU, the sources and `buildDescription.xml` so that `fmpy compile` rebuilds it
-for another platform (darwin64, say).
+fmpy's FMI 2.0 headers (and, asked for, win64 and darwin64 ones cross-compiled with zig, the
+`ziglang` package), and zips the FMU with the same model description (variables, units, value
+references) as the pythonfmu FMU, the sources and `buildDescription.xml` so that `fmpy compile`
+rebuilds it for another platform.
 """
 
 from __future__ import annotations
@@ -14,6 +14,7 @@ import html
 import importlib.util
 import math
 import shutil
+import struct
 import subprocess
 import sys
 import tempfile
@@ -71,8 +72,17 @@ HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
 MODEL_IDENTIFIER = "LMNCell"
 PART_CODES = {"soc": 0, "current": 1, "filtered_current": 2, "temperature": 3}
-PLATFORMS = {"linux64": ".so", "win64": ".dll"}   # FMI 2.0 platform → binary suffix
-ZIG_TARGETS = {"win64": "x86_64-windows-gnu"}     # platforms cross-compiled with zig
+PLATFORMS = {"linux64": ".so", "win64": ".dll", "darwin64": ".dylib"}   # FMI 2.0 platform → suffix
+# Platforms cross-compiled with zig, and its target for each architecture they hold; darwin64
+# holds a universal binary (Intel and Apple silicon Macs, macOS 11 or later), as FMI 2.0 hosts
+# on either kind of Mac look for it there.
+ZIG_TARGETS = {"win64": ("x86_64-windows-gnu",),
+               "darwin64": ("x86_64-macos.11.0", "aarch64-macos.11.0")}
+MACHO_MAGIC_64 = 0xFEEDFACF   # a thin 64-bit Mach-O binary (little-endian)
+FAT_MAGIC = 0xCAFEBABE        # a universal binary's header (big-endian)
+# the library's install name: its file name, not the build folder's path (reproducible builds)
+MACOS_LINK = [f"-Wl,-install_name,@rpath/{MODEL_IDENTIFIER}.dylib"]
+FAT_ALIGN = 14                # each slice at a 2**14-byte boundary (arm64's pages), as lipo puts it
 
 
 def fmi_headers() -> Path:
@@ -485,16 +495,50 @@ def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | No
                   ) -> None:
     """The binary of a platform of ZIG_TARGETS, cross-compiled with zig (the ziglang package:
     `pip install ziglang`; its first build for a target also builds that target's C library
-    into zig's cache, which takes longer)."""
+    into zig's cache, which takes longer); one per target, joined into a universal binary
+    where the platform has several (darwin64)."""
     if importlib.util.find_spec("ziglang") is None:
         raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
-                               "installed: pip install ziglang (or lmncell[windows])")
-    cmd = [sys.executable, "-m", "ziglang", "cc", "-target", ZIG_TARGETS[platform], "-std=c99",
-           "-O3", "-shared", "-s", "-Wall", "-Wno-unused-function", *(extra or []),
-           f"-I{fmi_headers()}", f"-I{src_dir}", str(src_dir / "lmncell.c"), "-o", str(out)]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise NativeBuildError(f"zig cc failed ({' '.join(cmd)}):\n{res.stderr}")
+                               "installed: pip install ziglang (or lmncell[cross])")
+    slices = []
+    for target in ZIG_TARGETS[platform]:
+        thin = out.parent / target / out.name   # the binary's own name: macOS signs it so
+        thin.parent.mkdir()
+        cmd = [sys.executable, "-m", "ziglang", "cc", "-target", target, "-std=c99", "-O3",
+               "-shared", "-s", "-Wall", "-Wno-unused-function", *(extra or []),
+               *(MACOS_LINK if "macos" in target else []),
+               f"-I{fmi_headers()}", f"-I{src_dir}", str(src_dir / "lmncell.c"), "-o", str(thin)]
+        res = subprocess.run(cmd, capture_output=True, text=True)
+        if res.returncode != 0:
+            raise NativeBuildError(f"zig cc failed ({' '.join(cmd)}):\n{res.stderr}")
+        slices.append(thin.read_bytes())
+    out.write_bytes(slices[0] if len(slices) == 1 else universal_binary(slices))
+
+
+def universal_binary(slices: Sequence[bytes]) -> bytes:
+    """The Mach-O universal ("fat") binary of thin 64-bit Mach-O binaries, as `lipo -create`
+    makes it: a big-endian header naming each slice's CPU type, offset and size, then the
+    slices, each at a 2**FAT_ALIGN-byte boundary. NativeBuildError for a slice that is not a
+    thin 64-bit Mach-O binary."""
+    align = 1 << FAT_ALIGN
+    offsets = [_aligned(8 + 20 * len(slices), align)]
+    for thin in slices[:-1]:
+        offsets.append(_aligned(offsets[-1] + len(thin), align))
+    fat = bytearray(struct.pack(">II", FAT_MAGIC, len(slices)))
+    for thin, offset in zip(slices, offsets, strict=True):
+        magic, cputype, cpusubtype = struct.unpack_from("<IiI", thin)
+        if magic != MACHO_MAGIC_64:
+            raise NativeBuildError(f"zig gave no 64-bit Mach-O binary (magic {magic:#x})")
+        fat += struct.pack(">iIIII", cputype, cpusubtype & 0x00FFFFFF, offset, len(thin),
+                           FAT_ALIGN)
+    for thin, offset in zip(slices, offsets, strict=True):
+        fat += bytes(offset - len(fat)) + thin
+    return bytes(fat)
+
+
+def _aligned(n: int, align: int) -> int:
+    """n rounded up to a multiple of align."""
+    return -(-n // align) * align
 
 
 def check_platforms(platforms: Sequence[str]) -> list[str]:
@@ -514,7 +558,8 @@ def check_platforms(platforms: Sequence[str]) -> list[str]:
 def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = False,
                      platforms: Sequence[str] = ("linux64",)) -> Path:
     """Generate, compile and zip the native FMU of a model file, with a binary for each of
-    platforms (PLATFORMS: linux64 with gcc, win64 cross-compiled with zig); returns its path.
+    platforms (PLATFORMS: linux64 with gcc, win64 and darwin64 cross-compiled with zig);
+    returns its path.
 
     trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash

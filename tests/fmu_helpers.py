@@ -27,6 +27,21 @@ def compile_host(source: Path, exe: Path, *libs: str) -> Path:
     return exe
 
 
+MODEL_EXCHANGE_ONLY = {f"fmi2{name}" for name in (
+    "EnterEventMode", "NewDiscreteStates", "EnterContinuousTimeMode", "CompletedIntegratorStep",
+    "SetTime", "SetContinuousStates", "GetDerivatives", "GetEventIndicators",
+    "GetContinuousStates", "GetNominalsOfContinuousStates")}
+
+
+def co_simulation_functions() -> set[str]:
+    """Every function of the FMI 2.0 API (fmpy's fmi2Functions.h) that a co-simulation FMU
+    exports: the common ones and those for co-simulation."""
+    from lmncell.fmu.native_build import fmi_headers
+
+    text = (fmi_headers() / "fmi2Functions.h").read_text()
+    return set(re.findall(r"FMI2_Export\s+fmi2\w+TYPE\s+(fmi2\w+);", text)) - MODEL_EXCHANGE_ONLY
+
+
 def unzip_fmu(fmu: Path, d: Path) -> str:
     """Extract an FMU into d; returns its GUID."""
     with zipfile.ZipFile(fmu) as z:

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from lmncell.cli import main
 
-from tests.fmu_helpers import HOST_C, compile_host, unzip_fmu
+from tests.fmu_helpers import HOST_C, co_simulation_functions, compile_host, unzip_fmu
 
 WINDOWS_LIBRARIES = re.compile(r"(kernel32|api-ms-win-crt-[a-z]+-l1-1-0)\.dll", re.IGNORECASE)
 
@@ -37,21 +37,6 @@ def both_fmu(quick_model, tmp_path_factory) -> Path:
                              native=True, platforms=("linux64", "win64"))
 
 
-MODEL_EXCHANGE_ONLY = {f"fmi2{name}" for name in (
-    "EnterEventMode", "NewDiscreteStates", "EnterContinuousTimeMode", "CompletedIntegratorStep",
-    "SetTime", "SetContinuousStates", "GetDerivatives", "GetEventIndicators",
-    "GetContinuousStates", "GetNominalsOfContinuousStates")}
-
-
-def _co_simulation_functions() -> set[str]:
-    """Every function of the FMI 2.0 API (fmpy's fmi2Functions.h) that a co-simulation FMU
-    exports: the common ones and those for co-simulation."""
-    from lmncell.fmu.native_build import fmi_headers
-
-    text = (fmi_headers() / "fmi2Functions.h").read_text()
-    return set(re.findall(r"FMI2_Export\s+fmi2\w+TYPE\s+(fmi2\w+);", text)) - MODEL_EXCHANGE_ONLY
-
-
 def test_the_win64_binary_is_a_windows_dll_with_the_whole_fmi_api(both_fmu) -> None:
     import pefile
 
@@ -62,7 +47,7 @@ def test_the_win64_binary_is_a_windows_dll_with_the_whole_fmi_api(both_fmu) -> N
     assert dll.is_dll() and dll.FILE_HEADER.Machine == 0x8664        # x86-64
     assert dll.OPTIONAL_HEADER.Magic == 0x20B                         # PE32+
     exported = {e.name.decode() for e in dll.DIRECTORY_ENTRY_EXPORT.symbols if e.name}
-    wanted = _co_simulation_functions()
+    wanted = co_simulation_functions()
     assert len(wanted) > 30 and wanted <= exported, wanted - exported
     imported = [i.dll.decode() for i in dll.DIRECTORY_ENTRY_IMPORT]
     assert all(WINDOWS_LIBRARIES.fullmatch(name) for name in imported), imported
@@ -74,7 +59,7 @@ def test_platforms_are_checked(quick_model, tmp_path, capsys) -> None:
     assert main(["build-fmu", str(quick_model), "--native", "--platforms", "win32",
                  "--out", out]) == 2
     assert ("--platforms: 'win32' is not a platform this build makes; expected one or more of "
-            "linux64, win64") in capsys.readouterr().err
+            "linux64, win64, darwin64") in capsys.readouterr().err
     assert main(["build-fmu", str(quick_model), "--native", "--platforms", ",", "--out", out]) == 2
     assert "--platforms: none given" in capsys.readouterr().err
     assert main(["build-fmu", str(quick_model), "--platforms", "win64", "--out", out]) == 2

@@ -225,7 +225,8 @@ def build_fmu(model_path: LmnModel | str | Path, out: str | Path, native: bool =
     """Package a model file (or a loaded model, written as its file) as an FMI 2.0
     co-simulation FMU: pythonfmu (the importer needs Python with numpy) or, with native=True,
     generated C compiled here (no Python needed) with a binary for each of platforms
-    ("linux64", the default; "win64", cross-compiled with zig: pip install ziglang)."""
+    ("linux64", the default; "win64" and "darwin64", the latter a universal binary for Intel
+    and Apple silicon Macs, cross-compiled with zig: pip install ziglang)."""
     if platforms is not None and not native:
         raise NativeBuildError("build_fmu: platforms are for native=True (the pythonfmu FMU "
                                "is built for this machine's platform only)")

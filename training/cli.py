@@ -533,8 +533,9 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
                    "importer (linux64 binary built here with gcc, sources included)")
-    s.add_argument("--platforms", type=_platform_list, metavar="linux64,win64",
-                   help="with --native: the binaries to put in (default linux64; win64 is "
+    s.add_argument("--platforms", type=_platform_list, metavar="linux64,win64,darwin64",
+                   help="with --native: the binaries to put in (default linux64; win64 and "
+                   "darwin64, a universal binary for Intel and Apple silicon Macs, are "
                    "cross-compiled with zig: pip install ziglang)")
     s.set_defaults(func=cmd_build_fmu)
 
