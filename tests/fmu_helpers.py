@@ -8,6 +8,7 @@ import subprocess
 import zipfile
 from pathlib import Path
 
+import numpy as np
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
@@ -40,6 +41,38 @@ def co_simulation_functions() -> set[str]:
 
     text = (fmi_headers() / "fmi2Functions.h").read_text()
     return set(re.findall(r"FMI2_Export\s+fmi2\w+TYPE\s+(fmi2\w+);", text)) - MODEL_EXCHANGE_ONLY
+
+
+def hostile_inputs(n: int, seed: int) -> tuple[list[str], list[str]]:
+    """n currents of a noisy square-and-sine drive (A) and measured voltages (V), a tenth of
+    each replaced by NaN, ±inf, ±1e308 or nonsense, as text for host.c."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n)
+    cur = (-2.0 * np.sin(t / 30.0) - 0.5 + rng.normal(0.0, 1.0, n)).astype(object)
+    volts = (3.3 + 0.2 * np.sin(t / 300.0)).astype(object)
+    cur[rng.choice(n, n // 10, replace=False)] = rng.choice(
+        ["nan", "inf", "-inf", "1e308", "-1e308", "0"], n // 10)
+    volts[rng.choice(n, n // 10, replace=False)] = rng.choice(["nan", "0.5", "4.9", "-1"], n // 10)
+    return [str(x) for x in cur], [str(x) for x in volts]
+
+
+def comparable(stdout: str) -> list[str]:
+    """host.c's output without its timing and its libpython probe (-1 on Windows)."""
+    lines = [ln for ln in stdout.splitlines() if not ln.startswith("us_per_step")]
+    return [re.sub(r" libpython -?\d$", "", ln) for ln in lines]
+
+
+def assert_same_run(got: str, expected: str, atol: float) -> None:
+    """host.c's output got equals expected: every message in order, the steps and refused
+    steps, and the final voltage, SoC and σ within atol (the C libraries' exp and log, and
+    the compilers' contraction of a·b + c, may differ in the last bits)."""
+    want, have = comparable(expected), comparable(got)
+    assert re.search(r"steps 3000 errors [1-9]\d+ voltage", want[-1]), want[-1]
+    assert any("the step was not taken" in ln for ln in want)   # refusals logged
+    assert have[:-1] == want[:-1]                                # every message, in order
+    numbers = [[float(x) for x in re.findall(r"-?\d[\d.e+-]*", ln)] for ln in (have[-1], want[-1])]
+    assert numbers[0][:2] == numbers[1][:2]                      # steps, refused steps
+    assert np.allclose(numbers[0][2:], numbers[1][2:], rtol=0.0, atol=atol), numbers
 
 
 def unzip_fmu(fmu: Path, d: Path) -> str:
