@@ -78,10 +78,10 @@ PLATFORMS = {"linux64": ".so", "win64": ".dll", "darwin64": ".dylib"}   # FMI 2.
 # on either kind of Mac look for it there.
 ZIG_TARGETS = {"win64": ("x86_64-windows-gnu",),
                "darwin64": ("x86_64-macos.11.0", "aarch64-macos.11.0")}
+# the macOS library's install name: its file name, not the build folder's path (reproducible)
+MACOS_LINK = [f"-Wl,-install_name,@rpath/{MODEL_IDENTIFIER}.dylib"]
 MACHO_MAGIC_64 = 0xFEEDFACF   # a thin 64-bit Mach-O binary (little-endian)
 FAT_MAGIC = 0xCAFEBABE        # a universal binary's header (big-endian)
-# the library's install name: its file name, not the build folder's path (reproducible builds)
-MACOS_LINK = [f"-Wl,-install_name,@rpath/{MODEL_IDENTIFIER}.dylib"]
 FAT_ALIGN = 14                # each slice at a 2**14-byte boundary (arm64's pages), as lipo puts it
 
 
