@@ -73,13 +73,14 @@ def shared_or_skip(rel: str = "") -> Path:
 @pytest.fixture(scope="session")
 def quick_model(tmp_path_factory) -> Path:
     """A small LMN trained on the shipped Panasonic HWFET and HPPC records (≤ 3 local models;
-    the HPPC rests pin down the OCV). The US06 record stays unseen."""
+    the HPPC rests pin down the OCV; Ts = 1 s, ten times fewer steps than the 0.1 s that
+    "auto" takes from these 10 Hz logs). The US06 record stays unseen."""
     from lmncell.identification.train import train_files
 
     out = tmp_path_factory.mktemp("model") / "pan.json"
     train_files([PAN_HWFET, PAN_HPPC], out, capacity_ah=2.85, soc0=1.0,
                 progress=lambda _m: None, max_local_models=3, oe_max_iterations=4,
-                hysteresis="off")
+                hysteresis="off", sample_time_s=1.0)
     return out
 
 
@@ -114,7 +115,7 @@ def fast_depletion_model(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("d2") / "d2.json"
     train_files([PAN_HWFET], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
                 max_local_models=3, oe_max_iterations=2, hysteresis="off",
-                depletion_fast_tau_s=5.0)
+                depletion_fast_tau_s=5.0, sample_time_s=1.0)   # the 1 s segments of the tests
     return out
 
 

@@ -1044,6 +1044,54 @@ def test_a_log_faster_or_slower_than_the_model_gets_a_note() -> None:
     assert round_step(0.101) == 0.1 and round_step(0.25) == 0.2 and round_step(0.02) == 0.02
 
 
+def test_sample_time_not_given_is_the_coarsest_log_within_a_tenth_and_one_second(
+        tmp_path) -> None:
+    """Without sample_time_s (or with "auto") training takes Ts from the records: the coarsest
+    record's logging interval, rounded down to 1, 2 or 5 × 10^k s, within 0.1…1 s; a setting
+    that does not fit that Ts is refused then, by name."""
+    from lmncell.config import sample_time_given
+    from lmncell.identification.train import auto_sample_time, with_records_sample_time
+
+    def logs(*steps: float) -> list[Record]:
+        return [_logged_every(step, f"log{k}.csv") for k, step in enumerate(steps)]
+
+    assert auto_sample_time(logs(0.1)) == 0.1                    # 10 Hz drive cycles
+    assert auto_sample_time(logs(0.1, 0.1001, 0.0999)) == 0.1
+    assert auto_sample_time(logs(0.1, 1.0)) == 1.0               # each record resolves a step
+    assert auto_sample_time(logs(0.01)) == 0.1                   # 100 Hz: no finer than 0.1 s
+    assert auto_sample_time(logs(10.0)) == 1.0                   # 10 s: no coarser than 1 s
+    assert auto_sample_time(logs(0.25)) == 0.2 and auto_sample_time(logs(0.5)) == 0.5
+    unknown = Record(np.arange(3.0), np.zeros(3), np.full(3, 3.3), RecordMeta("x.csv", "test"))
+    assert auto_sample_time([unknown]) == 1.0
+    toml = tmp_path / "c.toml"
+    toml.write_text("[train]\nsample_time_s = 0.5\n")
+    assert not sample_time_given() and not sample_time_given(sample_time_s="auto")
+    assert sample_time_given(sample_time_s=0.2) and sample_time_given(toml)
+    assert not sample_time_given(toml, sample_time_s="auto")     # overrides win, as in load_config
+    assert load_config(sample_time_s="auto").sample_time_s == 1.0
+    said: list[str] = []
+    fine = with_records_sample_time(load_config(), logs(0.1), said.append)
+    assert fine.sample_time_s == 0.1 and fine.filter_pairs()[:2] == [(0.01, 0.5), (0.5, 2.0)]
+    assert said[0].startswith("sample time Ts = 0.1 s: the records' logging interval")
+    with pytest.raises(ConfigError, match=r"'current_delay_s' = 0.5: expected 'auto' or 0 ≤ δ < "
+                                          r"sample_time_s = 0.1 s"):
+        with_records_sample_time(load_config(current_delay_s=0.5), logs(0.1), said.append)
+
+
+def test_training_takes_the_sample_time_of_a_10_hz_log_unless_given(tmp_path) -> None:
+    """lmncell.train on the shipped 10 Hz HWFET record makes a model of Ts = 0.1 s and says so;
+    given sample_time_s, the model has that."""
+    kw = {"capacity_ah": 2.85, "soc0": 1.0, "max_local_models": 1, "hysteresis": "off",
+          "oe_refinement": False}
+    said: list[str] = []
+    auto, _ = train_files([PAN_HWFET], tmp_path / "a.json", progress=said.append, **kw)
+    assert auto.sample_time_s == 0.1
+    assert any(m.startswith("sample time Ts = 0.1 s") for m in said)
+    given, _ = train_files([PAN_HWFET], tmp_path / "g.json", progress=said.append,
+                           sample_time_s=0.5, **kw)
+    assert given.sample_time_s == 0.5
+
+
 def test_hysteresis_terms_apply_where_the_model_has_temperature_terms_and_hysteresis() -> None:
     """The setting (default "constant") where the model has temperature terms and hysteresis;
     "arrhenius" needs an Arrhenius E too and otherwise says it has no effect; without

@@ -432,7 +432,7 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path, hysteresis,
     train_files([PAN_HWFET, PAN_HPPC], path, capacity_ah=2.85, soc0=1.0,
                 progress=lambda _m: None, max_local_models=2, oe_max_iterations=2,
                 hysteresis=hysteresis, temperature_terms=2, temperature_scaling=3000.0,
-                hysteresis_terms=hysteresis_terms)
+                hysteresis_terms=hysteresis_terms, sample_time_s=1.0)   # the 1 s segment below
     model = load_model(path)
     assert model.temperature_terms == 2 and "i(k)*dT^2" in model.columns()
     assert model.hysteresis_terms == hysteresis_terms
@@ -551,7 +551,7 @@ def test_native_ekf_with_the_filtered_current_in_the_partition_equals_the_runtim
     out = tmp_path / "fc.json"
     train_files([PAN_HWFET], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
                 partition=["soc", "filtered_current"], max_local_models=3, oe_max_iterations=2,
-                hysteresis="off")
+                hysteresis="off", sample_time_s=1.0)   # the 1 s segment below
     model = load_model(out)
     assert model.n_local_models > 1 and np.any(model.node_weights[:, 2] != 0.0)
     fmu = build_native_fmu(out, tmp_path / "fc.fmu")

@@ -177,9 +177,10 @@ def test_python_api_end_to_end(tmp_path) -> None:
     model = lmncell.train([PAN_US06], tmp_path / "m.json", capacity_ah=2.85,
                           progress=lambda _m: None, max_local_models=1, hysteresis="off")
     assert lmncell.load_model(tmp_path / "m.json").n_local_models == model.n_local_models
-    current = np.full(600, -2.85)                          # 1C discharge for 10 minutes
+    assert model.sample_time_s == 0.1                      # the 10 Hz record's interval
+    current = np.full(6000, -2.85)                         # 1C discharge for 10 minutes
     sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=1.0)
-    assert sim.voltage_v.shape == sim.soc.shape == (600,)
+    assert sim.voltage_v.shape == sim.soc.shape == (6000,)
     assert np.isclose(sim.soc[-1], 1.0 - 600 / 3600 * model.efficiency_discharge, atol=2e-3)
     assert np.all(np.diff(sim.voltage_v[5:]) < 1e-3)       # the voltage falls under load
     rows = lmncell.evaluate(model, [PAN_US06])

@@ -30,6 +30,7 @@ OCV_REFINE_LEVELS = 3      # ocv_refinement 'auto': on for records at this many 
 FILTER_CHAIN_S = (0.01, 5.0, 30.0, 150.0, 800.0, 3000.0)   # filters 'auto': the chain (s)
 SUB_SECOND_SPLITS_S = (0.5, 2.0)   # filters 'auto': its first element split here (s) where …
 SPLIT_MIN_SAMPLES = 5              # … the split lies at least this many samples Ts from 0
+AUTO_SAMPLE_TIME_S = (0.1, 1.0)    # Ts from the records: their logging interval within these (s)
 LOCAL_MODELS_PER_REGION = 8  # max_local_models 'auto': per temperature region (×2 with current)
 
 
@@ -78,7 +79,12 @@ class TrainConfig:
 
     Model structure
     sample_time_s: model sample time Ts (s); records are resampled to it (step means); at
-    least a tenth of each training record's logging interval (a finer Ts is refused).
+    least a tenth of each training record's logging interval (a finer Ts is refused). Not
+    given (or "auto"), `lmncell train` and lmncell.train take it from the records: their
+    logging interval within AUTO_SAMPLE_TIME_S, 0.1…1 s (lmncell.identification.train.
+    auto_sample_time; a 10 Hz log gives 0.1 s, a log of 1 s or slower 1 s), so that a host
+    stepping the FMU at Ts with each step's mean current gives it what the log resolves
+    (docs/settings.md); a configuration used on its own (train_lmn) keeps 1 s.
     current_delay_s: δ (s, 0 ≤ δ < Ts), the lag of the tester's voltage channel behind its
     current channel, which the model reproduces: the current enters δ late; "auto": estimated
     from the records (lmncell.data.lag; 0 for records sampled at Ts or slower).
@@ -487,17 +493,36 @@ def parse_setting(text: str) -> tuple[str, object]:
         return key, value.strip()
 
 
-def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
-    """Defaults, then the [train] table (or top level) of a TOML file, then overrides."""
+def sample_time_given(path: str | Path | None = None, **overrides) -> bool:
+    """Whether the settings (a TOML file's, then overrides, as load_config reads them) give
+    sample_time_s as a value, not leave it out or "auto" (then training takes it from the
+    records)."""
     values: dict = {}
     if path is not None:
-        path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except (OSError, tomllib.TOMLDecodeError) as exc:
-            raise ConfigError(f"{path}: cannot read the TOML configuration ({exc})") from exc
-        values.update(doc.get("train", doc))
+        values.update(_toml_table(Path(path)))
     values.update({k: v for k, v in overrides.items() if v is not None})
+    return values.get("sample_time_s", "auto") != "auto"
+
+
+def _toml_table(path: Path) -> dict:
+    """The [train] table (or the top level) of a TOML configuration file."""
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ConfigError(f"{path}: cannot read the TOML configuration ({exc})") from exc
+    return doc.get("train", doc)
+
+
+def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
+    """Defaults, then the [train] table (or top level) of a TOML file, then overrides;
+    sample_time_s "auto" is left at its default (training takes it from the records where
+    sample_time_given says so)."""
+    values: dict = {}
+    if path is not None:
+        values.update(_toml_table(Path(path)))
+    values.update({k: v for k, v in overrides.items() if v is not None})
+    if values.get("sample_time_s") == "auto":    # from the records: sample_time_given
+        del values["sample_time_s"]
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     unknown = sorted(set(values) - names)
     if unknown:

@@ -4,6 +4,7 @@ The library function behind `lmncell train` and `lmncell.train`."""
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 import platform
 import time
@@ -13,7 +14,14 @@ from typing import Any
 
 import numpy as np
 from lmncell import __version__
-from lmncell.config import ConfigError, TrainConfig, load_config, output_file_problem
+from lmncell.config import (
+    AUTO_SAMPLE_TIME_S,
+    ConfigError,
+    TrainConfig,
+    load_config,
+    output_file_problem,
+    sample_time_given,
+)
 from lmncell.data.dataset import (
     FAST_LOG_RATIO,
     Segment,
@@ -182,6 +190,29 @@ def sampling_note(records: list[Record], sample_time_s: float) -> str | None:
             "model steps, so the model learns nothing of what the cell does between samples "
             "(its fast time constants rest on the faster records alone, or on none)")
     return "\n".join(notes) or None
+
+
+def auto_sample_time(records: list[Record]) -> float:
+    """Ts (s) where sample_time_s is not given: the coarsest record's logging interval (its median
+    sample step, meta.sample_time_s) rounded down to 1, 2 or 5 × 10^k s (round_step) and held
+    within AUTO_SAMPLE_TIME_S, so that every record resolves each step; the largest of that
+    range where no record says its interval."""
+    low, high = AUTO_SAMPLE_TIME_S
+    logged = [r.meta.sample_time_s for r in records if math.isfinite(r.meta.sample_time_s)
+              and r.meta.sample_time_s > 0]
+    return min(max(round_step(max(logged)), low), high) if logged else high
+
+
+def with_records_sample_time(cfg: TrainConfig, records: list[Record],
+                             progress: Progress = _print) -> TrainConfig:
+    """cfg with Ts taken from the records (auto_sample_time), said; checked again, so that a
+    setting that does not fit that Ts (a current delay of at least Ts, say) is refused by name."""
+    ts = auto_sample_time(records)
+    progress(f"sample time Ts = {ts:g} s: the records' logging interval within "
+             f"{AUTO_SAMPLE_TIME_S[0]:g}…{AUTO_SAMPLE_TIME_S[1]:g} s (sample_time_s not given; "
+             "a host stepping the FMU at Ts with each step's mean current then gives it what "
+             "the log resolves)")
+    return dataclasses.replace(cfg, sample_time_s=ts).check()
 
 
 def round_step(interval_s: float) -> float:
@@ -354,11 +385,14 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
     cfg = load_config(config, partition=partition, **overrides)
+    ts_from_records = not sample_time_given(config, **overrides)
     check_given_capacity(capacity_ah)
     problem = output_file_problem(out)
     if problem:
         raise ConfigError(f"{out}: {problem}")
     records = read_training_records(paths, cfg, progress, read_options)
+    if ts_from_records:
+        cfg = with_records_sample_time(cfg, records, progress)
     check_full_starts(records, soc0, cfg, progress)
     note = sampling_note(records, cfg.sample_time_s)
     if note:
