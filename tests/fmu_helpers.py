@@ -75,6 +75,17 @@ def assert_same_run(got: str, expected: str, atol: float) -> None:
     assert np.allclose(numbers[0][2:], numbers[1][2:], rtol=0.0, atol=atol), numbers
 
 
+def cross_built_fmu(model: Path, folder: Path, platform: str) -> Path:
+    """The model's native FMU with linux64 and `platform` binaries (the latter cross-compiled
+    with zig), in folder; skip without gcc."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    import lmncell
+
+    return lmncell.build_fmu(model, folder / "cell.fmu", native=True,
+                             platforms=("linux64", platform))
+
+
 def unzip_fmu(fmu: Path, d: Path) -> str:
     """Extract an FMU into d; returns its GUID."""
     with zipfile.ZipFile(fmu) as z:

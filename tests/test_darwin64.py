@@ -25,6 +25,7 @@ from tests.fmu_helpers import (
     assert_same_run,
     co_simulation_functions,
     compile_host,
+    cross_built_fmu,
     hostile_inputs,
     unzip_fmu,
 )
@@ -128,12 +129,7 @@ def signed_pages_match(data: bytes, signature: tuple[int, int]) -> bool:
 @pytest.fixture(scope="module")
 def mac_fmu(quick_model, tmp_path_factory) -> Path:
     """The quick model's native FMU with linux64 and darwin64 binaries."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    import lmncell
-
-    return lmncell.build_fmu(quick_model, tmp_path_factory.mktemp("darwin64") / "cell.fmu",
-                             native=True, platforms=("linux64", "darwin64"))
+    return cross_built_fmu(quick_model, tmp_path_factory.mktemp("darwin64"), "darwin64")
 
 
 def test_the_darwin64_binary_is_a_universal_macos_library_with_the_whole_fmi_api(mac_fmu
