@@ -62,6 +62,21 @@ def comparable(stdout: str) -> list[str]:
     return [re.sub(r" libpython -?\d$", "", ln) for ln in lines]
 
 
+def linux64_reference_run(d: Path, guid: str, observer: int, resource_uri: str
+                          ) -> tuple[list[str], subprocess.CompletedProcess]:
+    """host.c's arguments for 3000 hostile steps (hostile_inputs, written into d) with an
+    observer, and the run of d/host (host.c built for Linux) on d/fmu's linux64 binary with
+    them: what another platform's build of the same C is compared with (assert_same_run)."""
+    cur, volts = hostile_inputs(3000, observer)
+    (d / f"c{observer}.txt").write_text("\n".join(cur))
+    (d / f"v{observer}.txt").write_text("\n".join(volts))
+    args = [resource_uri, guid, f"c{observer}.txt", "1.0", "0.9", str(observer),
+            f"v{observer}.txt"]
+    linux = subprocess.run([str(d / "host"), "fmu/binaries/linux64/LMNCell.so", *args],
+                           cwd=d, capture_output=True, text=True, timeout=300)
+    return args, linux
+
+
 def assert_same_run(got: str, expected: str, atol: float) -> None:
     """host.c's output got equals expected: every message in order, the steps and refused
     steps, and the final voltage, SoC and σ within atol (the C libraries' exp and log, and

@@ -26,7 +26,7 @@ from tests.fmu_helpers import (
     co_simulation_functions,
     compile_host,
     cross_built_fmu,
-    hostile_inputs,
+    linux64_reference_run,
     unzip_fmu,
 )
 
@@ -217,13 +217,7 @@ def test_under_qemu_the_arm64_build_runs_as_the_linux64_one(arm64_hosts, observe
     1e-10 (clang's contraction of a·b + c into one rounding and musl's exp move the last bits;
     the IMM's σ after 3000 such steps by 1e-11, as much between gcc and clang on x86-64)."""
     d, guid = arm64_hosts
-    cur, volts = hostile_inputs(3000, observer)
-    (d / f"c{observer}.txt").write_text("\n".join(cur))
-    (d / f"v{observer}.txt").write_text("\n".join(volts))
-    args = ["file:///x/", guid, f"c{observer}.txt", "1.0", "0.9", str(observer),
-            f"v{observer}.txt"]
-    linux = subprocess.run([str(d / "host"), "fmu/binaries/linux64/LMNCell.so", *args],
-                           cwd=d, capture_output=True, text=True, timeout=300)
+    args, linux = linux64_reference_run(d, guid, observer, "file:///x/")
     arm64 = subprocess.run(["qemu-aarch64", str(d / "host_arm64"), "(linked in)", *args],
                            cwd=d, capture_output=True, text=True, timeout=600)
     assert linux.returncode == 0 and arm64.returncode == 0, arm64.stderr[-2000:]

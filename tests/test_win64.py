@@ -23,7 +23,7 @@ from tests.fmu_helpers import (
     co_simulation_functions,
     compile_host,
     cross_built_fmu,
-    hostile_inputs,
+    linux64_reference_run,
     unzip_fmu,
 )
 
@@ -112,13 +112,7 @@ def test_under_wine_the_win64_binary_runs_as_the_linux64_one(hosts, observer) ->
     inputs (each observer in turn): every logged message, the refused steps and the final
     voltage, SoC and σ equal the linux64 binary's driven by host.c built for Linux."""
     d, guid = hosts
-    cur, volts = hostile_inputs(3000, observer)
-    (d / f"c{observer}.txt").write_text("\n".join(cur))
-    (d / f"v{observer}.txt").write_text("\n".join(volts))
-    args = ["file:///C:/", guid, f"c{observer}.txt", "1.0", "0.9", str(observer),
-            f"v{observer}.txt"]
-    linux = subprocess.run([str(d / "host"), "fmu/binaries/linux64/LMNCell.so", *args],
-                           cwd=d, capture_output=True, text=True, timeout=300)
+    args, linux = linux64_reference_run(d, guid, observer, "file:///C:/")
     windows = subprocess.run(["wine", "host.exe", "fmu/binaries/win64/LMNCell.dll", *args],
                              cwd=d, capture_output=True, text=True, timeout=600,
                              env=_wine_env(d))
