@@ -497,11 +497,16 @@ def sample_time_given(path: str | Path | None = None, **overrides) -> bool:
     """Whether the settings (a TOML file's, then overrides, as load_config reads them) give
     sample_time_s as a value, not leave it out or "auto" (then training takes it from the
     records)."""
+    return _given_values(path, overrides).get("sample_time_s", "auto") != "auto"
+
+
+def _given_values(path: str | Path | None, overrides: dict) -> dict:
+    """The settings given: the TOML file's table, then the overrides that are not None."""
     values: dict = {}
     if path is not None:
         values.update(_toml_table(Path(path)))
     values.update({k: v for k, v in overrides.items() if v is not None})
-    return values.get("sample_time_s", "auto") != "auto"
+    return values
 
 
 def _toml_table(path: Path) -> dict:
@@ -517,10 +522,7 @@ def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
     """Defaults, then the [train] table (or top level) of a TOML file, then overrides;
     sample_time_s "auto" is left at its default (training takes it from the records where
     sample_time_given says so)."""
-    values: dict = {}
-    if path is not None:
-        values.update(_toml_table(Path(path)))
-    values.update({k: v for k, v in overrides.items() if v is not None})
+    values = _given_values(path, overrides)
     if values.get("sample_time_s") == "auto":    # from the records: sample_time_given
         del values["sample_time_s"]
     names = {f.name for f in dataclasses.fields(TrainConfig)}
