@@ -742,6 +742,8 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
     ("Time", lambda a: np.where(np.arange(a.size).reshape(a.shape) == 7, np.nan, a),
      "field 'Time' holds 1 NaN or infinite value.*, the first at sample 8"),
     ("TimeStamp", lambda a: a[:3], "field 'TimeStamp' holds 3 value.* for 4000 times"),
+    ("Chamber_Temp_degC", lambda a: a + 273.15,
+     r"column 'Chamber_Temp_degC' \(ambient_c\) is 298.15 °C at sample 0 \(4000 sample"),
     ("TimeStamp", lambda a: np.array([["not a time"]] * a.size, dtype=object),
      "field 'TimeStamp': .*expected wall-clock times"),
 ])
@@ -755,6 +757,38 @@ def test_a_panasonic_file_with_a_broken_field_is_named(tmp_path, field, edit, me
     scipy.io.savemat(str(path), {"meas": fields})
     with pytest.raises(DataError, match=rf"broken_Pan18650PF.mat: {message}"):
         read_record(path)
+
+
+def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
+    """The Panasonic chamber temperature as logged (Chamber_Temp_degC) rides with the record;
+    a segment carries it per step where it varies (the 25 °C Cycle 1 record: 23 … 25 °C in its
+    first half hour), and evaluation's ambient runs then take it; a constant log, as in the
+    shipped records, leaves the set point. A chamber column with a gap is not used per step."""
+    from lmncell.data.dataset import record_to_segments
+    from lmncell.evaluation.evaluate import ambient_of
+
+    meas = scipy.io.loadmat(str(PAN_US06))["meas"][0, 0]
+    fields = {k: np.asarray(meas[k])[:4000] for k in meas.dtype.names}
+    constant = read_record(PAN_US06)
+    assert constant.ambient_c is not None and np.ptp(constant.ambient_c) == 0.0
+    (seg,) = record_to_segments(constant.slice(0, 4000), 0.1, 1.0, 2.85)
+    assert seg.ambient_trace_c is None and np.all(ambient_of(seg) == 25.0)
+    settling = np.linspace(23.0, 25.0, 4000).reshape(fields["Chamber_Temp_degC"].shape)
+    fields["Chamber_Temp_degC"] = settling
+    path = tmp_path / "settling_Pan18650PF.mat"
+    scipy.io.savemat(str(path), {"meas": fields})
+    rec = read_record(path)
+    assert rec.ambient_c == pytest.approx(settling.ravel())
+    assert rec.meta.chamber_temp_c == pytest.approx(24.0, abs=1e-3)
+    (seg,) = record_to_segments(rec, 0.1, 1.0, 2.85)
+    assert seg.ambient_trace_c is not None and len(seg.ambient_trace_c) == len(seg)
+    assert ambient_of(seg) == pytest.approx(np.interp(seg.time_s - 0.05, rec.time_s,
+                                                      rec.ambient_c), abs=2e-3)
+    fields["Chamber_Temp_degC"] = np.where(np.arange(4000).reshape(settling.shape) == 9,
+                                           np.nan, settling)
+    scipy.io.savemat(str(path), {"meas": fields})
+    gap = read_record(path)
+    assert gap.ambient_c is None and gap.meta.chamber_temp_c == pytest.approx(24.0, abs=1e-3)
 
 
 def test_a_one_sample_panasonic_file_is_inspected_not_refused(tmp_path, capsys) -> None:

@@ -53,6 +53,42 @@ def test_identification_recovers_known_parameters() -> None:
     assert info["at_bound"] == []
 
 
+def test_identification_follows_a_chamber_that_is_still_settling() -> None:
+    """A record whose chamber warms from 22 to 25 °C over its first half hour (the Panasonic
+    25 °C Cycle 1): fitted with the logged ambient per step the parameters come back; taken
+    at its set point throughout, the chamber's warm-up is read as the cell's own heating and
+    they do not."""
+    rng = np.random.default_rng(11)
+    n = 6000
+    ambient = 25.0 - 3.0 * np.exp(-np.arange(n) / 600.0)
+    seg = _synthetic_segment(rng, n, 25.0, 22.0)
+    heat = seg.current_a * (seg.voltage_v - (3.0 + 1.2 * seg.soc_ref))
+    temp = predicted_temperature(TRUE, heat, ambient, 22.0, 1.0)
+    seg = dataclasses.replace(seg, temperature_c=np.round(temp + rng.normal(0, 0.05, n), 1),
+                              ambient_trace_c=ambient)
+    steady = _synthetic_segment(rng, 5000, 10.0, 10.6)
+    fitted, info = fit_thermal(_ocv_model(), [seg, steady])
+    assert fitted is not None and info["rmse_k"] < 0.08
+    assert fitted.resistance_k_per_w == pytest.approx(TRUE.resistance_k_per_w, rel=0.03)
+    assert fitted.time_constant_s == pytest.approx(TRUE.time_constant_s, rel=0.05)
+    blind, blind_info = fit_thermal(_ocv_model(), [dataclasses.replace(seg, ambient_trace_c=None),
+                                                   steady])
+    assert blind is not None and blind_info["rmse_k"] > 2 * info["rmse_k"]
+    assert abs(blind.time_constant_s / TRUE.time_constant_s - 1) > 0.1
+
+
+def test_a_varying_ambient_steps_as_the_runtime_does() -> None:
+    # the fit's prediction with an ambient per step is the runtime's recursion
+    rng = np.random.default_rng(5)
+    heat, ambient = rng.uniform(0, 2, 300), 20.0 + rng.uniform(0, 5, 300)
+    predicted = predicted_temperature(TRUE, heat, ambient, 21.0, 0.1)
+    t, stepped = 21.0, [21.0]
+    for q, ta in zip(heat[:-1], ambient[:-1], strict=True):
+        t = next_temperature(TRUE, t, ta, q, 0.1)
+        stepped.append(t)
+    assert predicted == pytest.approx(stepped, abs=1e-10)
+
+
 def test_parameters_on_a_bound_are_named() -> None:
     from lmncell.identification.thermal import parameters_at_bound
 

@@ -24,7 +24,9 @@ class Segment:
     the first step; temperature_c in °C (None if unknown); weight the fit weight of each sample
     (SoC window, record weight and, in training, the SoC-reference weight); record_weight the
     weight of the record it belongs to alone; ambient_c the chamber (ambient) temperature in °C
-    where the record has a measured cell temperature beside it (else None); temperature_kind
+    where the record has a measured cell temperature beside it (else None), and ambient_trace_c
+    that temperature per step where the record logs it and it varies over the segment (a
+    chamber still settling; else None: ambient_c throughout); temperature_kind
     what temperature_c is: "measured" (the record's cell temperature), "chamber" (the chamber
     set point, where the record has no cell temperature) or "none" (temperature_c None).
     """
@@ -40,6 +42,7 @@ class Segment:
     record_weight: float = 1.0
     ambient_c: float | None = None
     temperature_kind: str = "measured"
+    ambient_trace_c: np.ndarray | None = None
 
     def __len__(self) -> int:
         return int(self.time_s.size)
@@ -226,7 +229,9 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
                                   float(present(part.soc_ref, "the record's SoC")[0]), soc, w,
                                   ambient_c=ambient,
-                                  temperature_kind=kind)))
+                                  temperature_kind=kind,
+                                  ambient_trace_c=_varying(part.ambient_c, rs.ambient_c,
+                                                           ambient))))
     if not out:
         longest = max((part.duration_s for part in rec.segments()), default=0.0)
         raise DataError(f"{rec.meta.source}: no segment is long enough for the model sample "
@@ -234,6 +239,16 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
                         f"at least {MIN_SEGMENT_STEPS * sample_time_s:g} s ({MIN_SEGMENT_STEPS} "
                         "model steps)")
     return out
+
+
+def _varying(logged: np.ndarray | None, steps: np.ndarray | None, ambient_c: float | None
+             ) -> np.ndarray | None:
+    """A segment's ambient temperature per step (steps, the step means of the logged samples)
+    where it has a set point beside a measured cell temperature and the logged samples vary,
+    else None."""
+    if logged is None or steps is None or ambient_c is None or float(np.ptp(logged)) == 0.0:
+        return None
+    return steps
 
 
 def file_sha256(path: str | Path) -> str:

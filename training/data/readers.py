@@ -495,12 +495,16 @@ def read_panasonic(path: Path) -> Record:
                  file_columns={"time_s": "Time", "current_a": "Current", "voltage_v": "Voltage",
                                "temperature_c": "Battery_Temp_degC", "charge_ah": "Ah"},
                  time_origin_s=float(t[0]) if t.size else 0.0)
+    ambient = None
     if "Chamber_Temp_degC" in fields:
         chamber = field_("Chamber_Temp_degC")
         if np.isfinite(chamber).any():
             meta.chamber_temp_c = float(np.nanmedian(chamber))
+        if temp is not None and np.isfinite(chamber).all():
+            ambient = chamber        # the chamber as logged beside the cell: the thermal
+            meta.file_columns["ambient_c"] = "Chamber_Temp_degC"   # model's ambient
     return Record(t - t[0], field_("Current"), field_("Voltage"), meta, temperature_c=temp,
-                  charge_ah=field_("Ah"))
+                  charge_ah=field_("Ah"), ambient_c=ambient)
 
 
 def read_bdf(path: Path) -> Record:

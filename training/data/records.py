@@ -58,7 +58,9 @@ class Record:
     """One measured time series.
 
     time_s: s, strictly increasing. current_a: A, > 0 charges. voltage_v: terminal voltage, V.
-    temperature_c: measured cell temperature in °C, or None. soc_ref: SoC reference (0…1) or None.
+    temperature_c: measured cell temperature in °C, or None. ambient_c: the ambient (chamber)
+    temperature logged beside it in °C, or None (meta.chamber_temp_c then the set point alone).
+    soc_ref: SoC reference (0…1) or None.
     charge_ah: net charge into the cell since the record start from the tester's counters (Ah,
     > 0 charged), or None. meta.segment_starts: indices where a new segment begins after a gap or
     a pause hidden in the time column (the cell state carries over, the lag buffers do not);
@@ -72,6 +74,7 @@ class Record:
     temperature_c: np.ndarray | None = None
     soc_ref: np.ndarray | None = None
     charge_ah: np.ndarray | None = None
+    ambient_c: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         validate_record(self)
@@ -111,7 +114,7 @@ class Record:
             first_line=None if self.meta.first_line is None else self.meta.first_line + start)
         return Record(self.time_s[start:stop].copy(), self.current_a[start:stop].copy(),
                       self.voltage_v[start:stop].copy(), meta, cut(self.temperature_c),
-                      cut(self.soc_ref), cut(self.charge_ah))
+                      cut(self.soc_ref), cut(self.charge_ah), cut(self.ambient_c))
 
     def segments(self) -> list[Record]:
         """The record split where meta.segment_starts marks a gap or a hidden pause."""
@@ -196,7 +199,8 @@ def validate_record(rec: Record) -> None:
     n = rec.time_s.size
     if n == 0:
         raise DataError(f"{src}: the record is empty (no samples)")
-    for name in ("time_s", "current_a", "voltage_v", "temperature_c", "soc_ref", "charge_ah"):
+    for name in ("time_s", "current_a", "voltage_v", "temperature_c", "soc_ref", "charge_ah",
+                 "ambient_c"):
         arr = getattr(rec, name)
         if arr is None:
             continue
@@ -222,6 +226,9 @@ def validate_record(rec: Record) -> None:
         _check_range("temperature_c", rec.temperature_c, CELL_TEMPERATURE_RANGE_C, "°C",
                      "a cell temperature in °C (a column in K: --temperature-unit K, "
                      "temperature_unit='K')", rec.meta)
+    if rec.ambient_c is not None:
+        _check_range("ambient_c", rec.ambient_c, CELL_TEMPERATURE_RANGE_C, "°C",
+                     "an ambient (chamber) temperature in °C", rec.meta)
     if rec.soc_ref is not None:
         outside = soc_outside(rec.soc_ref)
         if outside.size:

@@ -58,7 +58,7 @@ def resample_segment(rec: Record, sample_time_s: float, current_delay_s: float =
     current = _step_means(t, rec.current_a, grid, ts, current_delay_s)
     return Record(grid, current, _step_means(t, rec.voltage_v, grid, ts), meta,
                   temperature_c=mean(rec.temperature_c), soc_ref=at(rec.soc_ref),
-                  charge_ah=at(rec.charge_ah))
+                  charge_ah=at(rec.charge_ah), ambient_c=mean(rec.ambient_c))
 
 
 def resample(rec: Record, sample_time_s: float, current_delay_s: float = 0.0) -> list[Record]:

@@ -59,8 +59,11 @@ def baseline_voltage(kind: str, doc: dict, seg: Segment, soc: np.ndarray) -> np.
 
 def ambient_of(seg: Segment) -> np.ndarray:
     """The ambient temperature a vehicle simulation would give for a segment (°C per step):
-    the chamber temperature where the record has a measured cell temperature beside it, else
-    the record's own (chamber) temperature, else 25 °C."""
+    the chamber temperature where the record has a measured cell temperature beside it (as the
+    record logs it where that varies, else its set point), else the record's own (chamber)
+    temperature, else 25 °C."""
+    if seg.ambient_trace_c is not None:
+        return np.array(seg.ambient_trace_c, dtype=float)
     if seg.ambient_c is not None:
         return np.full(len(seg), float(seg.ambient_c))
     return np.asarray(seg.temperatures(), dtype=float)

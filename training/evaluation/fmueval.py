@@ -344,7 +344,8 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     its start estimate. The FMU applies its model's current delay itself, so its voltage is the
     pipeline's (evaluate MODEL.json)."""
     n, ts = len(seg), info.step_s
-    temperature = (np.full(len(part), float(ambient_of(seg)[0])) if ambient
+    temperature = ((part.ambient_c if seg.ambient_trace_c is not None
+                    else np.full(len(part), float(ambient_of(seg)[0]))) if ambient
                    else part.temperature_or_chamber())
     if temperature is None:
         temperature = np.full(len(part), DEFAULT_TEMPERATURE_C)
