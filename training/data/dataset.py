@@ -54,6 +54,12 @@ class Segment:
             return np.full(len(self), DEFAULT_TEMPERATURE_C)
         return self.temperature_c
 
+    def ambient_temperature(self) -> float | np.ndarray | None:
+        """The ambient (chamber) temperature beside the measured cell temperature (°C): per
+        step where the record logs it varying (ambient_trace_c), else the set point
+        (ambient_c; None where the segment has none)."""
+        return self.ambient_trace_c if self.ambient_trace_c is not None else self.ambient_c
+
     def start_temperature(self) -> float:
         """The temperature at the segment's first step (°C), or DEFAULT_TEMPERATURE_C where
         the segment has none."""

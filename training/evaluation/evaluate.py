@@ -62,10 +62,9 @@ def ambient_of(seg: Segment) -> np.ndarray:
     the chamber temperature where the record has a measured cell temperature beside it (as the
     record logs it where that varies, else its set point), else the record's own (chamber)
     temperature, else 25 °C."""
-    if seg.ambient_trace_c is not None:
-        return np.array(seg.ambient_trace_c, dtype=float)
-    if seg.ambient_c is not None:
-        return np.full(len(seg), float(seg.ambient_c))
+    ambient = seg.ambient_temperature()
+    if ambient is not None:
+        return np.array(np.broadcast_to(ambient, len(seg)), dtype=float)
     return np.asarray(seg.temperatures(), dtype=float)
 
 

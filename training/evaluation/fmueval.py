@@ -332,6 +332,14 @@ class _Slave:
             self._log.__exit__(None, None, None)
 
 
+def ambient_at_samples(part: Record, seg: Segment) -> np.ndarray:
+    """The ambient temperature at each of the part's own samples (°C): as the record logs it
+    where the segment follows it (Segment.ambient_trace_c), else the segment's (ambient_of)."""
+    if seg.ambient_trace_c is not None and part.ambient_c is not None:
+        return part.ambient_c
+    return np.full(len(part), float(ambient_of(seg)[0]))
+
+
 def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
                      ambient: bool, observer: int = 0, start_step: int = 0,
                      soc0: float | None = None) -> FmuRun:
@@ -344,9 +352,7 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     its start estimate. The FMU applies its model's current delay itself, so its voltage is the
     pipeline's (evaluate MODEL.json)."""
     n, ts = len(seg), info.step_s
-    temperature = ((part.ambient_c if seg.ambient_trace_c is not None
-                    else np.full(len(part), float(ambient_of(seg)[0]))) if ambient
-                   else part.temperature_or_chamber())
+    temperature = ambient_at_samples(part, seg) if ambient else part.temperature_or_chamber()
     if temperature is None:
         temperature = np.full(len(part), DEFAULT_TEMPERATURE_C)
     start_s = start_step * ts

@@ -28,24 +28,8 @@ MIN_RISE_K = 1.0      # records whose temperature rises less above ambient say n
 def predicted_temperature(params: ThermalModel, heat: np.ndarray, ambient_c: float | np.ndarray,
                           start_c: float, ts: float) -> np.ndarray:
     """T(k−1) for k = 0…n−1 (the temperature each step is taken at), from T(−1) = start_c; the
-    ambient one temperature or one per step (as lmncell.runtime.thermal.next_temperature
-    takes step k's)."""
-    if np.ndim(ambient_c):
-        return _predicted_with_ambient_trace(params, heat, np.asarray(ambient_c, dtype=float),
-                                             start_c, ts)
-    a = np.exp(-ts / params.time_constant_s)
-    rest = rested_temperature(params, ambient_c)
-    b = params.resistance_k_per_w * (1.0 - a)
-    # x(k) = a·x(k−1) + b·q(k), x = T − rest, x(−1) = start − rest
-    x, _ = lfilter([b], [1.0, -a], heat, zi=[a * (start_c - rest)])
-    return rest + np.concatenate([[start_c - rest], x[:-1]])
-
-
-def _predicted_with_ambient_trace(params: ThermalModel, heat: np.ndarray,
-                                  ambient_c: np.ndarray, start_c: float, ts: float
-                                  ) -> np.ndarray:
-    """predicted_temperature with an ambient temperature per step: T(k) = a·T(k−1) +
-    (1 − a)·(T_amb(k) + offset) + R·(1 − a)·q(k)."""
+    ambient one temperature or one per step, step k's as lmncell.runtime.thermal.
+    next_temperature takes it: T(k) = a·T(k−1) + (1 − a)·(T_amb(k) + offset) + R·(1 − a)·q(k)."""
     a = np.exp(-ts / params.time_constant_s)
     drive = (1.0 - a) * (rested_temperature(params, ambient_c)
                          + params.resistance_k_per_w * heat)
@@ -61,13 +45,14 @@ def step_heat(model: LmnModel, seg: Segment) -> np.ndarray:
 def fit_thermal(model: LmnModel, segs: list[Segment]) -> tuple[ThermalModel | None, dict]:
     """The thermal model and a summary (RMSE in K, the segments used), or None and the reason."""
     usable = [s for s in segs if s.ambient_c is not None and s.temperature_c is not None
-              and float(np.max(s.temperature_c - ambient_of_segment(s))) >= MIN_RISE_K]
+              and float(np.max(s.temperature_c - s.ambient_temperature())) >= MIN_RISE_K]
     if not usable:
         return None, {"used": False, "reason": "no record has a measured cell temperature that "
                       f"rises {MIN_RISE_K} K above a known ambient temperature"}
     ts = model.sample_time_s
     heats = [step_heat(model, s) for s in usable]
-    measured = [(ambient_of_segment(s), present(s.temperature_c, "cell temperature"))
+    measured = [(present(s.ambient_temperature(), "ambient"),
+                 present(s.temperature_c, "cell temperature"))
                 for s in usable]
 
     def unpack(x: np.ndarray) -> ThermalModel:
@@ -88,13 +73,6 @@ def fit_thermal(model: LmnModel, segs: list[Segment]) -> tuple[ThermalModel | No
     return params, {"used": True, "rmse_k": rmse, "segments": [s.name for s in usable],
                     "heat_capacity_j_per_k": params.heat_capacity_j_per_k,
                     "at_bound": parameters_at_bound(sol.x, lower, upper)}
-
-
-def ambient_of_segment(s: Segment) -> float | np.ndarray:
-    """A segment's ambient temperature (°C): its logged trace where that varies, else its set
-    point."""
-    return s.ambient_trace_c if s.ambient_trace_c is not None else present(s.ambient_c,
-                                                                            "ambient")
 
 
 THERMAL_PARAMETERS = ("resistance_k_per_w", "time_constant_s", "offset_k")
