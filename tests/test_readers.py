@@ -86,8 +86,10 @@ def test_bdf_round_trip_is_identical(tmp_path) -> None:
     path = write_bdf(rec, tmp_path / "r.bdf.csv")
     back = read_record(path)
     assert back.meta.fmt == "bdf"
-    for name in ("time_s", "current_a", "voltage_v", "temperature_c", "charge_ah", "soc_ref"):
+    for name in ("time_s", "current_a", "voltage_v", "temperature_c", "charge_ah", "soc_ref",
+                 "ambient_c"):
         assert np.array_equal(getattr(rec, name), getattr(back, name)), name
+    assert back.meta.chamber_temp_c == rec.meta.chamber_temp_c == 25.0
 
 
 def test_a_bdf_temperature_read_every_few_rows_holds_each_reading(tmp_path) -> None:
@@ -98,9 +100,9 @@ def test_a_bdf_temperature_read_every_few_rows_holds_each_reading(tmp_path) -> N
     lines = path.read_text().splitlines()
     j = lines[0].split(",").index("Temperature T1 / degC")
 
-    def blank(k: int, cell: str = "") -> None:
+    def blank(k: int, cell: str = "", column: int = j) -> None:
         cells = lines[k].split(",")
-        cells[j] = cell
+        cells[column] = cell
         lines[k] = ",".join(cells)
 
     readings = {k: float(lines[k].split(",")[j]) for k in range(1, len(lines))}
@@ -115,14 +117,15 @@ def test_a_bdf_temperature_read_every_few_rows_holds_each_reading(tmp_path) -> N
     path.write_text("\n".join(lines) + "\n")
     with pytest.raises(DataError, match="NaN or infinite value"):
         read_record(path)
-    # a blank chamber column beside the cell's, which the record does not take, stays unread
-    lines = path.read_text().splitlines()
-    lines[0] += ",Ambient Temperature / degC"
-    lines[1:] = [ln + "," for ln in lines[1:]]
+    # the chamber column beside the cell's, read once at row 10: that reading held throughout
     blank(10, repr(readings[10]))
+    chamber = lines[0].split(",").index("Ambient Temperature / degC")
+    for k in range(1, len(lines)):
+        blank(k, "24.5" if k == 10 else "", chamber)
     path.write_text("\n".join(lines) + "\n")
-    assert read_record(path).temperature_c.tolist() == [readings[1 + 10 * (n // 10)]
-                                                        for n in range(300)]
+    rec = read_record(path)
+    assert rec.temperature_c.tolist() == [readings[1 + 10 * (n // 10)] for n in range(300)]
+    assert rec.ambient_c.tolist() == [24.5] * 300 and rec.meta.chamber_temp_c == 24.5
 
 
 def test_generic_csv_with_mapping_and_sign(tmp_path) -> None:
@@ -784,6 +787,15 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     assert seg.ambient_trace_c is not None and len(seg.ambient_trace_c) == len(seg)
     assert ambient_of(seg) == pytest.approx(np.interp(seg.time_s - 0.05, rec.time_s,
                                                       rec.ambient_c), abs=2e-3)
+    # the same record as Battery Data Format: its Ambient Temperature column is that ambient
+    bdf = read_record(write_bdf(rec, tmp_path / "settling.bdf.csv"))
+    assert bdf.meta.file_columns["ambient_c"] == "Ambient Temperature / degC"
+    (same,) = record_to_segments(bdf, 0.1, 1.0, 2.85)
+    assert np.array_equal(same.ambient_trace_c, seg.ambient_trace_c)
+    assert same.ambient_c == seg.ambient_c
+    rec.ambient_c = rec.ambient_c + 273.15
+    with pytest.raises(DataError, match=r"'Ambient Temperature / degC'.*296\.15.*°C"):
+        read_record(write_bdf(rec, tmp_path / "kelvin.bdf.csv"))
     fields["Chamber_Temp_degC"] = np.where(np.arange(4000).reshape(settling.shape) == 9,
                                            np.nan, settling)
     scipy.io.savemat(str(path), {"meas": fields})

@@ -510,22 +510,29 @@ def read_panasonic(path: Path) -> Record:
 def read_bdf(path: Path) -> Record:
     """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …). A
     temperature column read every few rows, blank between readings, holds each reading until
-    the next (noted), as the generic reader's does."""
+    the next (noted), as the generic reader's does. The cell's temperature is ``Temperature
+    T1 / degC``, else the chamber's; beside T1, ``Ambient Temperature / degC`` is the record's
+    ambient (Record.ambient_c: the thermal model's, per step where it varies)."""
     cols = _read_csv_columns(path, keep_text={BDF_T1, BDF_AMBIENT})
     _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
     t = cols[BDF_TIME]
     temp_col = BDF_T1 if BDF_T1 in cols else BDF_AMBIENT   # the cell's, else the chamber's
     temp, notes = _held_readings(cols, temp_col, path) if temp_col in cols else (None, [])
-    return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE],
-                  _meta(path, "bdf", "none (BDF: charge > 0)", t,
-                        segment_starts=_segment_starts_from_gaps(
-                            t, cols[BDF_CURRENT], cols.get(BDF_NET_AH)),
-                        file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
-                                      "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
-                                      "charge_ah": BDF_NET_AH,
-                                      "temperature_c": temp_col},
-                        first_line=cols.first_line, notes=notes),
-                  temperature_c=temp, soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH))
+    meta = _meta(path, "bdf", "none (BDF: charge > 0)", t,
+                 segment_starts=_segment_starts_from_gaps(t, cols[BDF_CURRENT],
+                                                          cols.get(BDF_NET_AH)),
+                 file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
+                               "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
+                               "charge_ah": BDF_NET_AH, "temperature_c": temp_col},
+                 first_line=cols.first_line, notes=notes)
+    ambient = None
+    if temp_col == BDF_T1 and BDF_AMBIENT in cols:     # the chamber beside the cell: the
+        ambient, more = _held_readings(cols, BDF_AMBIENT, path)   # thermal model's ambient
+        meta.notes.extend(more)
+        meta.chamber_temp_c = float(np.median(ambient))
+        meta.file_columns["ambient_c"] = BDF_AMBIENT
+    return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE], meta, temperature_c=temp,
+                  soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH), ambient_c=ambient)
 
 
 def read_biologic(path: Path) -> Record:
@@ -998,8 +1005,8 @@ def write_bdf(rec: Record, path: str | Path) -> Path:
     path = Path(path)
     names = [BDF_TIME, BDF_VOLTAGE, BDF_CURRENT]
     arrays = [rec.time_s, rec.voltage_v, rec.current_a]
-    for name, arr in ((BDF_T1, rec.temperature_c), (BDF_NET_AH, rec.charge_ah),
-                      (BDF_SOC, rec.soc_ref)):
+    for name, arr in ((BDF_T1, rec.temperature_c), (BDF_AMBIENT, rec.ambient_c),
+                      (BDF_NET_AH, rec.charge_ah), (BDF_SOC, rec.soc_ref)):
         if arr is not None:
             names.append(name)
             arrays.append(arr)
