@@ -157,3 +157,31 @@ def test_ambient_evaluation_of_a_held_out_record(quick_model) -> None:
     assert amb_rows[0]["cell_temperature_rmse_k"] < 2.5
     assert cell_rows[0]["lmn"]["rmse_mv"] > 0 and amb_rows[0]["lmn"]["rmse_mv"] > 0
     assert PAN_HWFET.exists()
+
+
+def test_a_csv_of_ones_own_with_an_ambient_column_gets_the_thermal_model(quick_model,
+                                                                        tmp_path) -> None:
+    """A user's own CSV that maps the chamber's column as `ambient` beside the cell's
+    `temperature` gets the thermal model that the same record in its known format gets; without
+    that column there is no ambient, and no thermal model."""
+    from lmncell.data.dataset import record_to_segments
+    from lmncell.data.readers import read_record
+
+    rec = read_record(PAN_HWFET).slice(0, 15000)     # 25 minutes without a gap in time
+    path = tmp_path / "own.csv"
+    columns = (rec.time_s, rec.current_a, rec.voltage_v, rec.temperature_c, rec.ambient_c)
+    path.write_text("t [s],I [A],U [V],T cell [degC],T chamber [degC]\n" + "".join(
+        ",".join(repr(float(v)) for v in row) + "\n" for row in zip(*columns, strict=True)))
+    mapping = {"time": "t [s]", "current": "I [A]", "voltage": "U [V]",
+               "temperature": "T cell [degC]", "ambient": "T chamber [degC]"}
+    model = load_model(quick_model)
+
+    def thermal(record):
+        return fit_thermal(model, record_to_segments(record, 1.0, 1.0, 2.85))[0]
+
+    known, own = thermal(rec), thermal(read_record(path, columns=mapping))
+    assert known is not None and own is not None     # (the SoC reference of the .mat file
+    for name in ("resistance_k_per_w", "time_constant_s", "offset_k"):  # is its Ah counter's)
+        assert getattr(own, name) == pytest.approx(getattr(known, name), rel=1e-3), name
+    del mapping["ambient"]
+    assert thermal(read_record(path, columns=mapping)) is None

@@ -142,13 +142,15 @@ def soc_list_argument(text: str) -> list[float]:
 
 
 def _columns(text: str) -> dict[str, str]:
-    """time=COL,current=COL,voltage=COL[,temperature=COL] → {quantity: column name}."""
+    """time=COL,current=COL,voltage=COL[,temperature=COL][,ambient=COL] → {quantity: column
+    name}."""
     out: dict[str, str] = {}
     for part in text.split(","):
         key, sep, col = part.partition("=")
         if not sep or not key.strip() or not col.strip():
             raise argparse.ArgumentTypeError(
-                f"{text!r}: expected time=COL,current=COL,voltage=COL[,temperature=COL] "
+                f"{text!r}: expected time=COL,current=COL,voltage=COL[,temperature=COL]"
+                f"[,ambient=COL] "
                 f"(item {part!r} is not QUANTITY=COLUMN)")
         out[key.strip()] = col.strip()
     return out
@@ -392,8 +394,10 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
                              "Arbin, Panasonic .mat, BDF, BioLogic .mpt — are recognised "
                              "without these)")
     g.add_argument("--columns", type=_columns, metavar="time=COL,current=COL,voltage=COL"
-                   "[,temperature=COL]", help="the file's column names for time (s), current, "
-                   "voltage (V) and optionally cell temperature (°C)")
+                   "[,temperature=COL][,ambient=COL]", help="the file's column names for time "
+                   "(s), current, voltage (V) and optionally cell temperature and the ambient "
+                   "(chamber) temperature beside it (°C; with both, training identifies a "
+                   "thermal model)")
     g.add_argument("--discharge-positive", action="store_true", help="the file counts "
                    "discharge current as positive (LMNCell: current > 0 charges)")
     g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "
@@ -404,7 +408,7 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
     g.add_argument("--voltage-unit", choices=["V", "mV"], help="unit of the voltage column "
                    "(default: the file's, from the column name or a units row; else V)")
     g.add_argument("--temperature-unit", choices=["degC", "K"], help="unit of the temperature "
-                   "column (default: the file's, from the column name or a units row; else "
+                   "columns (default: the file's, from the column name or a units row; else "
                    "degC)")
     g.add_argument("--delimiter", metavar="CHAR", help="field delimiter, e.g. ';' or tab "
                    "(default: ',')")

@@ -619,15 +619,18 @@ def _first_present(path: Path, names: list[str], choices: tuple[str, ...], what:
     return found
 
 
-GENERIC_KEYS = ("time", "current", "voltage", "temperature")
-UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c"}
+GENERIC_KEYS = ("time", "current", "voltage", "temperature", "ambient")
+UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c",
+               "ambient": "_c"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
 VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
 TEMPERATURE_UNITS = {"degC": 0.0, "K": -273.15}      # the offset to °C
 UNITS = {"time": TIME_UNITS, "current": CURRENT_UNITS, "voltage": VOLTAGE_UNITS,
-         "temperature": TEMPERATURE_UNITS}
-DEFAULT_UNITS = {"time": "s", "current": "A", "voltage": "V", "temperature": "degC"}
+         "temperature": TEMPERATURE_UNITS, "ambient": TEMPERATURE_UNITS}
+DEFAULT_UNITS = {"time": "s", "current": "A", "voltage": "V", "temperature": "degC",
+                 "ambient": "degC"}
+UNIT_OPTION = {"ambient": "temperature"}     # the ambient column's unit option is the cell's
 NAME_UNIT = re.compile(r"(?:\[\s*([^\]]+?)\s*\]|\(\s*([^)]+?)\s*\)|/\s*([^/\s]+))\s*$")
 
 
@@ -645,6 +648,7 @@ UNIT_WORDS = {        # how a units row or a column name may write them (lower c
     "voltage": {"v": "V", "mv": "mV"},
     "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "k": "K"},
 }
+UNIT_WORDS["ambient"] = UNIT_WORDS["temperature"]
 
 
 def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
@@ -652,39 +656,42 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                  current_unit: str | None = None, time_unit: str | None = None,
                  voltage_unit: str | None = None, temperature_unit: str | None = None
                  ) -> Record:
-    """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']}
-    of LMNCell's quantities to the file's column names (time in s, or as text that
-    TIME_TEXT_EXPECTED describes; voltage in V, temperature in °C).
+    """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']
+    [, 'ambient']} of LMNCell's quantities to the file's column names (time in s, or as text
+    that TIME_TEXT_EXPECTED describes; voltage in V, temperatures in °C): 'temperature' the
+    cell's, 'ambient' the chamber's beside it (Record.ambient_c, the thermal model's ambient;
+    mapped alone, it is the record's temperature).
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
     time column, one of TIME_UNITS (default s); voltage_unit: "V" or "mV"; temperature_unit:
-    "degC" or "K"; each unit not given is the file's where its column name or a units row
-    under the names gives one (_file_units), else the default; discharge_positive: the file
-    counts discharge current as positive (it is negated: LMNCell's current > 0 charges); sep:
-    the delimiter; decimal: "." or "," (decimal comma). The column names are on the first line
-    that holds them all (_line_naming); a units row under them is skipped (_units_row)."""
+    "degC" or "K" (both temperature columns); each unit not given is the file's where its
+    column name or a units row under the names gives one (_file_units), else the default;
+    discharge_positive: the file counts discharge current as positive (it is negated:
+    LMNCell's current > 0 charges); sep: the delimiter; decimal: "." or "," (decimal comma).
+    The column names are on the first line that holds them all (_line_naming); a units row
+    under them is skipped (_units_row)."""
     given = {"time": time_unit, "current": current_unit, "voltage": voltage_unit,
-             "temperature": temperature_unit}
+             "temperature": temperature_unit, "ambient": temperature_unit}
     _check_mapping(path, columns, given)
     numeric = set(columns.values()) - {columns["time"]}
     _check_marks(path, sep, decimal)
     lines = read_text(path).splitlines()
     header_line = _line_naming(lines, set(columns.values()), sep)
     units = _units_row(lines, header_line, numeric, sep, decimal)
-    temp_col = columns.get("temperature")
+    temp_cols = {columns[k] for k in ("temperature", "ambient") if k in columns}
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={c for c in (columns["time"], temp_col) if c is not None},
+                             keep_text={columns["time"], *temp_cols},
                              header_line=header_line, lines=lines, units_row=units is not None,
-                             blank_ok=set() if temp_col is None else {temp_col})
+                             blank_ok=temp_cols)
     _require(path, cols, tuple(columns.values()), sep)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
-    if temp_col is not None:
-        cols[temp_col], held = _held_readings(cols, temp_col, path)
+    for col in sorted(temp_cols):
+        cols[col], held = _held_readings(cols, col, path)
         notes += held
     given, taken = _with_file_units(
         path, given, _file_units(columns, units, bool(notes)), current_scale)
     time_unit, current_unit = given["time"], given["current"]
-    voltage_unit, temperature_unit = given["voltage"], given["temperature"]
+    voltage_unit = given["voltage"]
     if current_unit is not None:
         current_scale = CURRENT_UNITS[current_unit]
     if time_unit is not None and notes:
@@ -693,18 +700,21 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     t = t * TIME_UNITS[time_unit or "s"]
     cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
     note = "current negated (file: discharge > 0)" if discharge_positive else "none"
-    temp = (cols[columns["temperature"]] + TEMPERATURE_UNITS[temperature_unit or "degC"]
-            if "temperature" in columns else None)
+    temp, ambient = (cols[columns[k]] + TEMPERATURE_UNITS[given[k] or "degC"]
+                     if k in columns else None for k in ("temperature", "ambient"))
     volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
     # a text time column's messages count s from its first row
     file_times = t - t[0] if notes else t
     notes += _layout_notes(header_line, units, taken)
-    return Record(t - t[0], cur, volts,
-                  _meta(path, "generic", note, t, notes=notes,
-                        segment_starts=_segment_starts_from_gaps(t, cur),
-                        **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
-                                                         for k, v in columns.items()})),
-                  temperature_c=temp)
+    names = {f"{k}{UNIT_SUFFIX[k]}": v for k, v in columns.items()}
+    if temp is None and ambient is not None:     # the chamber's alone: the record's temperature
+        temp, ambient, names["temperature_c"] = ambient, None, names.pop("ambient_c")
+    meta = _meta(path, "generic", note, t, notes=notes,
+                 segment_starts=_segment_starts_from_gaps(t, cur),
+                 **_csv_meta(cols, file_times, **names))
+    if ambient is not None:
+        meta.chamber_temp_c = float(np.median(ambient))
+    return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient)
 
 
 def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
@@ -730,11 +740,11 @@ def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray,
 def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str | None]
                    ) -> None:
     """DataError unless the column mapping names time, current and voltage (and at most
-    temperature besides) and every unit given is one of UNITS."""
+    temperature and ambient besides) and every unit given is one of UNITS."""
     for key in ("time", "current", "voltage"):
         if key not in columns:
             raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
-                            "expected time, current and voltage (temperature optional)")
+                            "expected time, current and voltage (temperature and ambient optional)")
     unknown = sorted(set(columns) - set(GENERIC_KEYS))
     if unknown:
         raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
@@ -845,9 +855,10 @@ def _with_file_units(path: Path, given: dict[str, str | None],
                               f"{said}", DataWarning, stacklevel=4)
             continue
         if other:
+            option = UNIT_OPTION.get(what, what)
             raise DataError(f"{path}: {says[0][1]} says the {what} is in {says[0][0]}, {said}; "
-                            f"expected them to agree (give the {what} unit: "
-                            f"--{what}-unit, {what}_unit=)")
+                            f"expected them to agree (give the {option} unit: "
+                            f"--{option}-unit, {option}_unit=)")
         out[what] = says[0][0]
         if says[0][0] != DEFAULT_UNITS[what]:
             taken[what] = says[0]
