@@ -1049,7 +1049,7 @@ def test_sample_time_not_given_is_the_coarsest_log_within_a_tenth_and_one_second
     """Without sample_time_s (or with "auto") training takes Ts from the records: the coarsest
     record's logging interval, rounded down to 1, 2 or 5 × 10^k s, within 0.1…1 s; a setting
     that does not fit that Ts is refused then, by name."""
-    from lmncell.config import sample_time_given
+    from lmncell.config import given_settings, sample_time_given
     from lmncell.identification.train import auto_sample_time, with_records_sample_time
 
     def logs(*steps: float) -> list[Record]:
@@ -1065,9 +1065,12 @@ def test_sample_time_not_given_is_the_coarsest_log_within_a_tenth_and_one_second
     assert auto_sample_time([unknown]) == 1.0
     toml = tmp_path / "c.toml"
     toml.write_text("[train]\nsample_time_s = 0.5\n")
-    assert not sample_time_given() and not sample_time_given(sample_time_s="auto")
-    assert sample_time_given(sample_time_s=0.2) and sample_time_given(toml)
-    assert not sample_time_given(toml, sample_time_s="auto")     # overrides win, as in load_config
+    def given(path=None, **overrides) -> bool:
+        return sample_time_given(given_settings(path, **overrides))
+
+    assert not given() and not given(sample_time_s="auto")
+    assert given(sample_time_s=0.2) and given(toml)
+    assert not given(toml, sample_time_s="auto")     # overrides win, as in load_config
     assert load_config(sample_time_s="auto").sample_time_s == 1.0
     said: list[str] = []
     fine = with_records_sample_time(load_config(), logs(0.1), said.append)

@@ -493,20 +493,20 @@ def parse_setting(text: str) -> tuple[str, object]:
         return key, value.strip()
 
 
-def sample_time_given(path: str | Path | None = None, **overrides) -> bool:
-    """Whether the settings (a TOML file's, then overrides, as load_config reads them) give
-    sample_time_s as a value, not leave it out or "auto" (then training takes it from the
-    records)."""
-    return _given_values(path, overrides).get("sample_time_s", "auto") != "auto"
-
-
-def _given_values(path: str | Path | None, overrides: dict) -> dict:
-    """The settings given: the TOML file's table, then the overrides that are not None."""
+def given_settings(path: str | Path | None = None, **overrides) -> dict:
+    """The settings given: a TOML file's [train] table (or its top level), then the overrides
+    that are not None; the file is read once here."""
     values: dict = {}
     if path is not None:
         values.update(_toml_table(Path(path)))
     values.update({k: v for k, v in overrides.items() if v is not None})
     return values
+
+
+def sample_time_given(values: dict) -> bool:
+    """Whether the settings given (given_settings) set sample_time_s to a value, not leave it
+    out or "auto" (then training takes it from the records)."""
+    return values.get("sample_time_s", "auto") != "auto"
 
 
 def _toml_table(path: Path) -> dict:
@@ -518,16 +518,20 @@ def _toml_table(path: Path) -> dict:
     return doc.get("train", doc)
 
 
-def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
-    """Defaults, then the [train] table (or top level) of a TOML file, then overrides;
-    sample_time_s "auto" is left at its default (training takes it from the records where
-    sample_time_given says so)."""
-    values = _given_values(path, overrides)
-    if values.get("sample_time_s") == "auto":    # from the records: sample_time_given
-        del values["sample_time_s"]
+def config_from_settings(values: dict, source: str = "configuration") -> TrainConfig:
+    """The checked TrainConfig of the settings given (given_settings; source names them in
+    errors): defaults where a setting is not given; sample_time_s "auto" is left at its
+    default (training takes it from the records where sample_time_given says so)."""
+    values = {k: v for k, v in values.items()
+              if not (k == "sample_time_s" and v == "auto")}
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     unknown = sorted(set(values) - names)
     if unknown:
-        raise ConfigError(f"{path or 'configuration'}: unknown setting(s) {unknown}; known: "
-                          f"{sorted(names)}")
+        raise ConfigError(f"{source}: unknown setting(s) {unknown}; known: {sorted(names)}")
     return TrainConfig(**values).check()
+
+
+def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:
+    """Defaults, then the [train] table (or top level) of a TOML file, then overrides
+    (config_from_settings of given_settings)."""
+    return config_from_settings(given_settings(path, **overrides), str(path or "configuration"))

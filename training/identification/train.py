@@ -18,7 +18,8 @@ from lmncell.config import (
     AUTO_SAMPLE_TIME_S,
     ConfigError,
     TrainConfig,
-    load_config,
+    config_from_settings,
+    given_settings,
     output_file_problem,
     sample_time_given,
 )
@@ -384,8 +385,9 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     mapping and its options for your own CSV);
     overrides are training settings (lmncell.config.TrainConfig), e.g. max_local_models=4."""
     t0 = time.perf_counter()
-    cfg = load_config(config, partition=partition, **overrides)
-    ts_from_records = not sample_time_given(config, **overrides)
+    given = given_settings(config, partition=partition, **overrides)
+    cfg = config_from_settings(given, str(config or "configuration"))
+    ts_from_records = not sample_time_given(given)
     check_given_capacity(capacity_ah)
     problem = output_file_problem(out)
     if problem:
