@@ -768,6 +768,7 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     first half hour), and evaluation's ambient runs then take it; a constant log, as in the
     shipped records, leaves the set point. A chamber column with a gap is not used per step."""
     from lmncell.data.dataset import record_to_segments
+    from lmncell.data.summary import format_summary, summarise
     from lmncell.evaluation.evaluate import ambient_of
 
     meas = scipy.io.loadmat(str(PAN_US06))["meas"][0, 0]
@@ -787,6 +788,8 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     assert seg.ambient_trace_c is not None and len(seg.ambient_trace_c) == len(seg)
     assert ambient_of(seg) == pytest.approx(np.interp(seg.time_s - 0.05, rec.time_s,
                                                       rec.ambient_c), abs=2e-3)
+    assert "chamber 24 °C, logged 23.0 … 25.0 °C (the thermal model's ambient)" in (
+        format_summary(summarise(rec)))
     # the same record as Battery Data Format: its Ambient Temperature column is that ambient
     bdf = read_record(write_bdf(rec, tmp_path / "settling.bdf.csv"))
     assert bdf.meta.file_columns["ambient_c"] == "Ambient Temperature / degC"

@@ -58,6 +58,8 @@ def summarise(rec: Record, capacity_ah: float | None = None) -> dict:
     if rec.temperature_c is not None:
         out["temperature_c"] = [float(np.min(rec.temperature_c)),
                                 float(np.max(rec.temperature_c))]
+    if rec.ambient_c is not None:
+        out["ambient_c"] = [float(np.min(rec.ambient_c)), float(np.max(rec.ambient_c))]
     lag = channel_lag_samples(rec)
     if lag is not None:
         out["voltage_lag_samples"] = lag
@@ -89,7 +91,7 @@ def format_summary(s: dict) -> str:
         lines.append(f"  temperature {rng(temp, '.1f')} °C")
     if s["chamber_temp_c"] is not None and not (isinstance(s["chamber_temp_c"], float)
                                                 and math.isnan(s["chamber_temp_c"])):
-        lines.append(f"  chamber {s['chamber_temp_c']:.0f} °C")
+        lines.append(f"  chamber {s['chamber_temp_c']:.0f} °C" + _ambient_text(s))
     lag = s.get("voltage_lag_samples")
     if lag:
         lines.append(f"  the voltage channel lags the current by {lag:.2f} sample(s), "
@@ -97,6 +99,16 @@ def format_summary(s: dict) -> str:
                      "current_delay_s 'auto' uses it where records are finer than Ts/2)")
     lines += [f"  note: {n}" for n in s["notes"]]
     return "\n".join(lines)
+
+
+def _ambient_text(s: dict) -> str:
+    """Where the chamber is logged beside the cell's temperature (the thermal model's
+    ambient): its range if it varies."""
+    ambient = s.get("ambient_c")
+    if ambient is None:
+        return ""
+    span = "" if ambient[0] == ambient[1] else f" {ambient[0]:.1f} … {ambient[1]:.1f} °C"
+    return f", logged{span} (the thermal model's ambient)"
 
 
 GAP_CHARGE_NOTE_AH = 1e-3   # current_integral_line names the charge across gaps from this (Ah)
