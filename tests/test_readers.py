@@ -320,6 +320,9 @@ def test_a_temperature_read_every_few_rows_is_held_between_readings(tmp_path) ->
     assert rec.temperature_c[-1] == 23.0
     assert ("column 'T': 36 of 40 rows blank between readings, each holding the reading "
             "before it" in " ".join(rec.meta.notes))
+    # a time unit with such a column (was refused: its note was taken for text times)
+    ms = read_record(path, columns=cols, time_unit="ms")
+    np.testing.assert_array_equal(ms.time_s, rec.time_s * 1e-3)
     path.write_text("t,I,U,T\n" + "\n".join(rows).replace(",20\n", ",n/a\n", 1) + "\n")
     with pytest.raises(DataError, match=r"aux.csv: column 'T' line 5: 'n/a' is not a number"):
         read_record(path, columns=cols)

@@ -685,16 +685,17 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                              blank_ok=temp_cols)
     _require(path, cols, tuple(columns.values()), sep)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
+    text_time = bool(notes)      # a note from _generic_times: the times are text
     for col in sorted(temp_cols):
         cols[col], held = _held_readings(cols, col, path)
         notes += held
     given, taken = _with_file_units(
-        path, given, _file_units(columns, units, bool(notes)), current_scale)
+        path, given, _file_units(columns, units, text_time), current_scale)
     time_unit, current_unit = given["time"], given["current"]
     voltage_unit = given["voltage"]
     if current_unit is not None:
         current_scale = CURRENT_UNITS[current_unit]
-    if time_unit is not None and notes:
+    if time_unit is not None and text_time:
         raise DataError(f"{path}: time unit {time_unit!r} for the column '{columns['time']}', "
                         "whose times are text that carries its own unit; expected no time unit")
     t = t * TIME_UNITS[time_unit or "s"]
@@ -704,7 +705,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                      if k in columns else None for k in ("temperature", "ambient"))
     volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
     # a text time column's messages count s from its first row
-    file_times = t - t[0] if notes else t
+    file_times = t - t[0] if text_time else t
     notes += _layout_notes(header_line, units, taken)
     names = {f"{k}{UNIT_SUFFIX[k]}": v for k, v in columns.items()}
     if temp is None and ambient is not None:     # the chamber's alone: the record's temperature
