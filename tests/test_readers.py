@@ -717,15 +717,16 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
     assert main(["inspect", str(path)]) == 2
     err = capsys.readouterr().err
     proposal = ("--columns 'time=Time [s],current=Current [mA],voltage=Voltage [V],"
-                "temperature=T_cell' --delimiter ';' --decimal ,")
+                "temperature=T_cell,ambient=T_ambient' --delimiter ';' --decimal ,")
     assert "eu.csv: unknown format; " in err and f"(line 1), perhaps: {proposal} (check" in err
     assert main(["inspect", str(path), *shlex.split(proposal)]) == 0
     out = capsys.readouterr().out
     assert "current -0.401 … -0.001 A" in out and "current in mA" in out, out
     rec = read_record(path, columns={"time": "Time [s]", "current": "Current [mA]",
-                                     "voltage": "Voltage [V]", "temperature": "T_cell"},
-                      sep=";", decimal=",")
+                                     "voltage": "Voltage [V]", "temperature": "T_cell",
+                                     "ambient": "T_ambient"}, sep=";", decimal=",")
     assert rec.current_a[1] == pytest.approx(-0.1005) and rec.temperature_c[0] == 25.1
+    assert rec.ambient_c[0] == 24.0
     preamble = tmp_path / "cycler.csv"             # a cycler's settings above the table
     preamble.write_text("Channel: 3\nCell: X-1\n\nt/s,I/A,U/V\n0,-1.0,3.3\n1,-1.0,3.2\n")
     with pytest.raises(DataError, match=r"\(line 4\), perhaps: --columns time=t/s,current=I/A,"
@@ -733,6 +734,11 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
         read_record(preamble)
     assert len(read_record(preamble, columns={"time": "t/s", "current": "I/A",
                                               "voltage": "U/V"})) == 2
+    from lmncell.data.header import suggested_options
+
+    assert suggested_options("Time,Current,Voltage,Tcell,Tamb", None) == (
+        "--columns time=Time,current=Current,voltage=Voltage,temperature=Tcell,ambient=Tamb")
+    assert "ambient" not in suggested_options("Time,Current,Voltage,Temp1,Temp2", None)
     for header in ("a,b,c\n1,2,3\n", "Time,Current,U1,U2\n0,1,3,3\n"):
         path.write_text(header)
         with pytest.raises(DataError, match="unknown format") as info:

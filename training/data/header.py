@@ -1,6 +1,7 @@
-"""Which columns of an unknown table's header look like time, current, voltage and temperature:
-the reader's options that would read it, proposed in the unknown-format error. Only proposed,
-never applied: the sign of the current and the columns are the user's to confirm."""
+"""Which columns of an unknown table's header look like time, current, voltage, temperature and
+the ambient beside it: the reader's options that would read it, proposed in the unknown-format
+error. Only proposed, never applied: the sign of the current and the columns are the user's to
+confirm."""
 
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ CURRENT_NAMES = {"current", "i", "curr", "cell current", "battery current", "amp
 VOLTAGE_NAMES = {"voltage", "u", "v", "volt", "volts", "cell voltage", "battery voltage",
                  "terminal voltage", "ecell", "e cell", "u cell", "ucell", "v cell", "vcell"}
 CELL_WORDS = ("cell", "battery", "surface", "case", "t1")   # a cell's, not the chamber's
+AMBIENT_WORDS = ("ambient", "amb", "chamber", "environment", "env", "room", "air")
 
 
 def suggested_options(header: str, first_row: str | None) -> str | None:
@@ -39,8 +41,9 @@ def suggested_options(header: str, first_row: str | None) -> str | None:
 
 
 def _picks(names: list[str]) -> dict[str, str] | None:
-    """{quantity: column name} for time, current, voltage (each the only candidate, else None)
-    and temperature (where one column, or one cell temperature among several, names it)."""
+    """{quantity: column name} for time, current, voltage (each the only candidate, else None),
+    temperature (where one column, or one cell temperature among several, names it) and
+    ambient (beside that, one chamber temperature: AMBIENT_WORDS)."""
     bases = {name: _base(name) for name in names}
     picks: dict[str, str] = {}
     for what, exact, word in (("time", TIME_NAMES, "time"), ("current", CURRENT_NAMES, "current"),
@@ -54,12 +57,23 @@ def _picks(names: list[str]) -> dict[str, str] | None:
             return None
         picks[what] = found[0]
     temps = [n for n, b in bases.items() if n not in picks.values()
-             and ("temp" in b or b.startswith("t ") or b in ("t1", "tcell"))]
+             and ("temp" in b or b.startswith("t ") or b in ("t1", "tcell")
+                  or _is_ambient(b))]
     cells = [n for n in temps if any(w in bases[n] for w in CELL_WORDS)]
     chosen = temps if len(temps) == 1 else cells
     if len(chosen) == 1:
         picks["temperature"] = chosen[0]
+        ambient = [n for n in temps if n != chosen[0] and _is_ambient(bases[n])]
+        if len(ambient) == 1:
+            picks["ambient"] = ambient[0]
     return picks
+
+
+def _is_ambient(base: str) -> bool:
+    """Whether a column's base name (_base) names a chamber's temperature: 'T_ambient',
+    'Chamber Temp', 'Tamb'."""
+    words = {w[1:] if w.startswith("t") and w[1:] in AMBIENT_WORDS else w for w in base.split()}
+    return bool(words & set(AMBIENT_WORDS))
 
 
 def _base(name: str) -> str:

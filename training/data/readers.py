@@ -187,7 +187,8 @@ def _format_of(path: Path) -> str:
                         f"--cycle {path} (or lmncell sweep --cycles)")
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:5])}. Name your columns: on the command line "
-                    "--columns time=COL,current=COL,voltage=COL[,temperature=COL] (with "
+                    "--columns time=COL,current=COL,voltage=COL[,temperature=COL]"
+                    "[,ambient=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})"
