@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import json
 import re
@@ -805,6 +806,15 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     (same,) = record_to_segments(bdf, 0.1, 1.0, 2.85)
     assert np.array_equal(same.ambient_trace_c, seg.ambient_trace_c)
     assert same.ambient_c == seg.ambient_c
+    # without the cell's column the chamber's is the record's temperature, as logged
+    alone = dataclasses.replace(rec, temperature_c=None)
+    chamber = read_record(write_bdf(alone, tmp_path / "chamber.bdf.csv"))
+    assert chamber.temperature_c is None
+    assert np.array_equal(chamber.temperature_or_chamber(), rec.ambient_c)
+    (own,) = record_to_segments(chamber, 0.1, 1.0, 2.85)
+    assert own.temperature_kind == "chamber" and own.ambient_temperature() is None
+    assert np.array_equal(own.temperature_c, seg.ambient_trace_c)
+    assert np.array_equal(ambient_of(own), seg.ambient_trace_c)
     rec.ambient_c = rec.ambient_c + 273.15
     with pytest.raises(DataError, match=r"'Ambient Temperature / degC'.*296\.15.*°C"):
         read_record(write_bdf(rec, tmp_path / "kelvin.bdf.csv"))

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from lmncell.config import load_config
 from lmncell.data.dataset import Segment
+from lmncell.data.records import DataError
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
 from lmncell.identification.thermal import fit_thermal, predicted_temperature
 from lmncell.identification.tree import skeleton
@@ -185,3 +186,12 @@ def test_a_csv_of_ones_own_with_an_ambient_column_gets_the_thermal_model(quick_m
         assert getattr(own, name) == pytest.approx(getattr(known, name), rel=1e-3), name
     del mapping["ambient"]
     assert thermal(read_record(path, columns=mapping)) is None
+    # nor is there an ambient to drive the model by: refused, not the cell's heated twice
+    from lmncell.evaluation.evaluate import evaluate_model
+
+    with pytest.raises(DataError, match=r"own.csv: driving the model by the ambient "
+                                        r"temperature needs the chamber's .* map it as "
+                                        r"ambient=COL"):
+        evaluate_model(model, [path], soc0=1.0, read_options={"columns": mapping},
+                       ambient=True)
+    assert evaluate_model(model, [path], soc0=1.0, read_options={"columns": mapping})[1]

@@ -27,8 +27,9 @@ class Segment:
     where the record has a measured cell temperature beside it (else None), and ambient_trace_c
     that temperature per step where the record logs it and it varies over the segment (a
     chamber still settling; else None: ambient_c throughout); temperature_kind
-    what temperature_c is: "measured" (the record's cell temperature), "chamber" (the chamber
-    set point, where the record has no cell temperature) or "none" (temperature_c None).
+    what temperature_c is: "measured" (the record's cell temperature), "chamber" (the chamber's,
+    as logged or its set point, where the record has no cell temperature) or "none"
+    (temperature_c None).
     """
 
     name: str

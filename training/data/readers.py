@@ -512,24 +512,23 @@ def read_bdf(path: Path) -> Record:
     """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …). A
     temperature column read every few rows, blank between readings, holds each reading until
     the next (noted), as the generic reader's does. The cell's temperature is ``Temperature
-    T1 / degC``, else the chamber's; beside T1, ``Ambient Temperature / degC`` is the record's
-    ambient (Record.ambient_c: the thermal model's, per step where it varies)."""
+    T1 / degC``; ``Ambient Temperature / degC`` is the record's ambient (Record.ambient_c:
+    beside T1 the thermal model's, per step where it varies; alone the record's temperature)."""
     cols = _read_csv_columns(path, keep_text={BDF_T1, BDF_AMBIENT})
     _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
     t = cols[BDF_TIME]
-    temp_col = BDF_T1 if BDF_T1 in cols else BDF_AMBIENT   # the cell's, else the chamber's
-    temp, notes = _held_readings(cols, temp_col, path) if temp_col in cols else (None, [])
+    temp, notes = _held_readings(cols, BDF_T1, path) if BDF_T1 in cols else (None, [])
     meta = _meta(path, "bdf", "none (BDF: charge > 0)", t,
                  segment_starts=_segment_starts_from_gaps(t, cols[BDF_CURRENT],
                                                           cols.get(BDF_NET_AH)),
                  file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
                                "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
-                               "charge_ah": BDF_NET_AH, "temperature_c": temp_col},
+                               "charge_ah": BDF_NET_AH, "temperature_c": BDF_T1},
                  first_line=cols.first_line, notes=notes)
     ambient = None
-    if temp_col == BDF_T1 and BDF_AMBIENT in cols:     # the chamber beside the cell: the
-        ambient, more = _held_readings(cols, BDF_AMBIENT, path)   # thermal model's ambient
-        meta.notes.extend(more)
+    if BDF_AMBIENT in cols:         # the chamber's: beside the cell's the thermal model's
+        ambient, more = _held_readings(cols, BDF_AMBIENT, path)   # ambient, alone the
+        meta.notes.extend(more)                                   # record's temperature
         meta.chamber_temp_c = float(np.median(ambient))
         meta.file_columns["ambient_c"] = BDF_AMBIENT
     return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE], meta, temperature_c=temp,
@@ -708,12 +707,10 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     # a text time column's messages count s from its first row
     file_times = t - t[0] if text_time else t
     notes += _layout_notes(header_line, units, taken)
-    names = {f"{k}{UNIT_SUFFIX[k]}": v for k, v in columns.items()}
-    if temp is None and ambient is not None:     # the chamber's alone: the record's temperature
-        temp, ambient, names["temperature_c"] = ambient, None, names.pop("ambient_c")
     meta = _meta(path, "generic", note, t, notes=notes,
                  segment_starts=_segment_starts_from_gaps(t, cur),
-                 **_csv_meta(cols, file_times, **names))
+                 **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
+                                                  for k, v in columns.items()}))
     if ambient is not None:
         meta.chamber_temp_c = float(np.median(ambient))
     return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient)

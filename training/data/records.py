@@ -59,7 +59,8 @@ class Record:
 
     time_s: s, strictly increasing. current_a: A, > 0 charges. voltage_v: terminal voltage, V.
     temperature_c: measured cell temperature in °C, or None. ambient_c: the ambient (chamber)
-    temperature logged beside it in °C, or None (meta.chamber_temp_c then the set point alone).
+    temperature as logged in °C (beside the cell's: the thermal model's ambient; alone: the
+    record's temperature), or None (meta.chamber_temp_c then the set point alone).
     soc_ref: SoC reference (0…1) or None.
     charge_ah: net charge into the cell since the record start from the tester's counters (Ah,
     > 0 charged), or None. meta.segment_starts: indices where a new segment begins after a gap or
@@ -91,9 +92,12 @@ class Record:
         return float(self.time_s[-1] - self.time_s[0]) if len(self) else 0.0
 
     def temperature_or_chamber(self) -> np.ndarray | None:
-        """Measured temperature, else the chamber set point as a constant, else None (°C)."""
+        """Measured temperature, else the chamber's as logged, else its set point as a constant,
+        else None (°C)."""
         if self.temperature_c is not None:
             return self.temperature_c
+        if self.ambient_c is not None:
+            return self.ambient_c
         if self.meta.chamber_temp_c is not None:
             return np.full(len(self), float(self.meta.chamber_temp_c))
         return None

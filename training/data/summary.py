@@ -102,13 +102,15 @@ def format_summary(s: dict) -> str:
 
 
 def _ambient_text(s: dict) -> str:
-    """Where the chamber is logged beside the cell's temperature (the thermal model's
-    ambient): its range if it varies."""
+    """Where the chamber is logged: its range if it varies, and what it is to the model (the
+    thermal model's ambient beside a cell temperature, else the model's temperature)."""
     ambient = s.get("ambient_c")
     if ambient is None:
         return ""
     span = "" if ambient[0] == ambient[1] else f" {ambient[0]:.1f} … {ambient[1]:.1f} °C"
-    return f", logged{span} (the thermal model's ambient)"
+    role = ("the thermal model's ambient" if s.get("temperature_c") else
+            "no cell temperature: the model's temperature")
+    return f", logged{span} ({role})"
 
 
 GAP_CHARGE_NOTE_AH = 1e-3   # current_integral_line names the charge across gaps from this (Ah)

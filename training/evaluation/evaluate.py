@@ -21,7 +21,7 @@ from lmncell.data.dataset import (
     start_socs,
 )
 from lmncell.data.readers import read_record
-from lmncell.data.records import Record, present
+from lmncell.data.records import DataError, Record, present
 from lmncell.data.soc import logged_current_drift_ah
 from lmncell.evaluation.metrics import ENDS, WINDOW, record_metrics
 from lmncell.identification.baselines import Ecm2rc
@@ -61,10 +61,17 @@ def ambient_of(seg: Segment) -> np.ndarray:
     """The ambient temperature a vehicle simulation would give for a segment (°C per step):
     the chamber temperature where the record has a measured cell temperature beside it (as the
     record logs it where that varies, else its set point), else the record's own (chamber)
-    temperature, else 25 °C."""
+    temperature, else 25 °C. DataError where the record has a measured cell temperature and
+    no chamber temperature: its ambient is not known (the cell's would be heated twice)."""
     ambient = seg.ambient_temperature()
     if ambient is not None:
         return np.array(np.broadcast_to(ambient, len(seg)), dtype=float)
+    if seg.temperature_kind == "measured":
+        raise DataError(f"{seg.name}: driving the model by the ambient temperature needs the "
+                        "chamber's beside the measured cell temperature, and the record has "
+                        "none; expected a chamber column (your own CSV: map it as "
+                        "ambient=COL in --columns), or evaluate with the cell temperature "
+                        "(without --ambient)")
     return np.asarray(seg.temperatures(), dtype=float)
 
 

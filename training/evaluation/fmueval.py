@@ -333,11 +333,17 @@ class _Slave:
 
 
 def ambient_at_samples(part: Record, seg: Segment) -> np.ndarray:
-    """The ambient temperature at each of the part's own samples (°C): as the record logs it
-    where the segment follows it (Segment.ambient_trace_c), else the segment's (ambient_of)."""
+    """The ambient temperature at each of the part's own samples (°C), as ambient_of gives it
+    at the model's steps: the chamber's beside the cell's as the record logs it where the
+    segment follows it (Segment.ambient_trace_c), else its set point; without a cell
+    temperature, the record's own (the chamber's)."""
+    ambient = ambient_of(seg)                      # DataError where it is not known
+    if seg.ambient_temperature() is None:
+        own = part.temperature_or_chamber()
+        return own if own is not None else ambient[0] + np.zeros(len(part))
     if seg.ambient_trace_c is not None and part.ambient_c is not None:
         return part.ambient_c
-    return np.full(len(part), float(ambient_of(seg)[0]))
+    return np.full(len(part), float(ambient[0]))
 
 
 def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
