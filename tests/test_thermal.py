@@ -105,6 +105,10 @@ def test_no_thermal_model_without_a_measured_rise() -> None:
     flat = dataclasses.replace(seg, temperature_c=np.full(len(seg), 25.0))
     fitted, info = fit_thermal(_ocv_model(), [flat, dataclasses.replace(seg, ambient_c=None)])
     assert fitted is None and "rises" in info["reason"]
+    assert info["reason"].endswith("; synthetic log a cell temperature and no chamber "
+                                   "temperature beside it (your own CSV: map the chamber's "
+                                   "column as ambient=COL)")
+    assert "beside it" not in fit_thermal(_ocv_model(), [flat])[1]["reason"]
 
 
 def test_step_recursion_is_the_exact_discretisation() -> None:

@@ -42,13 +42,25 @@ def step_heat(model: LmnModel, seg: Segment) -> np.ndarray:
     return seg.current_a * (seg.voltage_v - model.ocv(seg.soc_ref))
 
 
+def _no_thermal_reason(segs: list[Segment]) -> str:
+    """Why there is no thermal model, naming the records whose ambient is unknown."""
+    reason = (f"no record has a measured cell temperature that rises {MIN_RISE_K} K above a "
+              "known ambient temperature")
+    unknown = sorted({s.name.split("#")[0] for s in segs
+                      if s.temperature_kind == "measured" and s.ambient_c is None})
+    if unknown:
+        reason += (f"; {', '.join(unknown[:3])}{' …' if len(unknown) > 3 else ''} log a cell "
+                   "temperature and no chamber temperature beside it (your own CSV: map the "
+                   "chamber's column as ambient=COL)")
+    return reason
+
+
 def fit_thermal(model: LmnModel, segs: list[Segment]) -> tuple[ThermalModel | None, dict]:
     """The thermal model and a summary (RMSE in K, the segments used), or None and the reason."""
     usable = [s for s in segs if s.ambient_c is not None and s.temperature_c is not None
               and float(np.max(s.temperature_c - s.ambient_temperature())) >= MIN_RISE_K]
     if not usable:
-        return None, {"used": False, "reason": "no record has a measured cell temperature that "
-                      f"rises {MIN_RISE_K} K above a known ambient temperature"}
+        return None, {"used": False, "reason": _no_thermal_reason(segs)}
     ts = model.sample_time_s
     heats = [step_heat(model, s) for s in usable]
     measured = [(present(s.ambient_temperature(), "ambient"),
