@@ -777,9 +777,10 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     a segment carries it per step where it varies (the 25 °C Cycle 1 record: 23 … 25 °C in its
     first half hour), and evaluation's ambient runs then take it; a constant log, as in the
     shipped records, leaves the set point. A chamber column with a gap is not used per step."""
-    from lmncell.data.dataset import record_to_segments
+    from lmncell.data.dataset import record_parts, record_to_segments
     from lmncell.data.summary import format_summary, summarise
     from lmncell.evaluation.evaluate import ambient_of
+    from lmncell.evaluation.fmueval import ambient_at_samples
 
     meas = scipy.io.loadmat(str(PAN_US06))["meas"][0, 0]
     fields = {k: np.asarray(meas[k])[:4000] for k in meas.dtype.names}
@@ -815,6 +816,10 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     assert own.temperature_kind == "chamber" and own.ambient_temperature() is None
     assert np.array_equal(own.temperature_c, seg.ambient_trace_c)
     assert np.array_equal(ambient_of(own), seg.ambient_trace_c)
+    # and an FMU driven at the record's own samples gets the chamber as logged, either way
+    for record in (rec, chamber):
+        ((part, first),) = record_parts(record, 0.1, 1.0, 2.85)
+        assert np.array_equal(ambient_at_samples(part, first), rec.ambient_c)
     rec.ambient_c = rec.ambient_c + 273.15
     with pytest.raises(DataError, match=r"'Ambient Temperature / degC'.*296\.15.*°C"):
         read_record(write_bdf(rec, tmp_path / "kelvin.bdf.csv"))
