@@ -157,6 +157,7 @@ def _temperature_defines(m: LmnModel) -> list[str]:
         f"#define REF_TEMPERATURE_C {m.reference_temperature_c!r}",
         f"#define HAS_TAU_ACTIVATION {int(m.tau_activation_k is not None)}",
         f"#define TAU_ACTIVATION_K {float(m.tau_activation_k or 0.0)!r}",
+        f"#define ACTIVATION_T0_K {float(m.activation_t0_k)!r}",
         f"#define TEMPERATURE_TERMS {m.temperature_terms}",
         f"#define HAS_THERMAL {int(m.thermal is not None)}",
         f"#define THERMAL_R_K_PER_W {(m.thermal.resistance_k_per_w if m.thermal else 1.0)!r}",

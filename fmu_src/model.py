@@ -1,8 +1,9 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 7 (versions 1 to 6, which have no ``thermal``, no
+Format ``lmncell-model``, version 8 (versions 1 to 7, which have no ``thermal``, no
 ``regressors.depletion``, no ``current_delay_s``, no ``regressors.time_constant_activation_k``,
-no ``depletion.fast_tau_s`` or no ``regressors.hysteresis_terms`` key, are read too).
+no ``depletion.fast_tau_s``, no ``regressors.hysteresis_terms`` or no
+``regressors.activation_t0_k`` key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts (1e-4 … 3600 s).
@@ -28,6 +29,10 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   ``time_constant_activation_k`` (version 5; null or absent: none, or Eτ in K: every filter
   time constant is τ·exp(Eτ·(1/(T+273.15) − 1/(T_ref+273.15))) at the step's temperature T, the
   relaxation slower when cold; the file's time constants are those at T_ref),
+  ``activation_t0_k`` (version 8; absent: 0): T0 in K, 0 ≤ T0 ≤ 200, of both: with T0 > 0
+  each exp(E·(1/T − 1/T_ref)) above is exp(E·c·(1/(T − T0) − 1/(T_ref − T0))),
+  c = ((T_ref − T0)/T_ref)², T in K (the Vogel–Tammann–Fulcher form: the same slope at T_ref,
+  an apparent activation that grows towards the cold),
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
   regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K; the
   hysteresis regressor as ``hysteresis_terms`` says),
@@ -95,10 +100,11 @@ from .thermal import CELL_TEMPERATURE_RANGE_C, ThermalModel, is_real_number
 
 FORMAT = "lmncell-model"
 DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
-VERSION = 7
+VERSION = 8
 MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
+MAX_ACTIVATION_T0_K = 200.0       # VTF T0: 13 K below the coldest input taken, −60 °C
 MAX_ARRHENIUS_K = 20000.0    # E beyond it (≈ 166 kJ/mol): above any Li-ion activation energy
-READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7)
+READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7, 8)
 HYSTERESIS_TERMS = ("constant", "polynomial", "arrhenius")   # h's temperature terms, if any
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
@@ -207,6 +213,7 @@ class LmnModel:
     initial_direction: str = "discharge"
     arrhenius_k: float | None = None
     tau_activation_k: float | None = None       # Eτ (K) of the filter time constants
+    activation_t0_k: float = 0.0                # VTF T0 (K) of both; 0: Arrhenius
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
     hysteresis_terms: str = "polynomial"        # none, h·dTᵖ or h·dAᵖ (HYSTERESIS_TERMS)
@@ -621,6 +628,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         initial_direction=str(gating.get("initial_direction", "discharge")),
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         tau_activation_k=None if tau_activation is None else float(tau_activation),
+        activation_t0_k=_real(reg, "activation_t0_k", w, 0.0, MAX_ACTIVATION_T0_K, 0.0),
         reference_temperature_c=_real(reg, "reference_temperature_c", w, t_low, t_high, 25.0),
         temperature_terms=temperature_terms,
         hysteresis_terms=_read_hysteresis_terms(reg, w, arrhenius, ver),
@@ -838,6 +846,7 @@ def model_to_dict(model: LmnModel) -> dict:
                        "ocv_input": model.ocv_input, "soc_input": model.soc_input,
                        "offset": model.offset, "arrhenius_k": model.arrhenius_k,
                        "time_constant_activation_k": model.tau_activation_k,
+                       "activation_t0_k": model.activation_t0_k,
                        "reference_temperature_c": model.reference_temperature_c,
                        "temperature_terms": model.temperature_terms,
                        "hysteresis_terms": model.hysteresis_terms,

@@ -38,21 +38,31 @@ CHARGE, DISCHARGE = 1, 2
 
 
 def arrhenius_gain(temperature_c: np.ndarray | None, e_k: float | None, n: int,
-                   ref_c: float = 25.0) -> np.ndarray:
+                   ref_c: float = 25.0, t0_k: float = 0.0) -> np.ndarray:
     """arrhenius_factor for n samples at once (ones without E or T); the step itself takes the
     scalar math.exp version, which costs less per call."""
     if e_k is None or temperature_c is None:
         return np.ones(n)
-    return np.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
+    t_ref = ref_c + 273.15 - t0_k
+    ratio = t_ref / (ref_c + 273.15)
+    scale = e_k * (ratio * ratio)
+    return np.exp(scale * (1.0 / (temperature_c + 273.15 - t0_k) - 1.0 / t_ref))
 
 
-def arrhenius_factor(temperature_c: float, e_k: float | None, ref_c: float = 25.0) -> float:
-    """exp(E·(1/T − 1/T_ref)) at one temperature (°C; 1 without E), arrhenius_gain's value for
-    one sample: the Arrhenius gain g(T) of the current and filter regressors with E, the factor
-    k(T) of every filter time constant with Eτ (the relaxation slower when cold)."""
+def arrhenius_factor(temperature_c: float, e_k: float | None, ref_c: float = 25.0,
+                     t0_k: float = 0.0) -> float:
+    """exp(E·c·(1/(T − T0) − 1/(T_ref − T0))), c = ((T_ref − T0)/T_ref)², T in K, at one
+    temperature (°C; 1 without E): arrhenius_gain's value for one sample, the gain g(T) of the
+    current and filter regressors with E, the factor k(T) of every filter time constant with
+    Eτ (the relaxation slower when cold). T0 = 0: Arrhenius, exp(E·(1/T − 1/T_ref)); T0 > 0:
+    the Vogel–Tammann–Fulcher form of an electrolyte's transport, whose apparent activation
+    E·T²/(T − T0)²·c grows towards the cold (E at T_ref, so the slope there is Arrhenius')."""
     if e_k is None:
         return 1.0
-    return math.exp(e_k * (1.0 / (temperature_c + 273.15) - 1.0 / (ref_c + 273.15)))
+    t_ref = ref_c + 273.15 - t0_k
+    ratio = t_ref / (ref_c + 273.15)
+    scale = e_k * (ratio * ratio)
+    return math.exp(scale * (1.0 / (temperature_c + 273.15 - t0_k) - 1.0 / t_ref))
 
 
 def filter_coefficients(model: LmnModel, temperature_c: float | None = None,
@@ -62,7 +72,7 @@ def filter_coefficients(model: LmnModel, temperature_c: float | None = None,
     taus: model.filter_taus() where the caller keeps it."""
     k = (1.0 if temperature_c is None
          else arrhenius_factor(temperature_c, model.tau_activation_k,
-                               model.reference_temperature_c))
+                               model.reference_temperature_c, model.activation_t0_k))
     ts, exp = model.sample_time_s, math.exp
     return [exp(-ts / (tau * k)) for tau in (model.filter_taus() if taus is None else taus)]
 
@@ -141,9 +151,10 @@ class ExoStepper:
         return factor if soc == last_soc else self.factor_of_soc(soc)
 
     def temperature_gain(self, temperature_c: float) -> float:
-        """g(T) = exp(E·(1/T − 1/T_ref)) on current and filter regressors (1 without E)."""
+        """g(T) (arrhenius_factor) on current and filter regressors (1 without E)."""
         m = self.model
-        return arrhenius_factor(temperature_c, m.arrhenius_k, m.reference_temperature_c)
+        return arrhenius_factor(temperature_c, m.arrhenius_k, m.reference_temperature_c,
+                                m.activation_t0_k)
 
     def initial_state(self, soc0: float, h0: float | None = None) -> ExoState:
         m = self.model

@@ -78,7 +78,7 @@ class VectorCells:
     def _features(self, i: np.ndarray, t: np.ndarray, soc: np.ndarray, lp: np.ndarray,
                   h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         m, n = self.model, self.n
-        g = arrhenius_gain(t, m.arrhenius_k, n, m.reference_temperature_c)
+        g = arrhenius_gain(t, m.arrhenius_k, n, m.reference_temperature_c, m.activation_t0_k)
         cols = [g * i, *(g * self.past[:, k] for k in range(self.past.shape[1])),
                 *(g * (lp[:, 2 * f] - lp[:, 2 * f + 1]) for f in range(len(m.filters)))]
         if m.hysteresis_gamma is not None:
@@ -117,7 +117,8 @@ class VectorCells:
         m = self.model
         if m.tau_activation_k is None:
             return self.coef
-        k = arrhenius_gain(t, m.tau_activation_k, self.n, m.reference_temperature_c)
+        k = arrhenius_gain(t, m.tau_activation_k, self.n, m.reference_temperature_c,
+                           m.activation_t0_k)
         return np.exp(-m.sample_time_s / (self._taus[None, :] * k[:, None]))
 
     def _advance(self, i: np.ndarray, t: np.ndarray):

@@ -293,6 +293,32 @@ def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_region
         load_config(depletion_fast_tau_s=7)
 
 
+def test_the_vtf_form_is_taken_where_the_network_has_temperature_regions() -> None:
+    """activation_t0_k "auto": T0 = 170 K where the records lie at two chamber temperatures
+    and the network gets one set of local models per temperature (E then carries the warm-up
+    at 10 °C and at 25 °C alike), 0 (Arrhenius) at one temperature and with temperature terms;
+    a given value kept, one beyond 200 K refused by name."""
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.construction import resolve_activation_t0, resolve_partition
+
+    def seg(t0: float) -> Segment:
+        n = 100
+        return Segment("s", np.arange(1.0, n + 1), -np.ones(n), np.full(n, 3.6),
+                       t0 + np.linspace(0.0, 6.0, n), 1.0, np.linspace(1.0, 0.97, n), np.ones(n))
+
+    def t0(segs: list[Segment], **settings) -> float:
+        cfg = resolve_partition(load_config(**settings), segs)
+        return resolve_activation_t0(cfg, segs).activation_t0_k
+
+    two, one, three = [seg(25.0), seg(10.0)], [seg(25.0), seg(26.0)], [seg(-5.0), seg(5.0),
+                                                                       seg(45.0)]
+    assert t0(two) == 170.0 and t0(one) == 0.0 and t0(three) == 0.0
+    assert t0(two, temperature_regions="off") == 0.0 and t0(one, activation_t0_k=150) == 150.0
+    with pytest.raises(ConfigError, match=r"'activation_t0_k' = 250: expected 'auto' or T0 in "
+                                          r"K within 0…200"):
+        load_config(activation_t0_k=250)
+
+
 @pytest.mark.parametrize("kw, message", [
     ({"partition": ["soc", "pressure"]}, "'partition'"),
     ({"filters": [[100.0, 5.0]]}, "'filters'"),

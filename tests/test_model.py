@@ -218,8 +218,12 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=8),
-     r"version 8; this LMNCell reads versions \[1, 2, 3, 4, 5, 6, 7\]"),
+    (lambda d: d.update(version=9),
+     r"version 9; this LMNCell reads versions \[1, 2, 3, 4, 5, 6, 7, 8\]"),
+    (lambda d: d["regressors"].update(activation_t0_k=250.0),
+     r"'activation_t0_k' is 250.0, expected a number within 0…200"),
+    (lambda d: d["regressors"].update(activation_t0_k=float("nan")),
+     r"'activation_t0_k' is nan"),
     (lambda d: d["regressors"].update(time_constant_activation_k=-5.0),
      r"'time_constant_activation_k' is -5.0, expected null or a number of K within 0…10000"),
     (lambda d: d["regressors"].update(time_constant_activation_k="1500"),
@@ -525,3 +529,30 @@ def test_no_edit_of_a_model_file_gives_a_traceback_a_hang_or_nan(quick_model, tm
             if not all(np.isfinite(r).all() for r in runs):
                 found.append(f"{label}: non-finite output")
     assert not found, "\n".join(found[:20])
+
+
+def test_the_vtf_form_has_the_arrhenius_slope_at_the_reference() -> None:
+    """activation_t0_k: T0 = 0 is the Arrhenius factor to the bit; with T0 > 0 the factor has
+    E's slope at T_ref and an apparent activation d ln k/d(1/T) that grows towards the cold
+    (the Vogel–Tammann–Fulcher form), scalar and vector alike."""
+    import math
+
+    from lmncell.runtime.step import arrhenius_factor, arrhenius_gain
+
+    temps = np.array([-20.0, 0.0, 10.0, 25.0, 33.0, 45.0])
+    old = np.exp(3000.0 * (1.0 / (temps + 273.15) - 1.0 / 298.15))
+    assert np.array_equal(arrhenius_gain(temps, 3000.0, temps.size), old)
+    assert [arrhenius_factor(float(t), 3000.0) for t in temps] == [
+        math.exp(3000.0 * (1.0 / (t + 273.15) - 1.0 / 298.15)) for t in temps]
+
+    def apparent(t: float, t0: float, dt: float = 1e-3) -> float:    # d ln k / d(1/T)
+        up, down = arrhenius_factor(t + dt, 3000.0, 25.0, t0), arrhenius_factor(t - dt, 3000.0,
+                                                                                 25.0, t0)
+        return math.log(up / down) / (1.0 / (t + dt + 273.15) - 1.0 / (t - dt + 273.15))
+
+    assert apparent(25.0, 170.0) == pytest.approx(3000.0, rel=1e-6)
+    assert apparent(10.0, 170.0) > 1.1 * 3000.0 > 3000.0 > 1.04 * apparent(33.0, 170.0)
+    assert arrhenius_factor(25.0, 3000.0, 25.0, 170.0) == 1.0
+    np.testing.assert_allclose(arrhenius_gain(temps, 3000.0, temps.size, 25.0, 170.0),
+                               [arrhenius_factor(float(t), 3000.0, 25.0, 170.0) for t in temps],
+                               rtol=1e-15)

@@ -657,3 +657,32 @@ def test_out_of_range_when_the_model_voltage_leaves_its_trained_range(quick_mode
             assert log.count("model voltage") == 1 and "3.95" in log, (fmu.name, log)
         finally:
             inst.free()
+
+
+@pytest.mark.parametrize("ambient", [False, True])
+def test_native_with_the_vtf_temperature_form_equals_the_runtime(quick_model, tmp_path,
+                                                                 ambient) -> None:
+    # T0 > 0 (the Vogel–Tammann–Fulcher form) on both the gain g(T) with E and the time
+    # constants' k(T) with Eτ, as models of two chamber temperatures have it: the C takes the
+    # model file's T0 and the same operations; driven by the measured cell temperature and by
+    # the ambient, which the thermal model warms
+    import dataclasses
+
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.runtime.model import save_model
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    plain = load_model(quick_model)
+    assert plain.tau_activation_k is not None and plain.activation_t0_k == 0.0
+    model = dataclasses.replace(plain, arrhenius_k=3000.0, activation_t0_k=170.0)
+    path = save_model(model, tmp_path / "vtf.json")
+    assert load_model(path).activation_t0_k == 170.0
+    fmu = build_native_fmu(path, tmp_path / "vtf.fmu")
+    res = compare_fmu_with_pipeline(path, fmu, PAN_US06, max_steps=2500, ambient=ambient)
+    assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+    assert res["max_dtemperature_k"] <= 1e-9
+    same_e = save_model(dataclasses.replace(model, activation_t0_k=0.0), tmp_path / "e.json")
+    arrhenius = compare_fmu_with_pipeline(same_e, fmu, PAN_US06, max_steps=2500,
+                                          ambient=ambient)   # the file's T0 matters
+    assert arrhenius["max_dv_v"] > 1e-5

@@ -12,6 +12,7 @@ from pathlib import Path
 
 from lmncell.identification.ladder import is_ladder
 from lmncell.runtime.model import (
+    MAX_ACTIVATION_T0_K,
     MAX_ARRHENIUS_K,
     MAX_TAU_ACTIVATION_K,
     MAX_TEMPERATURE_TERMS,
@@ -22,6 +23,8 @@ from lmncell.runtime.model import (
 
 DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant for "auto" (s)
 DEPLETION_FAST_TAU_S = 5.0  # the fast depletion regressor's, where "auto" turns it on (s)
+ACTIVATION_T0_K = 170.0    # activation_t0_k 'auto' with temperature regions: a carbonate
+                           # electrolyte's Vogel–Tammann–Fulcher T0 (K), chosen before measuring
 OFFSET_BOUND_MV = 50.0     # offset_bound_mv 'auto' where slow OCV tests fix the OCV
 OFFSET_RIDGE = 0.003       # offset_ridge 'auto' where slow OCV tests fix the OCV
 OCV_TEST_ANCHOR = 0.003    # ocv_refinement: 1 mV off the test costs like this share of samples
@@ -122,6 +125,13 @@ class TrainConfig:
     time_constant_scaling: filter time constants τ·exp(Eτ·(1/T − 1/T_ref)): "auto" (on, with
     Eτ = 1500 K, where the measured temperature varies inside records by more than 2 K, i.e.
     the cells warm up under load), "off", or Eτ (K, 0…10000).
+    activation_t0_k: T0 (K) of both: exp(E·c·(1/(T − T0) − 1/(T_ref − T0))),
+    c = ((T_ref − T0)/T_ref)², the Vogel–Tammann–Fulcher form of an electrolyte's transport
+    (the slope at T_ref is the Arrhenius one of E; the apparent activation grows towards the
+    cold); 0: Arrhenius; "auto": ACTIVATION_T0_K (170 K) where the network has temperature
+    regions (two or more chamber temperatures, no temperature terms: E must carry the
+    cells' warm-up at each chamber temperature, 10 and 25 °C), else 0 (temperature terms
+    carry the curvature; at one chamber temperature the warm-up spans a few K); 0…200 K.
     temperature_terms: degree n of temperature terms: the current, filter and offset columns
     (and the hysteresis column as hysteresis_terms says) again times dT … dTⁿ,
     dT = (T − 25 °C)/10 K, so that resistances and OCV offsets vary smoothly with temperature
@@ -200,6 +210,7 @@ class TrainConfig:
     hysteresis: str | float = "auto"
     temperature_scaling: str | float = "auto"
     time_constant_scaling: str | float = "auto"
+    activation_t0_k: str | float = "auto"
     local_model_form: str = "auto"
     output: str = "relative_ocv"
     ocv_input: bool = False
@@ -382,6 +393,10 @@ class TrainConfig:
                     and 0 <= self.time_constant_scaling <= MAX_TAU_ACTIVATION_K)):
             raise bad("time_constant_scaling",
                       f"expected 'auto', 'off' or Eτ in K within 0…{MAX_TAU_ACTIVATION_K:g}")
+        if not (self.activation_t0_k == "auto" or (is_real_number(self.activation_t0_k)
+                and 0 <= self.activation_t0_k <= MAX_ACTIVATION_T0_K)):
+            raise bad("activation_t0_k",
+                      f"expected 'auto' or T0 in K within 0…{MAX_ACTIVATION_T0_K:g}")
         if not (self.temperature_terms == "auto" or (isinstance(self.temperature_terms, int)
                 and not isinstance(self.temperature_terms, bool)
                 and 0 <= self.temperature_terms <= MAX_TEMPERATURE_TERMS)):

@@ -163,10 +163,14 @@ static double ocv(double soc) { /* numpy.interp: linear, held beyond the ends */
     return OCV_V[k] + (OCV_V[k + 1] - OCV_V[k]) * (soc - OCV_SOC[k]) / (OCV_SOC[k + 1] - OCV_SOC[k]);
 }
 
-/* exp(E·(1/T − 1/T_ref)) at t (°C): the Arrhenius gain with E, the time constants' factor with
-   Eτ (step.arrhenius_factor) */
+/* exp(E·c·(1/(T − T0) − 1/(T_ref − T0))), c = ((T_ref − T0)/T_ref)², at t (°C): the
+   Arrhenius (T0 = 0) or Vogel–Tammann–Fulcher gain with E, the time constants' factor with Eτ
+   (step.arrhenius_factor, the same operations in the same order) */
 static double arrhenius_factor(double t, double e_k) {
-    return exp(e_k * (1.0 / (t + 273.15) - 1.0 / (REF_TEMPERATURE_C + 273.15)));
+    const double t_ref = REF_TEMPERATURE_C + 273.15 - ACTIVATION_T0_K;
+    const double ratio = t_ref / (REF_TEMPERATURE_C + 273.15);
+    const double scale = e_k * (ratio * ratio);
+    return exp(scale * (1.0 / (t + 273.15 - ACTIVATION_T0_K) - 1.0 / t_ref));
 }
 
 static double temperature_gain(double t) {

@@ -105,7 +105,7 @@ def ladder_parameters(model: LmnModel, theta: np.ndarray, temperature_c: float) 
     c = {src: float(coefficient_row(model, src, temperature_c) @ theta)
          for src in model._plain_columns()}
     g = float(arrhenius_gain(np.array([temperature_c]), model.arrhenius_k, 1,
-                             model.reference_temperature_c)[0])
+                             model.reference_temperature_c, model.activation_t0_k)[0])
     a = filter_to_ladder(list(model.filters), model.sample_time_s)
     gf = np.array([c[f"v{f + 1}(k)"] for f in range(len(model.filters))])
     r0 = sum(v for k, v in c.items() if k.startswith("i(k")) + float(a[0] @ gf)
@@ -158,12 +158,7 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
                  f"{', '.join(model.partition_variables)}; hysteresis: "
                  + ("off" if model.hysteresis_gamma is None
                     else f"γ = {model.hysteresis_gamma:g}")
-                 + ("" if model.arrhenius_k is None
-                    else f"; resistances × exp(E·(1/T − 1/T_ref)), E = {model.arrhenius_k:g} K")
-                 + ("" if model.tau_activation_k is None
-                    else "; time constants (at T_ref = "
-                         f"{model.reference_temperature_c:g} °C) × exp(Eτ·(1/T − 1/T_ref)), "
-                         f"Eτ = {model.tau_activation_k:g} K")
+                 + _temperature_text(model)
                  + ("" if not model.current_delay_s
                     else f"; current delayed by {model.current_delay_s:g} s (the voltage "
                          "channel's lag)"))
@@ -204,6 +199,23 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
     lines += ["  ".join(c.rjust(w) for c, w in zip(b, widths, strict=True)) for b in body]
     lines += _training_error_lines(model)
     return "\n".join(lines)
+
+
+def _temperature_text(model: LmnModel) -> str:
+    """How the resistances and time constants change with temperature, for explain's head."""
+    t0 = model.activation_t0_k
+    factor = ("exp({}·(1/T − 1/T_ref))" if not t0 else
+              "exp({}·c·(1/(T − T0) − 1/(T_ref − T0)))")
+    text = ""
+    if model.arrhenius_k is not None:
+        text += f"; resistances × {factor.format('E')}, E = {model.arrhenius_k:g} K"
+    if model.tau_activation_k is not None:
+        text += (f"; time constants (at T_ref = {model.reference_temperature_c:g} °C) × "
+                 f"{factor.format('Eτ')}, Eτ = {model.tau_activation_k:g} K")
+    if text and t0:
+        text += (f" (Vogel–Tammann–Fulcher: T0 = {t0:g} K, c = ((T_ref − T0)/T_ref)², T in "
+                 "K)")
+    return text
 
 
 def _training_error_lines(model: LmnModel) -> list[str]:

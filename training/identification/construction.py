@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from lmncell.config import (
+    ACTIVATION_T0_K,
     DEPLETION_FAST_TAU_S,
     LOCAL_MODELS_PER_REGION,
     ConfigError,
@@ -179,6 +180,20 @@ def resolve_fast_depletion(cfg: TrainConfig, segs: list[Segment], progress: Prog
     return dataclasses.replace(cfg, depletion_fast_tau_s=float(fast))
 
 
+def resolve_activation_t0(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
+                          ) -> TrainConfig:
+    """The settings with activation_t0_k "auto" replaced: ACTIVATION_T0_K where the network has
+    temperature regions (uses_temperature_regions; the partition resolved), else 0 (Arrhenius).
+    A given value was checked by TrainConfig.check."""
+    t0 = cfg.activation_t0_k
+    if t0 == "auto":
+        t0 = ACTIVATION_T0_K if uses_temperature_regions(cfg, segs) else 0.0
+        if t0:
+            progress(f"  temperature scaling in the Vogel–Tammann–Fulcher form (auto, "
+                     f"temperature regions): T0 = {t0:g} K")
+    return dataclasses.replace(cfg, activation_t0_k=float(t0))
+
+
 def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_fixed: bool,
                              progress: Progress = _quiet) -> TrainConfig:
     """The settings with max_local_models "auto" replaced: LOCAL_MODELS_PER_REGION per
@@ -224,6 +239,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     t_start = time.perf_counter()
     cfg = resolve_partition(cfg, segs, progress)
     cfg = resolve_fast_depletion(cfg, segs, progress)
+    cfg = resolve_activation_t0(cfg, segs, progress)
     d = len(cfg.partition)
     n_temp = temperature_degree(cfg, segs)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,

@@ -68,7 +68,8 @@ def coefficient_row(model: LmnModel, source: str, temperature_c: float) -> np.nd
     temperature, its temperature terms summed in (row @ θ gives the value)."""
     cols = model.columns()
     if model.in_activation_step(source):
-        gain = arrhenius_factor(temperature_c, model.arrhenius_k, model.reference_temperature_c)
+        gain = arrhenius_factor(temperature_c, model.arrhenius_k, model.reference_temperature_c,
+                                model.activation_t0_k)
         step = model.activation_step(temperature_c, gain)
     else:
         step = model.temperature_step(temperature_c)

@@ -151,7 +151,8 @@ class _Prefits:
         """The pre-fit with hysteresis γ (None: none), Arrhenius E (None: none), r_knots
         resistance knots over SoC and these sample weights (default: the fit weights)."""
         cfg, segs = self.cfg, self.segs
-        gain = [arrhenius_gain(s.temperature_c, e_k, len(s)) for s in segs]
+        gain = [arrhenius_gain(s.temperature_c, e_k, len(s), self.base.reference_temperature_c,
+                               self.base.activation_t0_k) for s in segs]
         return fit_ocv(self.socs, [s.current_a for s in segs], [s.voltage_v for s in segs],
                        self.fit_weights if weights is None else weights,
                        None if gamma is None else self.hysteresis_series(gamma),

@@ -33,6 +33,7 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
         node_weights=np.zeros((0, d + 1)), node_children=[],
         theta=np.zeros((len(roots), 1)), gating_mode=cfg.pre_partition,
         rest_current_a=cfg.rest_current_a, temperature_terms=temperature_terms,
+        activation_t0_k=float(cfg.activation_t0_k) if cfg.activation_t0_k != "auto" else 0.0,
         depletion=(Depletion(cfg.depletion_time_constant_s(), float(cfg.depletion_power),
                              fast_tau_s=cfg.depletion_fast_time_constant_s())
                    if cfg.depletion_power else None))
