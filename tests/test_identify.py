@@ -264,25 +264,37 @@ def test_auto_partition_and_local_model_budget_follow_the_temperatures() -> None
     assert resolve_max_local_models(own, two, temperature_fixed=False).max_local_models == 5
 
 
-def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_regions() -> None:
-    """depletion_fast_tau_s "auto": the filters' 5 s where the records lie at two chamber
-    temperatures and the network gets one set of local models per temperature, none at one
-    temperature, with temperature terms (three and more) or without a depletion regressor;
-    a given value kept; ConfigError for d's own time constant or one no filter has."""
+def _chamber_levels() -> tuple[list, list, list]:
+    """Short segments that warm by 6 K, at two chamber temperatures (25, 10 °C), at one (25,
+    26 °C) and at three (−5, 5, 45 °C)."""
     from lmncell.data.dataset import Segment
-    from lmncell.identification.construction import resolve_fast_depletion, resolve_partition
 
     def seg(t0: float) -> Segment:
         n = 100
         return Segment("s", np.arange(1.0, n + 1), -np.ones(n), np.full(n, 3.6),
                        t0 + np.linspace(0.0, 6.0, n), 1.0, np.linspace(1.0, 0.97, n), np.ones(n))
 
-    def fast(segs: list[Segment], **settings) -> float:
-        cfg = resolve_partition(load_config(**settings), segs)
-        return resolve_fast_depletion(cfg, segs).depletion_fast_tau_s
+    return [seg(25.0), seg(10.0)], [seg(25.0), seg(26.0)], [seg(-5.0), seg(5.0), seg(45.0)]
 
-    two, one, three = [seg(25.0), seg(10.0)], [seg(25.0), seg(26.0)], [seg(-5.0), seg(5.0),
-                                                                       seg(45.0)]
+
+def _resolved(resolve, segs: list, **settings):
+    """The settings given, their partition resolved for the segments, then resolve's "auto"."""
+    from lmncell.identification.construction import resolve_partition
+
+    return resolve(resolve_partition(load_config(**settings), segs), segs)
+
+
+def test_fast_depletion_regressor_is_on_where_the_network_has_temperature_regions() -> None:
+    """depletion_fast_tau_s "auto": the filters' 5 s where the records lie at two chamber
+    temperatures and the network gets one set of local models per temperature, none at one
+    temperature, with temperature terms (three and more) or without a depletion regressor;
+    a given value kept; ConfigError for d's own time constant or one no filter has."""
+    from lmncell.identification.construction import resolve_fast_depletion
+
+    def fast(segs: list, **settings) -> float:
+        return _resolved(resolve_fast_depletion, segs, **settings).depletion_fast_tau_s
+
+    two, one, three = _chamber_levels()
     assert fast(two) == 5.0 and fast(one) == 0.0 and fast(three) == 0.0
     assert fast(two, temperature_regions="off") == 0.0 and fast(two, depletion_power=0) == 0.0
     assert fast(two, depletion_fast_tau_s=0) == 0.0 and fast(one, depletion_fast_tau_s=30) == 30.0
@@ -298,20 +310,12 @@ def test_the_vtf_form_is_taken_where_the_network_has_temperature_regions() -> No
     and the network gets one set of local models per temperature (E then carries the warm-up
     at 10 °C and at 25 °C alike), 0 (Arrhenius) at one temperature and with temperature terms;
     a given value kept, one beyond 200 K refused by name."""
-    from lmncell.data.dataset import Segment
-    from lmncell.identification.construction import resolve_activation_t0, resolve_partition
+    from lmncell.identification.construction import resolve_activation_t0
 
-    def seg(t0: float) -> Segment:
-        n = 100
-        return Segment("s", np.arange(1.0, n + 1), -np.ones(n), np.full(n, 3.6),
-                       t0 + np.linspace(0.0, 6.0, n), 1.0, np.linspace(1.0, 0.97, n), np.ones(n))
+    def t0(segs: list, **settings) -> float:
+        return _resolved(resolve_activation_t0, segs, **settings).activation_t0_k
 
-    def t0(segs: list[Segment], **settings) -> float:
-        cfg = resolve_partition(load_config(**settings), segs)
-        return resolve_activation_t0(cfg, segs).activation_t0_k
-
-    two, one, three = [seg(25.0), seg(10.0)], [seg(25.0), seg(26.0)], [seg(-5.0), seg(5.0),
-                                                                       seg(45.0)]
+    two, one, three = _chamber_levels()
     assert t0(two) == 170.0 and t0(one) == 0.0 and t0(three) == 0.0
     assert t0(two, temperature_regions="off") == 0.0 and t0(one, activation_t0_k=150) == 150.0
     with pytest.raises(ConfigError, match=r"'activation_t0_k' = 250: expected 'auto' or T0 in "
