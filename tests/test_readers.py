@@ -797,6 +797,9 @@ def test_a_settling_chamber_is_the_ambient_of_its_segment(tmp_path) -> None:
     assert rec.meta.chamber_temp_c == pytest.approx(24.0, abs=1e-3)
     (seg,) = record_to_segments(rec, 0.1, 1.0, 2.85)
     assert seg.ambient_trace_c is not None and len(seg.ambient_trace_c) == len(seg)
+    first = seg.head(100)         # every per-step array cut, the trace included
+    assert len(first) == len(first.ambient_trace_c) == len(first.soc_ref) == 100
+    assert np.array_equal(first.ambient_trace_c, seg.ambient_trace_c[:100])
     assert ambient_of(seg) == pytest.approx(np.interp(seg.time_s - 0.05, rec.time_s,
                                                       rec.ambient_c), abs=2e-3)
     assert "chamber 24 °C, logged 23.0 … 25.0 °C (the thermal model's ambient)" in (

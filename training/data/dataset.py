@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -47,6 +48,13 @@ class Segment:
 
     def __len__(self) -> int:
         return int(self.time_s.size)
+
+    def head(self, steps: int) -> Segment:
+        """The segment's first steps: every per-step array cut there (time, current, voltage,
+        temperature, SoC, weight, ambient trace), the rest as it is."""
+        return dataclasses.replace(self, **{
+            f.name: getattr(self, f.name)[:steps] for f in dataclasses.fields(self)
+            if isinstance(getattr(self, f.name), np.ndarray)})
 
     def temperatures(self) -> np.ndarray:
         """The temperature of each step (°C): temperature_c, or DEFAULT_TEMPERATURE_C where the

@@ -58,13 +58,7 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
     seg = record_to_segments(rec, model.sample_time_s, start_soc(rec, soc0, model_ocv(model)),
                              model.capacity_ah)[0]
     if max_steps is not None and len(seg) > max_steps:
-        seg = Segment(seg.name, seg.time_s[:max_steps], seg.current_a[:max_steps],
-                      seg.voltage_v[:max_steps],
-                      None if seg.temperature_c is None else seg.temperature_c[:max_steps],
-                      seg.soc0, seg.soc_ref[:max_steps], seg.weight[:max_steps],
-                      ambient_c=seg.ambient_c, temperature_kind=seg.temperature_kind,
-                      ambient_trace_c=None if seg.ambient_trace_c is None
-                      else seg.ambient_trace_c[:max_steps])
+        seg = seg.head(max_steps)
     fmu_seg = seg
     seg = dataclasses.replace(seg, current_a=np.array(held_delayed_currents(
         seg.current_a.tolist(), model.sample_time_s, model.current_delay_s)))
