@@ -57,21 +57,26 @@ def baseline_voltage(kind: str, doc: dict, seg: Segment, soc: np.ndarray) -> np.
     return ecm.simulate(seg.current_a, seg.temperature_c, soc, initial_hysteresis(seg.soc0))
 
 
-def ambient_of(seg: Segment) -> np.ndarray:
-    """The ambient temperature a vehicle simulation would give for a segment (°C per step):
-    the chamber temperature where the record has a measured cell temperature beside it (as the
-    record logs it where that varies, else its set point), else the record's own (chamber)
-    temperature, else 25 °C. DataError where the record has a measured cell temperature and
-    no chamber temperature: its ambient is not known (the cell's would be heated twice)."""
-    ambient = seg.ambient_temperature()
-    if ambient is not None:
-        return np.array(np.broadcast_to(ambient, len(seg)), dtype=float)
-    if seg.temperature_kind == "measured":
+def check_ambient_known(seg: Segment) -> None:
+    """DataError where the record has a measured cell temperature and no chamber temperature:
+    its ambient is not known (driven by the cell's own, the cell would be heated twice)."""
+    if seg.ambient_temperature() is None and seg.temperature_kind == "measured":
         raise DataError(f"{seg.name}: driving the model by the ambient temperature needs the "
                         "chamber's beside the measured cell temperature, and the record has "
                         "none; expected a chamber column (your own CSV: map it as "
                         "ambient=COL in --columns), or evaluate with the cell temperature "
                         "(without --ambient)")
+
+
+def ambient_of(seg: Segment) -> np.ndarray:
+    """The ambient temperature a vehicle simulation would give for a segment (°C per step):
+    the chamber temperature where the record has a measured cell temperature beside it (as the
+    record logs it where that varies, else its set point), else the record's own (chamber)
+    temperature, else 25 °C; DataError where it is not known (check_ambient_known)."""
+    check_ambient_known(seg)
+    ambient = seg.ambient_temperature()
+    if ambient is not None:
+        return np.array(np.broadcast_to(ambient, len(seg)), dtype=float)
     return np.asarray(seg.temperatures(), dtype=float)
 
 

@@ -24,6 +24,7 @@ from lmncell.data.records import Record
 from lmncell.evaluation.evaluate import (
     Trace,
     ambient_of,
+    check_ambient_known,
     model_ocv,
     print_rows,
     read_records,
@@ -332,18 +333,18 @@ class _Slave:
             self._log.__exit__(None, None, None)
 
 
-def ambient_at_samples(part: Record, seg: Segment) -> np.ndarray:
+def ambient_at_samples(part: Record, seg: Segment) -> np.ndarray | None:
     """The ambient temperature at each of the part's own samples (°C), as ambient_of gives it
     at the model's steps: the chamber's beside the cell's as the record logs it where the
     segment follows it (Segment.ambient_trace_c), else its set point; without a cell
-    temperature, the record's own (the chamber's)."""
-    ambient = ambient_of(seg)                      # DataError where it is not known
-    if seg.ambient_temperature() is None:
-        own = part.temperature_or_chamber()
-        return own if own is not None else ambient[0] + np.zeros(len(part))
+    temperature, the record's own (the chamber's; None where it has none). DataError where
+    it is not known (check_ambient_known)."""
+    check_ambient_known(seg)
     if seg.ambient_trace_c is not None and part.ambient_c is not None:
         return part.ambient_c
-    return np.full(len(part), float(ambient[0]))
+    if seg.ambient_c is not None:
+        return np.full(len(part), float(seg.ambient_c))
+    return part.temperature_or_chamber()
 
 
 def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
