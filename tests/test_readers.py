@@ -847,3 +847,89 @@ def test_a_one_sample_panasonic_file_is_inspected_not_refused(tmp_path, capsys) 
     assert main(["inspect", str(path)]) == 0
     assert "1 samples, 0.00 h, no sample time (too short to train on or evaluate)" in (
         capsys.readouterr().out)
+
+
+def _own_csv_with_counter(path, rec, counter_ah, counter_name="Q [mAh]", scale=1e3) -> dict:
+    """A record written as a user's ';'-separated, decimal-comma CSV in mA with a charge counter
+    column (counter_ah in Ah, written times scale); the mapping that reads it."""
+    columns = (rec.time_s, rec.current_a * 1e3, rec.voltage_v, counter_ah * scale)
+    path.write_text(f"Time [s];I [mA];U [V];{counter_name}\n" + "".join(
+        ";".join(f"{v:.6f}".replace(".", ",") for v in row) + "\n"
+        for row in zip(*columns, strict=True)))
+    return {"time": "Time [s]", "current": "I [mA]", "voltage": "U [V]",
+            "charge": counter_name}
+
+
+def test_a_csv_charge_counter_keeps_a_gappy_log_in_one_segment(tmp_path, capsys) -> None:
+    """A 10 Hz drive cycle whose log has gaps of a few seconds under load: without a charge
+    counter the generic reader cannot tell whether charge was lost there and splits it (five
+    segments); with the tester's net counter mapped as charge=COL it is one segment, as the
+    .mat file with its Ah counter is, and the SoC reference counts by the counter. The header
+    proposes the column, in mAh from its name."""
+    from lmncell.data.soc import charge_throughput_ah
+
+    from tests.conftest import PAN_HWFET
+
+    rec = read_record(PAN_HWFET)
+    assert rec.meta.segment_starts == [0] and rec.charge_ah is not None
+    path = tmp_path / "own.csv"
+    mapping = _own_csv_with_counter(path, rec, rec.charge_ah)
+    without = {k: v for k, v in mapping.items() if k != "charge"}
+    assert len(read_record(path, columns=without, sep=";", decimal=",").segments()) == 5
+    own = read_record(path, columns=mapping, sep=";", decimal=",")
+    assert own.meta.segment_starts == [0]
+    assert own.charge_ah == pytest.approx(rec.charge_ah, abs=1e-9)
+    assert charge_throughput_ah(own)[-1] == pytest.approx(charge_throughput_ah(rec)[-1])
+    assert own.meta.file_columns["charge_ah"] == "Q [mAh]"
+    assert main(["inspect", str(path)]) == 2
+    proposal = ("--columns 'time=Time [s],current=I [mA],voltage=U [V],charge=Q [mAh]' "
+                "--delimiter ';' --decimal ,")
+    assert proposal in capsys.readouterr().err
+    assert main(["inspect", str(path), *shlex.split(proposal)]) == 0
+    out = capsys.readouterr().out
+    assert "1 segment(s)" in out and "the net charge is the tester's counters'" in out, out
+    # in Ah, the option saying so where the name does not
+    path.write_text(path.read_text().replace("Q [mAh]", "Q"))
+    in_ah = read_record(path, columns={**mapping, "charge": "Q"}, sep=";", decimal=",",
+                        charge_unit="mAh")
+    assert in_ah.charge_ah == pytest.approx(rec.charge_ah, abs=1e-9)
+    # a file that counts discharge positive counts its counter so too: both negated
+    flipped = dataclasses.replace(rec, current_a=-rec.current_a)
+    mapping = _own_csv_with_counter(path, flipped, -rec.charge_ah)
+    back = read_record(path, columns=mapping, sep=";", decimal=",", discharge_positive=True)
+    assert back.charge_ah == pytest.approx(rec.charge_ah, abs=1e-9)
+    assert not any("negated (LMNCell" in n for n in back.meta.notes)
+
+
+def test_a_csv_charge_counter_that_cannot_be_the_net_charge_is_refused(tmp_path) -> None:
+    """A counter of the opposite sign to the current is negated with a note; one that resets at
+    each step of the schedule, or counts discharge only where the record also charges, is
+    refused naming the column and what it counts against the current."""
+    from tests.conftest import PAN_HWFET
+
+    rec = read_record(PAN_HWFET).slice(0, 20000)
+    path = tmp_path / "own.csv"
+    mapping = _own_csv_with_counter(path, rec, -rec.charge_ah)
+    own = read_record(path, columns=mapping, sep=";", decimal=",")
+    assert own.charge_ah == pytest.approx(rec.charge_ah, abs=1e-9)
+    assert any("column 'Q [mAh]' counted charge negative to the current's sign; negated" in n
+               for n in own.meta.notes)
+    reset = rec.charge_ah.copy()
+    reset[12000:] -= reset[12000]                    # a new step of the schedule starts at 0
+    _own_csv_with_counter(path, rec, reset)
+    t = rec.time_s[11999]
+    with pytest.raises(DataError, match=rf"own.csv: column 'Q \[mAh\]' \(charge\) steps by "
+                                        rf"\+0.\d+ Ah between t = {t:g} and .* expected the "
+                                        r"tester's net charge counter running through the whole "
+                                        r"record \(not reset at each step\)"):
+        read_record(path, columns=mapping, sep=";", decimal=",")
+    held = np.concatenate([[0.0], rec.current_a[:-1] * np.diff(rec.time_s) / 3600])
+    discharged = np.cumsum(np.minimum(held, 0.0))          # the regeneration not counted
+    _own_csv_with_counter(path, rec, discharged)
+    with pytest.raises(DataError, match=r"column 'Q \[mAh\]' \(charge\) counts -\d.\d+ Ah over "
+                                        r"the record's gap-free steps where the current counts "
+                                        r"-\d.\d+ Ah \(\d+% of the .*expected the net charge "
+                                        r"counter"):
+        read_record(path, columns=mapping, sep=";", decimal=",")
+    with pytest.raises(DataError, match=r"charge unit 'Wh'; expected one of \['Ah', 'mAh'\]"):
+        read_record(path, columns=mapping, sep=";", decimal=",", charge_unit="Wh")

@@ -142,15 +142,15 @@ def soc_list_argument(text: str) -> list[float]:
 
 
 def _columns(text: str) -> dict[str, str]:
-    """time=COL,current=COL,voltage=COL[,temperature=COL][,ambient=COL] → {quantity: column
-    name}."""
+    """time=COL,current=COL,voltage=COL[,temperature=COL][,ambient=COL][,charge=COL] →
+    {quantity: column name}."""
     out: dict[str, str] = {}
     for part in text.split(","):
         key, sep, col = part.partition("=")
         if not sep or not key.strip() or not col.strip():
             raise argparse.ArgumentTypeError(
                 f"{text!r}: expected time=COL,current=COL,voltage=COL[,temperature=COL]"
-                f"[,ambient=COL] "
+                f"[,ambient=COL][,charge=COL] "
                 f"(item {part!r} is not QUANTITY=COLUMN)")
         out[key.strip()] = col.strip()
     return out
@@ -166,14 +166,14 @@ def read_options(a: argparse.Namespace) -> dict[str, Any]:
     extra = {"discharge_positive": a.discharge_positive or None,
              "current_unit": a.current_unit, "time_unit": a.time_unit,
              "voltage_unit": a.voltage_unit, "temperature_unit": a.temperature_unit,
-             "sep": _delimiter(a.delimiter), "decimal": a.decimal}
+             "charge_unit": a.charge_unit, "sep": _delimiter(a.delimiter), "decimal": a.decimal}
     given = {k: v for k, v in extra.items() if v is not None}
     if a.columns is None:
         if given:
             flags = {"discharge_positive": "--discharge-positive",
                      "current_unit": "--current-unit", "time_unit": "--time-unit",
                      "voltage_unit": "--voltage-unit", "temperature_unit": "--temperature-unit",
-                     "sep": "--delimiter",
+                     "charge_unit": "--charge-unit", "sep": "--delimiter",
                      "decimal": "--decimal"}
             verb = "needs" if len(given) == 1 else "need"
             raise ConfigError(f"{', '.join(flags[k] for k in given)} {verb} --columns "
@@ -394,10 +394,12 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
                              "Arbin, Panasonic .mat, BDF, BioLogic .mpt — are recognised "
                              "without these)")
     g.add_argument("--columns", type=_columns, metavar="time=COL,current=COL,voltage=COL"
-                   "[,temperature=COL][,ambient=COL]", help="the file's column names for time "
-                   "(s), current, voltage (V) and optionally cell temperature and the ambient "
-                   "(chamber) temperature beside it (°C; with both, training identifies a "
-                   "thermal model)")
+                   "[,temperature=COL][,ambient=COL][,charge=COL]", help="the file's column "
+                   "names for time (s), current, voltage (V) and optionally cell temperature "
+                   "and the ambient (chamber) temperature beside it (°C; with both, training "
+                   "identifies a thermal model), and the tester's net charge counter (Ah, "
+                   "running through the record: a gap in time then splits the record only "
+                   "where charge was lost, and the SoC reference counts by it)")
     g.add_argument("--discharge-positive", action="store_true", help="the file counts "
                    "discharge current as positive (LMNCell: current > 0 charges)")
     g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "
@@ -410,6 +412,8 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
     g.add_argument("--temperature-unit", choices=["degC", "K"], help="unit of the temperature "
                    "columns (default: the file's, from the column name or a units row; else "
                    "degC)")
+    g.add_argument("--charge-unit", choices=["Ah", "mAh"], help="unit of the charge counter "
+                   "column (default: the file's, from the column name or a units row; else Ah)")
     g.add_argument("--delimiter", metavar="CHAR", help="field delimiter, e.g. ';' or tab "
                    "(default: ',')")
     g.add_argument("--decimal", choices=[".", ","], help="decimal mark (default: '.')")

@@ -1,7 +1,7 @@
-"""Which columns of an unknown table's header look like time, current, voltage, temperature and
-the ambient beside it: the reader's options that would read it, proposed in the unknown-format
-error. Only proposed, never applied: the sign of the current and the columns are the user's to
-confirm."""
+"""Which columns of an unknown table's header look like time, current, voltage, temperature, the
+ambient beside it and a net charge counter: the reader's options that would read it, proposed in
+the unknown-format error. Only proposed, never applied: the sign of the current and the columns
+are the user's to confirm."""
 
 from __future__ import annotations
 
@@ -19,6 +19,10 @@ VOLTAGE_NAMES = {"voltage", "u", "v", "volt", "volts", "cell voltage", "battery 
                  "terminal voltage", "ecell", "e cell", "u cell", "ucell", "v cell", "vcell"}
 CELL_WORDS = ("cell", "battery", "surface", "case", "t1")   # a cell's, not the chamber's
 AMBIENT_WORDS = ("ambient", "amb", "chamber", "environment", "env", "room", "air")
+# a net charge counter's names (a cycler's per-step "Capacity" or separate charge and discharge
+# counters are not proposed); "Q" only with a charge unit, such as 'Q [mAh]'
+NET_CHARGE_NAMES = {"ah", "net ah", "q qo", "(q qo)", "ahaccu", "ah accu", "net charge",
+                    "net capacity", "charge counter"}
 
 
 def suggested_options(header: str, first_row: str | None) -> str | None:
@@ -42,8 +46,9 @@ def suggested_options(header: str, first_row: str | None) -> str | None:
 
 def _picks(names: list[str]) -> dict[str, str] | None:
     """{quantity: column name} for time, current, voltage (each the only candidate, else None),
-    temperature (where one column, or one cell temperature among several, names it) and
-    ambient (beside that, one chamber temperature: AMBIENT_WORDS)."""
+    temperature (where one column, or one cell temperature among several, names it),
+    ambient (beside that, one chamber temperature: AMBIENT_WORDS) and charge (one net charge
+    counter: _is_net_charge)."""
     bases = {name: _base(name) for name in names}
     picks: dict[str, str] = {}
     for what, exact, word in (("time", TIME_NAMES, "time"), ("current", CURRENT_NAMES, "current"),
@@ -66,7 +71,19 @@ def _picks(names: list[str]) -> dict[str, str] | None:
         ambient = [n for n in temps if n != chosen[0] and _is_ambient(bases[n])]
         if len(ambient) == 1:
             picks["ambient"] = ambient[0]
+    charges = [n for n in names if n not in picks.values() and _is_net_charge(n, bases[n])]
+    if len(charges) == 1:
+        picks["charge"] = charges[0]
     return picks
+
+
+def _is_net_charge(name: str, base: str) -> bool:
+    """Whether a column names a net charge counter: NET_CHARGE_NAMES, or 'Q' with a charge
+    unit ('Q [mAh]')."""
+    from lmncell.data.readers import UNIT_WORDS, split_unit
+
+    return base in NET_CHARGE_NAMES or (
+        base == "q" and split_unit(name)[1].lower() in UNIT_WORDS["charge"])
 
 
 def _is_ambient(base: str) -> bool:

@@ -188,9 +188,9 @@ def _format_of(path: Path) -> str:
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:5])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL]"
-                    "[,ambient=COL] (with "
+                    "[,ambient=COL][,charge=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
-                    "--temperature-unit, --discharge-positive as needed); "
+                    "--temperature-unit, --charge-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})"
                     + _suggestion(path))
 
@@ -619,17 +619,19 @@ def _first_present(path: Path, names: list[str], choices: tuple[str, ...], what:
     return found
 
 
-GENERIC_KEYS = ("time", "current", "voltage", "temperature", "ambient")
+GENERIC_KEYS = ("time", "current", "voltage", "temperature", "ambient", "charge")
 UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c",
-               "ambient": "_c"}
+               "ambient": "_c", "charge": "_ah"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
+CHARGE_UNITS = {"Ah": 1.0, "mAh": 1e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
 VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
 TEMPERATURE_UNITS = {"degC": 0.0, "K": -273.15}      # the offset to °C
 UNITS = {"time": TIME_UNITS, "current": CURRENT_UNITS, "voltage": VOLTAGE_UNITS,
-         "temperature": TEMPERATURE_UNITS, "ambient": TEMPERATURE_UNITS}
+         "temperature": TEMPERATURE_UNITS, "ambient": TEMPERATURE_UNITS,
+         "charge": CHARGE_UNITS}
 DEFAULT_UNITS = {"time": "s", "current": "A", "voltage": "V", "temperature": "degC",
-                 "ambient": "degC"}
+                 "ambient": "degC", "charge": "Ah"}
 UNIT_OPTION = {"ambient": "temperature"}     # the ambient column's unit option is the cell's
 NAME_UNIT = re.compile(r"(?:\[\s*([^\]]+?)\s*\]|\(\s*([^)]+?)\s*\)|/\s*([^/\s]+))\s*$")
 
@@ -649,29 +651,38 @@ UNIT_WORDS = {        # how a units row or a column name may write them (lower c
     "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "k": "K"},
 }
 UNIT_WORDS["ambient"] = UNIT_WORDS["temperature"]
+UNIT_WORDS["charge"] = {"ah": "Ah", "a.h": "Ah", "a h": "Ah", "mah": "mAh", "ma.h": "mAh",
+                        "ma h": "mAh"}
+COUNTER_JUMP_AH = 0.01      # a charge counter's step beyond the held current's that is a reset
+COUNTER_MISMATCH = 0.05     # share of the charge throughput the counter may differ from the
+                            # logged current over a record's gap-free steps (drift is ~1 %)
 
 
 def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
                  current_scale: float = 1.0, sep: str = ",", decimal: str = ".",
                  current_unit: str | None = None, time_unit: str | None = None,
-                 voltage_unit: str | None = None, temperature_unit: str | None = None
-                 ) -> Record:
+                 voltage_unit: str | None = None, temperature_unit: str | None = None,
+                 charge_unit: str | None = None) -> Record:
     """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']
-    [, 'ambient']} of LMNCell's quantities to the file's column names (time in s, or as text
-    that TIME_TEXT_EXPECTED describes; voltage in V, temperatures in °C): 'temperature' the
-    cell's, 'ambient' the chamber's beside it (Record.ambient_c, the thermal model's ambient;
-    mapped alone, it is the record's temperature).
+    [, 'ambient'][, 'charge']} of LMNCell's quantities to the file's column names (time in s,
+    or as text that TIME_TEXT_EXPECTED describes; voltage in V, temperatures in °C): 'temperature'
+    the cell's, 'ambient' the chamber's beside it (Record.ambient_c, the thermal model's ambient;
+    mapped alone, it is the record's temperature); 'charge' the tester's net charge counter
+    (Ah, running through the record: it decides whether a gap in time lost charge, and the
+    SoC reference counts by it; _checked_counter).
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
     time column, one of TIME_UNITS (default s); voltage_unit: "V" or "mV"; temperature_unit:
-    "degC" or "K" (both temperature columns); each unit not given is the file's where its
-    column name or a units row under the names gives one (_file_units), else the default;
+    "degC" or "K" (both temperature columns); charge_unit: "Ah" or "mAh"; each unit not given
+    is the file's where its column name or a units row under the names gives one
+    (_file_units), else the default;
     discharge_positive: the file counts discharge current as positive (it is negated:
     LMNCell's current > 0 charges); sep: the delimiter; decimal: "." or "," (decimal comma).
     The column names are on the first line that holds them all (_line_naming); a units row
     under them is skipped (_units_row)."""
     given = {"time": time_unit, "current": current_unit, "voltage": voltage_unit,
-             "temperature": temperature_unit, "ambient": temperature_unit}
+             "temperature": temperature_unit, "ambient": temperature_unit,
+             "charge": charge_unit}
     _check_mapping(path, columns, given)
     numeric = set(columns.values()) - {columns["time"]}
     _check_marks(path, sep, decimal)
@@ -706,14 +717,59 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
     # a text time column's messages count s from its first row
     file_times = t - t[0] if text_time else t
+    net_ah = None
+    if "charge" in columns:
+        counter = cols[columns["charge"]] * CHARGE_UNITS[given["charge"] or "Ah"]
+        net_ah, more = _checked_counter(path, columns["charge"], file_times, cur,
+                                        counter * (-1.0 if discharge_positive else 1.0))
+        notes += more
     notes += _layout_notes(header_line, units, taken)
     meta = _meta(path, "generic", note, t, notes=notes,
-                 segment_starts=_segment_starts_from_gaps(t, cur),
+                 segment_starts=_segment_starts_from_gaps(t, cur, net_ah),
                  **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                   for k, v in columns.items()}))
     if ambient is not None:
         meta.chamber_temp_c = float(np.median(ambient))
-    return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient)
+    return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient,
+                  charge_ah=net_ah)
+
+
+def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a: np.ndarray,
+                     counter_ah: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """A charge counter column (Ah, in the current's sign) as Record.charge_ah: the net charge
+    since the first row, checked against the logged current held over each step that is no gap
+    (find_gaps' steps of up to GAP_FACTOR × the median). A counter that falls while the current
+    charges is negated, with a note (the current's sign, --discharge-positive, is the one the
+    user chose); a DataError names the column where it jumps by COUNTER_JUMP_AH or more beyond
+    the current's charge in one step (a counter reset at each step of a test schedule, as some
+    testers log their capacity) or counts more than COUNTER_MISMATCH of the charge throughput
+    off the current over the record (a charge-only or discharge-only counter)."""
+    dt = np.diff(file_times)
+    regular = dt <= GAP_FACTOR * max(float(np.median(dt)), 1e-9) if dt.size else dt > 0
+    held = current_a[:-1] * dt / 3600.0
+    step = np.diff(counter_ah)
+    notes: list[str] = []
+    if float(np.sum((step * held)[regular])) < 0.0:
+        counter_ah, step = -counter_ah, -step
+        notes.append(f"column '{column}' counted charge negative to the current's sign; "
+                     "negated (LMNCell's counter rises while the current charges)")
+    off = np.abs(step - held) * regular
+    k = int(np.argmax(off)) if off.size else 0
+    if off.size and off[k] >= COUNTER_JUMP_AH:
+        raise DataError(f"{path}: column '{column}' (charge) steps by {step[k]:+.4f} Ah between "
+                        f"t = {file_times[k]:g} and {file_times[k + 1]:g} s where the current "
+                        f"moves {held[k]:+.5f} Ah; expected the tester's net charge counter "
+                        "running through the whole record (not reset at each step); leave "
+                        "the column out otherwise")
+    throughput = float(np.sum(np.abs(held[regular])))
+    mismatch = float(np.sum((step - held)[regular]))
+    if throughput > 0.0 and abs(mismatch) > COUNTER_MISMATCH * throughput:
+        raise DataError(f"{path}: column '{column}' (charge) counts {np.sum(step[regular]):+.4f} "
+                        f"Ah over the record's gap-free steps where the current counts "
+                        f"{np.sum(held[regular]):+.4f} Ah ({abs(mismatch) / throughput:.0%} of "
+                        f"the {throughput:.4f} Ah moved); expected the net charge counter "
+                        "(charge minus discharge, in Ah or mAh); leave the column out otherwise")
+    return counter_ah - counter_ah[0], notes
 
 
 def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
@@ -739,11 +795,12 @@ def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray,
 def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str | None]
                    ) -> None:
     """DataError unless the column mapping names time, current and voltage (and at most
-    temperature and ambient besides) and every unit given is one of UNITS."""
+    temperature, ambient and charge besides) and every unit given is one of UNITS."""
     for key in ("time", "current", "voltage"):
         if key not in columns:
             raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
-                            "expected time, current and voltage (temperature and ambient optional)")
+                            "expected time, current and voltage (temperature, ambient and charge "
+                            "optional)")
     unknown = sorted(set(columns) - set(GENERIC_KEYS))
     if unknown:
         raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
@@ -973,7 +1030,7 @@ def check_plausibility(rec: Record) -> None:
 
 # read_generic's options, which read_record passes on
 GENERIC_OPTIONS = ("columns", "discharge_positive", "current_scale", "sep", "decimal",
-                   "current_unit", "time_unit", "voltage_unit", "temperature_unit")
+                   "current_unit", "time_unit", "voltage_unit", "temperature_unit", "charge_unit")
 
 
 def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Record:
@@ -981,7 +1038,8 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
 
     fmt: one of FORMATS, or None to choose by content ("generic" when a column mapping
     `columns` is given). generic_kw go to read_generic (columns, discharge_positive,
-    current_unit or current_scale, time_unit, voltage_unit, temperature_unit, sep, decimal).
+    current_unit or current_scale, time_unit, voltage_unit, temperature_unit, charge_unit,
+    sep, decimal).
     """
     unknown = sorted(set(generic_kw) - set(GENERIC_OPTIONS))
     if unknown:
