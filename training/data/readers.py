@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.data.resample import find_gaps
+from lmncell.data.soc import REST_CURRENT_A
 from lmncell.runtime.model import FORMAT as MODEL_FORMAT
 
 FORMATS = ("plett", "arbin", "panasonic", "bdf", "biologic", "generic")
@@ -653,9 +654,8 @@ UNIT_WORDS = {        # how a units row or a column name may write them (lower c
 UNIT_WORDS["ambient"] = UNIT_WORDS["temperature"]
 UNIT_WORDS["charge"] = {"ah": "Ah", "a.h": "Ah", "a h": "Ah", "mah": "mAh", "ma.h": "mAh",
                         "ma h": "mAh"}
-COUNTER_JUMP_AH = 0.01      # a charge counter's step beyond the held current's that is a reset
-COUNTER_MISMATCH = 0.05     # share of the charge throughput the counter may differ from the
-                            # logged current over a record's gap-free steps (drift is ~1 %)
+COUNTER_CHECK_AH = 0.002   # Ah: a charge counter's step beyond what the current moves that can
+                           # be a restart; the least charge a one-way counter check needs
 
 
 def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: bool = False,
@@ -737,39 +737,57 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
 def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a: np.ndarray,
                      counter_ah: np.ndarray) -> tuple[np.ndarray, list[str]]:
     """A charge counter column (Ah, in the current's sign) as Record.charge_ah: the net charge
-    since the first row, checked against the logged current held over each step that is no gap
-    (find_gaps' steps of up to GAP_FACTOR × the median). A counter that falls while the current
-    charges is negated, with a note (the current's sign, --discharge-positive, is the one the
-    user chose); a DataError names the column where it jumps by COUNTER_JUMP_AH or more beyond
-    the current's charge in one step (a counter reset at each step of a test schedule, as some
-    testers log their capacity) or counts more than COUNTER_MISMATCH of the charge throughput
-    off the current over the record (a charge-only or discharge-only counter)."""
+    since the first row, read against the logged current over each step that is no gap
+    (find_gaps' steps of up to GAP_FACTOR × the median step), with notes:
+
+    - a counter that falls while the current charges is negated (the current's sign, which
+      --discharge-positive sets, is the one the user chose);
+    - a counter that restarts from 0 at each step of the test schedule (as some testers log
+      their capacity) is stitched: each restart continues from the count before it plus the
+      current's charge over that step (_counter_restarts);
+    - a DataError names the column where it counts less than a fifth of what the current
+      charges, or of what it discharges (a discharge-only or charge-only counter).
+    """
     dt = np.diff(file_times)
     regular = dt <= GAP_FACTOR * max(float(np.median(dt)), 1e-9) if dt.size else dt > 0
     held = current_a[:-1] * dt / 3600.0
-    step = np.diff(counter_ah)
     notes: list[str] = []
-    if float(np.sum((step * held)[regular])) < 0.0:
-        counter_ah, step = -counter_ah, -step
+    if float(np.sum((np.diff(counter_ah) * held)[regular])) < 0.0:
+        counter_ah = -counter_ah
         notes.append(f"column '{column}' counted charge negative to the current's sign; "
                      "negated (LMNCell's counter rises while the current charges)")
-    off = np.abs(step - held) * regular
-    k = int(np.argmax(off)) if off.size else 0
-    if off.size and off[k] >= COUNTER_JUMP_AH:
-        raise DataError(f"{path}: column '{column}' (charge) steps by {step[k]:+.4f} Ah between "
-                        f"t = {file_times[k]:g} and {file_times[k + 1]:g} s where the current "
-                        f"moves {held[k]:+.5f} Ah; expected the tester's net charge counter "
-                        "running through the whole record (not reset at each step); leave "
-                        "the column out otherwise")
-    throughput = float(np.sum(np.abs(held[regular])))
-    mismatch = float(np.sum((step - held)[regular]))
-    if throughput > 0.0 and abs(mismatch) > COUNTER_MISMATCH * throughput:
-        raise DataError(f"{path}: column '{column}' (charge) counts {np.sum(step[regular]):+.4f} "
-                        f"Ah over the record's gap-free steps where the current counts "
-                        f"{np.sum(held[regular]):+.4f} Ah ({abs(mismatch) / throughput:.0%} of "
-                        f"the {throughput:.4f} Ah moved); expected the net charge counter "
-                        "(charge minus discharge, in Ah or mAh); leave the column out otherwise")
+    restarts = _counter_restarts(counter_ah, current_a, dt, regular)
+    if restarts.size:
+        step = np.diff(counter_ah)
+        step[restarts] = held[restarts]
+        counter_ah = np.concatenate([[counter_ah[0]], counter_ah[0] + np.cumsum(step)])
+        notes.append(f"column '{column}' restarts from 0 {restarts.size} time(s), the first at "
+                     f"t = {file_times[restarts[0] + 1]:g} s; each restart continues from the "
+                     "count before it plus the current's charge over that step")
+    step = np.diff(counter_ah)
+    for sign, what in ((1.0, "charges"), (-1.0, "discharges")):
+        one_way = regular & (sign * current_a[:-1] > REST_CURRENT_A) & (
+            sign * current_a[1:] > REST_CURRENT_A)
+        moved = sign * float(np.sum(held[one_way]))
+        if moved >= COUNTER_CHECK_AH and sign * float(np.sum(step[one_way])) < 0.2 * moved:
+            raise DataError(
+                f"{path}: column '{column}' (charge) counts {np.sum(step[one_way]):+.4f} Ah "
+                f"over the steps where the current {what} {sign * moved:+.4f} Ah; expected "
+                "the tester's net charge counter (charge minus discharge, in Ah or mAh), "
+                "not one that counts only one direction; leave the column out otherwise")
     return counter_ah - counter_ah[0], notes
+
+
+def _counter_restarts(counter_ah: np.ndarray, current_a: np.ndarray, dt: np.ndarray,
+                      regular: np.ndarray) -> np.ndarray:
+    """Steps k (between rows k and k + 1) where a charge counter restarts: it falls back to
+    about 0 by more than the current could move in that step. "About" and "could" are within
+    COUNTER_CHECK_AH plus the larger of the step's two currents held over it."""
+    step = np.diff(counter_ah)
+    held = current_a[:-1] * dt / 3600.0
+    tol = COUNTER_CHECK_AH + np.maximum(np.abs(current_a[:-1]), np.abs(current_a[1:])) * dt / 3600
+    return np.flatnonzero(regular & (np.abs(step - held) > tol)
+                          & (np.abs(counter_ah[1:]) <= tol))
 
 
 def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
