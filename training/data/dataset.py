@@ -15,6 +15,13 @@ from lmncell.data.soc import REST_CURRENT_A, discharged_ah, reference_soc
 from lmncell.runtime.observers import first_crossing
 from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
+SEGMENT_MARK = "#"      # a split record's segments are named RECORD#0, RECORD#1, …
+
+
+def record_name(segment_name: str) -> str:
+    """The name of the record a segment (or a row of it) is part of: 'US06.mat#1' → 'US06.mat'."""
+    return segment_name.split(SEGMENT_MARK)[0]
+
 
 @dataclass
 class Segment:
@@ -240,7 +247,8 @@ def record_parts(rec: Record, sample_time_s: float, soc0: float, capacity_ah: fl
         soc = present(rs.soc_ref, "the segment's reference SoC")
         lo, hi = soc_window
         w = np.where((soc >= lo) & (soc <= hi), 1.0, outside_weight)
-        name = rec.name if len(rec.meta.segment_starts) == 1 else f"{rec.name}#{k}"
+        name = (rec.name if len(rec.meta.segment_starts) == 1
+                else f"{rec.name}{SEGMENT_MARK}{k}")
         out.append((part, Segment(name, rs.time_s, rs.current_a, rs.voltage_v, rs.temperature_c,
                                   float(present(part.soc_ref, "the record's SoC")[0]), soc, w,
                                   ambient_c=ambient,

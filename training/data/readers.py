@@ -392,6 +392,12 @@ def read_arbin(path: Path) -> Record:
                   charge_ah=ah)
 
 
+def chamber_set_point(logged_c: np.ndarray) -> float:
+    """The chamber's set point (°C) from its logged temperature: the median of the readings
+    (NaN readings left out), which a chamber still settling at the start does not move."""
+    return float(np.nanmedian(logged_c))
+
+
 def _parse_timestamps(stamps: np.ndarray) -> np.ndarray:
     """Wall-clock ``M/D/YYYY h:mm:ss AM`` strings to seconds since the first one."""
     flat = [str(np.ravel(s)[0]) if np.size(s) else "" for s in np.ravel(stamps)]
@@ -501,7 +507,7 @@ def read_panasonic(path: Path) -> Record:
     if "Chamber_Temp_degC" in fields:
         chamber = field_("Chamber_Temp_degC")
         if np.isfinite(chamber).any():
-            meta.chamber_temp_c = float(np.nanmedian(chamber))
+            meta.chamber_temp_c = chamber_set_point(chamber)
         if temp is not None and np.isfinite(chamber).all():
             ambient = chamber        # the chamber as logged beside the cell: the thermal
             meta.file_columns["ambient_c"] = "Chamber_Temp_degC"   # model's ambient
@@ -530,7 +536,7 @@ def read_bdf(path: Path) -> Record:
     if BDF_AMBIENT in cols:         # the chamber's: beside the cell's the thermal model's
         ambient, more = _held_readings(cols, BDF_AMBIENT, path)   # ambient, alone the
         meta.notes.extend(more)                                   # record's temperature
-        meta.chamber_temp_c = float(np.median(ambient))
+        meta.chamber_temp_c = chamber_set_point(ambient)
         meta.file_columns["ambient_c"] = BDF_AMBIENT
     return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE], meta, temperature_c=temp,
                   soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH), ambient_c=ambient)
@@ -729,7 +735,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                  **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                   for k, v in columns.items()}))
     if ambient is not None:
-        meta.chamber_temp_c = float(np.median(ambient))
+        meta.chamber_temp_c = chamber_set_point(ambient)
     return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient,
                   charge_ah=net_ah)
 

@@ -16,6 +16,7 @@ import numpy as np
 from lmncell.data.dataset import (
     FAST_LOG_RATIO,
     Segment,
+    record_name,
     record_to_segments,
     start_soc,
     start_socs,
@@ -380,7 +381,7 @@ def record_notes_once(rows: list[dict], key: str) -> Iterator[tuple[str, Any]]:
     per record, however many segments ('#1', '#2') it was split into (each carries the same)."""
     told = set()
     for r in rows:
-        name, value = r["record"].split("#")[0], r.get(key)
+        name, value = record_name(r["record"]), r.get(key)
         if value is not None and name not in told:
             told.add(name)
             yield name, value

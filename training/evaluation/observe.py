@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from lmncell.data.dataset import Segment, record_to_segments
+from lmncell.data.dataset import Segment, record_name, record_to_segments
 from lmncell.data.records import DataError
 from lmncell.evaluation.evaluate import model_ocv, read_records
 from lmncell.report.jsontext import json_text
@@ -131,7 +131,7 @@ def observer_segment(segs: list[Segment], start_at: float | None) -> Segment:
     for seg in segs:
         if _reached(seg, start_at).any():
             return seg
-    raise _never_reached(segs[0].name.split("#")[0], [seg.soc_ref for seg in segs], start_at)
+    raise _never_reached(record_name(segs[0].name), [seg.soc_ref for seg in segs], start_at)
 
 
 def observer_runs(model: LmnModel, seg: Segment, kinds: list[str], soc0_est: float,

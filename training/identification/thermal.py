@@ -15,7 +15,7 @@ the start of the step, T(k−1); it is compared here with the measured mean over
 from __future__ import annotations
 
 import numpy as np
-from lmncell.data.dataset import Segment
+from lmncell.data.dataset import Segment, record_name
 from lmncell.data.records import present
 from lmncell.runtime.model import LmnModel
 from lmncell.runtime.thermal import ThermalModel, rested_temperature
@@ -46,7 +46,7 @@ def _no_thermal_reason(segs: list[Segment]) -> str:
     """Why there is no thermal model, naming the records whose ambient is unknown."""
     reason = (f"no record has a measured cell temperature that rises {MIN_RISE_K} K above a "
               "known ambient temperature")
-    unknown = sorted({s.name.split("#")[0] for s in segs
+    unknown = sorted({record_name(s.name) for s in segs
                       if s.temperature_kind == "measured" and s.ambient_c is None})
     if unknown:
         reason += (f"; {', '.join(unknown[:3])}{' …' if len(unknown) > 3 else ''} log a cell "
