@@ -939,3 +939,38 @@ def test_a_csv_charge_counter_of_another_kind_is_mended_or_refused(tmp_path) -> 
         rec = read_record(known)
         counter, notes = _checked_counter(known, "Q", rec.time_s, rec.current_a, rec.charge_ah)
         assert notes == [] and np.array_equal(counter, rec.charge_ah - rec.charge_ah[0])
+
+
+def test_ones_own_csv_with_every_column_trains_the_model_of_the_known_format(tmp_path) -> None:
+    """A record written as a user's CSV with its cell and chamber temperatures and the tester's
+    charge counter mapped (temperature=, ambient=, charge=) trains, bit for bit, the model that
+    the same record in a known format (Battery Data Format, with those columns) trains: the
+    generic reader leaves nothing behind. Measured on the full HWFET and US06 .mat records
+    against CSVs of them too (November 2026)."""
+    from lmncell.identification.train import train_files
+
+    from tests.conftest import PAN_HWFET
+
+    rec = read_record(PAN_HWFET)
+    (tmp_path / "bdf").mkdir()
+    (tmp_path / "own").mkdir()
+    known = write_bdf(rec, tmp_path / "bdf" / "hwfet.csv")     # one name: the model names it
+    own = tmp_path / "own" / "hwfet.csv"
+    columns = (rec.time_s, rec.current_a, rec.voltage_v, rec.temperature_c, rec.ambient_c,
+               rec.charge_ah)
+    own.write_text("t [s],I [A],U [V],T cell,T chamber,Ah\n" + "".join(
+        ",".join(repr(float(v)) for v in row) + "\n" for row in zip(*columns, strict=True)))
+    mapping = {"time": "t [s]", "current": "I [A]", "voltage": "U [V]",
+               "temperature": "T cell", "ambient": "T chamber", "charge": "Ah"}
+    settings = {"max_local_models": 2, "sample_time_s": 1.0}
+
+    def model(path, **read):
+        out = path.with_suffix(".json")
+        train_files([path], out, capacity_ah=2.85, soc0=1.0, progress=lambda _m: None,
+                    read_options=read, **settings)
+        data = json.loads(out.read_text())     # all but the files' paths and the timings
+        data["training"] = {k: data["training"][k] for k in ("capacity_ah", "curve",
+                                                             "train_metrics", "thermal")}
+        return data
+
+    assert model(own, columns=mapping) == model(known)
