@@ -926,6 +926,12 @@ def test_a_csv_charge_counter_of_another_kind_is_mended_or_refused(tmp_path) -> 
     t = rec.time_s[6000]
     assert any(f"column 'Q [mAh]' restarts from 0 3 time(s), the first at t = {t:g} s" in n
                for n in stitched.meta.notes), stitched.meta.notes
+    _own_csv_with_counter(path, rec, -restarted)          # both: negated, then stitched
+    both = read_record(path, columns=mapping, sep=";", decimal=",")
+    assert both.charge_ah == pytest.approx(rec.charge_ah, abs=2e-4)
+    assert [n.split(";")[0] for n in both.meta.notes[:2]] == [
+        "column 'Q [mAh]' counted charge negative to the current's sign",
+        f"column 'Q [mAh]' restarts from 0 3 time(s), the first at t = {t:g} s"]
     held = np.concatenate([[0.0], rec.current_a[:-1] * np.diff(rec.time_s) / 3600])
     discharged = np.cumsum(np.minimum(held, 0.0))          # the regeneration not counted
     _own_csv_with_counter(path, rec, discharged)

@@ -750,19 +750,26 @@ def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a:
       --discharge-positive sets, is the one the user chose);
     - a counter that restarts from 0 at each step of the test schedule (as some testers log
       their capacity) is stitched: each restart continues from the count before it plus the
-      current's charge over that step (_counter_restarts);
+      current's charge over that step (a restart: the counter falls back to about 0 by more
+      than the current could move it, both within COUNTER_CHECK_AH plus the larger of the
+      step's two currents held over it);
     - a DataError names the column where it counts less than a fifth of what the current
       charges, or of what it discharges (a discharge-only or charge-only counter).
     """
     dt = np.diff(file_times)
     regular = dt <= GAP_FACTOR * max(float(np.median(dt)), 1e-9) if dt.size else dt > 0
     held = current_a[:-1] * dt / 3600.0
+    # the most a step of the counter can move by the current: more is a restart
+    tol = COUNTER_CHECK_AH + np.maximum(np.abs(current_a[:-1]), np.abs(current_a[1:])) * dt / 3600
     notes: list[str] = []
-    if float(np.sum((np.diff(counter_ah) * held)[regular])) < 0.0:
+    step = np.diff(counter_ah)
+    normal = regular & (np.abs(step) <= tol)
+    if float(np.sum((step * held)[normal])) < 0.0:
         counter_ah = -counter_ah
         notes.append(f"column '{column}' counted charge negative to the current's sign; "
                      "negated (LMNCell's counter rises while the current charges)")
-    restarts = _counter_restarts(counter_ah, current_a, dt, regular)
+    restarts = np.flatnonzero(regular & (np.abs(np.diff(counter_ah) - held) > tol)
+                              & (np.abs(counter_ah[1:]) <= tol))
     if restarts.size:
         step = np.diff(counter_ah)
         step[restarts] = held[restarts]
@@ -782,18 +789,6 @@ def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a:
                 "the tester's net charge counter (charge minus discharge, in Ah or mAh), "
                 "not one that counts only one direction; leave the column out otherwise")
     return counter_ah - counter_ah[0], notes
-
-
-def _counter_restarts(counter_ah: np.ndarray, current_a: np.ndarray, dt: np.ndarray,
-                      regular: np.ndarray) -> np.ndarray:
-    """Steps k (between rows k and k + 1) where a charge counter restarts: it falls back to
-    about 0 by more than the current could move in that step. "About" and "could" are within
-    COUNTER_CHECK_AH plus the larger of the step's two currents held over it."""
-    step = np.diff(counter_ah)
-    held = current_a[:-1] * dt / 3600.0
-    tol = COUNTER_CHECK_AH + np.maximum(np.abs(current_a[:-1]), np.abs(current_a[1:])) * dt / 3600
-    return np.flatnonzero(regular & (np.abs(step - held) > tol)
-                          & (np.abs(counter_ah[1:]) <= tol))
 
 
 def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
