@@ -980,3 +980,35 @@ def test_ones_own_csv_with_every_column_trains_the_model_of_the_known_format(tmp
         return data
 
     assert model(own, columns=mapping) == model(known)
+
+
+def test_an_arbin_file_whose_capacities_restart_at_each_cycle_keeps_one_charge_count(
+        tmp_path) -> None:
+    """Arbin's Charge_Capacity and Discharge_Capacity restart at 0 with each cycle. The net
+    counter jumped back there, and the SoC reference with it (a C/30 discharge that restarts
+    half way read 1 Ah short at its end, silently); now the restart is stitched, with a note,
+    as the generic reader's charge=COL is."""
+    path = DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"
+    with gzip.open(path, "rt") as fh:
+        lines = fh.read().splitlines()
+    names = lines[0].split(",")
+    chg, dis, cyc = (names.index(n) for n in ("Charge_Capacity(Ah)", "Discharge_Capacity(Ah)",
+                                               "Cycle_Index"))
+    half = len(lines) // 2
+    at_half = [float(lines[half - 1].split(",")[k]) for k in (chg, dis)]
+    rows = [lines[0]]
+    for k, line in enumerate(lines[1:], start=1):
+        cells = line.split(",")
+        if k >= half:                            # the second cycle counts from 0
+            cells[cyc] = "2"
+            for col, start in zip((chg, dis), at_half, strict=True):
+                cells[col] = repr(float(cells[col]) - start)
+        rows.append(",".join(cells))
+    restarted = tmp_path / "A123_OCV_P25_S1.csv"
+    restarted.write_text("\n".join(rows) + "\n")
+    original, rec = read_record(path), read_record(restarted)
+    assert rec.meta.fmt == "arbin"
+    assert rec.charge_ah[-1] == pytest.approx(original.charge_ah[-1], abs=1e-3)
+    assert original.charge_ah[-1] < -2.0
+    assert any("restarts from 0 1 time(s)" in n for n in rec.meta.notes), rec.meta.notes
+    assert not any("restarts" in n for n in original.meta.notes)

@@ -368,10 +368,12 @@ def read_plett(path: Path) -> Record:
     cols = _read_csv_columns(path, sep=",")
     _require(path, cols, PLETT_COLUMNS)
     t = cols["time"] - cols["time"][0]
-    cur, ah = -cols["current"], cols["chgAh"] - cols["disAh"]
+    cur = -cols["current"]
+    ah, notes = _stitched_counter("chgAh − disAh", cols["time"], cur,
+                                  cols["chgAh"] - cols["disAh"])
     return Record(t, cur, cols["voltage"],
                   _meta(path, "plett", "current negated (file: discharge > 0)", cols["time"],
-                        segment_starts=_segment_starts_from_gaps(t, cur, ah),
+                        segment_starts=_segment_starts_from_gaps(t, cur, ah), notes=notes,
                         **_csv_meta(cols, cols["time"], time_s="time", current_a="current",
                                     voltage_v="voltage", charge_ah="chgAh − disAh")),
                   charge_ah=ah)
@@ -382,10 +384,13 @@ def read_arbin(path: Path) -> Record:
     cols = _read_csv_columns(path)
     _require(path, cols, ARBIN_COLUMNS)
     t = cols["Test_Time(s)"]
-    ah = cols["Charge_Capacity(Ah)"] - cols["Discharge_Capacity(Ah)"]
+    ah, notes = _stitched_counter(      # Arbin's capacities restart at each cycle
+        "Charge_Capacity(Ah) − Discharge_Capacity(Ah)", t, cols["Current(A)"],
+        cols["Charge_Capacity(Ah)"] - cols["Discharge_Capacity(Ah)"])
     return Record(t - t[0], cols["Current(A)"], cols["Voltage(V)"],
                   _meta(path, "arbin", "none (file: charge > 0)", t,
                         segment_starts=_segment_starts_from_gaps(t, cols["Current(A)"], ah),
+                        notes=notes,
                         **_csv_meta(cols, t, time_s="Test_Time(s)", current_a="Current(A)",
                                     voltage_v="Voltage(V)",
                                     charge_ah="Charge_Capacity(Ah) − Discharge_Capacity(Ah)")),
@@ -478,7 +483,9 @@ def read_panasonic(path: Path) -> Record:
         return _mat_field(meas, name, path, keep.size)[keep]
 
     t = t[keep]
-    gaps = set(_segment_starts_from_gaps(t, field_("Current"), field_("Ah")))
+    ah, more = _stitched_counter("Ah", t, field_("Current"), field_("Ah"))
+    notes += more
+    gaps = set(_segment_starts_from_gaps(t, field_("Current"), ah))
     pauses: set[int] = set()
     if "TimeStamp" in fields:
         stamps = np.ravel(meas["TimeStamp"])
@@ -512,7 +519,7 @@ def read_panasonic(path: Path) -> Record:
             ambient = chamber        # the chamber as logged beside the cell: the thermal
             meta.file_columns["ambient_c"] = "Chamber_Temp_degC"   # model's ambient
     return Record(t - t[0], field_("Current"), field_("Voltage"), meta, temperature_c=temp,
-                  charge_ah=field_("Ah"), ambient_c=ambient)
+                  charge_ah=ah, ambient_c=ambient)
 
 
 def read_bdf(path: Path) -> Record:
@@ -525,9 +532,12 @@ def read_bdf(path: Path) -> Record:
     _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
     t = cols[BDF_TIME]
     temp, notes = _held_readings(cols, BDF_T1, path) if BDF_T1 in cols else (None, [])
+    net_ah = cols.get(BDF_NET_AH)
+    if net_ah is not None:
+        net_ah, more = _stitched_counter(BDF_NET_AH, t, cols[BDF_CURRENT], net_ah)
+        notes += more
     meta = _meta(path, "bdf", "none (BDF: charge > 0)", t,
-                 segment_starts=_segment_starts_from_gaps(t, cols[BDF_CURRENT],
-                                                          cols.get(BDF_NET_AH)),
+                 segment_starts=_segment_starts_from_gaps(t, cols[BDF_CURRENT], net_ah),
                  file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
                                "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
                                "charge_ah": BDF_NET_AH, "temperature_c": BDF_T1},
@@ -539,7 +549,7 @@ def read_bdf(path: Path) -> Record:
         meta.chamber_temp_c = chamber_set_point(ambient)
         meta.file_columns["ambient_c"] = BDF_AMBIENT
     return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE], meta, temperature_c=temp,
-                  soc_ref=cols.get(BDF_SOC), charge_ah=cols.get(BDF_NET_AH), ambient_c=ambient)
+                  soc_ref=cols.get(BDF_SOC), charge_ah=net_ah, ambient_c=ambient)
 
 
 def read_biologic(path: Path) -> Record:
@@ -570,8 +580,12 @@ def read_biologic(path: Path) -> Record:
                         "current samples of a charge or discharge")
     t = cols[BIOLOGIC_TIME][keep]
     amps = cols[current][keep] * BIOLOGIC_CURRENTS[current]
-    net_ah = (None if charge is None else
-              (cols[charge][keep] - cols[charge][keep][0]) * BIOLOGIC_CHARGES[charge])
+    net_ah = None
+    if charge is not None:
+        raw, unit = cols[charge][keep], BIOLOGIC_CHARGES[charge]
+        stitched, more = _stitched_counter(charge, t, amps, raw * unit)  # restarts: to 0
+        net_ah = stitched - stitched[0] if more else (raw - raw[0]) * unit
+        notes += more
     file_columns = {"time_s": BIOLOGIC_TIME, "current_a": current, "voltage_v": voltage,
                     **({"charge_ah": charge} if charge else {}),
                     **({"temperature_c": temperature} if temperature else {})}
@@ -742,41 +756,26 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
 
 def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a: np.ndarray,
                      counter_ah: np.ndarray) -> tuple[np.ndarray, list[str]]:
-    """A charge counter column (Ah, in the current's sign) as Record.charge_ah: the net charge
-    since the first row, read against the logged current over each step that is no gap
-    (find_gaps' steps of up to GAP_FACTOR × the median step), with notes:
+    """A user's charge counter column (Ah, in the current's sign) as Record.charge_ah: the net
+    charge since the first row, read against the logged current, with notes:
 
     - a counter that falls while the current charges is negated (the current's sign, which
-      --discharge-positive sets, is the one the user chose);
-    - a counter that restarts from 0 at each step of the test schedule (as some testers log
-      their capacity) is stitched: each restart continues from the count before it plus the
-      current's charge over that step (a restart: the counter falls back to about 0 by more
-      than the current could move it, both within COUNTER_CHECK_AH plus the larger of the
-      step's two currents held over it);
+      --discharge-positive sets, is the one the user chose), read from the steps whose counter
+      moves no more than the current can (_counter_reach);
+    - restarts are stitched (_stitched_counter);
     - a DataError names the column where it counts less than a fifth of what the current
       charges, or of what it discharges (a discharge-only or charge-only counter).
     """
-    dt = np.diff(file_times)
-    regular = dt <= GAP_FACTOR * max(float(np.median(dt)), 1e-9) if dt.size else dt > 0
-    held = current_a[:-1] * dt / 3600.0
-    # the most a step of the counter can move by the current: more is a restart
-    tol = COUNTER_CHECK_AH + np.maximum(np.abs(current_a[:-1]), np.abs(current_a[1:])) * dt / 3600
+    regular, held, reach = _counter_reach(file_times, current_a)
     notes: list[str] = []
     step = np.diff(counter_ah)
-    normal = regular & (np.abs(step) <= tol)
+    normal = regular & (np.abs(step) <= reach)
     if float(np.sum((step * held)[normal])) < 0.0:
         counter_ah = -counter_ah
         notes.append(f"column '{column}' counted charge negative to the current's sign; "
                      "negated (LMNCell's counter rises while the current charges)")
-    restarts = np.flatnonzero(regular & (np.abs(np.diff(counter_ah) - held) > tol)
-                              & (np.abs(counter_ah[1:]) <= tol))
-    if restarts.size:
-        step = np.diff(counter_ah)
-        step[restarts] = held[restarts]
-        counter_ah = np.concatenate([[counter_ah[0]], counter_ah[0] + np.cumsum(step)])
-        notes.append(f"column '{column}' restarts from 0 {restarts.size} time(s), the first at "
-                     f"t = {file_times[restarts[0] + 1]:g} s; each restart continues from the "
-                     "count before it plus the current's charge over that step")
+    counter_ah, more = _stitched_counter(column, file_times, current_a, counter_ah)
+    notes += more
     step = np.diff(counter_ah)
     for sign, what in ((1.0, "charges"), (-1.0, "discharges")):
         one_way = regular & (sign * current_a[:-1] > REST_CURRENT_A) & (
@@ -789,6 +788,40 @@ def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a:
                 "the tester's net charge counter (charge minus discharge, in Ah or mAh), "
                 "not one that counts only one direction; leave the column out otherwise")
     return counter_ah - counter_ah[0], notes
+
+
+def _counter_reach(file_times: np.ndarray, current_a: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per step between rows k and k + 1: whether it is no gap (up to GAP_FACTOR × the median
+    step, as find_gaps), the charge of the current held over it (Ah), and the most a charge
+    counter can move in it by the current: COUNTER_CHECK_AH plus the larger of its two
+    currents held over it (Ah)."""
+    dt = np.diff(file_times)
+    regular = dt <= GAP_FACTOR * max(float(np.median(dt)), 1e-9) if dt.size else dt > 0
+    held = current_a[:-1] * dt / 3600.0
+    reach = COUNTER_CHECK_AH + np.maximum(np.abs(current_a[:-1]),
+                                          np.abs(current_a[1:])) * dt / 3600.0
+    return regular, held, reach
+
+
+def _stitched_counter(column: str, file_times: np.ndarray, current_a: np.ndarray,
+                      counter_ah: np.ndarray) -> tuple[np.ndarray, list[str]]:
+    """A charge counter (Ah, in the current's sign) with its restarts mended, and a note where
+    there were any: a step that is no gap where the counter falls back to about 0 by more than
+    the current can move it (both within _counter_reach), as a tester's capacity counters do at
+    each cycle or step of a schedule, continues from the count before it plus the current's
+    charge over that step. The counter itself where there is none."""
+    regular, held, reach = _counter_reach(file_times, current_a)
+    restarts = np.flatnonzero(regular & (np.abs(np.diff(counter_ah) - held) > reach)
+                              & (np.abs(counter_ah[1:]) <= reach))
+    if not restarts.size:
+        return counter_ah, []
+    step = np.diff(counter_ah)
+    step[restarts] = held[restarts]
+    return (np.concatenate([[counter_ah[0]], counter_ah[0] + np.cumsum(step)]),
+            [f"column '{column}' restarts from 0 {restarts.size} time(s), the first at "
+             f"t = {file_times[restarts[0] + 1]:g} s; each restart continues from the count "
+             "before it plus the current's charge over that step"])
 
 
 def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
