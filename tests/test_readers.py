@@ -875,7 +875,11 @@ def test_a_csv_charge_counter_keeps_a_gappy_log_in_one_segment(tmp_path, capsys)
     path = tmp_path / "own.csv"
     mapping = _own_csv_with_counter(path, rec, rec.charge_ah)
     without = {k: v for k, v in mapping.items() if k != "charge"}
-    assert len(read_record(path, columns=without, sep=";", decimal=",").segments()) == 5
+    split = read_record(path, columns=without, sep=";", decimal=",")
+    assert len(split.segments()) == 5
+    assert ("split at 4 gap(s) in time under load: without the tester's charge counter the "
+            "reader cannot tell whether charge was lost there; the column 'Q [mAh]' looks "
+            "like one (charge=Q [mAh])") in split.meta.notes
     own = read_record(path, columns=mapping, sep=";", decimal=",")
     assert own.meta.segment_starts == [0]
     assert own.charge_ah == pytest.approx(rec.charge_ah, abs=1e-9)

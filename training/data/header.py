@@ -48,7 +48,7 @@ def _picks(names: list[str]) -> dict[str, str] | None:
     """{quantity: column name} for time, current, voltage (each the only candidate, else None),
     temperature (where one column, or one cell temperature among several, names it),
     ambient (beside that, one chamber temperature: AMBIENT_WORDS) and charge (one net charge
-    counter: _is_net_charge)."""
+    counter: is_net_charge)."""
     bases = {name: _base(name) for name in names}
     picks: dict[str, str] = {}
     for what, exact, word in (("time", TIME_NAMES, "time"), ("current", CURRENT_NAMES, "current"),
@@ -71,17 +71,18 @@ def _picks(names: list[str]) -> dict[str, str] | None:
         ambient = [n for n in temps if n != chosen[0] and _is_ambient(bases[n])]
         if len(ambient) == 1:
             picks["ambient"] = ambient[0]
-    charges = [n for n in names if n not in picks.values() and _is_net_charge(n, bases[n])]
+    charges = [n for n in names if n not in picks.values() and is_net_charge(n)]
     if len(charges) == 1:
         picks["charge"] = charges[0]
     return picks
 
 
-def _is_net_charge(name: str, base: str) -> bool:
+def is_net_charge(name: str) -> bool:
     """Whether a column names a net charge counter: NET_CHARGE_NAMES, or 'Q' with a charge
     unit ('Q [mAh]')."""
     from lmncell.data.readers import UNIT_WORDS, split_unit
 
+    base = _base(name)
     return base in NET_CHARGE_NAMES or (
         base == "q" and split_unit(name)[1].lower() in UNIT_WORDS["charge"])
 

@@ -744,14 +744,29 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                                         counter * (-1.0 if discharge_positive else 1.0))
         notes += more
     notes += _layout_notes(header_line, units, taken)
-    meta = _meta(path, "generic", note, t, notes=notes,
-                 segment_starts=_segment_starts_from_gaps(t, cur, net_ah),
+    starts = _segment_starts_from_gaps(t, cur, net_ah)
+    if net_ah is None and len(starts) > 1:
+        notes.append(_no_counter_note(len(starts) - 1, lines[header_line - 1], sep))
+    meta = _meta(path, "generic", note, t, notes=notes, segment_starts=starts,
                  **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                   for k, v in columns.items()}))
     if ambient is not None:
         meta.chamber_temp_c = chamber_set_point(ambient)
     return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient,
                   charge_ah=net_ah)
+
+
+def _no_counter_note(gaps: int, header: str, sep: str) -> str:
+    """The note of a generic record split at gaps in time under load without a charge counter
+    mapped, naming the header's net counter column where it has one (header.is_net_charge)."""
+    from lmncell.data.header import is_net_charge
+
+    names = [c.strip() for c in next(csv.reader([header], delimiter=sep), [])]
+    found = [n for n in names if n and is_net_charge(n)]
+    return (f"split at {gaps} gap(s) in time under load: without the tester's charge counter "
+            "the reader cannot tell whether charge was lost there"
+            + (f"; the column '{found[0]}' looks like one (charge={found[0]})"
+               if len(found) == 1 else "; map it as charge=COL where the file has one"))
 
 
 def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a: np.ndarray,
