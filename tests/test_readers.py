@@ -877,9 +877,9 @@ def test_a_csv_charge_counter_keeps_a_gappy_log_in_one_segment(tmp_path, capsys)
     without = {k: v for k, v in mapping.items() if k != "charge"}
     split = read_record(path, columns=without, sep=";", decimal=",")
     assert len(split.segments()) == 5
-    assert ("split at 4 gap(s) in time under load: without the tester's charge counter the "
-            "reader cannot tell whether charge was lost there; the column 'Q [mAh]' looks "
-            "like one (charge=Q [mAh])") in split.meta.notes
+    assert ("split at 4 gap(s) in time: without the tester's charge counter the reader cannot "
+            "tell whether a gap under load (or one of 10 min or more at rest) lost charge; the "
+            "column 'Q [mAh]' looks like one (charge=Q [mAh])") in split.meta.notes
     own = read_record(path, columns=mapping, sep=";", decimal=",")
     assert own.meta.segment_starts == [0]
     assert own.charge_ah == pytest.approx(rec.charge_ah, abs=1e-9)

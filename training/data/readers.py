@@ -763,8 +763,8 @@ def _no_counter_note(gaps: int, header: str, sep: str) -> str:
 
     names = [c.strip() for c in next(csv.reader([header], delimiter=sep), [])]
     found = [n for n in names if n and is_net_charge(n)]
-    return (f"split at {gaps} gap(s) in time under load: without the tester's charge counter "
-            "the reader cannot tell whether charge was lost there"
+    return (f"split at {gaps} gap(s) in time: without the tester's charge counter the reader "
+            "cannot tell whether a gap under load (or one of 10 min or more at rest) lost charge"
             + (f"; the column '{found[0]}' looks like one (charge={found[0]})"
                if len(found) == 1 else "; map it as charge=COL where the file has one"))
 
