@@ -746,7 +746,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     notes += _layout_notes(header_line, units, taken)
     starts = _segment_starts_from_gaps(t, cur, net_ah)
     if net_ah is None and len(starts) > 1:
-        notes.append(_no_counter_note(len(starts) - 1, lines[header_line - 1], sep))
+        notes.append(_no_counter_note(len(starts) - 1, list(cols)))
     meta = _meta(path, "generic", note, t, notes=notes, segment_starts=starts,
                  **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                   for k, v in columns.items()}))
@@ -756,12 +756,12 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                   charge_ah=net_ah)
 
 
-def _no_counter_note(gaps: int, header: str, sep: str) -> str:
-    """The note of a generic record split at gaps in time under load without a charge counter
-    mapped, naming the header's net counter column where it has one (header.is_net_charge)."""
+def _no_counter_note(gaps: int, names: list[str]) -> str:
+    """The note of a generic record split at gaps in time without a charge counter mapped,
+    naming the file's net counter column (of its column names) where it has one
+    (header.is_net_charge)."""
     from lmncell.data.header import is_net_charge
 
-    names = [c.strip() for c in next(csv.reader([header], delimiter=sep), [])]
     found = [n for n in names if n and is_net_charge(n)]
     return (f"split at {gaps} gap(s) in time: without the tester's charge counter the reader "
             "cannot tell whether a gap under load (or one of 10 min or more at rest) lost charge"
