@@ -483,9 +483,10 @@ def read_panasonic(path: Path) -> Record:
         return _mat_field(meas, name, path, keep.size)[keep]
 
     t = t[keep]
-    ah, more = _stitched_counter("Ah", t, field_("Current"), field_("Ah"))
+    cur = field_("Current")
+    ah, more = _stitched_counter("Ah", t, cur, field_("Ah"))
     notes += more
-    gaps = set(_segment_starts_from_gaps(t, field_("Current"), ah))
+    gaps = set(_segment_starts_from_gaps(t, cur, ah))
     pauses: set[int] = set()
     if "TimeStamp" in fields:
         stamps = np.ravel(meas["TimeStamp"])
@@ -518,7 +519,7 @@ def read_panasonic(path: Path) -> Record:
         if temp is not None and np.isfinite(chamber).all():
             ambient = chamber        # the chamber as logged beside the cell: the thermal
             meta.file_columns["ambient_c"] = "Chamber_Temp_degC"   # model's ambient
-    return Record(t - t[0], field_("Current"), field_("Voltage"), meta, temperature_c=temp,
+    return Record(t - t[0], cur, field_("Voltage"), meta, temperature_c=temp,
                   charge_ah=ah, ambient_c=ambient)
 
 
