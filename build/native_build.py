@@ -49,6 +49,7 @@ from lmncell.runtime.model import (
     TEMPERATURE_STEP_K,
     LmnModel,
     load_model,
+    replaced_whole,
 )
 from lmncell.runtime.observers import (
     EKF_ERROR_SCALE,
@@ -594,7 +595,8 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
                    ("resources/model.json", model_file.read_bytes()),
                    ("documentation/index.html",
                     documentation_html(model, model_file, "native").encode())]
-        with zipfile.ZipFile(archive, "w", zipfile.ZIP_DEFLATED) as z:
+        with replaced_whole(archive) as part, \
+                zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as z:   # whole, or no file
             for name, data in members:
                 z.writestr(zip_entry(name, when), data)
     return archive

@@ -48,7 +48,7 @@ from lmncell.runtime.cosim import (
     MIN_TEMPERATURE_C,
     VOLTAGE_MARGIN_V,
 )
-from lmncell.runtime.model import LmnModel, load_model
+from lmncell.runtime.model import LmnModel, load_model, replaced_whole
 
 RUNTIME_DIR = Path(runtime_package.__file__).resolve().parent
 WRAPPER_DIR = Path(__file__).resolve().parent / "pythonfmu_wrapper"
@@ -295,14 +295,13 @@ def _rewrite_members(fmu: Path, members: dict[str, bytes], when: datetime | None
     """Replace the contents of the named zip members (same names, same order) and add, at the
     end, those the FMU does not have yet; with `when` (interface.build_time) every member dated
     then, else the existing ones as pythonfmu dated them."""
-    tmp = fmu.with_suffix(".tmp")
-    with zipfile.ZipFile(fmu) as zin, zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
+    with replaced_whole(fmu) as tmp, zipfile.ZipFile(fmu) as zin, \
+            zipfile.ZipFile(tmp, "w", zipfile.ZIP_DEFLATED) as zout:
         for item in zin.infolist():
             header = item if when is None else zip_entry(item.filename, when)
             zout.writestr(header, members.get(item.filename, zin.read(item.filename)))
         for name in sorted(members.keys() - set(zin.namelist())):
             zout.writestr(zip_entry(name, when), members[name])
-    tmp.replace(fmu)
 
 
 def native_host_environment() -> dict[str, str] | None:
@@ -363,13 +362,22 @@ def patched_binary(guid: str, model_identifier: str) -> dict[str, bytes]:
 
 def build_fmu(model_path: str | Path, out: str | Path) -> Path:
     """Write the pythonfmu FMU of a model file; returns its path."""
-    from pythonfmu.builder import FmuBuilder
-
     model_file, archive = Path(model_path), fmu_path(out)
     model = load_model(model_file)
     when = build_time()       # a bad SOURCE_DATE_EPOCH is refused before the build
     h = model_hash(model_file)
     archive.parent.mkdir(parents=True, exist_ok=True)
+    with replaced_whole(archive) as part:    # no half-written FMU where the build fails
+        _pythonfmu_archive(model_file, model, h, part)
+        _patch_archive(part, model_file, model, h, when)
+    return archive
+
+
+def _pythonfmu_archive(model_file: Path, model: LmnModel, h: str, archive: Path) -> None:
+    """pythonfmu's FMU of the model file (its slave class, the runtime package and the model
+    file as project files, the documentation), written to archive."""
+    from pythonfmu.builder import FmuBuilder
+
     with tempfile.TemporaryDirectory(prefix="lmncell_fmu_") as tmp:
         stage = Path(tmp)
         pkg = stage / f"lmncell_rt_{h}"
@@ -392,6 +400,12 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
             for name in [n for n in sys.modules if n.startswith((f"lmncell_rt_{h}",
                                                                   f"lmncell_{h}"))]:
                 del sys.modules[name]
+
+
+def _patch_archive(archive: Path, model_file: Path, model: LmnModel, h: str,
+                   when: datetime | None) -> None:
+    """pythonfmu's FMU made LMNCell's: the patched wrapper where it was built, the model
+    description and documentation completed, every member dated `when`."""
     with zipfile.ZipFile(archive) as z:
         xml_text = z.read("modelDescription.xml").decode("utf-8")
     root = ET.fromstring(xml_text)
@@ -403,4 +417,3 @@ def build_fmu(model_path: str | Path, out: str | Path) -> Path:
     members["documentation/index.html"] = documentation_html(
         model, model_file, "pythonfmu", wrapper).encode("utf-8")
     _rewrite_members(archive, members, when)
-    return archive

@@ -90,6 +90,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import overload
@@ -893,9 +896,29 @@ def load_model(path: str | Path) -> LmnModel:
 
 
 def save_model(model: LmnModel, path: str | Path) -> Path:
-    """Write the model as JSON; floats are written with repr, so loading is bit-identical."""
+    """Write the model as JSON; floats are written with repr, so loading is bit-identical.
+    Written whole or not at all (replaced_whole): a full disk leaves no truncated model file."""
     path = Path(path)
-    path.write_text(json.dumps(model_to_dict(model), indent=1, allow_nan=False) + "\n",
-                    encoding="utf-8")
+    text = json.dumps(model_to_dict(model), indent=1, allow_nan=False) + "\n"
+    with replaced_whole(path) as part:
+        part.write_text(text, encoding="utf-8")
     return path
+
+
+@contextmanager
+def replaced_whole(path: Path) -> Iterator[Path]:
+    """A temporary path beside `path` to write a file to; once the block completes, that file
+    replaces `path` in one step (os.replace). Where the block raises (a full disk, a read-only
+    folder, an error while writing), the temporary file is removed and `path`, if it exists,
+    is left as it was: a model or FMU is never left half written for a host to load."""
+    part = path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
+    try:
+        yield part
+        os.replace(part, path)
+    except BaseException as exc:
+        with suppress(OSError):   # nothing was written there (e.g. a read-only folder)
+            part.unlink(missing_ok=True)
+        if isinstance(exc, OSError) and exc.filename in (None, str(part)):
+            exc.filename = str(path)          # the file the user asked for, not the part
+        raise
 

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import csv
+import errno
 import json
 import re
+import zipfile
 
 import numpy as np
 import pytest
@@ -538,3 +540,29 @@ def test_a_record_logged_every_10_s_is_evaluated_by_a_1_s_model_and_fmu(
                  "--capacity", "2.85", "--set", "sample_time_s=0.5"]) == 2
     assert ("slow.csv: logged every 10 s (the median time step); a model sample time of 0.5 s "
             "would hold each sample over 20 model steps") in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("native", [False, True], ids=["pythonfmu", "native"])
+def test_a_build_that_cannot_write_keeps_the_old_fmu_and_says_why(quick_model, tmp_path,
+                                                                  monkeypatch, capsys,
+                                                                  native) -> None:
+    """A full disk while the FMU is zipped: exit status 2 and the system's reason with the
+    FMU's path (no traceback), the FMU of before untouched, no half-written file left."""
+    out = tmp_path / "cell.fmu"
+    out.write_bytes(b"the FMU of yesterday")
+    real, calls = zipfile.ZipFile.writestr, []
+
+    def full_disk(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) > 2:
+            raise OSError(errno.ENOSPC, "No space left on device")
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(zipfile.ZipFile, "writestr", full_disk)
+    assert main(["build-fmu", str(quick_model), "--out", str(out),
+                 *(["--native"] if native else [])]) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: No space left on device (OS error 28)" in err, err
+    assert "Traceback" not in err and len(calls) > 2
+    assert out.read_bytes() == b"the FMU of yesterday"
+    assert [p.name for p in tmp_path.iterdir()] == ["cell.fmu"]

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,6 +16,7 @@ from lmncell.runtime.model import (
     load_model,
     model_from_dict,
     model_to_dict,
+    replaced_whole,
     save_model,
 )
 from lmncell.runtime.step import CellStepper, simulate
@@ -556,3 +559,36 @@ def test_the_vtf_form_has_the_arrhenius_slope_at_the_reference() -> None:
     np.testing.assert_allclose(arrhenius_gain(temps, 3000.0, temps.size, 25.0, 170.0),
                                [arrhenius_factor(float(t), 3000.0, 25.0, 170.0) for t in temps],
                                rtol=1e-15)
+
+
+def test_a_model_file_is_written_whole_or_not_at_all(quick_model, tmp_path, monkeypatch) -> None:
+    """save_model writes beside the file and replaces it in one step: a write that fails part
+    way (here a full disk after half the text) leaves the file as it was and no part behind,
+    and the error names the file asked for, not the part."""
+    model = load_model(quick_model)
+    path = tmp_path / "cell.json"
+    path.write_text("the model of yesterday", encoding="utf-8")
+    real = Path.write_text
+
+    def full_disk(self: Path, text: str, *args, **kwargs) -> int:
+        real(self, text[: len(text) // 2], *args, **kwargs)
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Path, "write_text", full_disk)
+    with pytest.raises(OSError) as failed:
+        save_model(model, path)
+    assert failed.value.filename == str(path)
+    monkeypatch.undo()
+    assert path.read_text(encoding="utf-8") == "the model of yesterday"
+    assert [p.name for p in tmp_path.iterdir()] == ["cell.json"]
+    save_model(model, path)
+    assert model_to_dict(load_model(path)) == model_to_dict(model)
+    assert [p.name for p in tmp_path.iterdir()] == ["cell.json"]
+
+
+def test_replaced_whole_keeps_an_error_that_names_another_file(tmp_path) -> None:
+    """An error about another file (one being read) keeps its own name."""
+    with pytest.raises(FileNotFoundError) as failed, replaced_whole(tmp_path / "x.fmu"):
+        (tmp_path / "absent.json").read_text()
+    assert failed.value.filename == str(tmp_path / "absent.json")
+    assert list(tmp_path.iterdir()) == []

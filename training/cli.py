@@ -714,6 +714,18 @@ def run_script(main_function: Callable[[], None], script: str) -> None:
     except MemoryError as exc:
         print(f"{name}: error: {out_of_memory(exc)}", file=sys.stderr)
         sys.exit(2)
+    except OSError as exc:
+        print(f"{name}: error: {os_refusal(exc)}", file=sys.stderr)
+        sys.exit(2)
+
+
+def os_refusal(exc: OSError) -> str:
+    """The message for an operating-system error that USER_ERRORS does not name (a full disk,
+    a read-only folder, a failing drive): the file where the system gives it, its reason and
+    error number, and what to check."""
+    where = f"{exc.filename}: " if exc.filename else ""
+    return (f"{where}{exc.strerror or exc} (OS error {exc.errno}): the system refused to read "
+            "or write a file; expected free disk space and a writable output folder")
 
 
 def out_of_memory(exc: MemoryError) -> str:
@@ -744,6 +756,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:       # Ctrl-C: a message and the shell's code, no traceback
         print(f"\nlmncell {args.command}: interrupted", file=sys.stderr)
         return 130
+    except OSError as exc:          # after BrokenPipeError, one of its kind
+        print(f"lmncell {args.command}: error: {os_refusal(exc)}", file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":
