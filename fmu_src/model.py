@@ -910,7 +910,12 @@ def replaced_whole(path: Path) -> Iterator[Path]:
     """A temporary path beside `path` to write a file to; once the block completes, that file
     replaces `path` in one step (os.replace). Where the block raises (a full disk, a read-only
     folder, an error while writing), the temporary file is removed and `path`, if it exists,
-    is left as it was: a model or FMU is never left half written for a host to load."""
+    is left as it was: a model or FMU is never left half written for a host to load. A symbolic
+    link, or a path that is no regular file (/dev/stdout, a pipe), is given as it is, to be
+    written through, as open() would: the link stays, and so does whatever holds the file open."""
+    if path.is_symlink() or (path.exists() and not path.is_file()):
+        yield path            # written through: a link, a device or pipe (/dev/stdout)
+        return
     part = path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
     try:
         yield part

@@ -5,6 +5,8 @@ from __future__ import annotations
 import errno
 import json
 import math
+import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -592,3 +594,23 @@ def test_replaced_whole_keeps_an_error_that_names_another_file(tmp_path) -> None
         (tmp_path / "absent.json").read_text()
     assert failed.value.filename == str(tmp_path / "absent.json")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_model_file_through_a_link_or_into_a_pipe(quick_model, tmp_path) -> None:
+    """A link to the model file keeps pointing at it, rewritten; a path that is no regular
+    file (a pipe, as /dev/stdout can be) is written to, not replaced by a file."""
+    model = load_model(quick_model)
+    target, link = tmp_path / "models" / "cell.json", tmp_path / "cell.json"
+    target.parent.mkdir()
+    target.write_text("old", encoding="utf-8")
+    link.symlink_to(target)
+    save_model(model, link)
+    assert link.is_symlink() and model_to_dict(load_model(target)) == model_to_dict(model)
+    assert sorted(p.name for p in target.parent.iterdir()) == ["cell.json"]
+    pipe, got = tmp_path / "pipe", []
+    os.mkfifo(pipe)
+    reader = threading.Thread(target=lambda: got.append(pipe.read_text(encoding="utf-8")))
+    reader.start()
+    save_model(model, pipe)
+    reader.join(timeout=30)
+    assert not pipe.is_file() and got == [target.read_text(encoding="utf-8")]

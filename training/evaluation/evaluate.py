@@ -30,7 +30,7 @@ from lmncell.progress import Progress
 from lmncell.progress import print_progress as _print
 from lmncell.report.jsontext import json_text
 from lmncell.runtime.cosim import trained_bounds
-from lmncell.runtime.model import LmnModel, load_model, model_from_dict
+from lmncell.runtime.model import LmnModel, load_model, model_from_dict, replaced_whole
 from lmncell.runtime.step import initial_hysteresis, simulate, simulate_ambient
 
 
@@ -295,7 +295,7 @@ def write_trace(trace: Trace, path: str | Path, name: str = "lmn") -> Path:
     voltage of the trace's model called name, and its SoC."""
     path = Path(path)
     seg = trace.segment
-    with open(path, "w", newline="") as fh:
+    with replaced_whole(path) as part, open(part, "w", newline="") as fh:
         wr = csv.writer(fh)
         wr.writerow(["time_s", "current_a", "voltage_measured_v", "voltage_model_v", "soc"])
         for row in zip(seg.time_s, seg.current_a, seg.voltage_v, trace.voltage[name],

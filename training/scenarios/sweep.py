@@ -30,7 +30,7 @@ from lmncell.data.records import (
     is_cell_temperature,
     present,
 )
-from lmncell.runtime.model import LmnModel, model_from_dict
+from lmncell.runtime.model import LmnModel, model_from_dict, replaced_whole
 from lmncell.scenarios.drive import (
     MAX_CYCLE_STEPS,
     STEP_ERROR_PREFIX,
@@ -376,10 +376,11 @@ def write_table(table, path: str | Path) -> Path:
     The CSV's numbers are the shortest that read back to the same floats (0.8, not the
     0.80000000000000004 of a fixed 17 digits)."""
     path = check_table_path(path)
-    if path.suffix == ".parquet":
-        table.to_parquet(path, index=False)
-    else:
-        table.to_csv(path, index=False)
+    with replaced_whole(path) as part:       # a full disk leaves no truncated table
+        if path.suffix == ".parquet":
+            table.to_parquet(part, index=False)
+        else:
+            table.to_csv(part, index=False)
     return path
 
 
