@@ -91,6 +91,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
@@ -919,6 +920,8 @@ def replaced_whole(path: Path) -> Iterator[Path]:
     part = path.with_name(f".{path.name}.{os.getpid()}.part{path.suffix}")
     try:
         yield part
+        if path.exists():
+            shutil.copymode(path, part)           # the file keeps its permissions
         os.replace(part, path)
     except BaseException as exc:
         with suppress(OSError):   # nothing was written there (e.g. a read-only folder)

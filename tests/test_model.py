@@ -583,9 +583,11 @@ def test_a_model_file_is_written_whole_or_not_at_all(quick_model, tmp_path, monk
     monkeypatch.undo()
     assert path.read_text(encoding="utf-8") == "the model of yesterday"
     assert [p.name for p in tmp_path.iterdir()] == ["cell.json"]
+    path.chmod(0o640)
     save_model(model, path)
     assert model_to_dict(load_model(path)) == model_to_dict(model)
     assert [p.name for p in tmp_path.iterdir()] == ["cell.json"]
+    assert path.stat().st_mode & 0o777 == 0o640
 
 
 def test_replaced_whole_keeps_an_error_that_names_another_file(tmp_path) -> None:
