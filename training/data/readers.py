@@ -25,6 +25,7 @@ from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.data.resample import find_gaps
 from lmncell.data.soc import REST_CURRENT_A
 from lmncell.runtime.model import FORMAT as MODEL_FORMAT
+from lmncell.runtime.model import replaced_whole
 
 FORMATS = ("plett", "arbin", "panasonic", "bdf", "biologic", "generic")
 PLETT_COLUMNS = ("time", "step", "current", "voltage", "chgAh", "disAh")
@@ -1147,7 +1148,7 @@ def write_bdf(rec: Record, path: str | Path) -> Path:
             names.append(name)
             arrays.append(arr)
     opener = gzip.open if path.suffix == ".gz" else open
-    with opener(path, "wt", encoding="utf-8", newline="") as fh:
+    with replaced_whole(path) as part, opener(part, "wt", encoding="utf-8", newline="") as fh:
         fh.write(",".join(names) + "\n")
         for row in zip(*arrays, strict=True):
             fh.write(",".join(repr(float(v)) for v in row) + "\n")

@@ -32,6 +32,7 @@ from lmncell.config import TrainConfig
 from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS
 from lmncell.report.jsontext import json_text
+from lmncell.runtime.model import replaced_whole
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
@@ -598,7 +599,7 @@ def write_programme(prog: Programme, out: Path) -> list[Path]:
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with open(out, "w") as fh:
+    with replaced_whole(out) as part, open(part, "w") as fh:   # no half programme for a cycler
         fh.write("time_s,current_a\n")
         t_start = np.concatenate([[0.0], prog.time_s[:-1]])
         for t, i in zip(t_start, prog.current_a, strict=True):
