@@ -46,7 +46,7 @@ def judged(model, path: Path, soc0: float) -> tuple[float, float, object]:
 
 
 def plot_fold(held: str, traces: dict[str, list], out: Path) -> Path:
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(9, 4.5))
     first = next(iter(traces.values()))
@@ -63,9 +63,7 @@ def plot_fold(held: str, traces: dict[str, list], out: Path) -> Path:
     ax.legend(fontsize=8)
     path = out / f"charge_{held}.png"
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path, dpi=110)
 
 
 def main() -> None:

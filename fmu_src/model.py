@@ -900,7 +900,13 @@ def save_model(model: LmnModel, path: str | Path) -> Path:
     """Write the model as JSON; floats are written with repr, so loading is bit-identical.
     Written whole or not at all (replaced_whole): a full disk leaves no truncated model file."""
     path = Path(path)
-    text = json.dumps(model_to_dict(model), indent=1, allow_nan=False) + "\n"
+    return write_text_whole(path, json.dumps(model_to_dict(model), indent=1, allow_nan=False)
+                            + "\n")
+
+
+def write_text_whole(path: str | Path, text: str) -> Path:
+    """Write text in UTF-8 to path, whole or not at all (replaced_whole); returns the path."""
+    path = Path(path)
     with replaced_whole(path) as part:
         part.write_text(text, encoding="utf-8")
     return path

@@ -7,6 +7,7 @@ import errno
 import json
 import re
 import zipfile
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -566,3 +567,27 @@ def test_a_build_that_cannot_write_keeps_the_old_fmu_and_says_why(quick_model, t
     assert "Traceback" not in err and len(calls) > 2
     assert out.read_bytes() == b"the FMU of yesterday"
     assert [p.name for p in tmp_path.iterdir()] == ["cell.fmu"]
+
+
+def test_a_figure_is_written_whole_and_closed_even_where_writing_fails(tmp_path,
+                                                                       monkeypatch) -> None:
+    """save_figure: a PNG by the name's suffix, the figure closed; where the disk fills while
+    it is written, the picture of before stays, no part is left, and the figure is closed."""
+    from lmncell.report.plots import plt, save_figure
+
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    path = save_figure(fig, tmp_path / "a.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not plt.fignum_exists(fig.number)
+    before = path.read_bytes()
+    fig, ax = plt.subplots()
+
+    def full_disk(target, **kwargs):
+        Path(target).write_bytes(b"\x89PNG half")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(fig, "savefig", full_disk)
+    with pytest.raises(OSError) as failed:
+        save_figure(fig, path)
+    assert failed.value.filename == str(path) and not plt.fignum_exists(fig.number)
+    assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["a.png"]

@@ -21,7 +21,7 @@ from lmncell.design.optimal import (
     write_programme,
 )
 from lmncell.report.jsontext import json_text
-from lmncell.runtime.model import LmnModel
+from lmncell.runtime.model import LmnModel, write_text_whole
 
 
 def default_virtual_cell() -> str:
@@ -240,7 +240,7 @@ def run_design(a) -> int:
         print(json_text(programme_figures(prog, files, check)))
     if result is not None:
         proof_json = Path(a.out).with_suffix(".proof.json")
-        proof_json.write_text(json_text(result))
+        write_text_whole(proof_json, json_text(result))
         fig = plot_proof(result, Path(a.plot) if a.plot else Path(a.out).parent,
                          Path(a.out).stem)
         left_out = result["skipped"]

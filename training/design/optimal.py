@@ -32,7 +32,7 @@ from lmncell.config import TrainConfig
 from lmncell.data.records import DataError, Record, RecordMeta
 from lmncell.design import DESIGN_METHODS, INFORMATION_KINDS
 from lmncell.report.jsontext import json_text
-from lmncell.runtime.model import replaced_whole
+from lmncell.runtime.model import replaced_whole, write_text_whole
 from scipy.optimize import minimize
 from scipy.signal import lfilter
 
@@ -607,16 +607,17 @@ def write_programme(prog: Programme, out: Path) -> list[Path]:
     bdf = out.with_suffix(".bdf.csv")
     write_bdf(prog.to_record(str(out)), bdf)
     meta = out.with_suffix(".json")
-    meta.write_text(json_text({"settings": prog.settings, "profile_points": prog.profile_points,
-                                "log_det_per_sequence": prog.log_dets,
-                                "note": "the BDF voltage is the design model's prediction"},
-                               indent=1))
+    write_text_whole(meta, json_text({"settings": prog.settings,
+                                      "profile_points": prog.profile_points,
+                                      "log_det_per_sequence": prog.log_dets,
+                                      "note": "the BDF voltage is the design model's prediction"},
+                                     indent=1))
     return [out, bdf, meta]
 
 
 def plot_programme(prog: Programme, out_dir: Path, index: int = 0) -> list[Path]:
     """Fig. 5 (one sequence) and Fig. 6 (the whole programme with charge and SoC)."""
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -629,9 +630,7 @@ def plot_programme(prog: Programme, out_dir: Path, index: int = 0) -> list[Path]
     ax[0].set(ylabel="current / A", title=f"designed sequence {index + 1} (D-optimal)")
     ax[1].plot(t, prog.voltage_v[a:b], "k")
     ax[1].set(ylabel="predicted voltage / V", xlabel="time / s")
-    fig.savefig(out_dir / "fig05_sequence.png", dpi=90)
-    plt.close(fig)
-    files.append(out_dir / "fig05_sequence.png")
+    files.append(save_figure(fig, out_dir / "fig05_sequence.png"))
     th = prog.time_s / 3600
     charge = np.cumsum(prog.current_a) * (prog.time_s[1] - prog.time_s[0]) / 3600
     fig, ax = plt.subplots(3, 1, figsize=(10, 7), sharex=True, constrained_layout=True)
@@ -645,7 +644,5 @@ def plot_programme(prog: Programme, out_dir: Path, index: int = 0) -> list[Path]
         ax[2].plot(pts[:, 0] / 3600, 100 * pts[:, 1], "ko", label="target profile")
     ax[2].set(ylabel="SoC / %", xlabel="time / h")
     ax[2].legend()
-    fig.savefig(out_dir / "fig06_programme.png", dpi=90)
-    plt.close(fig)
-    files.append(out_dir / "fig06_programme.png")
+    files.append(save_figure(fig, out_dir / "fig06_programme.png"))
     return files

@@ -341,7 +341,7 @@ def prove_design(vc: VirtualCellLike, cell: CellSpec, cyc: CyclerSpec, spec: Des
 def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
     """Per validation profile the designed programme's free-run RMSE beside every random
     programme's (dots) and their medians (bars); the title gives the covariance ratios."""
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -372,6 +372,4 @@ def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
                  fontsize=9)
     ax.legend(fontsize=8)
     path = out_dir / f"{stem}_proof.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

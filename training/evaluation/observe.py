@@ -76,7 +76,7 @@ def soc_metrics(run: ObserverRun) -> dict:
 
 
 def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     fig, ax = plt.subplots(2, 1, figsize=(10, 6.5), sharex=True, constrained_layout=True)
     r0 = runs[0]
@@ -93,9 +93,7 @@ def observer_figure(runs: list[ObserverRun], path: Path) -> Path:
     for b in (-2, 2):
         ax[1].axhline(b, color="k", ls=":", lw=0.7)
     ax[1].set(ylabel="estimate − reference / %", xlabel="time / min")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _reached(seg: Segment, start_at: float) -> np.ndarray:

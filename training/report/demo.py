@@ -31,7 +31,7 @@ from lmncell.identification.train import train_files
 from lmncell.report.html import Report
 from lmncell.report.jsontext import json_text
 from lmncell.report.readme import drift_sentence
-from lmncell.runtime.model import LmnModel, load_model
+from lmncell.runtime.model import LmnModel, load_model, write_text_whole
 from lmncell.scenarios.drive import load_vehicle, plot_cycle, run_cycle
 from lmncell.scenarios.traces import data_dir
 
@@ -52,7 +52,7 @@ def _say(msg: str) -> None:
 
 def ocv_figure(out: Path) -> tuple[Path, float]:
     """Fig. 1: charge and discharge OCV branches of the 25 °C C/30 test."""
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     d = data_dir() / A123 / "ocv"
     s1, s2, s3 = (read_record(d / f"A123_OCV_P25_S{k}.csv.gz") for k in (1, 2, 3))
@@ -66,8 +66,7 @@ def ocv_figure(out: Path) -> tuple[Path, float]:
            title="A123 LFP: OCV hysteresis at 25 °C")
     ax.legend()
     path = out / "fig01_ocv_hysteresis.png"
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path)
     mid = (curve.soc > 0.2) & (curve.soc < 0.8)
     return path, float(2e3 * np.median(curve.hysteresis_v[mid]))
 
@@ -106,7 +105,7 @@ def run_demo(out: Path) -> Path:
         "soc_outside_3sigma_pct": outside_figures,
         "seconds": time.perf_counter() - t0,
     }
-    (out / "summary.json").write_text(json_text(headline))
+    write_text_whole(out / "summary.json", json_text(headline))
     return _finish(rep, headline, model_path, fmu)
 
 
@@ -411,7 +410,7 @@ def _native(model_path: Path, out: Path, record: Path) -> str:
 
 
 def _agreement_figure(check: dict, path: Path) -> Path:
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     t = (check["time_s"] - check["time_s"][0]) / 3600
     fig, ax = plt.subplots(2, 1, figsize=(9, 5), sharex=True, constrained_layout=True)
@@ -424,6 +423,4 @@ def _agreement_figure(check: dict, path: Path) -> Path:
     ax[1].axhline(1e-9, color="r", ls="--", lw=0.8, label="tolerance of the tests, 1e-9 V")
     ax[1].set(ylabel="|FMU − pipeline| / V", xlabel="time / h", ylim=(1e-18, 1e-6))
     ax[1].legend(loc="upper right", fontsize=8)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)

@@ -7,6 +7,8 @@ import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from lmncell.runtime.model import write_text_whole
+
 
 def _inline(text: str) -> str:
     """Escaped text with `code spans` as <code>."""
@@ -77,5 +79,4 @@ caption {{ text-align: left; font-size: 0.92em; color: #444; padding-bottom: 4px
 </body></html>
 """
         path = self.out / "report.html"
-        path.write_text(page, encoding="utf-8")
-        return path
+        return write_text_whole(path, page)

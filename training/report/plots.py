@@ -12,13 +12,26 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 from lmncell.data.records import Record
-from lmncell.runtime.model import LmnModel
+from lmncell.runtime.model import LmnModel, replaced_whole
 from matplotlib.ticker import FuncFormatter
 
 COLORS = {"measured": "k", "lmn": "tab:red", "fmu": "darkred", "arx": "tab:gray",
           "ecm2rc": "tab:blue", "ecm2rc_hyst": "tab:green", "ekf": "tab:red", "fuzzy": "tab:orange",
           "imm": "tab:purple"}
 MAIN = ("lmn", "fmu")      # the model a figure is about (lmn; fmu: an FMU of it)
+
+
+def save_figure(fig, path: str | Path, dpi: int = 90) -> Path:
+    """Write the figure to path (its format by the suffix, PNG without one), whole or not at
+    all (replaced_whole), and close it, also where writing fails; returns the path."""
+    path = Path(path)
+    try:
+        with replaced_whole(path) as part:
+            fig.savefig(part, dpi=dpi, format=path.suffix[1:] or matplotlib.rcParams[
+                "savefig.format"])
+    finally:
+        plt.close(fig)
+    return path
 
 
 def safe_name(name: str) -> str:
@@ -74,9 +87,7 @@ def fit_figure(trace, path: Path, title: str = "", zoom_s: float = 600.0) -> Pat
            title="error (axis clipped to the central 99 % of samples)")
     ax.axhline(0, color="k", lw=0.5)
     ax.legend(loc="lower left", ncol=5, fontsize=8)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def validity_figure(model: LmnModel, path: Path) -> Path:
@@ -97,9 +108,7 @@ def validity_figure(model: LmnModel, path: Path) -> Path:
         ax.set(xlabel="SoC / %", ylabel="validity Φ", ylim=(-0.02, 1.02),
                title=f"validity functions {label}".strip())
         ax.legend(fontsize=7, ncol=4)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
@@ -117,9 +126,7 @@ def curve_figure(curve: list[dict], path: Path, chosen: int) -> Path:
     ax.yaxis.set_major_formatter(plain)
     ax.yaxis.set_minor_formatter(plain)
     ax.legend(fontsize=7 if len(set(regions)) > 1 else None)
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def _curve_lines(ax: plt.Axes, curve: list[dict], prefix: str, n: int) -> None:
@@ -176,9 +183,7 @@ def records_figure(records: list[tuple[Record, np.ndarray | None]], path: Path,
         axes[2].set(ylabel="SoC / %")
         axes[2].set_title(soc_note, fontsize=9)
     axes[-1].set(xlabel="time from the record's start / h")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_local_model_table(model: LmnModel, path: Path) -> Path:
@@ -188,7 +193,7 @@ def write_local_model_table(model: LmnModel, path: Path) -> Path:
     from lmncell.evaluation.interpret import local_model_table
 
     rows = local_model_table(model)
-    with open(path, "w", newline="") as fh:
+    with replaced_whole(Path(path)) as part, open(part, "w", newline="") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
         wr.writeheader()
         for r in rows:
@@ -239,9 +244,7 @@ def _finish_folds_figure(fig, axes: np.ndarray, path: Path, caption: str, n: int
     handles, labels = axes.flat[0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=n, fontsize=8)
     fig.suptitle(textwrap.fill(caption, 130), fontsize=9, x=0.01, ha="left")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def folds_figure(folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]]]],

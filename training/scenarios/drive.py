@@ -495,7 +495,7 @@ def stop_title(res: CycleResult) -> str:
 
 def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     """Speed (for a drive cycle), current, voltage, SoC and cell temperature over the run."""
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     t = res.time_s / 60.0
     f = res.figures
@@ -528,9 +528,7 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
         tx = ax[2].twinx()
         tx.plot(t, res.cell_temperature_c, color="tab:red", lw=0.8)
         tx.set_ylabel(f"cell temperature / °C (ambient {f['ambient_c']:g})", color="tab:red")
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
-    return Path(path)
+    return save_figure(fig, path)
 
 
 def simulate_cycle_cli(a) -> int:

@@ -387,7 +387,7 @@ def write_table(table, path: str | Path) -> Path:
 def plot_sweep(table, out_dir: str | Path) -> list[Path]:
     """Distance driven, minimum cell voltage and end SoC over ambient × cycle (mean over the
     other settings; a run that stopped with the cell empty counts up to there)."""
-    from lmncell.report.plots import plt
+    from lmncell.report.plots import plt, save_figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -407,8 +407,6 @@ def plot_sweep(table, out_dir: str | Path) -> list[Path]:
             ax.text(c, r, f"{v:.3f}", ha="center", va="center", color="w", fontsize=8)
         fig.colorbar(im, ax=ax, label=label)
         path = out / f"sweep_{column}.png"
-        fig.savefig(path, dpi=90)
-        plt.close(fig)
-        files.append(path)
+        files.append(save_figure(fig, path))
     return files
 
