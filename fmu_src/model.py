@@ -906,20 +906,20 @@ def save_model(model: LmnModel, path: str | Path) -> Path:
 
 def write_text_whole(path: str | Path, text: str) -> Path:
     """Write text in UTF-8 to path, whole or not at all (replaced_whole); returns the path."""
-    path = Path(path)
     with replaced_whole(path) as part:
         part.write_text(text, encoding="utf-8")
-    return path
+    return Path(path)
 
 
 @contextmanager
-def replaced_whole(path: Path) -> Iterator[Path]:
+def replaced_whole(path: str | Path) -> Iterator[Path]:
     """A temporary path beside `path` to write a file to; once the block completes, that file
     replaces `path` in one step (os.replace). Where the block raises (a full disk, a read-only
     folder, an error while writing), the temporary file is removed and `path`, if it exists,
     is left as it was: a model or FMU is never left half written for a host to load. A symbolic
     link, or a path that is no regular file (/dev/stdout, a pipe), is given as it is, to be
     written through, as open() would: the link stays, and so does whatever holds the file open."""
+    path = Path(path)
     if path.is_symlink() or (path.exists() and not path.is_file()):
         yield path            # written through: a link, a device or pipe (/dev/stdout)
         return

@@ -791,7 +791,8 @@ def _checked_counter(path: Path, column: str, file_times: np.ndarray, current_a:
         counter_ah = -counter_ah
         notes.append(f"column '{column}' counted charge negative to the current's sign; "
                      "negated (LMNCell's counter rises while the current charges)")
-    counter_ah, more = _stitched_counter(column, file_times, current_a, counter_ah)
+    counter_ah, more = _stitched_counter(column, file_times, current_a, counter_ah,
+                                         (regular, held, reach))
     notes += more
     step = np.diff(counter_ah)
     for sign, what in ((1.0, "charges"), (-1.0, "discharges")):
@@ -822,13 +823,16 @@ def _counter_reach(file_times: np.ndarray, current_a: np.ndarray
 
 
 def _stitched_counter(column: str, file_times: np.ndarray, current_a: np.ndarray,
-                      counter_ah: np.ndarray) -> tuple[np.ndarray, list[str]]:
+                      counter_ah: np.ndarray,
+                      reached: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+                      ) -> tuple[np.ndarray, list[str]]:
     """A charge counter (Ah, in the current's sign) with its restarts mended, and a note where
     there were any: a step that is no gap where the counter falls back to about 0 by more than
     the current can move it (both within _counter_reach), as a tester's capacity counters do at
     each cycle or step of a schedule, continues from the count before it plus the current's
-    charge over that step. The counter itself where there is none."""
-    regular, held, reach = _counter_reach(file_times, current_a)
+    charge over that step. The counter itself where there is none. reached: _counter_reach of
+    these times and currents where the caller has it already."""
+    regular, held, reach = reached or _counter_reach(file_times, current_a)
     restarts = np.flatnonzero(regular & (np.abs(np.diff(counter_ah) - held) > reach)
                               & (np.abs(counter_ah[1:]) <= reach))
     if not restarts.size:
