@@ -9,6 +9,7 @@ import re
 import shlex
 import warnings
 from datetime import datetime, timedelta
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -949,6 +950,47 @@ def test_a_csv_charge_counter_of_another_kind_is_mended_or_refused(tmp_path) -> 
         rec = read_record(known)
         counter, notes = _checked_counter(known, "Q", rec.time_s, rec.current_a, rec.charge_ah)
         assert notes == [] and np.array_equal(counter, rec.charge_ah - rec.charge_ah[0])
+
+
+def test_a_counter_restart_at_a_slow_step_is_stitched_and_a_recharge_in_a_gap_is_kept(
+        tmp_path) -> None:
+    """A tester that logs a rest more slowly (10 s against 0.1 s) and restarts its counter at
+    the rest's first row: before, that step was no regular one, the restart stayed, the rest of
+    the record was one segment later and the counters counted +1 Ah "across the gap" that the
+    SoC reference then took. A fall to 0 that no current of the record could make over its step
+    is a restart; a net counter back at 0 after an hour's gap, in which the cell could have been
+    recharged at the record's own current, stays as counted (a gap, two segments)."""
+    def record(parts, restart_at=None):
+        t, i = [0.0], [0.0]
+        for dt, n, amps in parts:
+            t += list(t[-1] + dt * np.arange(1, n + 1))
+            i += [amps] * n
+        t, i = np.array(t), np.array(i)
+        counter = np.concatenate([[0.0], np.cumsum(i[:-1] * np.diff(t)) / 3600])
+        logged = counter.copy()
+        if restart_at is not None:
+            logged[restart_at:] -= logged[restart_at]
+        return SimpleNamespace(time_s=t, current_a=i, voltage_v=3.6 + 0.05 * i), counter, logged
+
+    path = tmp_path / "own.csv"
+    rec, counter, logged = record([(0.1, 18000, -2.0), (10.0, 30, 0.0), (0.1, 3000, -2.0)],
+                                  restart_at=18001)
+    mapping = _own_csv_with_counter(path, rec, logged)
+    read = read_record(path, columns=mapping, sep=";", decimal=",")
+    assert read.charge_ah == pytest.approx(counter, abs=1e-6)
+    assert read.meta.segment_starts == [0]
+    assert any("restarts from 0 1 time(s), the first at t = 1810 s" in n
+               and "1 of them at a step longer than the log's" in n
+               for n in read.meta.notes), read.meta.notes
+    # an hour without rows, the cell recharged in it: the counter back near 0 stays as counted
+    rec, counter, _ = record([(0.1, 6000, -2.0), (3600.0, 1, 0.0), (0.1, 100, 0.0)])
+    back = counter.copy()
+    back[6001:] = counter[6001:] - counter[6001] - 1e-4
+    _own_csv_with_counter(path, rec, back)
+    kept = read_record(path, columns=mapping, sep=";", decimal=",")
+    assert kept.charge_ah == pytest.approx(back, abs=1e-6)
+    assert kept.meta.segment_starts == [0, 6001]
+    assert not any("restarts" in n for n in kept.meta.notes), kept.meta.notes
 
 
 def test_ones_own_csv_with_every_column_trains_the_model_of_the_known_format(tmp_path) -> None:

@@ -827,22 +827,33 @@ def _stitched_counter(column: str, file_times: np.ndarray, current_a: np.ndarray
                       reached: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
                       ) -> tuple[np.ndarray, list[str]]:
     """A charge counter (Ah, in the current's sign) with its restarts mended, and a note where
-    there were any: a step that is no gap where the counter falls back to about 0 by more than
-    the current can move it (both within _counter_reach), as a tester's capacity counters do at
-    each cycle or step of a schedule, continues from the count before it plus the current's
-    charge over that step. The counter itself where there is none. reached: _counter_reach of
-    these times and currents where the caller has it already."""
+    there were any: a step where the counter falls back to about 0 by more than the current can
+    move it (both within _counter_reach), as a tester's capacity counters do at each cycle or
+    step of a schedule, continues from the count before it plus the current's charge over that
+    step. At a step longer than the log's (GAP_FACTOR × its median: a rest logged more slowly,
+    or a gap) only a fall that no current of the record, held over the whole step, could have
+    made counts as a restart: a cell recharged inside a gap brings a counter of the net charge
+    since the start back to about 0 as well, and stays as counted. The counter itself where
+    there is none. reached: _counter_reach of these times and currents where the caller has it
+    already."""
     regular, held, reach = reached or _counter_reach(file_times, current_a)
-    restarts = np.flatnonzero(regular & (np.abs(np.diff(counter_ah) - held) > reach)
+    step = np.diff(counter_ah)
+    peak = float(np.max(np.abs(current_a))) if current_a.size else 0.0
+    beyond_any_current = np.abs(step) > COUNTER_CHECK_AH + peak * np.diff(file_times) / 3600.0
+    restarts = np.flatnonzero((regular | beyond_any_current) & (np.abs(step - held) > reach)
                               & (np.abs(counter_ah[1:]) <= reach))
     if not restarts.size:
         return counter_ah, []
-    step = np.diff(counter_ah)
     step[restarts] = held[restarts]
+    slow = restarts[~regular[restarts]]
     return (np.concatenate([[counter_ah[0]], counter_ah[0] + np.cumsum(step)]),
             [f"column '{column}' restarts from 0 {restarts.size} time(s), the first at "
              f"t = {file_times[restarts[0] + 1]:g} s; each restart continues from the count "
-             "before it plus the current's charge over that step"])
+             "before it plus the current's charge over that step"
+             + (f" ({slow.size} of them at a step longer than the log's, the first at "
+                f"t = {file_times[slow[0] + 1]:g} s after "
+                f"{file_times[slow[0] + 1] - file_times[slow[0]]:g} s: the charge over such a "
+                "step is the current held over it)" if slow.size else "")])
 
 
 def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray, list[str]]:
