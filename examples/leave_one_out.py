@@ -3,7 +3,8 @@ held-out record free-run, and compare the LMN with its baselines fitted on the s
 
 Usage:
     python examples/leave_one_out.py CAPACITY_AH RECORD... [--soc0 F[,F...]] [--set KEY=VALUE ...]
-        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN] [--through-hidden-pauses]
+        [--ocv-tests FILE] [--no-baselines] [--hold-out PATTERN [--together]]
+        [--through-hidden-pauses]
         [--fmu native|pythonfmu [--at-model-steps]] [--plot FILE.png]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
@@ -21,7 +22,10 @@ the capacity: a model driven by the current counts its SoC that much off, which 
 moves the voltage collapse; A123 25 °C: +1.17 %, the SoC ends that much high); then the
 means over the folds. --hold-out PATTERN holds out only the records whose name contains
 PATTERN (e.g. 10degC: train on all, test each 10 °C record left out in turn), or one of a
-comma list (N05,P05,P25: the A123 folds between training temperatures).
+comma list (N05,P05,P25: the A123 folds between training temperatures); with --together the
+records of each pattern are held out at once and the model is trained on the others
+(--hold-out 10degC --together: trained at 25 °C only, tested at 10 °C: leave one temperature
+out).
 --through-hidden-pauses evaluates the held-out record as a host that drives the FMU through its
 time column: pauses that only the wall clock shows (Panasonic 25 °C Cycle 1:
 16 h and 3 h) do not split it, and the model's state runs on through them (training still
@@ -46,7 +50,7 @@ from lmncell.cli import THROUGH_PAUSES_HELP, number_argument, run_script, soc_li
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import (
     evaluate_records,
-    hold_out_clause,
+    fold_words,
     leave_one_out_folds,
     read_records,
     through_pauses_clause,
@@ -82,6 +86,10 @@ def main() -> None:
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
                     help="hold out only records whose name contains PATTERN, or one of a "
                     "comma list")
+    ap.add_argument("--together", action="store_true",
+                    help="hold out the records of each --hold-out pattern at once, trained on "
+                    "the records without it (--hold-out 10degC --together: leave one "
+                    "temperature out)")
     ap.add_argument("--through-hidden-pauses", action="store_true",
                     help=THROUGH_PAUSES_HELP)
     ap.add_argument("--fmu", choices=("native", "pythonfmu"),
@@ -99,15 +107,20 @@ def main() -> None:
         settings["ocv_tests"] = a.ocv_tests
     means: dict[str, list[tuple[float, float]]] = {}
     folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]]]] = []
+    if a.together and not a.hold_out:
+        ap.error("--together needs --hold-out PATTERN (the records held out together)")
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
+    trained_on: list[str] = []
     for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
-                                                                   a.soc0):
-        model, _ = train_files(train, Path(tmp) / "model.json",
-                               capacity_ah=a.capacity_ah, soc0=train_soc0,
-                               baselines=not a.no_baselines, progress=lambda _m: None,
-                               **settings)
-        fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
-                         native=a.fmu == "native") if a.fmu else None)
+                                                                   a.soc0, a.together):
+        if train != trained_on:           # held out together: one training per group
+            model, _ = train_files(train, Path(tmp) / "model.json",
+                                   capacity_ah=a.capacity_ah, soc0=train_soc0,
+                                   baselines=not a.no_baselines, progress=lambda _m: None,
+                                   **settings)
+            fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
+                             native=a.fmu == "native") if a.fmu else None)
+            trained_on = train
         folds.append((Path(held).name, {}))
         held_records = [(rec, start) for _, rec, start in read_records(
             [held], held_soc0, through_hidden_pauses=a.through_hidden_pauses)]
@@ -148,10 +161,9 @@ def main() -> None:
         for m, v in means.items()))
     if a.plot:
         ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
-        which = hold_out_clause(a.hold_out)
-        caption = (f"Leave-one-record-out, {len(folds)} fold(s): each record{which} held out "
-                   f"in turn, the models trained on the other {len(a.records) - 1} records "
-                   "with the same data and settings; free-run RMSE of the held-out record, "
+        title, words = fold_words(a.hold_out, a.together, len(a.records))
+        caption = (f"{title}, {len(folds)} held-out record(s): {words}, with the same data "
+                   "and settings; free-run RMSE of the held-out record, "
                    "driven by the measured cell temperature (cell) and, where the record has "
                    "one beside it, by the chamber temperature only (ambient)"
                    + through_pauses_clause(a.through_hidden_pauses) + fmu_clause(a)

@@ -5,7 +5,7 @@ median 3σ after 10 minutes (how wide the band is while it holds the truth).
 
 Usage:
     python examples/observer_leave_one_out.py CAPACITY_AH RECORD... [--ocv-tests FILE ...]
-        [--hold-out PATTERN] [--start-soc 0.6] [--soc0-est 0.3] [--soc0 F[,F...]]
+        [--hold-out PATTERN [--together]] [--start-soc 0.6] [--soc0-est 0.3] [--soc0 F[,F...]]
         [--set KEY=VALUE ...] [--through-hidden-pauses] [--plot FILE.png]
 
 Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV test):
@@ -15,7 +15,8 @@ Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV 
 
 The observer starts where the reference SoC first falls to --start-soc (under load, its load
 history unknown to it) with the estimate --soc0-est. --hold-out PATTERN holds out only the
-records whose name contains PATTERN (e.g. 10degC), or one of a comma list (N05,P05,P25).
+records whose name contains PATTERN (e.g. 10degC), or one of a comma list (N05,P05,P25);
+--together holds the records of each pattern out at once, the model trained on the others.
 --through-hidden-pauses runs the observers through pauses that only the wall clock shows, as in
 an FMU driven through the record's time column (default: the record is split there).
 --plot FILE.png draws the RMSE and the share outside ±3σ per held-out record and observer, with
@@ -34,7 +35,7 @@ from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments, start_soc
 from lmncell.data.readers import read_record
 from lmncell.evaluation.evaluate import (
-    hold_out_clause,
+    fold_words,
     leave_one_out_folds,
     through_pauses_clause,
 )
@@ -57,6 +58,8 @@ def main() -> None:
     ap.add_argument("records", nargs="+")
     ap.add_argument("--ocv-tests", nargs="*", default=[])
     ap.add_argument("--hold-out", default="", metavar="PATTERN")
+    ap.add_argument("--together", action="store_true",
+                    help="hold out the records of each --hold-out pattern at once")
     ap.add_argument("--start-soc", type=float, default=0.6)
     ap.add_argument("--soc0-est", type=float, default=0.3)
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
@@ -67,18 +70,23 @@ def main() -> None:
     ap.add_argument("--plot", type=Path, metavar="FILE.png",
                     help="also draw the results per held-out record")
     a = ap.parse_args()
+    if a.together and not a.hold_out:
+        ap.error("--together needs --hold-out PATTERN (the records held out together)")
     settings = dict(parse_setting(s) for s in a.set)
     if a.ocv_tests:
         settings["ocv_tests"] = a.ocv_tests
     results: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
     folds: list[tuple[str, dict[str, tuple[float, float]]]] = []
     with tempfile.TemporaryDirectory() as tmp:
+        trained_on: list[str] = []
         for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
-                                                                       a.soc0):
-            out = Path(tmp) / "model.json"
-            train_files(train, out, a.capacity_ah, train_soc0, progress=lambda _m: None,
-                        **settings)
-            model = load_model(out)
+                                                                       a.soc0, a.together):
+            if train != trained_on:       # held out together: one training per group
+                out = Path(tmp) / "model.json"
+                train_files(train, out, a.capacity_ah, train_soc0, progress=lambda _m: None,
+                            **settings)
+                model = load_model(out)
+                trained_on = train
             rec = read_record(held)
             if a.through_hidden_pauses:
                 rec = rec.through_hidden_pauses()
@@ -104,9 +112,8 @@ def main() -> None:
                   f"{out3:.1f} % (worst fold {worst:.1f} %), median 3σ {width:.1f} %")
     if a.plot:
         ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
-        which = hold_out_clause(a.hold_out)
-        caption = (f"Observer leave-one-record-out, {len(folds)} fold(s): each record{which} "
-                   f"held out in turn, the model trained on the other {len(a.records) - 1}; "
+        title, words = fold_words(a.hold_out, a.together, len(a.records), "model")
+        caption = (f"Observer {title.lower()}, {len(folds)} held-out record(s): {words}; "
                    f"each observer started where the reference SoC falls to {a.start_soc:g} "
                    f"(under load) with the estimate {a.soc0_est:g}; SoC RMSE after the first "
                    "10 minutes, and the share of all its samples whose reference SoC lies "

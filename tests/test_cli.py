@@ -244,6 +244,7 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
     single record, is a clear DataError."""
     from lmncell.data.records import DataError
     from lmncell.evaluation.evaluate import (
+        fold_words,
         hold_out_clause,
         leave_one_out_folds,
         through_pauses_clause,
@@ -267,6 +268,21 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
         leave_one_out_folds(recs, "10degC,P25")
     with pytest.raises(DataError, match="at least two different records, got 1"):
         leave_one_out_folds(["d/a.csv"])
+    # held out together (leave one temperature out): each trained on the others only
+    assert leave_one_out_folds(recs, "10degC", [1.0, 0.0, 0.5], together=True) == [
+        ("d/a_10degC.mat", 1.0, ["d/b_25degC.mat"], [0.0]),
+        ("d/c_10degC.mat", 0.5, ["d/b_25degC.mat"], [0.0])]
+    assert [f[2] for f in leave_one_out_folds(recs, "a_,10degC", together=True)] == [
+        ["d/b_25degC.mat", "d/c_10degC.mat"], ["d/b_25degC.mat"]]
+    with pytest.raises(DataError, match="'.mat' is in every record name, so held out "
+                                        "together nothing is left to train on"):
+        leave_one_out_folds(recs, ".mat", together=True)
+    assert fold_words("10degC", True, 3) == (
+        "Leave-one-group-out", "the records whose name contains '10degC' held out together, "
+        "one group per pattern, the models trained on the records outside the group")
+    assert fold_words("", False, 3, "model") == (
+        "Leave-one-record-out", "each record held out in turn, the model trained on the "
+        "other 2 records")
 
 
 def test_start_soc_per_file(tmp_path, capsys) -> None:

@@ -203,13 +203,15 @@ def record_notes(rec: Record, capacity_ah: float, sample_time_s: float) -> dict:
 
 
 def leave_one_out_folds(records: list[str], hold_out: str = "",
-                        soc0: float | Sequence[float] | None = None
+                        soc0: float | Sequence[float] | None = None, together: bool = False
                         ) -> list[tuple[str, float | None, list[str], list[float | None]]]:
     """(held-out record, its start SoC, training records, their start SoCs) for each record
     whose file name contains hold_out, or one of its comma-separated patterns ("N05,P05,P25":
     the folds between the training temperatures; every record for ""); soc0 as in start_socs
-    (one for all, one per record in order, or None). DataError where a pattern matches no
-    record or a fold would have nothing to train or test on."""
+    (one for all, one per record in order, or None). together: the records of each pattern
+    are held out at once, each trained on the records that match none of it (10degC: leave
+    one temperature out; a record matched by several patterns goes with the first). DataError
+    where a pattern matches no record or a fold would have nothing to train or test on."""
     from lmncell.data.records import DataError
 
     if len(set(records)) < 2:
@@ -221,10 +223,16 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
         if not any(pat in Path(p).name for p in records):
             raise DataError(f"hold-out pattern {pat!r} is in none of the {len(records)} record "
                             "names: expected part of a file name, e.g. 10degC")
-    held = [p for p in records if any(pat in Path(p).name for pat in patterns)]
     folds = []
-    for h in held:
-        train = [p for p in records if p != h]
+    for h in records:
+        first = next((pat for pat in patterns if pat in Path(h).name), None)
+        if first is None:
+            continue
+        train = [p for p in records if (first not in Path(p).name if together else p != h)]
+        if not train:
+            raise DataError(f"hold-out pattern {first!r} is in every record name, so held "
+                            "out together nothing is left to train on; expected a pattern "
+                            "that some records lack, e.g. 10degC among 10 and 25 °C records")
         folds.append((h, start[h], train, [start[p] for p in train]))
     return folds
 
@@ -242,6 +250,20 @@ def hold_out_clause(hold_out: str) -> str:
     if len(patterns) == 1:
         return f" whose name contains {patterns[0]!r}"
     return " whose name contains one of " + ", ".join(repr(p) for p in patterns)
+
+
+def fold_words(hold_out: str, together: bool, n_records: int, what: str = "models"
+               ) -> tuple[str, str]:
+    """A caption's title and words for the folds of leave_one_out_folds: ("Leave-one-record-
+    out", "each record … held out in turn, the models trained on the other N − 1 records") or,
+    together, ("Leave-one-group-out", "the records … held out together, …")."""
+    if not together:
+        return ("Leave-one-record-out", f"each record{hold_out_clause(hold_out)} held out in "
+                f"turn, the {what} trained on the other {n_records - 1} records")
+    groups = " or ".join(repr(p) for p in hold_out_patterns(hold_out))
+    return ("Leave-one-group-out", f"the records whose name contains {groups} held out "
+            f"together, one group per pattern, the {what} trained on the records outside the "
+            "group")
 
 
 def through_pauses_clause(through_hidden_pauses: bool, what: str = "model") -> str:
