@@ -955,10 +955,10 @@ def test_a_csv_charge_counter_of_another_kind_is_mended_or_refused(tmp_path) -> 
 def test_a_counter_restart_at_a_slow_step_is_stitched_and_a_recharge_in_a_gap_is_kept(
         tmp_path) -> None:
     """A tester that logs a rest more slowly (10 s against 0.1 s) and restarts its counter at
-    the rest's first row: before, that step was no regular one, the restart stayed, the rest of
-    the record was one segment later and the counters counted +1 Ah "across the gap" that the
-    SoC reference then took. A fall to 0 that no current of the record could make over its step
-    is a restart; a net counter back at 0 after an hour's gap, in which the cell could have been
+    the rest's first row: before, that step was no regular one and the restart stayed, so the
+    record was split there and the counters counted +1 Ah "across the gap", which the SoC
+    reference took. A fall to 0 that no current of the record could make over its step is a
+    restart; a net counter back at 0 after an hour's gap, in which the cell could have been
     recharged at the record's own current, stays as counted (a gap, two segments)."""
     def record(parts, restart_at=None):
         t, i = [0.0], [0.0]
