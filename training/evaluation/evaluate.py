@@ -260,8 +260,7 @@ def fold_words(hold_out: str, together: bool, n_records: int, what: str = "model
     if not together:
         return ("Leave-one-record-out", f"each record{hold_out_clause(hold_out)} held out in "
                 f"turn, the {what} trained on the other {n_records - 1} records")
-    groups = " or ".join(repr(p) for p in hold_out_patterns(hold_out))
-    return ("Leave-one-group-out", f"the records whose name contains {groups} held out "
+    return ("Leave-one-group-out", f"the records{hold_out_clause(hold_out)} held out "
             f"together, one group per pattern, the {what} trained on the records outside the "
             "group")
 
