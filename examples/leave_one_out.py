@@ -54,11 +54,13 @@ from lmncell.evaluation.evaluate import (
     leave_one_out_folds,
     read_records,
     through_pauses_clause,
+    trained_per_fold,
 )
 from lmncell.evaluation.fmueval import evaluate_fmu
 from lmncell.evaluation.metrics import ENDS, pooled
 from lmncell.identification.train import train_files
 from lmncell.report.plots import folds_figure
+from lmncell.runtime.model import LmnModel
 
 MODELS = ("lmn", "fmu", "fmu_samples", "arx", "ecm2rc", "ecm2rc_hyst")
 
@@ -110,17 +112,16 @@ def main() -> None:
     if a.together and not a.hold_out:
         ap.error("--together needs --hold-out PATTERN (the records held out together)")
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
-    trained_on: list[str] = []
-    for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
-                                                                   a.soc0, a.together):
-        if train != trained_on:           # held out together: one training per group
-            model, _ = train_files(train, Path(tmp) / "model.json",
-                                   capacity_ah=a.capacity_ah, soc0=train_soc0,
-                                   baselines=not a.no_baselines, progress=lambda _m: None,
-                                   **settings)
-            fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
-                             native=a.fmu == "native") if a.fmu else None)
-            trained_on = train
+
+    def train(records: list[str], socs: list[float | None]) -> tuple[LmnModel, Path | None]:
+        model, _ = train_files(records, Path(tmp) / "model.json", capacity_ah=a.capacity_ah,
+                               soc0=socs, baselines=not a.no_baselines,
+                               progress=lambda _m: None, **settings)
+        return model, (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
+                                 native=a.fmu == "native") if a.fmu else None)
+
+    for held, held_soc0, (model, fmu) in trained_per_fold(
+            leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train):
         folds.append((Path(held).name, {}))
         held_records = [(rec, start) for _, rec, start in read_records(
             [held], held_soc0, through_hidden_pauses=a.through_hidden_pauses)]

@@ -38,6 +38,7 @@ from lmncell.evaluation.evaluate import (
     fold_words,
     leave_one_out_folds,
     through_pauses_clause,
+    trained_per_fold,
 )
 from lmncell.evaluation.observe import (
     observer_segment,
@@ -47,7 +48,7 @@ from lmncell.evaluation.observe import (
 )
 from lmncell.identification.train import train_files
 from lmncell.report.plots import observer_folds_figure
-from lmncell.runtime.model import load_model
+from lmncell.runtime.model import LmnModel, load_model
 
 KINDS = ("ekf", "fuzzy", "imm")
 
@@ -78,15 +79,14 @@ def main() -> None:
     results: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
     folds: list[tuple[str, dict[str, tuple[float, float]]]] = []
     with tempfile.TemporaryDirectory() as tmp:
-        trained_on: list[str] = []
-        for held, held_soc0, train, train_soc0 in leave_one_out_folds(a.records, a.hold_out,
-                                                                       a.soc0, a.together):
-            if train != trained_on:       # held out together: one training per group
-                out = Path(tmp) / "model.json"
-                train_files(train, out, a.capacity_ah, train_soc0, progress=lambda _m: None,
-                            **settings)
-                model = load_model(out)
-                trained_on = train
+        def train(records: list[str], socs: list[float | None]) -> LmnModel:
+            out = Path(tmp) / "model.json"
+            train_files(records, out, a.capacity_ah, socs, progress=lambda _m: None,
+                        **settings)
+            return load_model(out)
+
+        for held, held_soc0, model in trained_per_fold(
+                leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train):
             rec = read_record(held)
             if a.through_hidden_pauses:
                 rec = rec.through_hidden_pauses()

@@ -285,6 +285,38 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
         "other 2 records")
 
 
+def test_trained_per_fold_trains_once_per_training_set() -> None:
+    """The leave-one-out scripts' trainings: one per fold held out alone, one per group held
+    out together, each given the fold's training records and their start SoCs."""
+    from lmncell.evaluation.evaluate import leave_one_out_folds, trained_per_fold
+
+    recs = ["d/a_10degC.mat", "d/b_25degC.mat", "d/c_10degC.mat", "d/e_25degC.mat"]
+    calls: list[tuple[list[str], list[float | None]]] = []
+
+    def train(records: list[str], socs: list[float | None]) -> int:
+        calls.append((records, socs))
+        return len(calls)
+
+    socs = [1.0, 0.9, 0.8, 0.7]
+    # two groups whose records alternate in the list: the folds come group by group
+    both = list(trained_per_fold(leave_one_out_folds(recs, "10degC,25degC", socs,
+                                                     together=True), train))
+    assert both == [("d/a_10degC.mat", 1.0, 1), ("d/c_10degC.mat", 0.8, 1),
+                    ("d/b_25degC.mat", 0.9, 2), ("d/e_25degC.mat", 0.7, 2)]
+    assert calls == [(["d/b_25degC.mat", "d/e_25degC.mat"], [0.9, 0.7]),
+                     (["d/a_10degC.mat", "d/c_10degC.mat"], [1.0, 0.8])]
+    calls.clear()
+    grouped = list(trained_per_fold(leave_one_out_folds(recs, "10degC", socs, together=True),
+                                    train))
+    assert grouped == [("d/a_10degC.mat", 1.0, 1), ("d/c_10degC.mat", 0.8, 1)]
+    assert calls == [(["d/b_25degC.mat", "d/e_25degC.mat"], [0.9, 0.7])]
+    calls.clear()
+    alone = list(trained_per_fold(leave_one_out_folds(recs, "10degC", socs), train))
+    assert alone == [("d/a_10degC.mat", 1.0, 1), ("d/c_10degC.mat", 0.8, 2)]
+    assert [c[0] for c in calls] == [["d/b_25degC.mat", "d/c_10degC.mat", "d/e_25degC.mat"],
+                                     ["d/a_10degC.mat", "d/b_25degC.mat", "d/e_25degC.mat"]]
+
+
 def test_start_soc_per_file(tmp_path, capsys) -> None:
     """--soc0 takes one value for all files or one per file; a count that fits neither is
     refused with a message that names soc0 and both counts."""

@@ -7,10 +7,10 @@ from __future__ import annotations
 import csv
 import dataclasses
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import numpy as np
 from lmncell.data.dataset import (
@@ -32,6 +32,8 @@ from lmncell.report.jsontext import json_text
 from lmncell.runtime.cosim import trained_bounds
 from lmncell.runtime.model import LmnModel, load_model, model_from_dict, replaced_whole
 from lmncell.runtime.step import initial_hysteresis, simulate, simulate_ambient
+
+Trained = TypeVar("Trained")
 
 
 def simulate_segment(model: LmnModel, seg: Segment, capacity_ah: float | None = None):
@@ -210,7 +212,8 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
     the folds between the training temperatures; every record for ""); soc0 as in start_socs
     (one for all, one per record in order, or None). together: the records of each pattern
     are held out at once, each trained on the records that match none of it (10degC: leave
-    one temperature out; a record matched by several patterns goes with the first). DataError
+    one temperature out; a record matched by several patterns goes with the first), group by
+    group in the patterns' order. DataError
     where a pattern matches no record or a fold would have nothing to train or test on."""
     from lmncell.data.records import DataError
 
@@ -233,8 +236,23 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
             raise DataError(f"hold-out pattern {first!r} is in every record name, so held "
                             "out together nothing is left to train on; expected a pattern "
                             "that some records lack, e.g. 10degC among 10 and 25 °C records")
-        folds.append((h, start[h], train, [start[p] for p in train]))
-    return folds
+        folds.append((patterns.index(first), (h, start[h], train, [start[p] for p in train])))
+    if together:          # each group's folds one after another (one training per group)
+        folds.sort(key=lambda fold: fold[0])
+    return [fold for _, fold in folds]
+
+
+def trained_per_fold(folds: Sequence[tuple[str, float | None, list[str], list[float | None]]],
+                     train: Callable[[list[str], list[float | None]], Trained]
+                     ) -> Iterator[tuple[str, float | None, Trained]]:
+    """(held-out record, its start SoC, train(its training records, their start SoCs)) for
+    each fold of leave_one_out_folds, training once per distinct set of training records:
+    records held out together (together=True) share one training, in fold order."""
+    trained_on: list[str] | None = None
+    for held, held_soc0, records, socs in folds:
+        if records != trained_on:
+            model, trained_on = train(records, socs), records
+        yield held, held_soc0, model
 
 
 def hold_out_patterns(hold_out: str) -> list[str]:
