@@ -246,8 +246,9 @@ def trained_per_fold(folds: Sequence[tuple[str, float | None, list[str], list[fl
                      train: Callable[[list[str], list[float | None]], Trained]
                      ) -> Iterator[tuple[str, float | None, Trained]]:
     """(held-out record, its start SoC, train(its training records, their start SoCs)) for
-    each fold of leave_one_out_folds, training once per distinct set of training records:
-    records held out together (together=True) share one training, in fold order."""
+    each fold of leave_one_out_folds, training again only where a fold's training records
+    differ from the fold's before: the records of a group held out together (together=True,
+    whose folds come one after another) share one training."""
     trained_on: list[str] | None = None
     for held, held_soc0, records, socs in folds:
         if records != trained_on:
