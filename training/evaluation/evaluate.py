@@ -228,15 +228,16 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
                             "names: expected part of a file name, e.g. 10degC")
     folds = []
     for h in records:
-        first = next((pat for pat in patterns if pat in Path(h).name), None)
-        if first is None:
+        group = next((k for k, pat in enumerate(patterns) if pat in Path(h).name), None)
+        if group is None:
             continue
+        first = patterns[group]
         train = [p for p in records if (first not in Path(p).name if together else p != h)]
         if not train:
             raise DataError(f"hold-out pattern {first!r} is in every record name, so held "
                             "out together nothing is left to train on; expected a pattern "
                             "that some records lack, e.g. 10degC among 10 and 25 °C records")
-        folds.append((patterns.index(first), (h, start[h], train, [start[p] for p in train])))
+        folds.append((group, (h, start[h], train, [start[p] for p in train])))
     if together:          # each group's folds one after another (one training per group)
         folds.sort(key=lambda fold: fold[0])
     return [fold for _, fold in folds]
