@@ -66,7 +66,7 @@ from lmncell.runtime.observers import (
     lowpass_states,
     state_columns,
 )
-from lmncell.runtime.step import filter_coefficients, tree_plan
+from lmncell.runtime.step import core_rise_coefficient, filter_coefficients, tree_plan
 from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 HERE = Path(__file__).resolve().parent
@@ -159,6 +159,9 @@ def _temperature_defines(m: LmnModel) -> list[str]:
         f"#define HAS_TAU_ACTIVATION {int(m.tau_activation_k is not None)}",
         f"#define TAU_ACTIVATION_K {float(m.tau_activation_k or 0.0)!r}",
         f"#define ACTIVATION_T0_K {float(m.activation_t0_k)!r}",
+        f"#define HAS_CORE_RISE {int(bool(m.core_rise_k_per_a2))}",
+        f"#define CORE_RISE_K {float(m.core_rise_k_per_a2)!r}",
+        f"#define CORE_RISE_A {core_rise_coefficient(m)!r}",
         f"#define TEMPERATURE_TERMS {m.temperature_terms}",
         f"#define HAS_THERMAL {int(m.thermal is not None)}",
         f"#define THERMAL_R_K_PER_W {(m.thermal.resistance_k_per_w if m.thermal else 1.0)!r}",

@@ -1,9 +1,9 @@
 """The LMNCell model file: a versioned JSON document, loaded and checked here (numpy + stdlib).
 
-Format ``lmncell-model``, version 8 (versions 1 to 7, which have no ``thermal``, no
+Format ``lmncell-model``, version 9 (versions 1 to 8, which have no ``thermal``, no
 ``regressors.depletion``, no ``current_delay_s``, no ``regressors.time_constant_activation_k``,
-no ``depletion.fast_tau_s``, no ``regressors.hysteresis_terms`` or no
-``regressors.activation_t0_k`` key, are read too).
+no ``depletion.fast_tau_s``, no ``regressors.hysteresis_terms``, no
+``regressors.activation_t0_k`` or no ``regressors.core_rise`` key, are read too).
 Keys (units in the names, current > 0 charges, SoC 0…1):
 
 - ``sample_time_s``: the model's fixed sample time Ts (1e-4 … 3600 s).
@@ -33,6 +33,12 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   each exp(E·(1/T − 1/T_ref)) above is exp(E·c·(1/(T − T0) − 1/(T_ref − T0))),
   c = ((T_ref − T0)/T_ref)², T in K (the Vogel–Tammann–Fulcher form: the same slope at T_ref,
   an apparent activation that grows towards the cold),
+  ``core_rise`` (version 9; null or absent: none, or {``k_per_a2``, ``tau_s``}): the
+  temperature that every temperature-dependent part of the step takes (g(T), the time
+  constants, the temperature terms, the partition) is T + k·c(k), T the step's cell
+  temperature (the ``temperature`` input, or the thermal model's), c(k) = a·c(k−1) +
+  (1 − a)·i(k)², a = exp(−Ts/τ), c = 0 at the start (0 ≤ k ≤ 10 K/A², 0 < τ ≤ 1e5 s): the
+  core's rise above the case under load, which follows the current's square,
   ``temperature_terms`` (0 by default, or the degree n ≤ 3: the current, filter and hysteresis
   regressors and the offset enter again multiplied by dT, …, dTⁿ, dT = (T − T_ref)/10 K; the
   hysteresis regressor as ``hysteresis_terms`` says),
@@ -104,11 +110,13 @@ from .thermal import CELL_TEMPERATURE_RANGE_C, ThermalModel, is_real_number
 
 FORMAT = "lmncell-model"
 DEPLETION_COLUMNS = ("d(k)", "d2(k)")   # the depletion regressors' columns (Depletion)
-VERSION = 8
+VERSION = 9
+MAX_CORE_RISE_K_PER_A2 = 10.0     # core rise beyond it: 1000 K at 10 A
+MAX_CORE_RISE_TAU_S = 1e5
 MAX_TAU_ACTIVATION_K = 10000.0    # Eτ beyond it: τ changes by more than e^5 between 0 and 45 °C
 MAX_ACTIVATION_T0_K = 200.0       # VTF T0: 13 K below the coldest input taken, −60 °C
 MAX_ARRHENIUS_K = 20000.0    # E beyond it (≈ 166 kJ/mol): above any Li-ion activation energy
-READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7, 8)
+READABLE_VERSIONS = (1, 2, 3, 4, 5, 6, 7, 8, 9)
 HYSTERESIS_TERMS = ("constant", "polynomial", "arrhenius")   # h's temperature terms, if any
 PARTITION_VARIABLES = ("soc", "current", "filtered_current", "temperature")
 MAX_TEMPERATURE_TERMS = 3
@@ -218,6 +226,8 @@ class LmnModel:
     arrhenius_k: float | None = None
     tau_activation_k: float | None = None       # Eτ (K) of the filter time constants
     activation_t0_k: float = 0.0                # VTF T0 (K) of both; 0: Arrhenius
+    core_rise_k_per_a2: float = 0.0             # core rise k (K/A²) of k·LP_τ(i²); 0: none
+    core_rise_tau_s: float = 0.0                # its time constant τ (s)
     reference_temperature_c: float = 25.0
     temperature_terms: int = 0
     hysteresis_terms: str = "polynomial"        # none, h·dTᵖ or h·dAᵖ (HYSTERESIS_TERMS)
@@ -496,6 +506,21 @@ def _thermal(doc: object, source: str) -> ThermalModel | None:
         raise ModelFileError(str(exc)) from None
 
 
+def _core_rise(doc: object, where: str, version: int) -> dict[str, float]:
+    """regressors.core_rise of a model document as LmnModel's two fields (0, 0: none)."""
+    if doc is None:
+        return {"core_rise_k_per_a2": 0.0, "core_rise_tau_s": 0.0}
+    if version < 9:
+        raise ModelFileError(f"{where}: 'core_rise' exists from version 9 on; this file says "
+                             f"version {version}")
+    if not isinstance(doc, dict) or set(doc) != {"k_per_a2", "tau_s"}:
+        raise ModelFileError(f"{where}: 'core_rise' must be null or an object with the keys "
+                             "'k_per_a2' and 'tau_s'")
+    k = _real(doc, "k_per_a2", f"{where}: core_rise", 0.0, MAX_CORE_RISE_K_PER_A2)
+    tau = _real(doc, "tau_s", f"{where}: core_rise", 0.0, MAX_CORE_RISE_TAU_S, low_open=True)
+    return {"core_rise_k_per_a2": k, "core_rise_tau_s": tau if k else 0.0}
+
+
 def _depletion(doc: object, filters: list[tuple[float, float]], where: str, version: int
                ) -> Depletion | None:
     """regressors.depletion of a model document, or None (absent or null)."""
@@ -633,6 +658,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         tau_activation_k=None if tau_activation is None else float(tau_activation),
         activation_t0_k=_real(reg, "activation_t0_k", w, 0.0, MAX_ACTIVATION_T0_K, 0.0),
+        **_core_rise(reg.get("core_rise"), w, ver),
         reference_temperature_c=_real(reg, "reference_temperature_c", w, t_low, t_high, 25.0),
         temperature_terms=temperature_terms,
         hysteresis_terms=_read_hysteresis_terms(reg, w, arrhenius, ver),
@@ -851,6 +877,9 @@ def model_to_dict(model: LmnModel) -> dict:
                        "offset": model.offset, "arrhenius_k": model.arrhenius_k,
                        "time_constant_activation_k": model.tau_activation_k,
                        "activation_t0_k": model.activation_t0_k,
+                       "core_rise": (None if not model.core_rise_k_per_a2 else
+                                     {"k_per_a2": model.core_rise_k_per_a2,
+                                      "tau_s": model.core_rise_tau_s}),
                        "reference_temperature_c": model.reference_temperature_c,
                        "temperature_terms": model.temperature_terms,
                        "hysteresis_terms": model.hysteresis_terms,

@@ -295,7 +295,7 @@ class SocObserver:
             lp = (self._stepper_lowpass(row[1:1 + nlp].tolist()) if row.size > 1
                   else list(base.lp))
             h = float(row[1 + nlp]) if row.size > 1 + nlp else base.h
-            cand = ExoState(float(row[0]), lp, h, base.direction, past)
+            cand = ExoState(float(row[0]), lp, h, base.direction, past, base.core)
             st.exo.features(cand, current, temperature, x[r], z[r])
         return x, z
 
@@ -366,6 +366,7 @@ class SocObserver:
         low-pass state."""
         _, temperature, _ = self._step_inputs
         exo = self.stepper.exo
+        temperature = exo.lmn_temperature(self.stepper.state, temperature)   # as the step's
         gain = exo.gain_at(temperature)
         per_validity = np.dot(validity, self._gradient).tolist()
         out = state_gradient(per_validity, len(self.state_columns), self._gradient_powers, gain,

@@ -91,6 +91,7 @@ class ExoState:
     h: float
     direction: int
     past_current: list[float]  # i(k−1) … i(k−nb+1)
+    core: float = 0.0          # LP_τ(i²) of the core rise (A²; 0 without one)
 
     def as_list(self) -> list[float]:
         return [self.soc, *self.lp, self.h, float(self.direction), *self.past_current]
@@ -125,6 +126,8 @@ class ExoStepper:
         self._taus = model.filter_taus()
         self.soc_gain = ts / (3600.0 * self.capacity_ah)
         self.gamma = model.hysteresis_gamma
+        self.core_k = model.core_rise_k_per_a2
+        self.core_a = core_rise_coefficient(model)
         pv = model.partition_variables     # where each partition input goes in z (or None)
         self._z_index = tuple(pv.index(name) if name in pv else None for name in
                               ("soc", "current", "filtered_current", "temperature"))
@@ -178,10 +181,19 @@ class ExoStepper:
             self._coef_at = (temperature_c, coef)
         return coef
 
+    def lmn_temperature(self, s: ExoState, temperature_c: float) -> float:
+        """The temperature the step's temperature-dependent parts take (°C): the cell
+        temperature plus the core rise k·LP_τ(i²) where the model has one."""
+        return temperature_c + self.core_k * s.core if self.core_k else temperature_c
+
     def update(self, s: ExoState, current_a: float, temperature_c: float) -> None:
-        """Advance the state by one step with the current held over it, at the temperature
-        (°C; it sets the filters' time constants where the model has Eτ)."""
+        """Advance the state by one step with the current held over it, at the cell
+        temperature (°C; with the core rise it sets the filters' time constants where the model
+        has Eτ)."""
         i = current_a
+        if self.core_k:
+            s.core = self.core_a * s.core + (1.0 - self.core_a) * i * i
+            temperature_c = self.lmn_temperature(s, temperature_c)
         s.soc += self.soc_gain * self.eta(i) * i
         for k, a in enumerate(self.coefficients_at(temperature_c)):
             s.lp[k] = a * s.lp[k] + (1.0 - a) * i
@@ -196,10 +208,11 @@ class ExoStepper:
 
     def features(self, s: ExoState, current_a: float, temperature_c: float,
                  x: np.ndarray, z: np.ndarray) -> list[float]:
-        """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken;
-        returns each depletion regressor's g(T)·LP_τ(i) (its SoC factor apart), in column order
-        (empty without one)."""
+        """Fill x (exogenous regressors) and z (raw partition inputs) for the step just taken,
+        at the cell temperature (°C; the core rise added here); returns each depletion
+        regressor's g(T)·LP_τ(i) (its SoC factor apart), in column order (empty without one)."""
         m = self.model
+        temperature_c = self.lmn_temperature(s, temperature_c)
         g = 1.0 if m.arrhenius_k is None else self.temperature_gain(temperature_c)
         self.last_gain = (temperature_c, g)
         lp = s.lp
@@ -273,6 +286,32 @@ class ExoSeries:
     z: np.ndarray          # (N, d), normalised
     direction: np.ndarray  # (N,)
     soc: np.ndarray        # (N,)
+
+
+def core_rise_coefficient(model: LmnModel) -> float:
+    """a = exp(−Ts/τ) of the core rise's low-pass state c(k) = a·c(k−1) + (1 − a)·i(k)² (0
+    without a core rise); the C takes this very value."""
+    if not model.core_rise_k_per_a2:
+        return 0.0
+    return math.exp(-model.sample_time_s / model.core_rise_tau_s)
+
+
+def lmn_temperatures(model: LmnModel, current_a: np.ndarray,
+                     temperature_c: np.ndarray) -> np.ndarray:
+    """The temperature (°C) each step's temperature-dependent parts take over a record of
+    steps: the cell temperature plus the core rise k·LP_τ(i²) (ExoStepper.update's recursion,
+    the same operations in the same order); the cell temperature itself without one."""
+    k = model.core_rise_k_per_a2
+    if not k:
+        return temperature_c
+    a = core_rise_coefficient(model)
+    out = np.empty(len(current_a))
+    c = 0.0
+    for n, (i, t) in enumerate(zip(np.asarray(current_a, dtype=float).tolist(),
+                                   np.asarray(temperature_c, dtype=float).tolist(), strict=True)):
+        c = a * c + (1.0 - a) * i * i
+        out[n] = t + k * c
+    return out
 
 
 def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray | None,
@@ -720,7 +759,7 @@ class CellStepper:
 
     def get_state(self) -> list[float]:
         """Everything the next step depends on, as a flat list of floats."""
-        return [*self.state.as_list(), *self.lags, self.voltage_v]
+        return [*self.state.as_list(), *self.lags, self.voltage_v, self.state.core]
 
     def set_state(self, values: list[float]) -> None:
         m = self.model
@@ -729,6 +768,7 @@ class CellStepper:
                                         m.current_terms - 1)
         self.lags = list(values[n_exo_state:n_exo_state + m.output_lags])
         self.voltage_v = float(values[n_exo_state + m.output_lags])
+        self.state.core = float(values[n_exo_state + m.output_lags + 1])
 
 
 class CellThermal:

@@ -18,6 +18,7 @@ from .step import (
     CHARGE,
     DISCHARGE,
     arrhenius_gain,
+    core_rise_coefficient,
     filter_coefficients,
     fixed_point,
     initial_hysteresis,
@@ -54,6 +55,8 @@ class VectorCells:
         d0 = CHARGE if m.initial_direction == "charge" else DISCHARGE
         self.direction = np.full(n, d0, dtype=np.intp)
         self.past = np.zeros((n, m.current_terms - 1))
+        self.core = np.zeros(n)         # LP_τ(i²) of the core rise (A²; step.ExoState.core)
+        self._core_a = core_rise_coefficient(m)
         self.thermal_active = m.thermal is not None and not temperature_is_cell
         t0 = rested_temperature(m.thermal if self.thermal_active else None, temperature_c)
         self.cell_temperature_c = np.full(n, float(t0))
@@ -122,10 +125,15 @@ class VectorCells:
         return np.exp(-m.sample_time_s / (self._taus[None, :] * k[:, None]))
 
     def _advance(self, i: np.ndarray, t: np.ndarray):
-        """The state after one step and the voltage, without storing anything."""
+        """The state after one step and the voltage, without storing anything (t: the cells'
+        temperatures, °C; the core rise is added here)."""
         m = self.model
         eta = np.where(i > 0, m.efficiency_charge, m.efficiency_discharge)
         soc = self.soc + self.soc_gain * eta * i
+        core = self.core
+        if m.core_rise_k_per_a2:        # the temperature the LMN takes (ExoStepper.update)
+            core = self._core_a * core + (1.0 - self._core_a) * i * i
+            t = t + m.core_rise_k_per_a2 * core
         coef = self._coefficients(t)
         lp = coef * self.lp + (1.0 - coef) * i[:, None]
         h = self.h
@@ -138,7 +146,7 @@ class VectorCells:
         A, b, _ = m.blend(x, m.normalise(z), direction)
         y = b + np.sum(A * self.lags, axis=1) if m.output_lags else b
         u = (m.ocv(soc) if m.relative_ocv else 0.0) + self.r * y
-        return soc, lp, h, direction, y, u
+        return soc, lp, h, direction, core, y, u
 
     def _temperatures(self, temperature_c: np.ndarray) -> np.ndarray:
         if not self.thermal_active:
@@ -184,7 +192,8 @@ class VectorCells:
         t_in = np.broadcast_to(np.asarray(temperature_c, dtype=float), (self.n,))
         t = self._temperatures(t_in)
         soc_before = self.soc
-        self.soc, self.lp, self.h, self.direction, y, self.voltage_v = self._advance(i, t)
+        self.soc, self.lp, self.h, self.direction, self.core, y, self.voltage_v = \
+            self._advance(i, t)
         self.out_of_range = self._outside(i, soc_before, t, self.voltage_v)
         if self.past.shape[1]:
             self.past = np.column_stack([i, self.past[:, :-1]])

@@ -323,6 +323,34 @@ def test_the_vtf_form_is_taken_where_the_network_has_temperature_regions() -> No
         load_config(activation_t0_k=250)
 
 
+def test_the_core_rise_is_taken_where_the_cells_warm_up_inside_records() -> None:
+    """core_rise_k_per_a2 "auto": 0.015 K/A² where the measured temperature rises inside a
+    record by more than 2 K, 0 where every record holds its temperature (a chamber's only);
+    a given value kept, a negative one refused by name; the model the skeleton builds carries
+    k and τ."""
+    import dataclasses
+
+    from lmncell.identification.construction import resolve_core_rise
+
+    def k(segs: list, **settings) -> float:
+        return _resolved(resolve_core_rise, segs, **settings).core_rise_k_per_a2
+
+    two, one, three = _chamber_levels()
+    steady = [dataclasses.replace(s, temperature_c=np.full(len(s), 25.0)) for s in one]
+    assert k(two) == 0.015 and k(one) == 0.015 and k(three) == 0.015 and k(steady) == 0.0
+    assert k(one, core_rise_k_per_a2=0) == 0.0 and k(steady, core_rise_k_per_a2=0.03) == 0.03
+    cfg = _resolved(resolve_core_rise, one, core_rise_tau_s=60.0)
+    base = skeleton(cfg, 2.85, np.array([0.0, 1.0]), np.array([3.0, 4.2]), None,
+                    np.zeros(len(cfg.partition)), np.ones(len(cfg.partition)))
+    assert (base.core_rise_k_per_a2, base.core_rise_tau_s) == (0.015, 60.0)
+    with pytest.raises(ConfigError, match=r"'core_rise_k_per_a2' = -0.01: expected 'auto' or "
+                                          r"k in K/A² within 0…10"):
+        load_config(core_rise_k_per_a2=-0.01)
+    with pytest.raises(ConfigError, match=r"'core_rise_tau_s' = 0: expected τ in s within 0 "
+                                          r"\(excluded\)…100000"):
+        load_config(core_rise_tau_s=0)
+
+
 @pytest.mark.parametrize("kw, message", [
     ({"partition": ["soc", "pressure"]}, "'partition'"),
     ({"filters": [[100.0, 5.0]]}, "'filters'"),
@@ -987,8 +1015,8 @@ def test_depletion_factor_is_held_below_the_training_socs() -> None:
 def test_raw_partition_inputs_are_exo_series_bit_for_bit() -> None:
     """partition_normalisation's loop-free inputs and SoC equal exo_series' exactly (the SoC
     reference weights, the depletion hold and the pre-fit read that SoC), with coulombic
-    efficiencies below 1, without a temperature and with the filtered current in the
-    partition (exo_series itself then)."""
+    efficiencies below 1, with a core rise on the temperature, without a temperature and
+    with the filtered current in the partition (exo_series itself then)."""
     from lmncell.data.dataset import Segment
     from lmncell.identification.construction import raw_partition_inputs
     from lmncell.runtime.step import exo_series
@@ -996,10 +1024,12 @@ def test_raw_partition_inputs_are_exo_series_bit_for_bit() -> None:
     rng = np.random.default_rng(11)
     n = 5000
     cur = np.repeat(rng.normal(-1.0, 4.0, n // 10), 10)
-    for partition, temperature in ((["soc", "current", "temperature"], 20.0 + rng.random(n)),
-                                   (["soc", "current"], None),
-                                   (["soc", "filtered_current"], None)):
-        cfg = load_config(partition=partition)
+    for partition, temperature, core in (
+            (["soc", "current", "temperature"], 20.0 + rng.random(n), 0.0),
+            (["soc", "current", "temperature"], 20.0 + rng.random(n), 0.02),
+            (["soc", "current"], None, 0.0),
+            (["soc", "filtered_current"], None, 0.0)):
+        cfg = load_config(partition=partition, core_rise_k_per_a2=core)
         base = skeleton(cfg, 2.85, np.array([0.0, 1.0]), np.array([3.0, 4.2]), None,
                         np.zeros(len(partition)), np.ones(len(partition)))
         base.efficiency_charge, base.efficiency_discharge = 0.987, 0.999

@@ -223,8 +223,17 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
 
 
 @pytest.mark.parametrize("edit, message", [
-    (lambda d: d.update(version=9),
-     r"version 9; this LMNCell reads versions \[1, 2, 3, 4, 5, 6, 7, 8\]"),
+    (lambda d: d.update(version=10),
+     r"version 10; this LMNCell reads versions \[1, 2, 3, 4, 5, 6, 7, 8, 9\]"),
+    (lambda d: d["regressors"].update(core_rise={"k_per_a2": -0.1, "tau_s": 120.0}),
+     r"core_rise: 'k_per_a2' is -0.1, expected a number within 0…10"),
+    (lambda d: d["regressors"].update(core_rise={"k_per_a2": 0.01, "tau_s": 0.0}),
+     r"core_rise: 'tau_s' is 0.0, expected a number within 0 \(excluded\)…100000"),
+    (lambda d: d["regressors"].update(core_rise={"k_per_a2": 0.01}),
+     r"'core_rise' must be null or an object with the keys 'k_per_a2' and 'tau_s'"),
+    (lambda d: d.update(version=8) or d["regressors"].update(
+        core_rise={"k_per_a2": 0.01, "tau_s": 120.0}),
+     r"'core_rise' exists from version 9 on; this file says version 8"),
     (lambda d: d["regressors"].update(activation_t0_k=250.0),
      r"'activation_t0_k' is 250.0, expected a number within 0…200"),
     (lambda d: d["regressors"].update(activation_t0_k=float("nan")),

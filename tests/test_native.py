@@ -686,3 +686,32 @@ def test_native_with_the_vtf_temperature_form_equals_the_runtime(quick_model, tm
     arrhenius = compare_fmu_with_pipeline(same_e, fmu, PAN_US06, max_steps=2500,
                                           ambient=ambient)   # the file's T0 matters
     assert arrhenius["max_dv_v"] > 1e-5
+
+
+@pytest.mark.parametrize("ambient", [False, True])
+def test_native_with_a_core_rise_equals_the_runtime(quick_model, tmp_path, ambient) -> None:
+    # the core rise k·LP_τ(i²) added to the temperature the step takes: the C keeps the same
+    # low-pass state and takes the model file's k and the runtime's coefficient; driven by the
+    # measured cell temperature and by the ambient, which the thermal model warms
+    import dataclasses
+
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.runtime.model import save_model
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    plain = load_model(quick_model)
+    assert plain.tau_activation_k is not None
+    with_e = save_model(dataclasses.replace(plain, arrhenius_k=3000.0, core_rise_k_per_a2=0.0,
+                                            core_rise_tau_s=0.0), tmp_path / "e.json")
+    model = dataclasses.replace(load_model(with_e), core_rise_k_per_a2=0.05,
+                                core_rise_tau_s=60.0)
+    path = save_model(model, tmp_path / "core.json")
+    assert load_model(path).core_rise_tau_s == 60.0
+    fmu = build_native_fmu(path, tmp_path / "core.fmu")
+    res = compare_fmu_with_pipeline(path, fmu, PAN_US06, max_steps=2500, ambient=ambient)
+    assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
+    assert res["max_dtemperature_k"] <= 1e-9
+    without = compare_fmu_with_pipeline(with_e, fmu, PAN_US06, max_steps=2500,
+                                        ambient=ambient)    # the file's core rise matters
+    assert without["max_dv_v"] > 1e-5

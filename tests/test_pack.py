@@ -3,6 +3,7 @@ parallel cells share the current by their impedance."""
 
 from __future__ import annotations
 
+import dataclasses
 import re
 
 import numpy as np
@@ -16,9 +17,14 @@ from lmncell.scenarios.pack import Pack, PackSpec, drive_pack, parse_pack, parse
 
 
 @pytest.mark.parametrize("temperature_is_cell", [True, False])
-@pytest.mark.parametrize("fixture", ["quick_model", "a123_model"])
-def test_vectorised_step_equals_the_per_cell_step(request, fixture, temperature_is_cell) -> None:
+@pytest.mark.parametrize("fixture, core", [("quick_model", False), ("a123_model", False),
+                                           ("quick_model", True)])
+def test_vectorised_step_equals_the_per_cell_step(request, fixture, core,
+                                                  temperature_is_cell) -> None:
     model = load_model(request.getfixturevalue(fixture))
+    if core:    # a core rise k·LP_τ(i²) on the temperature that g(T) and Eτ take
+        model = dataclasses.replace(model, arrhenius_k=3000.0, core_rise_k_per_a2=0.05,
+                                    core_rise_tau_s=60.0)
     soc0 = np.array([1.0, 0.7, 0.3, 0.95])
     cap = model.capacity_ah * np.array([1.0, 0.9, 1.05, 1.1])
     cells = VectorCells(model, soc0, capacity_ah=cap, temperature_c=20.0,

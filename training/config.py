@@ -14,6 +14,8 @@ from lmncell.identification.ladder import is_ladder
 from lmncell.runtime.model import (
     MAX_ACTIVATION_T0_K,
     MAX_ARRHENIUS_K,
+    MAX_CORE_RISE_K_PER_A2,
+    MAX_CORE_RISE_TAU_S,
     MAX_TAU_ACTIVATION_K,
     MAX_TEMPERATURE_TERMS,
     PARTITION_VARIABLES,
@@ -25,6 +27,8 @@ DEPLETION_TAU_S = 150.0    # the depletion regressor's low-pass time constant fo
 DEPLETION_FAST_TAU_S = 5.0  # the fast depletion regressor's, where "auto" turns it on (s)
 ACTIVATION_T0_K = 170.0    # activation_t0_k 'auto' with temperature regions: a carbonate
                            # electrolyte's Vogel–Tammann–Fulcher T0 (K), chosen before measuring
+CORE_RISE_K_PER_A2 = 0.015  # core_rise_k_per_a2 'auto' where the records' cells warm up: the
+                           # Panasonic 18650PF's (docs/settings.md, core_rise_k_per_a2)
 OFFSET_BOUND_MV = 50.0     # offset_bound_mv 'auto' where slow OCV tests fix the OCV
 OFFSET_RIDGE = 0.003       # offset_ridge 'auto' where slow OCV tests fix the OCV
 OCV_TEST_ANCHOR = 0.003    # ocv_refinement: 1 mV off the test costs like this share of samples
@@ -132,6 +136,12 @@ class TrainConfig:
     regions (two or more chamber temperatures, no temperature terms: E must carry the
     cells' warm-up at each chamber temperature, 10 and 25 °C), else 0 (temperature terms
     carry the curvature; at one chamber temperature the warm-up spans a few K); 0…200 K.
+    core_rise_k_per_a2 / core_rise_tau_s: the core's rise above the measured (case)
+    temperature under load, k·LP_τ(i²) (K/A², s), added to the temperature that every
+    temperature-dependent part of the model takes, in training and in the runtime (0: none);
+    "auto": CORE_RISE_K_PER_A2 (0.015 K/A², measured on the Panasonic 18650PF) where the
+    temperature varies inside some record by more than 2 K (cells warming up under load, as
+    time_constant_scaling's "auto"), else 0; k within 0…10 K/A², τ > 0 s.
     temperature_terms: degree n of temperature terms: the current, filter and offset columns
     (and the hysteresis column as hysteresis_terms says) again times dT … dTⁿ,
     dT = (T − 25 °C)/10 K, so that resistances and OCV offsets vary smoothly with temperature
@@ -211,6 +221,8 @@ class TrainConfig:
     temperature_scaling: str | float = "auto"
     time_constant_scaling: str | float = "auto"
     activation_t0_k: str | float = "auto"
+    core_rise_k_per_a2: str | float = "auto"
+    core_rise_tau_s: float = 120.0
     local_model_form: str = "auto"
     output: str = "relative_ocv"
     ocv_input: bool = False
@@ -397,6 +409,14 @@ class TrainConfig:
                 and 0 <= self.activation_t0_k <= MAX_ACTIVATION_T0_K)):
             raise bad("activation_t0_k",
                       f"expected 'auto' or T0 in K within 0…{MAX_ACTIVATION_T0_K:g}")
+        if not (self.core_rise_k_per_a2 == "auto" or (is_real_number(self.core_rise_k_per_a2)
+                and 0 <= self.core_rise_k_per_a2 <= MAX_CORE_RISE_K_PER_A2)):
+            raise bad("core_rise_k_per_a2",
+                      f"expected 'auto' or k in K/A² within 0…{MAX_CORE_RISE_K_PER_A2:g}")
+        if not (is_real_number(self.core_rise_tau_s)
+                and 0 < self.core_rise_tau_s <= MAX_CORE_RISE_TAU_S):
+            raise bad("core_rise_tau_s",
+                      f"expected τ in s within 0 (excluded)…{MAX_CORE_RISE_TAU_S:g}")
         if not (self.temperature_terms == "auto" or (isinstance(self.temperature_terms, int)
                 and not isinstance(self.temperature_terms, bool)
                 and 0 <= self.temperature_terms <= MAX_TEMPERATURE_TERMS)):

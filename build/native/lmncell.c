@@ -70,6 +70,7 @@ typedef struct {
     int t_cell_set;
     /* exogenous state (runtime.ExoState) */
     double soc, lp[2 * NF + 1], h, past[NB + 1];
+    double core;                               /* LP_τ(i²) of the core rise (ExoState.core) */
     int direction;
     /* the filter coefficients at the last step's temperature (ExoStepper.coefficients_at) */
     double coef_t, coef[2 * NF + 1];
@@ -206,6 +207,7 @@ static void exo_init(State *s, double soc0, double h0) {
     }
     s->coef_t = NAN;
     s->h = h0;
+    s->core = 0.0;
     s->direction = INITIAL_DIRECTION;
     for (k = 0; k < NB + 1; k++) s->past[k] = 0.0;
 }
@@ -229,10 +231,25 @@ static const double *filter_coefficients(State *s, double t) {
 #endif
 }
 
+/* the temperature the step's temperature-dependent parts take: the cell temperature t plus
+   the core rise (ExoStepper.lmn_temperature) */
+static double lmn_temperature(const State *s, double t) {
+#if HAS_CORE_RISE
+    return t + CORE_RISE_K * s->core;
+#else
+    (void)s;
+    return t;
+#endif
+}
+
 static void exo_update(State *s, double i, double t, double cap) {
     int k;
     double gain = TS / (3600.0 * cap);
-    const double *coef = filter_coefficients(s, t);
+    const double *coef;
+#if HAS_CORE_RISE
+    s->core = CORE_RISE_A * s->core + (1.0 - CORE_RISE_A) * i * i;
+#endif
+    coef = filter_coefficients(s, lmn_temperature(s, t));
     s->soc += gain * eta(i) * i;
     for (k = 0; k < 2 * NF; k++) s->lp[k] = coef[k] * s->lp[k] + (1.0 - coef[k]) * i;
 #if HAS_HYSTERESIS
@@ -258,9 +275,10 @@ static double activation_step(double dt, double g) {
 #endif
 }
 
-static void features(const State *s, double i, double t, double *x, double *z,
+static void features(const State *s, double i, double t_cell, double *x, double *z,
                      double *dep_source) {
     int col = 0, k;
+    double t = lmn_temperature(s, t_cell);
     double g = temperature_gain(t);
     x[col++] = g * i;
     for (k = 0; k < NB - 1; k++) x[col++] = g * s->past[k];
@@ -455,6 +473,7 @@ static double outputs_for(const State *s, const double *xi, int nxi, double *phi
     for (k = 0; k < 2 * NF + 1; k++)
         tmp.lp[k] = (nxi > 1 && k < 2 * NF) ? xi[1 + SLOT_LX[k]] : s->lp[k];
     tmp.h = nxi > 1 + NLX ? xi[1 + NLX] : s->h;
+    tmp.core = s->core;
     for (k = 0; k < NB + 1; k++) tmp.past[k] = s->ob_past[k];
     features(&tmp, s->ob_i, s->ob_t, x, z, NULL);
     u = network(x, z, s->d, s->prev_lags, phi, local);
@@ -621,8 +640,9 @@ static double output_moved(const State *s, const double *xi, int a, double delta
 /* SocObserver._regressor_gradient: ∂u/∂state for the states after SoC (hv[1 … NX − 1]) through
    the regressors they enter, at the validities phi and SoC soc and the step's temperature */
 static void regressor_gradient(const State *s, const double *phi, double soc, double *hv) {
-    double blended[NEXO + 1], g = temperature_gain(s->ob_t);
-    double dt = (s->ob_t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
+    double t = lmn_temperature(s, s->ob_t);
+    double blended[NEXO + 1], g = temperature_gain(t);
+    double dt = (t - REF_TEMPERATURE_C) / TEMPERATURE_STEP_K;
     double da = activation_step(dt, g);   /* the unscaled columns are h's */
     int a, c, j, m, p;
     for (m = 0; m < NGRADCOL; m++) {       /* only the columns read below */

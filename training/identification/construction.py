@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from lmncell.config import (
     ACTIVATION_T0_K,
+    CORE_RISE_K_PER_A2,
     DEPLETION_FAST_TAU_S,
     LOCAL_MODELS_PER_REGION,
     ConfigError,
@@ -65,7 +66,7 @@ from lmncell.identification.tree import (
     skeleton,
 )
 from lmncell.runtime.model import LmnModel
-from lmncell.runtime.step import exo_series
+from lmncell.runtime.step import exo_series, lmn_temperatures
 
 VALIDATION_BLOCKS = 5   # validation 'block': time blocks centred at 10, 30, … 90 % of each
 #                         record (validation_masks)
@@ -137,7 +138,7 @@ def raw_partition_inputs(base: LmnModel, seg: Segment) -> tuple[np.ndarray, np.n
     gain = base.sample_time_s / (3600.0 * base.capacity_ah)     # ExoStepper.soc_gain
     eta = np.where(i > 0, base.efficiency_charge, base.efficiency_discharge)
     soc = np.add.accumulate(np.concatenate([[float(seg.soc0)], gain * eta * i]))[1:]
-    temp = seg.temperatures()
+    temp = lmn_temperatures(base, i, seg.temperatures())
     columns = {"soc": soc, "current": i, "temperature": temp}
     return np.column_stack([columns[v] for v in base.partition_variables]), soc
 
@@ -194,6 +195,21 @@ def resolve_activation_t0(cfg: TrainConfig, segs: list[Segment], progress: Progr
     return dataclasses.replace(cfg, activation_t0_k=float(t0))
 
 
+def resolve_core_rise(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
+                      ) -> TrainConfig:
+    """The settings with core_rise_k_per_a2 "auto" replaced: CORE_RISE_K_PER_A2 where the
+    temperature varies inside some record by more than CHAMBER_SPAN_K (measured cell
+    temperatures that warm up under load), else 0. A given value was checked by
+    TrainConfig.check."""
+    k = cfg.core_rise_k_per_a2
+    if k == "auto":
+        k = CORE_RISE_K_PER_A2 if _within_record_span(segs) > CHAMBER_SPAN_K else 0.0
+    if k:
+        progress(f"  core rise over the measured temperature: {k:g} K/A² · LP(i²), "
+                 f"τ = {cfg.core_rise_tau_s:g} s")
+    return dataclasses.replace(cfg, core_rise_k_per_a2=float(k))
+
+
 def resolve_max_local_models(cfg: TrainConfig, segs: list[Segment], temperature_fixed: bool,
                              progress: Progress = _quiet) -> TrainConfig:
     """The settings with max_local_models "auto" replaced: LOCAL_MODELS_PER_REGION per
@@ -240,6 +256,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     cfg = resolve_partition(cfg, segs, progress)
     cfg = resolve_fast_depletion(cfg, segs, progress)
     cfg = resolve_activation_t0(cfg, segs, progress)
+    cfg = resolve_core_rise(cfg, segs, progress)
     d = len(cfg.partition)
     n_temp = temperature_degree(cfg, segs)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,

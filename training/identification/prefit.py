@@ -22,7 +22,7 @@ from lmncell.identification.tree import (
     root_tree,
 )
 from lmncell.runtime.model import LmnModel
-from lmncell.runtime.step import arrhenius_gain, initial_hysteresis
+from lmncell.runtime.step import arrhenius_gain, initial_hysteresis, lmn_temperatures
 
 HYSTERESIS_CANDIDATES = (10.0, 30.0, 100.0, 300.0)
 HYSTERESIS_MIN_GAIN = 0.03   # the pre-fit's relative RMSE gain from γ at which 'auto' keeps it,
@@ -136,6 +136,10 @@ class _Prefits:
                                    np.linspace(0, 1, cfg.ocv_knots))
                       if cfg.ocv_tests else None)
         self.groups = arrhenius_groups(cfg, segs)
+        # the temperatures the model's g(T) takes (the core rise added; None: no temperature)
+        self.temperatures = [None if s.temperature_c is None
+                             else lmn_temperatures(base, s.current_a, s.temperature_c)
+                             for s in segs]
 
     def hysteresis_series(self, gamma: float) -> list[np.ndarray]:
         """The runtime's hysteresis recursion (lmncell.runtime.step.ExoStepper.update) per
@@ -151,8 +155,9 @@ class _Prefits:
         """The pre-fit with hysteresis γ (None: none), Arrhenius E (None: none), r_knots
         resistance knots over SoC and these sample weights (default: the fit weights)."""
         cfg, segs = self.cfg, self.segs
-        gain = [arrhenius_gain(s.temperature_c, e_k, len(s), self.base.reference_temperature_c,
-                               self.base.activation_t0_k) for s in segs]
+        gain = [arrhenius_gain(t, e_k, len(s), self.base.reference_temperature_c,
+                               self.base.activation_t0_k)
+                for s, t in zip(segs, self.temperatures, strict=True)]
         return fit_ocv(self.socs, [s.current_a for s in segs], [s.voltage_v for s in segs],
                        self.fit_weights if weights is None else weights,
                        None if gamma is None else self.hysteresis_series(gamma),

@@ -34,6 +34,10 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
         theta=np.zeros((len(roots), 1)), gating_mode=cfg.pre_partition,
         rest_current_a=cfg.rest_current_a, temperature_terms=temperature_terms,
         activation_t0_k=float(cfg.activation_t0_k) if cfg.activation_t0_k != "auto" else 0.0,
+        core_rise_k_per_a2=(float(cfg.core_rise_k_per_a2)
+                            if cfg.core_rise_k_per_a2 != "auto" else 0.0),
+        core_rise_tau_s=(float(cfg.core_rise_tau_s)
+                         if cfg.core_rise_k_per_a2 not in ("auto", 0) else 0.0),
         depletion=(Depletion(cfg.depletion_time_constant_s(), float(cfg.depletion_power),
                              fast_tau_s=cfg.depletion_fast_time_constant_s())
                    if cfg.depletion_power else None))
