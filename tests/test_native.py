@@ -659,40 +659,25 @@ def test_out_of_range_when_the_model_voltage_leaves_its_trained_range(quick_mode
             inst.free()
 
 
-@pytest.mark.parametrize("ambient", [False, True])
-def test_native_with_the_vtf_temperature_form_equals_the_runtime(quick_model, tmp_path,
-                                                                 ambient) -> None:
-    # T0 > 0 (the Vogel–Tammann–Fulcher form) on both the gain g(T) with E and the time
-    # constants' k(T) with Eτ, as models of two chamber temperatures have it: the C takes the
-    # model file's T0 and the same operations; driven by the measured cell temperature and by
-    # the ambient, which the thermal model warms
-    import dataclasses
-
-    from lmncell.fmu.native_build import build_native_fmu
-    from lmncell.runtime.model import save_model
-
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    plain = load_model(quick_model)
-    assert plain.tau_activation_k is not None and plain.activation_t0_k == 0.0
-    model = dataclasses.replace(plain, arrhenius_k=3000.0, activation_t0_k=170.0)
-    path = save_model(model, tmp_path / "vtf.json")
-    assert load_model(path).activation_t0_k == 170.0
-    fmu = build_native_fmu(path, tmp_path / "vtf.fmu")
-    res = compare_fmu_with_pipeline(path, fmu, PAN_US06, max_steps=2500, ambient=ambient)
-    assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
-    assert res["max_dtemperature_k"] <= 1e-9
-    same_e = save_model(dataclasses.replace(model, activation_t0_k=0.0), tmp_path / "e.json")
-    arrhenius = compare_fmu_with_pipeline(same_e, fmu, PAN_US06, max_steps=2500,
-                                          ambient=ambient)   # the file's T0 matters
-    assert arrhenius["max_dv_v"] > 1e-5
+# the temperature forms the C must mirror, each with the model that differs only in it: T0 > 0
+# (the Vogel–Tammann–Fulcher form, as models of two chamber temperatures have it) on both the
+# gain g(T) with E and the time constants' k(T) with Eτ; the core rise k·LP_τ(i²) on the
+# temperature the step takes, a state the C keeps with the runtime's coefficient
+TEMPERATURE_FORMS = {
+    "vtf": ({"arrhenius_k": 3000.0, "activation_t0_k": 170.0},
+            {"arrhenius_k": 3000.0, "activation_t0_k": 0.0}),
+    "core_rise": ({"arrhenius_k": 3000.0, "core_rise_k_per_a2": 0.05, "core_rise_tau_s": 60.0},
+                  {"arrhenius_k": 3000.0, "core_rise_k_per_a2": 0.0, "core_rise_tau_s": 0.0}),
+}
 
 
 @pytest.mark.parametrize("ambient", [False, True])
-def test_native_with_a_core_rise_equals_the_runtime(quick_model, tmp_path, ambient) -> None:
-    # the core rise k·LP_τ(i²) added to the temperature the step takes: the C keeps the same
-    # low-pass state and takes the model file's k and the runtime's coefficient; driven by the
-    # measured cell temperature and by the ambient, which the thermal model warms
+@pytest.mark.parametrize("form", sorted(TEMPERATURE_FORMS))
+def test_native_temperature_forms_equal_the_runtime(quick_model, tmp_path, form,
+                                                    ambient) -> None:
+    # the C takes the model file's parameters and the same operations; driven by the measured
+    # cell temperature and by the ambient, which the thermal model warms; the same FMU against
+    # the model without the form differs (the file's parameters matter)
     import dataclasses
 
     from lmncell.fmu.native_build import build_native_fmu
@@ -702,16 +687,13 @@ def test_native_with_a_core_rise_equals_the_runtime(quick_model, tmp_path, ambie
         pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
     plain = load_model(quick_model)
     assert plain.tau_activation_k is not None
-    with_e = save_model(dataclasses.replace(plain, arrhenius_k=3000.0, core_rise_k_per_a2=0.0,
-                                            core_rise_tau_s=0.0), tmp_path / "e.json")
-    model = dataclasses.replace(load_model(with_e), core_rise_k_per_a2=0.05,
-                                core_rise_tau_s=60.0)
-    path = save_model(model, tmp_path / "core.json")
-    assert load_model(path).core_rise_tau_s == 60.0
-    fmu = build_native_fmu(path, tmp_path / "core.fmu")
+    with_form, without_form = TEMPERATURE_FORMS[form]
+    path = save_model(dataclasses.replace(plain, **with_form), tmp_path / f"{form}.json")
+    assert all(getattr(load_model(path), k) == v for k, v in with_form.items())
+    fmu = build_native_fmu(path, tmp_path / f"{form}.fmu")
     res = compare_fmu_with_pipeline(path, fmu, PAN_US06, max_steps=2500, ambient=ambient)
     assert res["max_dv_v"] <= 1e-9 and res["max_dsoc"] <= 1e-12
     assert res["max_dtemperature_k"] <= 1e-9
-    without = compare_fmu_with_pipeline(with_e, fmu, PAN_US06, max_steps=2500,
-                                        ambient=ambient)    # the file's core rise matters
-    assert without["max_dv_v"] > 1e-5
+    other = save_model(dataclasses.replace(plain, **without_form), tmp_path / "other.json")
+    assert compare_fmu_with_pipeline(other, fmu, PAN_US06, max_steps=2500,
+                                     ambient=ambient)["max_dv_v"] > 1e-5
