@@ -94,13 +94,14 @@ class ExoState:
     core: float = 0.0          # LP_τ(i²) of the core rise (A²; 0 without one)
 
     def as_list(self) -> list[float]:
-        return [self.soc, *self.lp, self.h, float(self.direction), *self.past_current]
+        return [self.soc, *self.lp, self.h, float(self.direction), *self.past_current,
+                self.core]
 
     @classmethod
     def from_list(cls, values: list[float], n_filters: int, n_past: int) -> ExoState:
         k = 1 + 2 * n_filters
         return cls(values[0], list(values[1:k]), values[k], int(values[k + 1]),
-                   list(values[k + 2:k + 2 + n_past]))
+                   list(values[k + 2:k + 2 + n_past]), values[k + 2 + n_past])
 
 
 def _without_depletion(soc: float) -> float:
@@ -759,16 +760,16 @@ class CellStepper:
 
     def get_state(self) -> list[float]:
         """Everything the next step depends on, as a flat list of floats."""
-        return [*self.state.as_list(), *self.lags, self.voltage_v, self.state.core]
+        return [*self.state.as_list(), *self.lags, self.voltage_v]
 
     def set_state(self, values: list[float]) -> None:
         m = self.model
-        n_exo_state = 1 + 2 * len(m.filters) + 2 + (m.current_terms - 1)
+        # ExoState.as_list: soc, the low-pass states, h, direction, the past currents, core
+        n_exo_state = 1 + 2 * len(m.filters) + 2 + (m.current_terms - 1) + 1
         self.state = ExoState.from_list(list(values[:n_exo_state]), len(m.filters),
                                         m.current_terms - 1)
         self.lags = list(values[n_exo_state:n_exo_state + m.output_lags])
         self.voltage_v = float(values[n_exo_state + m.output_lags])
-        self.state.core = float(values[n_exo_state + m.output_lags + 1])
 
 
 class CellThermal:
