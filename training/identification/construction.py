@@ -37,9 +37,8 @@ from lmncell.data.dataset import Segment
 from lmncell.identification.blas import one_blas_thread
 from lmncell.identification.ladder import Ladder, ladder_for, ladder_keys
 from lmncell.identification.prefit import (
-    CHAMBER_SPAN_K,
     HYSTERESIS_MIN_GAIN,
-    _within_record_span,
+    cells_warm_up,
     choose_arrhenius_with_temperature_terms,
     choose_prefit,
     choose_time_constant_scaling,
@@ -198,12 +197,11 @@ def resolve_activation_t0(cfg: TrainConfig, segs: list[Segment], progress: Progr
 def resolve_core_rise(cfg: TrainConfig, segs: list[Segment], progress: Progress = _quiet
                       ) -> TrainConfig:
     """The settings with core_rise_k_per_a2 "auto" replaced: CORE_RISE_K_PER_A2 where the
-    temperature varies inside some record by more than CHAMBER_SPAN_K (measured cell
-    temperatures that warm up under load), else 0. A given value was checked by
-    TrainConfig.check."""
+    cells warm up inside the records (prefit.cells_warm_up, as time_constant_scaling's "auto"),
+    else 0. A given value was checked by TrainConfig.check."""
     k = cfg.core_rise_k_per_a2
     if k == "auto":
-        k = CORE_RISE_K_PER_A2 if _within_record_span(segs) > CHAMBER_SPAN_K else 0.0
+        k = CORE_RISE_K_PER_A2 if cells_warm_up(segs) else 0.0
     if k:
         progress(f"  core rise over the measured temperature: {k:g} K/A² · LP(i²), "
                  f"τ = {cfg.core_rise_tau_s:g} s")
@@ -282,7 +280,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     ladder = local_ladder(cfg, base, segs, progress)
     e_scores: dict[str, float] = {}
     if (n_temp and cfg.temperature_scaling == "auto" and e_k is not None
-            and _within_record_span(segs) <= CHAMBER_SPAN_K):
+            and not cells_warm_up(segs)):
         e_k, e_scores, design = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg,
                                                                         progress, ladder)
         base.arrhenius_k = e_k

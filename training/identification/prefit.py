@@ -71,13 +71,19 @@ def choose_time_constant_scaling(cfg: TrainConfig, segs: list[Segment],
     setting = cfg.time_constant_scaling
     if isinstance(setting, (int, float)):
         e_tau = float(setting)
-    elif setting == "auto" and _within_record_span(segs) > CHAMBER_SPAN_K:
+    elif setting == "auto" and cells_warm_up(segs):
         e_tau = TIME_CONSTANT_ACTIVATION_K
     else:
         e_tau = None
     progress("  filter time constants: " + ("fixed" if e_tau is None else
                                           f"× exp(Eτ·(1/T − 1/T_ref)), Eτ = {e_tau:g} K"))
     return e_tau
+
+
+def cells_warm_up(segs: list[Segment]) -> bool:
+    """Whether the temperature varies inside some segment by more than CHAMBER_SPAN_K (measured
+    cells that warm up under load, not a chamber's set point)."""
+    return _within_record_span(segs) > CHAMBER_SPAN_K
 
 
 def _within_record_span(segs: list[Segment]) -> float:

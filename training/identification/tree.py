@@ -23,6 +23,7 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
     current_sign = cfg.pre_partition == "current_sign"
     roots = ([("charge", ("leaf", 0)), ("discharge", ("leaf", 1))] if current_sign
              else [("all", ("leaf", 0))])
+    core_k = float(cfg.core_rise_k_per_a2) if cfg.core_rise_k_per_a2 != "auto" else 0.0
     m = LmnModel(
         sample_time_s=cfg.sample_time_s, capacity_ah=capacity_ah, ocv_soc=ocv_soc, ocv_v=ocv_v,
         output_lags=cfg.output_lags, current_terms=cfg.current_terms,
@@ -34,10 +35,7 @@ def skeleton(cfg: TrainConfig, capacity_ah: float, ocv_soc: np.ndarray, ocv_v: n
         theta=np.zeros((len(roots), 1)), gating_mode=cfg.pre_partition,
         rest_current_a=cfg.rest_current_a, temperature_terms=temperature_terms,
         activation_t0_k=float(cfg.activation_t0_k) if cfg.activation_t0_k != "auto" else 0.0,
-        core_rise_k_per_a2=(float(cfg.core_rise_k_per_a2)
-                            if cfg.core_rise_k_per_a2 != "auto" else 0.0),
-        core_rise_tau_s=(float(cfg.core_rise_tau_s)
-                         if cfg.core_rise_k_per_a2 not in ("auto", 0) else 0.0),
+        core_rise_k_per_a2=core_k, core_rise_tau_s=float(cfg.core_rise_tau_s) if core_k else 0.0,
         depletion=(Depletion(cfg.depletion_time_constant_s(), float(cfg.depletion_power),
                              fast_tau_s=cfg.depletion_fast_time_constant_s())
                    if cfg.depletion_power else None))
