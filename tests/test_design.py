@@ -415,6 +415,8 @@ def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_mo
     with pytest.warns(UserWarning):
         sim = lmncell.simulate(model, current, temperature_c=25.0, soc0=0.9)
     assert low <= sim.voltage_v.min() and sim.voltage_v.max() <= high
+    assert (f"the model itself runs the programme at {sim.voltage_v.min():.3f} … "  # the shrunk
+            f"{sim.voltage_v.max():.3f} V\n") in said                              # one's run
 
 
 def test_shrinking_keeps_each_sequences_charge_and_the_other_model_inside() -> None:
@@ -469,13 +471,13 @@ def test_the_resistance_scale_from_a_model_is_its_response_over_the_design_model
 def test_model_check_warns_where_the_model_leaves_its_limits(quick_model) -> None:
     """What design --model prints after the model ran its programme: the voltage range, and a
     warning naming the limits where the model leaves them (here a 5C discharge from SoC 0.2)."""
-    from lmncell.design.command import model_check
+    from lmncell.design.command import model_voltage, voltage_check
     from lmncell.runtime.model import load_model
 
     model = load_model(quick_model)
     low, high = model.limits["voltage_v"]
     cell = CellSpec(capacity_ah=2.85, voltage_min_v=low, voltage_max_v=high)
-    gentle = model_check(model, np.full(300, -1.0), 1.0, 0.8, cell)
+    gentle = voltage_check(model_voltage(model, np.full(300, -1.0), 1.0, 0.8, 2.85), cell)
     assert gentle.startswith("the model itself runs the programme at ") and "warning" not in gentle
-    hard = model_check(model, np.full(600, -14.25), 1.0, 0.2, cell)
+    hard = voltage_check(model_voltage(model, np.full(600, -14.25), 1.0, 0.2, 2.85), cell)
     assert f"; warning: outside the limits {low:.3f} … {high:.3f} V even where" in hard

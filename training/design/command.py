@@ -107,12 +107,11 @@ def model_resistance_scale(model: LmnModel, cell: CellSpec, profile: list[float]
     return tuple(float(s) for s in socs), tuple(factors)
 
 
-def model_check(model: LmnModel, current_a: np.ndarray, sample_time_s: float, soc0: float,
-                cell: CellSpec) -> str:
-    """The model's own voltage over a programme (model_voltage), and a warning where it leaves
-    the design's voltage limits (after _fit_to_model: where even a sequence's mean current,
-    the charge the profile needs in it, takes the model there)."""
-    v = model_voltage(model, current_a, sample_time_s, soc0, cell.capacity_ah)
+def voltage_check(v: np.ndarray, cell: CellSpec) -> str:
+    """What design --model says of the model's own voltage v (V) over its programme
+    (model_voltage): its range, and a warning where it leaves the design's voltage limits
+    (after _fit_to_model: where even a sequence's mean current, the charge the profile needs
+    in it, takes the model there)."""
     low, high = float(v.min()), float(v.max())
     text = f"the model itself runs the programme at {low:.3f} … {high:.3f} V"
     if low < cell.voltage_min_v or high > cell.voltage_max_v:
@@ -142,14 +141,17 @@ def model_voltage(model: LmnModel, current_a: np.ndarray, sample_time_s: float, 
 
 
 def _fit_to_model(prog, model: LmnModel, cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
-                  say):
+                  say) -> tuple:
     """The programme with the sequences that take the model itself outside the voltage
-    window shrunk towards their mean current (optimal.shrink_to_fit), said where any were."""
+    window shrunk towards their mean current (optimal.shrink_to_fit), said where any were;
+    and the model's voltage (model_voltage, V) over that programme, the last one simulated."""
     ts, soc0 = model.sample_time_s, spec.soc_profile[0]
     dt = cyc.sample_time_s
+    runs: list[tuple[np.ndarray, np.ndarray]] = []
 
     def at_samples(current: np.ndarray) -> np.ndarray:
         v = model_voltage(model, current, dt, soc0, cell.capacity_ah)
+        runs.append((current.copy(), v))
         step = np.minimum((np.arange(1, current.size + 1) * dt / ts - 1e-9).astype(int),
                           v.size - 1)
         return v[np.maximum(step, 0)]
@@ -160,7 +162,10 @@ def _fit_to_model(prog, model: LmnModel, cell: CellSpec, cyc: CyclerSpec, spec: 
             + ", ".join(f"{k + 1} ({100 * kept:.0f} % of the spread kept)"
                         for k, kept in shrunk.items())
             + "; their current shrunk towards each one's mean (same charge)")
-    return prog
+    current, v = runs[-1]          # shrink_to_fit's last run is of the programme it returns
+    if not np.array_equal(current, prog.current_a):
+        v = model_voltage(model, prog.current_a, dt, soc0, cell.capacity_ah)
+    return prog, v
 
 
 def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]] | None:
@@ -182,7 +187,7 @@ def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]]
 def programme_figures(prog, files: list[Path], model_check_text: str | None) -> dict:
     """What `lmncell design --json` prints without --compare-virtual: the files written, the
     programme's current (A) and predicted voltage (V) ranges, its duration (s), the SoC reached
-    at each profile point, and with --model the model's own run of it (model_check) and the
+    at each profile point, and with --model the model's own run of it (voltage_check) and the
     share of their current's spread kept by sequences shrunk for it (numbered from 1)."""
     return {"files": [str(f) for f in files],
             "current_a": [float(prog.current_a.min()), float(prog.current_a.max())],
@@ -213,7 +218,7 @@ def run_design(a) -> int:
             f"{spec.information} information) …")
         return design_programme(c, cyc, spec, progress=say)
 
-    result = None
+    result = model_v = None
     if a.compare_virtual:
         from lmncell.design.proof import make_virtual_cell, plot_proof, prove_design
 
@@ -224,15 +229,15 @@ def run_design(a) -> int:
     else:
         prog = design(cell)
         if model is not None:
-            prog = _fit_to_model(prog, model, cell, cyc, spec, say)
+            prog, model_v = _fit_to_model(prog, model, cell, cyc, spec, say)
     files = write_programme(prog, Path(a.out))
     say(f"wrote {', '.join(str(f) for f in files)}; current {prog.current_a.min():.2f} … "
         f"{prog.current_a.max():.2f} A, predicted voltage {prog.voltage_v.min():.3f} … "
         f"{prog.voltage_v.max():.3f} V, SoC reached at the profile points: "
         + ", ".join(f"{p[1]:.3f}" for p in prog.profile_points))
     check = None
-    if model is not None and result is None:
-        check = model_check(model, prog.current_a, cyc.sample_time_s, spec.soc_profile[0], cell)
+    if model_v is not None:
+        check = voltage_check(model_v, cell)
         say(check)
     if a.plot:
         plot_programme(prog, Path(a.plot))
