@@ -542,18 +542,41 @@ def test_region_boundaries_lie_in_the_gap_or_the_overlap_of_the_levels() -> None
     assert region_boundaries([no_temp]) == []
 
 
+def test_region_boundaries_lie_on_the_temperature_the_partition_takes() -> None:
+    """With a core rise the partition takes T + k·LP(i²), so the boundary lies in the gap of
+    those temperatures: two levels at 1 A and 2 A, k = 1 K/A², τ short against the records,
+    raise the lower level's top by 1 K and the upper level's bottom by about 4 K."""
+    from types import SimpleNamespace
+
+    from lmncell.data.dataset import Segment
+    from lmncell.identification.regions import region_boundaries
+
+    def seg(lo: float, hi: float, amps: float) -> Segment:
+        n = 1001
+        return Segment("s", np.arange(1.0, n + 1), -amps * np.ones(n), np.full(n, 3.6),
+                       np.linspace(lo, hi, n), 1.0, np.linspace(1.0, 0.9, n), np.ones(n))
+
+    segs = [seg(10.0, 14.0, 1.0), seg(25.0, 29.0, 2.0)]
+    base = SimpleNamespace(core_rise_k_per_a2=1.0, core_rise_tau_s=1.0, sample_time_s=1.0)
+    (raw, _), = region_boundaries(segs)
+    (with_rise, width), = region_boundaries(segs, base)
+    assert with_rise - raw == pytest.approx(0.5 * (1.0 + 4.0), abs=0.01)
+    assert width == pytest.approx((25.04 + 4.0 - 13.96 - 1.0) / 8, abs=0.01)
+
+
 def test_temperature_regions_split_only_between_the_chamber_temperatures() -> None:
     """Two chamber temperatures whose cells warm up inside each record: the one split along
     temperature is the fixed one, centred in the gap between the levels' cell temperatures
-    (10…16 and 25…31 °C), and every other split keeps its temperature weight at 0."""
+    (10…16 and 25…31 °C, plus the core rise the partition adds), and every other split keeps
+    its temperature weight at 0."""
     from lmncell.identification.construction import train_lmn
     from lmncell.identification.regions import region_boundaries
 
     segs, cap = _two_chamber_cell()
-    (centre, width), = region_boundaries(segs)
-    assert 16.0 < centre < 25.0 and width >= 0.5
     cfg = load_config(max_local_models=4, oe_refinement=False, hysteresis="off")
     model = train_lmn(segs, cfg, cap).model
+    (centre, width), = region_boundaries(segs, model)     # on T + the core rise ("auto": on)
+    assert 16.0 < centre < 25.0 and width >= 0.5 and model.core_rise_k_per_a2 > 0
     assert model.partition_variables == ["soc", "current", "temperature"]
     k = 1 + model.partition_variables.index("temperature")
     along = np.flatnonzero(model.node_weights[:, k] != 0.0)

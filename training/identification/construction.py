@@ -275,7 +275,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "
                  + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
-    cfg, fixed_axes, boundaries = _temperature_structure(cfg, segs, n_temp, progress)
+    cfg, fixed_axes, boundaries = _temperature_structure(cfg, segs, base, n_temp, progress)
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
     ladder = local_ladder(cfg, base, segs, progress)
     e_scores: dict[str, float] = {}
@@ -316,18 +316,19 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     return TrainResult(model, curve, model.n_local_models, info)
 
 
-def _temperature_structure(cfg: TrainConfig, segs: list[Segment], n_temp: int,
+def _temperature_structure(cfg: TrainConfig, segs: list[Segment], base: LmnModel, n_temp: int,
                            progress: Progress) -> tuple[TrainConfig, frozenset, list]:
     """How temperature enters the growth: the partition axes no split may use (temperature
     where temperature terms or regions carry it), the resolved max_local_models, and the
-    temperature regions' fixed boundaries (empty without regions)."""
+    temperature regions' fixed boundaries (empty without regions), placed on base's partition
+    temperature."""
     fixed_axes: frozenset = frozenset()
     if n_temp and "temperature" in cfg.partition:
         fixed_axes = frozenset({cfg.partition.index("temperature")})
         progress("  temperature acts through the temperature terms, not through splits: "
                  "sigmoid splits between a few training temperatures interpolate badly")
     cfg = resolve_max_local_models(cfg, segs, bool(fixed_axes), progress)
-    boundaries = region_boundaries(segs) if uses_temperature_regions(cfg, segs) else []
+    boundaries = region_boundaries(segs, base) if uses_temperature_regions(cfg, segs) else []
     if boundaries:
         fixed_axes = frozenset({cfg.partition.index("temperature")})
         progress("  temperature regions: fixed splits at " + ", ".join(

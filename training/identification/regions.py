@@ -21,6 +21,7 @@ from lmncell.data.dataset import Segment
 from lmncell.identification.prefit import segment_levels, temperature_levels
 from lmncell.identification.tree import Design, Tree, fit_leaves, one_step
 from lmncell.runtime.model import LmnModel
+from lmncell.runtime.step import lmn_temperatures
 
 MIN_WIDTH_K = 0.5        # the fixed sigmoids' smallest width (K)
 GAP_WIDTHS = 8.0         # a sigmoid's width is the gap over this: 1.8 % leak at the gap's edges
@@ -28,18 +29,22 @@ GAP_WIDTHS = 8.0         # a sigmoid's width is the gap over this: 1.8 % leak at
 # out 7.21 / 10.91, 10 °C 11.12 / 18.58; 2, width 2.1 K: 8.28 / 12.01 and 11.17 / 25.45)
 
 
-def region_boundaries(segs: list[Segment]) -> list[tuple[float, float]]:
+def region_boundaries(segs: list[Segment], base: LmnModel | None = None
+                      ) -> list[tuple[float, float]]:
     """(centre, width) in K of the sigmoid between each pair of neighbouring temperature levels
     (temperature_levels): centred in the gap between the lower level's 99th and the upper
-    level's 1st percentile of cell temperature, width a GAP_WIDTHS-th of the gap (at least
-    MIN_WIDTH_K; where the levels' temperatures overlap, centred in the overlap)."""
+    level's 1st percentile of the temperature the partition takes (the cell temperature plus
+    base's core rise, lmn_temperatures; the cell temperature itself without base), width a
+    GAP_WIDTHS-th of the gap (at least MIN_WIDTH_K; where the levels' temperatures overlap,
+    centred in the overlap)."""
     levels = temperature_levels(segs)
     if len(levels) < 2:
         return []
     per_level: list[list[np.ndarray]] = [[] for _ in levels]
     for s, k in zip(segs, segment_levels(segs), strict=True):
         if s.temperature_c is not None:
-            per_level[k].append(np.asarray(s.temperature_c, dtype=float))
+            t = np.asarray(s.temperature_c, dtype=float)
+            per_level[k].append(t if base is None else lmn_temperatures(base, s.current_a, t))
     out = []
     for low, high in itertools.pairwise(per_level):
         top = float(np.percentile(np.concatenate(low), 99))
