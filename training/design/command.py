@@ -10,6 +10,7 @@ from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
     DesignSpec,
+    Programme,
     check_sampling,
     design_programme,
     parse_profile,
@@ -140,18 +141,18 @@ def model_voltage(model: LmnModel, current_a: np.ndarray, sample_time_s: float, 
                         capacity_ah=capacity_ah).voltage_v
 
 
-def _fit_to_model(prog, model: LmnModel, cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
-                  say) -> tuple:
+def _fit_to_model(prog: Programme, model: LmnModel, cell: CellSpec, cyc: CyclerSpec,
+                  spec: DesignSpec, say) -> tuple[Programme, np.ndarray]:
     """The programme with the sequences that take the model itself outside the voltage
     window shrunk towards their mean current (optimal.shrink_to_fit), said where any were;
     and the model's voltage (model_voltage, V) over that programme, the last one simulated."""
     ts, soc0 = model.sample_time_s, spec.soc_profile[0]
     dt = cyc.sample_time_s
-    runs: list[tuple[np.ndarray, np.ndarray]] = []
+    last: list[tuple[np.ndarray, np.ndarray]] = []      # the latest run's current and voltage
 
     def at_samples(current: np.ndarray) -> np.ndarray:
         v = model_voltage(model, current, dt, soc0, cell.capacity_ah)
-        runs.append((current.copy(), v))
+        last[:] = [(current.copy(), v)]
         step = np.minimum((np.arange(1, current.size + 1) * dt / ts - 1e-9).astype(int),
                           v.size - 1)
         return v[np.maximum(step, 0)]
@@ -162,7 +163,7 @@ def _fit_to_model(prog, model: LmnModel, cell: CellSpec, cyc: CyclerSpec, spec: 
             + ", ".join(f"{k + 1} ({100 * kept:.0f} % of the spread kept)"
                         for k, kept in shrunk.items())
             + "; their current shrunk towards each one's mean (same charge)")
-    current, v = runs[-1]          # shrink_to_fit's last run is of the programme it returns
+    current, v = last[0]           # shrink_to_fit's last run is of the programme it returns
     if not np.array_equal(current, prog.current_a):
         v = model_voltage(model, prog.current_a, dt, soc0, cell.capacity_ah)
     return prog, v
