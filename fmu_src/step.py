@@ -764,8 +764,7 @@ class CellStepper:
 
     def set_state(self, values: list[float]) -> None:
         m = self.model
-        # ExoState.as_list: soc, the low-pass states, h, direction, the past currents, core
-        n_exo_state = 1 + 2 * len(m.filters) + 2 + (m.current_terms - 1) + 1
+        n_exo_state = len(self.state.as_list())     # this model's ExoState layout
         self.state = ExoState.from_list(list(values[:n_exo_state]), len(m.filters),
                                         m.current_terms - 1)
         self.lags = list(values[n_exo_state:n_exo_state + m.output_lags])
