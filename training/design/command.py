@@ -148,11 +148,11 @@ def _fit_to_model(prog: Programme, model: LmnModel, cell: CellSpec, cyc: CyclerS
     and the model's voltage (model_voltage, V) over that programme, the last one simulated."""
     ts, soc0 = model.sample_time_s, spec.soc_profile[0]
     dt = cyc.sample_time_s
-    last: list[tuple[np.ndarray, np.ndarray]] = []      # the latest run's current and voltage
+    last: list[np.ndarray] = []          # the latest run's voltage, one value per model step
 
     def at_samples(current: np.ndarray) -> np.ndarray:
         v = model_voltage(model, current, dt, soc0, cell.capacity_ah)
-        last[:] = [(current.copy(), v)]
+        last[:] = [v]
         step = np.minimum((np.arange(1, current.size + 1) * dt / ts - 1e-9).astype(int),
                           v.size - 1)
         return v[np.maximum(step, 0)]
@@ -163,10 +163,7 @@ def _fit_to_model(prog: Programme, model: LmnModel, cell: CellSpec, cyc: CyclerS
             + ", ".join(f"{k + 1} ({100 * kept:.0f} % of the spread kept)"
                         for k, kept in shrunk.items())
             + "; their current shrunk towards each one's mean (same charge)")
-    current, v = last[0]           # shrink_to_fit's last run is of the programme it returns
-    if not np.array_equal(current, prog.current_a):
-        v = model_voltage(model, prog.current_a, dt, soc0, cell.capacity_ah)
-    return prog, v
+    return prog, last[0]           # shrink_to_fit's last run is of the programme it returns
 
 
 def design_impedance(model: LmnModel) -> tuple[float, list[tuple[float, float]]] | None:

@@ -512,7 +512,7 @@ def shrink_to_fit(prog: Programme, cell: CellSpec, cyc: CyclerSpec, spec: Design
     its mean current, SHRINK_STEP at a time, until it stays inside (its charge, and so the SoC
     profile, unchanged); and {sequence index: the share of its spread kept} for those shrunk.
     A sequence whose mean current alone leaves the window keeps none and is left to the
-    caller's check."""
+    caller's check. voltage_of's last call is on the returned programme's current."""
     lo, hi = voltage_window(cell, spec)
     n = prog.current_a.size
     bounds = list(zip(prog.sequence_starts, [*prog.sequence_starts[1:], n], strict=True))
