@@ -438,71 +438,18 @@ def read_panasonic(path: Path) -> Record:
     ``TimeStamp`` shows start new segments (meta.segment_starts; the pauses also in
     meta.pause_starts); ``Ah`` carries charge across.
     """
-    import scipy.io
-
-    try:
-        if path.suffix == ".gz":
-            with gzip.open(path, "rb") as fh:
-                mat = scipy.io.loadmat(io.BytesIO(fh.read()))
-        else:
-            mat = scipy.io.loadmat(str(path))
-    except NotImplementedError:     # scipy's answer to a v7.3 (HDF5) file
-        raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file, which is not read here; expected "
-                        "a v7 or older .mat file (in MATLAB: save(FILE, 'meas', '-v7'))"
-                        ) from None
-    except Exception as exc:  # scipy raises several types for corrupt files
-        raise DataError(f"{path}: not a readable MATLAB file ({exc})") from exc
-    if "meas" not in mat:
-        raise DataError(f"{path}: no struct 'meas' in the MATLAB file; found "
-                        f"{[k for k in mat if not k.startswith('__')]}")
-    meas = mat["meas"][0, 0]
+    meas = _panasonic_struct(path)
     fields = meas.dtype.names or ()
-    need = ("Time", "Voltage", "Current", "Ah")
-    missing = [f for f in need if f not in fields]
-    if missing:
-        raise DataError(f"{path}: struct 'meas' lacks field(s) {missing}; found {list(fields)}")
-    t = _mat_field(meas, "Time", path)
-    if t.size == 0:
-        raise DataError(f"{path}: field 'Time' is empty; expected one time (s) per sample")
-    if not np.isfinite(t).all():
-        first = int(np.flatnonzero(~np.isfinite(t))[0])
-        raise DataError(f"{path}: field 'Time' holds {int((~np.isfinite(t)).sum())} NaN or "
-                        f"infinite value(s), the first at sample {first + 1}; expected finite "
-                        "times (s)")
-    keep = np.ones(t.size, dtype=bool)
-    keep[1:] = np.diff(t) > 0
-    notes = []
-    if (~keep).any():
-        back = np.flatnonzero(np.diff(t) < 0)
-        if back.size:
-            raise DataError(f"{path}: field 'Time' decreases at sample {int(back[0]) + 1} "
-                            f"({float(t[back[0]])!r} s then {float(t[back[0] + 1])!r} s); expected "
-                            "increasing time")
-        notes.append(f"dropped {int((~keep).sum())} sample(s) with a repeated time stamp")
+    t, keep, notes = _panasonic_times(meas, path)
 
     def field_(name: str) -> np.ndarray:
         return _mat_field(meas, name, path, keep.size)[keep]
 
-    t = t[keep]
     cur = field_("Current")
     ah, more = _stitched_counter("Ah", t, cur, field_("Ah"))
     notes += more
     gaps = set(_segment_starts_from_gaps(t, cur, ah))
-    pauses: set[int] = set()
-    if "TimeStamp" in fields:
-        stamps = np.ravel(meas["TimeStamp"])
-        if stamps.size != keep.size:
-            raise DataError(f"{path}: field 'TimeStamp' holds {stamps.size} value(s) for "
-                            f"{keep.size} times; expected one per sample")
-        try:
-            wall = _parse_timestamps(stamps[keep])
-        except ValueError as exc:
-            raise DataError(f"{path}: field 'TimeStamp': {exc}; expected wall-clock times "
-                            "such as '3/20/2017 5:56:01 AM'") from None
-        hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
-        for k in hidden:
-            notes.append(f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at sample {k}")
-        pauses = set(hidden.tolist()) - gaps
+    pauses = set(_hidden_pauses(meas, path, t, keep, notes)) - gaps
     temp = field_("Battery_Temp_degC") if "Battery_Temp_degC" in fields else None
     if temp is not None and not np.isfinite(temp).all():
         notes.append("Battery_Temp_degC has non-finite samples: temperature not used")
@@ -522,6 +469,80 @@ def read_panasonic(path: Path) -> Record:
             meta.file_columns["ambient_c"] = "Chamber_Temp_degC"   # model's ambient
     return Record(t - t[0], cur, field_("Voltage"), meta, temperature_c=temp,
                   charge_ah=ah, ambient_c=ambient)
+
+
+def _panasonic_struct(path: Path) -> np.ndarray:
+    """The struct ``meas`` of a Panasonic ``.mat`` (or ``.mat.gz``) file, with the fields Time,
+    Voltage, Current and Ah; DataError naming the file for anything else."""
+    import scipy.io
+
+    try:
+        if path.suffix == ".gz":
+            with gzip.open(path, "rb") as fh:
+                mat = scipy.io.loadmat(io.BytesIO(fh.read()))
+        else:
+            mat = scipy.io.loadmat(str(path))
+    except NotImplementedError:     # scipy's answer to a v7.3 (HDF5) file
+        raise DataError(f"{path}: a MATLAB v7.3 (HDF5) file, which is not read here; expected "
+                        "a v7 or older .mat file (in MATLAB: save(FILE, 'meas', '-v7'))"
+                        ) from None
+    except Exception as exc:  # scipy raises several types for corrupt files
+        raise DataError(f"{path}: not a readable MATLAB file ({exc})") from exc
+    if "meas" not in mat:
+        raise DataError(f"{path}: no struct 'meas' in the MATLAB file; found "
+                        f"{[k for k in mat if not k.startswith('__')]}")
+    meas = mat["meas"][0, 0]
+    fields = meas.dtype.names or ()
+    missing = [f for f in ("Time", "Voltage", "Current", "Ah") if f not in fields]
+    if missing:
+        raise DataError(f"{path}: struct 'meas' lacks field(s) {missing}; found {list(fields)}")
+    return meas
+
+
+def _panasonic_times(meas: np.ndarray, path: Path) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """The field Time (s) without its repeated stamps, the mask of the samples kept and the
+    notes saying what was dropped; DataError for an empty, non-finite or decreasing Time."""
+    t = _mat_field(meas, "Time", path)
+    if t.size == 0:
+        raise DataError(f"{path}: field 'Time' is empty; expected one time (s) per sample")
+    if not np.isfinite(t).all():
+        first = int(np.flatnonzero(~np.isfinite(t))[0])
+        raise DataError(f"{path}: field 'Time' holds {int((~np.isfinite(t)).sum())} NaN or "
+                        f"infinite value(s), the first at sample {first + 1}; expected finite "
+                        "times (s)")
+    keep = np.ones(t.size, dtype=bool)
+    keep[1:] = np.diff(t) > 0
+    notes = []
+    if (~keep).any():
+        back = np.flatnonzero(np.diff(t) < 0)
+        if back.size:
+            raise DataError(f"{path}: field 'Time' decreases at sample {int(back[0]) + 1} "
+                            f"({float(t[back[0]])!r} s then {float(t[back[0] + 1])!r} s); expected "
+                            "increasing time")
+        notes.append(f"dropped {int((~keep).sum())} sample(s) with a repeated time stamp")
+    return t[keep], keep, notes
+
+
+def _hidden_pauses(meas: np.ndarray, path: Path, t: np.ndarray, keep: np.ndarray,
+                   notes: list[str]) -> list[int]:
+    """Samples (indices into the kept ones) after which the wall clock ``TimeStamp`` shows a
+    pause longer than PAUSE_MIN_S that ``Time`` (t, s) hides; each is added to notes. None
+    without a TimeStamp field."""
+    if "TimeStamp" not in (meas.dtype.names or ()):
+        return []
+    stamps = np.ravel(meas["TimeStamp"])
+    if stamps.size != keep.size:
+        raise DataError(f"{path}: field 'TimeStamp' holds {stamps.size} value(s) for "
+                        f"{keep.size} times; expected one per sample")
+    try:
+        wall = _parse_timestamps(stamps[keep])
+    except ValueError as exc:
+        raise DataError(f"{path}: field 'TimeStamp': {exc}; expected wall-clock times "
+                        "such as '3/20/2017 5:56:01 AM'") from None
+    hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
+    notes += [f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at sample {k}"
+              for k in hidden]
+    return hidden.tolist()
 
 
 def read_bdf(path: Path) -> Record:
