@@ -93,18 +93,28 @@ class LmnCellSlave(Fmi2Slave):
             release_wrapper_state_at_exit(res.parent / "binaries" / "linux64" /
                                           f"{type(self).__name__}.so")
         self._model = load_model(res / "model.json")
-        m = self._model
         self.current = 0.0
         self.voltage_measured = 0.0
         self.temperature = DEFAULT_TEMPERATURE_C
         self.soc0 = 1.0
-        self.capacity = float(m.capacity_ah)
+        self.capacity = float(self._model.capacity_ah)
         self.observer = 0
         self.temperature_is_cell = False
         self._cosim: CellCosim | None = None
         self._time = 0.0
         self._terminated = False
         self._in_initialization = False
+        self._register_variables(self._model.thermal is not None)
+        # the per-step calls' fast path: the Real variables that get_real may read and the
+        # inputs that set_real may always set (anything else goes through the checks)
+        self._real_getters = {vr: v.getter for vr, v in self.vars.items() if isinstance(v, Real)}
+        self._input_names = {vr: v.local_name for vr, v in self.vars.items()
+                             if isinstance(v, Real) and v.causality == Fmi2Causality.input}
+
+    def _register_variables(self, has_thermal: bool) -> None:
+        """Declare the FMU's variables (inputs, outputs, parameters; GUIDE: FMU interface),
+        in the order of their value references; has_thermal: the model carries a thermal
+        model, so `temperature` is the ambient by default."""
         reg = self.register_variable
         reg(Real("current", causality=Fmi2Causality.input, variability=Fmi2Variability.continuous,
                  description="cell current held over the step, > 0 charges [A]"))
@@ -114,7 +124,7 @@ class LmnCellSlave(Fmi2Slave):
                              "0 = not measured [V]"))
         reg(Real("temperature", causality=Fmi2Causality.input,
                  variability=Fmi2Variability.continuous,
-                 description=TEMPERATURE_DESCRIPTION if m.thermal is not None else
+                 description=TEMPERATURE_DESCRIPTION if has_thermal else
                  "cell temperature (this model has no thermal model) [degC]"))
         reg(Real("voltage", causality=Fmi2Causality.output,
                  variability=Fmi2Variability.continuous,
@@ -152,11 +162,6 @@ class LmnCellSlave(Fmi2Slave):
                  getter=lambda: (self._cosim or self._initial_cosim()).cell_temperature_c,
                  description="cell temperature at the end of the last completed model step "
                              "(the next step's) [degC]"))
-        # the per-step calls' fast path: the Real variables that get_real may read and the
-        # inputs that set_real may always set (anything else goes through the checks)
-        self._real_getters = {vr: v.getter for vr, v in self.vars.items() if isinstance(v, Real)}
-        self._input_names = {vr: v.local_name for vr, v in self.vars.items()
-                             if isinstance(v, Real) and v.causality == Fmi2Causality.input}
 
     def _dedupe_sys_path(self) -> None:
         """The wrapper inserts the resources folder into sys.path at every instantiation: keep
