@@ -399,18 +399,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     note = sampling_note(records, cfg.sample_time_s)
     if note:
         progress(note)
-    if capacity_ah is None and cfg.ocv_tests:
-        delay = current_delay(cfg, records, progress)
-        cap, segs, result = fit_capacity(records, cfg, soc0, delay, progress)
-    else:
-        cap = (lower_bound_capacity(records, soc0, progress) if capacity_ah is None
-               else float(capacity_ah))
-        delay = current_delay(cfg, records, progress)
-        segs = training_segments(records, cfg, cap, soc0, delay)
-        n = sum(len(s) for s in segs)
-        progress(f"training on {len(segs)} segment(s), {n} samples at Ts = "
-                 f"{cfg.sample_time_s} s")
-        result = train_lmn(segs, cfg, cap, progress)
+    cap, delay, segs, result = _identify(records, cfg, capacity_ah, soc0, progress)
     model = result.model
     model.current_delay_s = delay
     model.limits = _limits(segs, model)
@@ -443,6 +432,25 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
              f"{_mv_or_none(summary['train_window_rmse_mv'])}{_ends_text(summary)}), LMN "
              f"training {result.info['seconds']:.1f} s, total {seconds:.1f} s")
     return model, summary
+
+
+def _identify(records: list[Record], cfg: TrainConfig, capacity_ah: float | None,
+              soc0: float | Sequence[float] | None, progress: Progress
+              ) -> tuple[float, float, list[Segment], TrainResult]:
+    """The capacity (Ah), the current delay (s), the model-rate training segments and the LMN
+    identified on them. capacity_ah None: fit_capacity with OCV tests, else the records' lower
+    bound (lower_bound_capacity)."""
+    if capacity_ah is None and cfg.ocv_tests:
+        delay = current_delay(cfg, records, progress)
+        cap, segs, result = fit_capacity(records, cfg, soc0, delay, progress)
+        return cap, delay, segs, result
+    cap = (lower_bound_capacity(records, soc0, progress) if capacity_ah is None
+           else float(capacity_ah))
+    delay = current_delay(cfg, records, progress)
+    segs = training_segments(records, cfg, cap, soc0, delay)
+    n = sum(len(s) for s in segs)
+    progress(f"training on {len(segs)} segment(s), {n} samples at Ts = {cfg.sample_time_s} s")
+    return cap, delay, segs, train_lmn(segs, cfg, cap, progress)
 
 
 def check_trained_model(model: LmnModel, segs: list[Segment], cfg: TrainConfig) -> None:
