@@ -449,7 +449,9 @@ def read_panasonic(path: Path) -> Record:
     ah, more = _stitched_counter("Ah", t, cur, field_("Ah"))
     notes += more
     gaps = set(_segment_starts_from_gaps(t, cur, ah))
-    pauses = set(_hidden_pauses(meas, path, t, keep, notes)) - gaps
+    hidden, more = _hidden_pauses(meas, path, t, keep)
+    notes += more
+    pauses = set(hidden) - gaps
     temp = field_("Battery_Temp_degC") if "Battery_Temp_degC" in fields else None
     if temp is not None and not np.isfinite(temp).all():
         notes.append("Battery_Temp_degC has non-finite samples: temperature not used")
@@ -523,13 +525,13 @@ def _panasonic_times(meas: np.ndarray, path: Path) -> tuple[np.ndarray, np.ndarr
     return t[keep], keep, notes
 
 
-def _hidden_pauses(meas: np.ndarray, path: Path, t: np.ndarray, keep: np.ndarray,
-                   notes: list[str]) -> list[int]:
-    """Samples (indices into the kept ones) after which the wall clock ``TimeStamp`` shows a
-    pause longer than PAUSE_MIN_S that ``Time`` (t, s) hides; each is added to notes. None
+def _hidden_pauses(meas: np.ndarray, path: Path, t: np.ndarray, keep: np.ndarray
+                   ) -> tuple[list[int], list[str]]:
+    """The samples (indices into the kept ones) at which the wall clock ``TimeStamp`` shows a
+    pause longer than PAUSE_MIN_S that ``Time`` (t, s) hides, and a note for each; none
     without a TimeStamp field."""
     if "TimeStamp" not in (meas.dtype.names or ()):
-        return []
+        return [], []
     stamps = np.ravel(meas["TimeStamp"])
     if stamps.size != keep.size:
         raise DataError(f"{path}: field 'TimeStamp' holds {stamps.size} value(s) for "
@@ -540,9 +542,8 @@ def _hidden_pauses(meas: np.ndarray, path: Path, t: np.ndarray, keep: np.ndarray
         raise DataError(f"{path}: field 'TimeStamp': {exc}; expected wall-clock times "
                         "such as '3/20/2017 5:56:01 AM'") from None
     hidden = np.flatnonzero(np.diff(wall) - np.diff(t) > PAUSE_MIN_S) + 1
-    notes += [f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at sample {k}"
-              for k in hidden]
-    return hidden.tolist()
+    return hidden.tolist(), [f"pause of {wall[k] - wall[k - 1]:.0f} s hidden in 'Time' at "
+                             f"sample {k}" for k in hidden]
 
 
 def read_bdf(path: Path) -> Record:
