@@ -728,56 +728,79 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
              "temperature": temperature_unit, "ambient": temperature_unit,
              "charge": charge_unit}
     _check_mapping(path, columns, given)
-    numeric = set(columns.values()) - {columns["time"]}
-    _check_marks(path, sep, decimal)
-    lines = read_text(path).splitlines()
-    header_line = _line_naming(lines, set(columns.values()), sep)
-    units = _units_row(lines, header_line, numeric, sep, decimal)
-    temp_cols = {columns[k] for k in ("temperature", "ambient") if k in columns}
-    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"], *temp_cols},
-                             header_line=header_line, lines=lines, units_row=units is not None,
-                             blank_ok=temp_cols)
-    _require(path, cols, tuple(columns.values()), sep)
+    cols, header_line, units = _generic_columns(path, columns, sep, decimal)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     text_time = bool(notes)      # a note from _generic_times: the times are text
-    for col in sorted(temp_cols):
+    for col in sorted(_temperature_columns(columns)):
         cols[col], held = _held_readings(cols, col, path)
         notes += held
     given, taken = _with_file_units(
         path, given, _file_units(columns, units, text_time), current_scale)
-    time_unit, current_unit = given["time"], given["current"]
-    voltage_unit = given["voltage"]
-    if current_unit is not None:
-        current_scale = CURRENT_UNITS[current_unit]
-    if time_unit is not None and text_time:
-        raise DataError(f"{path}: time unit {time_unit!r} for the column '{columns['time']}', "
+    if given["current"] is not None:
+        current_scale = CURRENT_UNITS[given["current"]]
+    if given["time"] is not None and text_time:
+        raise DataError(f"{path}: time unit {given['time']!r} for the column '{columns['time']}', "
                         "whose times are text that carries its own unit; expected no time unit")
-    t = t * TIME_UNITS[time_unit or "s"]
-    cur = cols[columns["current"]] * current_scale * (-1.0 if discharge_positive else 1.0)
+    t = t * TIME_UNITS[given["time"] or "s"]
+    sign = -1.0 if discharge_positive else 1.0
+    cur = cols[columns["current"]] * current_scale * sign
     note = "current negated (file: discharge > 0)" if discharge_positive else "none"
     temp, ambient = (cols[columns[k]] + TEMPERATURE_UNITS[given[k] or "degC"]
                      if k in columns else None for k in ("temperature", "ambient"))
-    volts = cols[columns["voltage"]] * VOLTAGE_UNITS[voltage_unit or "V"]
+    volts = cols[columns["voltage"]] * VOLTAGE_UNITS[given["voltage"] or "V"]
     # a text time column's messages count s from its first row
     file_times = t - t[0] if text_time else t
     net_ah = None
     if "charge" in columns:
         counter = cols[columns["charge"]] * CHARGE_UNITS[given["charge"] or "Ah"]
-        net_ah, more = _checked_counter(path, columns["charge"], file_times, cur,
-                                        counter * (-1.0 if discharge_positive else 1.0))
+        net_ah, more = _checked_counter(path, columns["charge"], file_times, cur, counter * sign)
         notes += more
     notes += _layout_notes(header_line, units, taken)
-    starts = _segment_starts_from_gaps(t, cur, net_ah)
-    if net_ah is None and len(starts) > 1:
-        notes.append(_no_counter_note(len(starts) - 1, list(cols)))
-    meta = _meta(path, "generic", note, t, notes=notes, segment_starts=starts,
-                 **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
-                                                  for k, v in columns.items()}))
+    meta = _generic_meta(path, columns, cols, (t, file_times, cur, net_ah), note, notes)
     if ambient is not None:
         meta.chamber_temp_c = chamber_set_point(ambient)
     return Record(t - t[0], cur, volts, meta, temperature_c=temp, ambient_c=ambient,
                   charge_ah=net_ah)
+
+
+def _temperature_columns(columns: Mapping[str, str]) -> set[str]:
+    """The file's column names mapped to the cell's and the chamber's temperature."""
+    return {columns[k] for k in ("temperature", "ambient") if k in columns}
+
+
+def _generic_columns(path: Path, columns: Mapping[str, str], sep: str, decimal: str
+                     ) -> tuple[CsvColumns, int, UnitsRow | None]:
+    """read_generic's columns as read (file units, the time column and the temperature columns
+    kept as text where they are), the line that names them and the units row under it (None
+    where there is none); a DataError names a mapped column that the file lacks."""
+    numeric = set(columns.values()) - {columns["time"]}
+    _check_marks(path, sep, decimal)
+    lines = read_text(path).splitlines()
+    header_line = _line_naming(lines, set(columns.values()), sep)
+    units = _units_row(lines, header_line, numeric, sep, decimal)
+    temp_cols = _temperature_columns(columns)
+    cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
+                             keep_text={columns["time"], *temp_cols},
+                             header_line=header_line, lines=lines, units_row=units is not None,
+                             blank_ok=temp_cols)
+    _require(path, cols, tuple(columns.values()), sep)
+    return cols, header_line, units
+
+
+def _generic_meta(path: Path, columns: Mapping[str, str], cols: CsvColumns,
+                  series: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None],
+                  note: str, notes: list[str]) -> RecordMeta:
+    """read_generic's RecordMeta: series are the times (s, as the record keeps them before its
+    start is taken off), the times as the file's messages count them (s), the current (A) and
+    the net charge counter (Ah, None without one), from which the segments start at gaps in
+    time (with a note where no counter tells what a gap lost)."""
+    t, file_times, cur, net_ah = series
+    starts = _segment_starts_from_gaps(t, cur, net_ah)
+    if net_ah is None and len(starts) > 1:
+        notes.append(_no_counter_note(len(starts) - 1, list(cols)))
+    return _meta(path, "generic", note, t, notes=notes, segment_starts=starts,
+                 **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
+                                                  for k, v in columns.items()}))
 
 
 def _no_counter_note(gaps: int, names: list[str]) -> str:
