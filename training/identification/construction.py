@@ -251,10 +251,7 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
               ) -> TrainResult:
     """Identify an LMN from model-rate segments (see the module docstring)."""
     t_start = time.perf_counter()
-    cfg = resolve_partition(cfg, segs, progress)
-    cfg = resolve_fast_depletion(cfg, segs, progress)
-    cfg = resolve_activation_t0(cfg, segs, progress)
-    cfg = resolve_core_rise(cfg, segs, progress)
+    cfg = _resolved_settings(cfg, segs, progress)
     d = len(cfg.partition)
     n_temp = temperature_degree(cfg, segs)
     base = skeleton(cfg, capacity_ah, np.array([0.0, 1.0]), np.array([0.0, 0.0]), None,
@@ -267,43 +264,21 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     progress(f"  hysteresis: {'off' if gamma is None else f'γ = {gamma:g}'}; OCV pre-fit RMSE "
              f"{1e3 * ocv.rmse_v:.2f} mV")
     base = skeleton(cfg, capacity_ah, ocv.knots, ocv.ocv_v, gamma, center, scale, n_temp)
-    hold_depletion_below_the_data(base, socs, progress)
-    base.arrhenius_k = e_k
-    base.hysteresis_terms = hysteresis_terms(cfg, base, progress)
-    base.theta = np.zeros((len(base.roots), len(base.columns())))   # the columns it implies
-    base.tau_activation_k = choose_time_constant_scaling(cfg, segs, progress)
+    _complete_base(base, cfg, segs, socs, e_k, progress)
     if n_temp:
         progress(f"  temperature terms of degree {n_temp} (training temperatures "
                  + ", ".join(f"{t:.0f}" for t in temperature_levels(segs)) + " °C)")
     cfg, fixed_axes, boundaries = _temperature_structure(cfg, segs, base, n_temp, progress)
     segs = with_soc_reference_weights(segs, socs, base.ocv_soc, base.ocv_v, cfg)
-    ladder = local_ladder(cfg, base, segs, progress)
-    e_scores: dict[str, float] = {}
-    if (n_temp and cfg.temperature_scaling == "auto" and e_k is not None
-            and not cells_warm_up(segs)):
-        e_k, e_scores, design = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg,
-                                                                        progress, ladder)
-        base.arrhenius_k = e_k
-    else:
-        design = build_design(base, segs, masks, ladder)
-    tree = root_tree(base, design, cfg)
-    if boundaries:
-        tree = temperature_region_tree(tree, base, design, cfg, boundaries)
+    design, e_scores = _design_choosing_arrhenius(base, segs, masks, cfg, n_temp, progress)
     stop_stage = "validation" if cfg.stop == "validation" and cfg.validation != "none" else "aicc"
-    grower = Grower(base, segs, design, cfg, fixed_axes, progress, t_start)
-    progress("  growing the tree (RMSE weighted as the fit weights the samples: one-step and "
-             "free run on the fit samples, free run on the validation samples)")
-    if (boundaries and cfg.region_growth == "separate" and stop_stage == "validation"
-            and cfg.validation == "block"):
-        tree = grow_regions_separately(grower, tree)
-    else:
-        tree = grower.grow(tree, stop_stage)
+    tree, grower = _grown_tree(base, segs, design, cfg, stop_stage, (fixed_axes, boundaries),
+                               progress, t_start)
     key = ("aicc" if stop_stage != "validation" else "validation_level_score_mv"
            if "validation_level_score_mv" in grower.curve[-1] else "validation_freerun_rmse_mv")
-    curve = grower.curve
     model = tree.apply(base)
     progress(f"  chosen M={model.n_local_models} by {STOP_NAMES[key]}")
-    info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": e_k,
+    info = {"stop": key, "hysteresis_gamma": gamma, "arrhenius_k": base.arrhenius_k,
             "time_constant_activation_k": base.tau_activation_k,
             "arrhenius_root_freerun_rmse_mv": e_scores,
             "temperature_terms": n_temp,
@@ -313,7 +288,67 @@ def train_lmn(segs: list[Segment], cfg: TrainConfig, capacity_ah: float,
     info.update(_final_figures(model, segs, design, cfg.oe_refinement,
                                grower.levels if key == "validation_level_score_mv" else None))
     info["seconds"] = time.perf_counter() - t_start
-    return TrainResult(model, curve, model.n_local_models, info)
+    return TrainResult(model, grower.curve, model.n_local_models, info)
+
+
+def _resolved_settings(cfg: TrainConfig, segs: list[Segment], progress: Progress
+                       ) -> TrainConfig:
+    """cfg with its "auto" partition, fast depletion, activation T0 and core rise resolved for
+    these segments (each says what it chose through progress)."""
+    cfg = resolve_partition(cfg, segs, progress)
+    cfg = resolve_fast_depletion(cfg, segs, progress)
+    cfg = resolve_activation_t0(cfg, segs, progress)
+    return resolve_core_rise(cfg, segs, progress)
+
+
+def _complete_base(base: LmnModel, cfg: TrainConfig, segs: list[Segment],
+                   socs: list[np.ndarray], e_k: float | None, progress: Progress) -> None:
+    """Fill in base (the pre-fit's OCV and hysteresis already in it) before the growth: the
+    depletion factor held below the data, the pre-fit's Arrhenius E (K), the hysteresis
+    column's temperature terms, zero coefficients in the columns these imply, and the time
+    constants' activation (K)."""
+    hold_depletion_below_the_data(base, socs, progress)
+    base.arrhenius_k = e_k
+    base.hysteresis_terms = hysteresis_terms(cfg, base, progress)
+    base.theta = np.zeros((len(base.roots), len(base.columns())))   # the columns it implies
+    base.tau_activation_k = choose_time_constant_scaling(cfg, segs, progress)
+
+
+def _design_choosing_arrhenius(base: LmnModel, segs: list[Segment], masks: list[np.ndarray],
+                               cfg: TrainConfig, n_temp: int, progress: Progress
+                               ) -> tuple[Design, dict[str, float]]:
+    """The growth's design matrices, and the free-run RMSE (mV) of each Arrhenius E tried by
+    name (empty where none is tried). E is chosen here, and set in base, where temperature
+    terms carry the temperature, E is "auto" and the pre-fit took one, and the cells do not
+    warm up inside the records (their warm-up pins E down in the pre-fit otherwise)."""
+    ladder = local_ladder(cfg, base, segs, progress)
+    if (n_temp and cfg.temperature_scaling == "auto" and base.arrhenius_k is not None
+            and not cells_warm_up(segs)):
+        e_k, e_scores, design = choose_arrhenius_with_temperature_terms(base, segs, masks, cfg,
+                                                                        progress, ladder)
+        base.arrhenius_k = e_k
+        return design, e_scores
+    return build_design(base, segs, masks, ladder), {}
+
+
+def _grown_tree(base: LmnModel, segs: list[Segment], design: Design, cfg: TrainConfig,
+                stop_stage: str, temperature: tuple[frozenset, list], progress: Progress,
+                t_start: float) -> tuple[Tree, Grower]:
+    """The tree grown from its root (with the temperature regions' fixed splits where
+    _temperature_structure gave boundaries) up to the stage that stop_stage ("validation" or
+    "aicc") picks, and the Grower with the curve. temperature: the axes no split may use and
+    the regions' boundaries; t_start: perf_counter at the training's start, for progress."""
+    fixed_axes, boundaries = temperature
+    tree = root_tree(base, design, cfg)
+    if boundaries:
+        tree = temperature_region_tree(tree, base, design, cfg, boundaries)
+    grower = Grower(base, segs, design, cfg, fixed_axes, progress, t_start)
+    progress("  growing the tree (RMSE weighted as the fit weights the samples: one-step and "
+             "free run on the fit samples, free run on the validation samples)")
+    if (boundaries and cfg.region_growth == "separate" and stop_stage == "validation"
+            and cfg.validation == "block"):
+        return grow_regions_separately(grower, tree), grower
+    return grower.grow(tree, stop_stage), grower
 
 
 def _temperature_structure(cfg: TrainConfig, segs: list[Segment], base: LmnModel, n_temp: int,
