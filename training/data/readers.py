@@ -797,7 +797,7 @@ def _generic_meta(path: Path, columns: Mapping[str, str], cols: CsvColumns,
     t, file_times, cur, net_ah = series
     starts = _segment_starts_from_gaps(t, cur, net_ah)
     if net_ah is None and len(starts) > 1:
-        notes.append(_no_counter_note(len(starts) - 1, list(cols)))
+        notes = [*notes, _no_counter_note(len(starts) - 1, list(cols))]
     return _meta(path, "generic", note, t, notes=notes, segment_starts=starts,
                  **_csv_meta(cols, file_times, **{f"{k}{UNIT_SUFFIX[k]}": v
                                                   for k, v in columns.items()}))
