@@ -388,31 +388,13 @@ def temperature_description(model: LmnModel) -> str:
 
 
 def model_description(model: LmnModel, guid: str, version: str) -> str:
+    """The native FMU's modelDescription.xml (FMI 2.0 co-simulation) for model, with this GUID
+    and model version: VARIABLES as ScalarVariables (the capacity's start and the temperature
+    input's description from the model), units, log categories, the model's sample time as
+    the default step, and the outputs' dependencies."""
     from lmncell import __version__
 
-    rows = []
-    for name, vr, caus, var, typ, unit, start, desc in VARIABLES:
-        if name == "capacity":
-            start = repr(float(model.capacity_ah))
-        if name == "temperature":
-            desc = temperature_description(model)
-        attrs = (f'name="{name}" valueReference="{vr}" description="{html.escape(desc)}" '
-                 f'causality="{caus}" variability="{var}"')
-        if caus == "output":
-            attrs += ' initial="calculated"'
-        inner = f"<{typ}"
-        if unit:
-            inner += f' unit="{unit}"'
-        if name in INPUT_BOUNDS:
-            inner += ' min="{!r}" max="{!r}"'.format(*INPUT_BOUNDS[name])
-        if start is not None:
-            inner += f' start="{start}"'
-        rows.append(f"    <ScalarVariable {attrs}>\n      {inner}/>\n    </ScalarVariable>")
-    names = [v[0] for v in VARIABLES]
-    outputs = [k + 1 for k, v in enumerate(VARIABLES) if v[2] == "output"]
-    unknowns = "\n".join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)
-    initial = "\n".join(f'      <Unknown index="{i}" dependencies="'
-                         f'{dependency_indices(names[i - 1], names)}"/>' for i in outputs)
+    unknowns, initial = _model_structure()
     desc = html.escape(model.extra.get("description", "LMNCell model"))
     return f"""<?xml version="1.0" encoding="UTF-8"?>
 <fmiModelDescription fmiVersion="2.0" modelName="LMNCell" guid="{guid}" description="{desc}"
@@ -443,7 +425,7 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
   </LogCategories>
   <DefaultExperiment startTime="0.0" stopTime="3600.0" stepSize="{model.sample_time_s!r}"/>
   <ModelVariables>
-{chr(10).join(rows)}
+{_scalar_variables(model)}
   </ModelVariables>
   <ModelStructure>
     <Outputs>
@@ -455,6 +437,43 @@ def model_description(model: LmnModel, guid: str, version: str) -> str:
   </ModelStructure>
 </fmiModelDescription>
 """
+
+
+def _scalar_variables(model: LmnModel) -> str:
+    """The <ScalarVariable> elements of VARIABLES, in their order (their index is their place),
+    with the capacity's start value and the temperature input's description taken from
+    model, and the inputs' bounds (INPUT_BOUNDS)."""
+    rows = []
+    for name, vr, caus, var, typ, unit, start, desc in VARIABLES:
+        if name == "capacity":
+            start = repr(float(model.capacity_ah))
+        if name == "temperature":
+            desc = temperature_description(model)
+        attrs = (f'name="{name}" valueReference="{vr}" description="{html.escape(desc)}" '
+                 f'causality="{caus}" variability="{var}"')
+        if caus == "output":
+            attrs += ' initial="calculated"'
+        inner = f"<{typ}"
+        if unit:
+            inner += f' unit="{unit}"'
+        if name in INPUT_BOUNDS:
+            inner += ' min="{!r}" max="{!r}"'.format(*INPUT_BOUNDS[name])
+        if start is not None:
+            inner += f' start="{start}"'
+        rows.append(f"    <ScalarVariable {attrs}>\n      {inner}/>\n    </ScalarVariable>")
+    return "\n".join(rows)
+
+
+def _model_structure() -> tuple[str, str]:
+    """The <Unknown> elements of <Outputs> (no direct feedthrough: no dependencies) and of
+    <InitialUnknowns> (the variables that each output's initial value depends on:
+    INITIAL_DEPENDENCIES)."""
+    names = [v[0] for v in VARIABLES]
+    outputs = [k + 1 for k, v in enumerate(VARIABLES) if v[2] == "output"]
+    unknowns = "\n".join(f'      <Unknown index="{i}" dependencies=""/>' for i in outputs)
+    initial = "\n".join(f'      <Unknown index="{i}" dependencies="'
+                         f'{dependency_indices(names[i - 1], names)}"/>' for i in outputs)
+    return unknowns, initial
 
 
 # sources/buildDescription.xml: the build-description file is defined by FMI 3.0 (hence its
