@@ -387,13 +387,12 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     t0 = time.perf_counter()
     given = given_settings(config, partition=partition, **overrides)
     cfg = config_from_settings(given, str(config or "configuration"))
-    ts_from_records = not sample_time_given(given)
     check_given_capacity(capacity_ah)
     problem = output_file_problem(out)
     if problem:
         raise ConfigError(f"{out}: {problem}")
     records = read_training_records(paths, cfg, progress, read_options)
-    if ts_from_records:
+    if not sample_time_given(given):
         cfg = with_records_sample_time(cfg, records, progress)
     check_full_starts(records, soc0, cfg, progress)
     note = sampling_note(records, cfg.sample_time_s)
@@ -402,16 +401,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     cap, delay, segs, result = _identify(records, cfg, capacity_ah, soc0, progress)
     model = result.model
     model.current_delay_s = delay
-    model.limits = _limits(segs, model)
-    model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
-                  "voltage_max_v": model.limits["voltage_v"][1]}
-    sims = [simulate_segment(model, s).voltage_v for s in segs]
-    train_metrics = [{"segment": s.name, **record_metrics(s.voltage_v, v, s.soc_ref)}
-                     for s, v in zip(segs, sims, strict=True)]
-    model.thermal, thermal_info = fit_thermal(model, segs)
-    progress("thermal model: " + _thermal_text(model.thermal, thermal_info))
-    model.noise = _noise_doc(segs, sims, 1e-3 * pooled(train_metrics), result.info,
-                             cfg.sample_time_s)
+    train_metrics, thermal_info = _complete_model(model, records, segs, result.info, progress)
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
@@ -432,6 +422,25 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
              f"{_mv_or_none(summary['train_window_rmse_mv'])}{_ends_text(summary)}), LMN "
              f"training {result.info['seconds']:.1f} s, total {seconds:.1f} s")
     return model, summary
+
+
+def _complete_model(model: LmnModel, records: list[Record], segs: list[Segment], info: dict,
+                    progress: Progress) -> tuple[list[dict], dict]:
+    """Complete the identified model from its training segments: the ranges it was trained on
+    (limits), the cell's name and voltage range, the thermal model (fitted where the records
+    have a cell temperature beside a known ambient) and the noise document of the observers.
+    Returns each segment's free-run metrics and the thermal fit's information."""
+    model.limits = _limits(segs, model)
+    model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
+                  "voltage_max_v": model.limits["voltage_v"][1]}
+    sims = [simulate_segment(model, s).voltage_v for s in segs]
+    train_metrics = [{"segment": s.name, **record_metrics(s.voltage_v, v, s.soc_ref)}
+                     for s, v in zip(segs, sims, strict=True)]
+    model.thermal, thermal_info = fit_thermal(model, segs)
+    progress("thermal model: " + _thermal_text(model.thermal, thermal_info))
+    model.noise = _noise_doc(segs, sims, 1e-3 * pooled(train_metrics), info,
+                             model.sample_time_s)
+    return train_metrics, thermal_info
 
 
 def _identify(records: list[Record], cfg: TrainConfig, capacity_ah: float | None,
