@@ -24,9 +24,10 @@ from pathlib import Path
 
 from lmncell.cli import run_script
 from lmncell.data.records import DataError
-from lmncell.evaluation.evaluate import evaluate_model
+from lmncell.evaluation.evaluate import Trace, evaluate_model
 from lmncell.evaluation.metrics import pooled
 from lmncell.identification.train import train_files
+from lmncell.runtime.model import LmnModel
 
 
 def test_file(dyn: Path, temperature: str, script: str) -> Path:
@@ -38,14 +39,14 @@ def test_file(dyn: Path, temperature: str, script: str) -> Path:
     return found[0]
 
 
-def judged(model, path: Path, soc0: float) -> tuple[float, float, object]:
+def judged(model: LmnModel, path: Path, soc0: float) -> tuple[float, float, list[Trace]]:
     """Free-run RMSE (mV) over the 20–80 % window and the whole record, and the traces."""
     traces, rows = evaluate_model(model, [path], soc0=soc0)
     per = [r["lmn"] for r in rows]
     return pooled(per, "window_"), pooled(per), traces
 
 
-def plot_fold(held: str, traces: dict[str, list], out: Path) -> Path:
+def plot_fold(held: str, traces: dict[str, list[Trace]], out: Path) -> Path:
     from lmncell.report.plots import plt, save_figure
 
     fig, ax = plt.subplots(figsize=(9, 4.5))
@@ -86,7 +87,7 @@ def main() -> None:
         charges = [test_file(a.dyn_dir, t, "s3") for t in others]
         records = {"discharge": test_file(a.dyn_dir, held, "s1"),
                    "charge": test_file(a.dyn_dir, held, "s3")}
-        traces = {}
+        traces: dict[str, list[Trace]] = {}
         for name, files, soc0 in (
                 ("s1 only", discharges, [1.0] * len(discharges)),
                 ("s1 + s3", discharges + charges, [1.0] * len(discharges) + [0.0] * len(charges))):

@@ -46,7 +46,12 @@ import tempfile
 from pathlib import Path
 
 from lmncell.api import build_fmu
-from lmncell.cli import THROUGH_PAUSES_HELP, number_argument, run_script, soc_list_argument
+from lmncell.cli import (
+    THROUGH_PAUSES_HELP,
+    capacity_or_auto_argument,
+    run_script,
+    soc_list_argument,
+)
 from lmncell.config import parse_setting
 from lmncell.evaluation.evaluate import (
     evaluate_records,
@@ -64,18 +69,39 @@ from lmncell.runtime.model import LmnModel
 
 MODELS = ("lmn", "fmu", "fmu_samples", "arx", "ecm2rc", "ecm2rc_hyst")
 
-
-_capacity_ah = number_argument(float, lambda v: v > 0, "Ah > 0 or 'auto'")
-
-
-def capacity_argument(text: str) -> float | None:
-    """The capacity argument: Ah > 0, or 'auto' (None: estimated by each fold's training)."""
-    return None if text == "auto" else _capacity_ah(text)
+# per mode ("cell", "ambient"), per model: (20–80 % SoC, whole record) RMSE, mV
+Scores = dict[str, dict[str, tuple[float, float]]]
+Fold = tuple[str, Scores]          # a held-out record's name and scores
 
 
 def main() -> None:
+    a = _arguments()
+    settings = dict(parse_setting(s) for s in a.set)
+    if a.ocv_tests:
+        settings["ocv_tests"] = a.ocv_tests
+    tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
+
+    def train(records: list[str], socs: list[float | None]) -> tuple[LmnModel, Path | None]:
+        model, _ = train_files(records, Path(tmp) / "model.json", capacity_ah=a.capacity_ah,
+                               soc0=socs, baselines=not a.no_baselines,
+                               progress=lambda _m: None, **settings)
+        return model, (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
+                                 native=a.fmu == "native") if a.fmu else None)
+
+    folds = [(Path(held).name, _scored_fold(a, model, fmu, held, held_soc0))
+             for held, held_soc0, (model, fmu) in trained_per_fold(
+                 leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train)]
+    print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(
+        f"{m} {sum(w for w, _ in v) / len(v):.2f} / {sum(x for _, x in v) / len(v):.2f}"
+        for m, v in _per_model(folds).items()))
+    if a.plot:
+        print(f"figure: {folds_figure(folds, a.plot, _caption(a, len(folds)))}")
+
+
+def _arguments() -> argparse.Namespace:
+    """The command line, checked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=capacity_argument,
+    ap.add_argument("capacity_ah", type=capacity_or_auto_argument,
                     help="Ah, or 'auto': each fold's training estimates it (with --ocv-tests "
                          "by the free-run error, lmncell.identification.train.fit_capacity)")
     ap.add_argument("records", nargs="+")
@@ -104,73 +130,83 @@ def main() -> None:
     a = ap.parse_args()
     if a.at_model_steps and not a.fmu:
         ap.error("--at-model-steps needs --fmu")
-    settings = dict(parse_setting(s) for s in a.set)
-    if a.ocv_tests:
-        settings["ocv_tests"] = a.ocv_tests
-    means: dict[str, list[tuple[float, float]]] = {}
-    folds: list[tuple[str, dict[str, dict[str, tuple[float, float]]]]] = []
     if a.together and not a.hold_out:
         ap.error("--together needs --hold-out PATTERN (the records held out together)")
-    tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
+    return a
 
-    def train(records: list[str], socs: list[float | None]) -> tuple[LmnModel, Path | None]:
-        model, _ = train_files(records, Path(tmp) / "model.json", capacity_ah=a.capacity_ah,
-                               soc0=socs, baselines=not a.no_baselines,
-                               progress=lambda _m: None, **settings)
-        return model, (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
-                                 native=a.fmu == "native") if a.fmu else None)
 
-    for held, held_soc0, (model, fmu) in trained_per_fold(
-            leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train):
-        folds.append((Path(held).name, {}))
-        held_records = [(rec, start) for _, rec, start in read_records(
-            [held], held_soc0, through_hidden_pauses=a.through_hidden_pauses)]
-        for ambient in (False, True):
-            _, rows = evaluate_records(model, held_records, ambient=ambient)
-            if ambient and "cell_temperature_rmse_k" not in rows[0]:
-                continue                  # no measured cell temperature: one run says it all
-            if fmu is not None:
-                _, fmu_rows = evaluate_fmu(fmu, [held], held_soc0, ambient,
-                                           through_hidden_pauses=a.through_hidden_pauses,
-                                           at_model_steps=a.at_model_steps,
-                                           progress=lambda _m: None)
-                for row, fmu_row in zip(rows, fmu_rows, strict=True):
-                    row["fmu"] = fmu_row["fmu"]
-                    if "fmu_samples" in fmu_row:      # a record sampled faster than Ts
-                        row["fmu_samples"] = fmu_row["fmu_samples"]
-            names = [m for m in MODELS if m in rows[0]]
-            cells = []
-            mode = "ambient" if ambient else "cell"
-            for m in names:
-                per_segment = [r[m] for r in rows]
-                w, whole = pooled(per_segment, "window_"), pooled(per_segment)
-                means.setdefault(f"{m} ({mode} T)", []).append((w, whole))
-                folds[-1][1].setdefault(mode, {})[m] = (w, whole)
-                cells.append(f"{m} {w:6.2f} / {whole:6.1f}")
-            extra = ""
-            low = pooled([r["lmn"] for r in rows], "low_soc_")    # NaN: no sample below
-            if math.isfinite(low):
-                extra += f"  | lmn below {100 * ENDS[0]:.0f} % SoC {low:6.1f}"
-            if "cell_temperature_rmse_k" in rows[0]:
-                extra += f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
-            if "soc_drift_pct" in rows[0]:
-                extra += f"  SoC drift {rows[0]['soc_drift_pct']:+.2f} %"
-            print(f"{Path(held).name[:40]:40s} {mode:7s} M={model.n_local_models:2d} "
-                  f"E={model.arrhenius_k}  " + "  ".join(cells) + extra, flush=True)
-    print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(
-        f"{m} {sum(w for w, _ in v) / len(v):.2f} / {sum(x for _, x in v) / len(v):.2f}"
-        for m, v in means.items()))
-    if a.plot:
-        ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
-        title, words = fold_words(a.hold_out, a.together, len(a.records))
-        caption = (f"{title}, {len(folds)} held-out record(s): {words}, with the same data "
-                   "and settings; free-run RMSE of the held-out record, "
-                   "driven by the measured cell temperature (cell) and, where the record has "
-                   "one beside it, by the chamber temperature only (ambient)"
-                   + through_pauses_clause(a.through_hidden_pauses) + fmu_clause(a)
-                   + ". Settings: "
-                   f"{', '.join(a.set) or 'defaults'}; OCV: {ocv}.")
-        print(f"figure: {folds_figure(folds, a.plot, caption)}")
+def _scored_fold(a: argparse.Namespace, model: LmnModel, fmu: Path | None, held: str,
+                 held_soc0: float | None) -> Scores:
+    """The held-out record's (20–80 %, whole record) RMSE in mV per mode and model, each
+    mode's line printed: driven by the measured cell temperature ("cell") and, where the record
+    has one, by the chamber temperature only ("ambient")."""
+    held_records = [(rec, start) for _, rec, start in read_records(
+        [held], held_soc0, through_hidden_pauses=a.through_hidden_pauses)]
+    scores: Scores = {}
+    for ambient in (False, True):
+        _, rows = evaluate_records(model, held_records, ambient=ambient)
+        if ambient and "cell_temperature_rmse_k" not in rows[0]:
+            continue                  # no measured cell temperature: one run says it all
+        if fmu is not None:
+            _add_fmu_rows(a, fmu, held, held_soc0, ambient, rows)
+        mode = "ambient" if ambient else "cell"
+        scores[mode] = {m: (pooled([r[m] for r in rows], "window_"), pooled([r[m] for r in rows]))
+                        for m in MODELS if m in rows[0]}
+        print(f"{Path(held).name[:40]:40s} {mode:7s} M={model.n_local_models:2d} "
+              f"E={model.arrhenius_k}  " + "  ".join(
+                  f"{m} {w:6.2f} / {whole:6.1f}" for m, (w, whole) in scores[mode].items())
+              + _extra_words(rows), flush=True)
+    return scores
+
+
+def _add_fmu_rows(a: argparse.Namespace, fmu: Path, held: str, held_soc0: float | None,
+                  ambient: bool, rows: list[dict]) -> None:
+    """Adds the FMU's figures ("fmu", and "fmu_samples" for a record sampled faster than Ts)
+    to the pipeline's rows of the held-out record, one per segment."""
+    _, fmu_rows = evaluate_fmu(fmu, [held], held_soc0, ambient,
+                               through_hidden_pauses=a.through_hidden_pauses,
+                               at_model_steps=a.at_model_steps, progress=lambda _m: None)
+    for row, fmu_row in zip(rows, fmu_rows, strict=True):
+        row["fmu"] = fmu_row["fmu"]
+        if "fmu_samples" in fmu_row:
+            row["fmu_samples"] = fmu_row["fmu_samples"]
+
+
+def _extra_words(rows: list[dict]) -> str:
+    """The end of a fold's line: the LMN's RMSE below 10 % SoC (where the record goes there),
+    the thermal model's cell temperature RMSE, the logged current's SoC drift."""
+    extra = ""
+    low = pooled([r["lmn"] for r in rows], "low_soc_")    # NaN: no sample below
+    if math.isfinite(low):
+        extra += f"  | lmn below {100 * ENDS[0]:.0f} % SoC {low:6.1f}"
+    if "cell_temperature_rmse_k" in rows[0]:
+        extra += f"  T RMSE {rows[0]['cell_temperature_rmse_k']:.2f} K"
+    if "soc_drift_pct" in rows[0]:
+        extra += f"  SoC drift {rows[0]['soc_drift_pct']:+.2f} %"
+    return extra
+
+
+def _per_model(folds: list[Fold]) -> dict[str, list[tuple[float, float]]]:
+    """Each "model (mode T)"'s (20–80 %, whole record) RMSE over the folds, in fold order."""
+    out: dict[str, list[tuple[float, float]]] = {}
+    for _, scores in folds:
+        for mode, per_model in scores.items():
+            for m, pair in per_model.items():
+                out.setdefault(f"{m} ({mode} T)", []).append(pair)
+    return out
+
+
+def _caption(a: argparse.Namespace, n_folds: int) -> str:
+    """The figure's caption: the split, how each record was driven, the settings."""
+    ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
+    title, words = fold_words(a.hold_out, a.together, len(a.records))
+    return (f"{title}, {n_folds} held-out record(s): {words}, with the same data "
+            "and settings; free-run RMSE of the held-out record, "
+            "driven by the measured cell temperature (cell) and, where the record has "
+            "one beside it, by the chamber temperature only (ambient)"
+            + through_pauses_clause(a.through_hidden_pauses) + fmu_clause(a)
+            + ". Settings: "
+            f"{', '.join(a.set) or 'defaults'}; OCV: {ocv}.")
 
 
 def fmu_clause(a: argparse.Namespace) -> str:

@@ -30,7 +30,13 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
-from lmncell.cli import THROUGH_PAUSES_HELP, run_script, soc_list_argument
+from lmncell.cli import (
+    THROUGH_PAUSES_HELP,
+    capacity_argument,
+    run_script,
+    soc_argument,
+    soc_list_argument,
+)
 from lmncell.config import parse_setting
 from lmncell.data.dataset import record_to_segments, start_soc
 from lmncell.data.readers import read_record
@@ -53,16 +59,49 @@ from lmncell.runtime.model import LmnModel, load_model
 KINDS = ("ekf", "fuzzy", "imm")
 
 
+# per observer: (SoC RMSE after the first 10 minutes %, share outside ±3σ %, median 3σ %)
+Scores = dict[str, tuple[float, float, float]]
+
+
 def main() -> None:
+    a = _arguments()
+    settings = dict(parse_setting(s) for s in a.set)
+    if a.ocv_tests:
+        settings["ocv_tests"] = a.ocv_tests
+    folds: list[tuple[str, Scores]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        def train(records: list[str], socs: list[float | None]) -> LmnModel:
+            out = Path(tmp) / "model.json"
+            train_files(records, out, a.capacity_ah, socs, progress=lambda _m: None,
+                        **settings)
+            return load_model(out)
+
+        for held, held_soc0, model in trained_per_fold(
+                leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train):
+            folds.append((Path(held).name, _observed_fold(a, model, held, held_soc0)))
+    for kind in KINDS:
+        rows = [scores[kind] for _, scores in folds]
+        if rows:
+            rmse, out3, width = np.mean(rows, axis=0)
+            worst = max(r[1] for r in rows)
+            print(f"mean over the folds, {kind:5s}: SoC RMSE {rmse:.2f} %, outside ±3σ "
+                  f"{out3:.1f} % (worst fold {worst:.1f} %), median 3σ {width:.1f} %")
+    if a.plot:
+        bars = [(name, {k: (r[0], r[1]) for k, r in scores.items()}) for name, scores in folds]
+        print(f"figure: {observer_folds_figure(bars, a.plot, _caption(a, len(folds)))}")
+
+
+def _arguments() -> argparse.Namespace:
+    """The command line, checked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=float)
+    ap.add_argument("capacity_ah", type=capacity_argument)
     ap.add_argument("records", nargs="+")
     ap.add_argument("--ocv-tests", nargs="*", default=[])
     ap.add_argument("--hold-out", default="", metavar="PATTERN")
     ap.add_argument("--together", action="store_true",
                     help="hold out the records of each --hold-out pattern at once")
-    ap.add_argument("--start-soc", type=float, default=0.6)
-    ap.add_argument("--soc0-est", type=float, default=0.3)
+    ap.add_argument("--start-soc", type=soc_argument, default=0.6)
+    ap.add_argument("--soc0-est", type=soc_argument, default=0.3)
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
                     help="start SoC: one for every record or one per record, in order")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
@@ -73,55 +112,43 @@ def main() -> None:
     a = ap.parse_args()
     if a.together and not a.hold_out:
         ap.error("--together needs --hold-out PATTERN (the records held out together)")
-    settings = dict(parse_setting(s) for s in a.set)
-    if a.ocv_tests:
-        settings["ocv_tests"] = a.ocv_tests
-    results: dict[str, list[tuple[float, float]]] = {k: [] for k in KINDS}
-    folds: list[tuple[str, dict[str, tuple[float, float]]]] = []
-    with tempfile.TemporaryDirectory() as tmp:
-        def train(records: list[str], socs: list[float | None]) -> LmnModel:
-            out = Path(tmp) / "model.json"
-            train_files(records, out, a.capacity_ah, socs, progress=lambda _m: None,
-                        **settings)
-            return load_model(out)
+    return a
 
-        for held, held_soc0, model in trained_per_fold(
-                leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train):
-            rec = read_record(held)
-            if a.through_hidden_pauses:
-                rec = rec.through_hidden_pauses()
-            seg = observer_segment(record_to_segments(rec, model.sample_time_s,
-                                                      start_soc(rec, held_soc0), a.capacity_ah,
-                                                      current_delay_s=model.current_delay_s),
-                                   a.start_soc)
-            k0 = start_index(seg, a.start_soc)
-            folds.append((Path(held).name, {}))
-            for kind in KINDS:
-                m = soc_metrics(run_observer(model, seg, kind, a.soc0_est, k0))
-                results[kind].append((m["rmse_pct"], 100 * m["outside_3sigma_share"],
-                                      m["median_3sigma_pct"]))
-                folds[-1][1][kind] = (m["rmse_pct"], 100 * m["outside_3sigma_share"])
-                print(f"{Path(held).name[:40]:40s} {kind:5s} SoC RMSE {m['rmse_pct']:5.2f} %"
-                      f"  outside ±3σ {100 * m['outside_3sigma_share']:5.1f} %  median 3σ "
-                      f"{m['median_3sigma_pct']:5.1f} %", flush=True)
-    for kind, rows in results.items():
-        if rows:
-            rmse, out3, width = np.mean(rows, axis=0)
-            worst = max(r[1] for r in rows)
-            print(f"mean over the folds, {kind:5s}: SoC RMSE {rmse:.2f} %, outside ±3σ "
-                  f"{out3:.1f} % (worst fold {worst:.1f} %), median 3σ {width:.1f} %")
-    if a.plot:
-        ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
-        title, words = fold_words(a.hold_out, a.together, len(a.records), "model")
-        caption = (f"Observer {title.lower()}, {len(folds)} held-out record(s): {words}; "
-                   f"each observer started where the reference SoC falls to {a.start_soc:g} "
-                   f"(under load) with the estimate {a.soc0_est:g}; SoC RMSE after the first "
-                   "10 minutes, and the share of all its samples whose reference SoC lies "
-                   "outside the observer's ±3σ band"
-                   + through_pauses_clause(a.through_hidden_pauses, "observer")
-                   + f". Settings: {', '.join(a.set) or 'defaults'};"
-                   f" OCV: {ocv}.")
-        print(f"figure: {observer_folds_figure(folds, a.plot, caption)}")
+
+def _observed_fold(a: argparse.Namespace, model: LmnModel, held: str,
+                   held_soc0: float | None) -> Scores:
+    """Each observer on the held-out record from --start-soc with the estimate --soc0-est, its
+    line printed."""
+    rec = read_record(held)
+    if a.through_hidden_pauses:
+        rec = rec.through_hidden_pauses()
+    seg = observer_segment(record_to_segments(rec, model.sample_time_s,
+                                              start_soc(rec, held_soc0), a.capacity_ah,
+                                              current_delay_s=model.current_delay_s),
+                           a.start_soc)
+    k0 = start_index(seg, a.start_soc)
+    scores: Scores = {}
+    for kind in KINDS:
+        m = soc_metrics(run_observer(model, seg, kind, a.soc0_est, k0))
+        scores[kind] = (m["rmse_pct"], 100 * m["outside_3sigma_share"], m["median_3sigma_pct"])
+        print(f"{Path(held).name[:40]:40s} {kind:5s} SoC RMSE {m['rmse_pct']:5.2f} %"
+              f"  outside ±3σ {100 * m['outside_3sigma_share']:5.1f} %  median 3σ "
+              f"{m['median_3sigma_pct']:5.1f} %", flush=True)
+    return scores
+
+
+def _caption(a: argparse.Namespace, n_folds: int) -> str:
+    """The figure's caption: the split, where and how each observer started, the settings."""
+    ocv = ", ".join(Path(f).name for f in a.ocv_tests) or "estimated from the records"
+    title, words = fold_words(a.hold_out, a.together, len(a.records), "model")
+    return (f"Observer {title.lower()}, {n_folds} held-out record(s): {words}; "
+            f"each observer started where the reference SoC falls to {a.start_soc:g} "
+            f"(under load) with the estimate {a.soc0_est:g}; SoC RMSE after the first "
+            "10 minutes, and the share of all its samples whose reference SoC lies "
+            "outside the observer's ±3σ band"
+            + through_pauses_clause(a.through_hidden_pauses, "observer")
+            + f". Settings: {', '.join(a.set) or 'defaults'};"
+            f" OCV: {ocv}.")
 
 
 if __name__ == "__main__":

@@ -372,3 +372,23 @@ def test_every_example_without_its_arguments_prints_its_usage(script: Path) -> N
                          timeout=120)
     assert out.returncode == 2, out.stderr
     assert out.stderr.startswith("usage: ") and "Traceback" not in out.stderr
+
+
+@pytest.mark.parametrize(("script", "args", "expected"), [
+    ("leave_one_out.py", ["x", "a.csv"], "'x': expected a cell capacity in Ah within "
+     "0.0001…100000 or 'auto'"),
+    ("observer_leave_one_out.py", ["auto", "a.csv"], "'auto': expected a cell capacity"),
+    ("observer_leave_one_out.py", ["2.85", "a.csv", "--soc0-est", "nan"],
+     "argument --soc0-est: 'nan': expected a SoC fraction within 0…1"),
+    ("observer_leave_one_out.py", ["2.85", "a.csv", "--start-soc", "1.5"],
+     "argument --start-soc: '1.5': expected a SoC fraction within 0…1"),
+])
+def test_the_leave_one_out_examples_refuse_bad_numbers_before_training(
+        script: str, args: list[str], expected: str) -> None:
+    """Their capacity and SoCs are checked as the commands check them, before any file is read
+    (a NaN start estimate used to run every fold and print NaN bands)."""
+    path = Path(__file__).resolve().parents[1] / "examples" / script
+    out = subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 2, out.stderr
+    assert expected in out.stderr and "Traceback" not in out.stderr

@@ -118,10 +118,12 @@ def output_folder_argument(text: str) -> str:
     return text
 
 
-_float01 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
-_positive = number_argument(float, lambda v: v > 0, "a number > 0")
-_capacity = number_argument(
+# argparse types the examples share with the commands
+soc_argument = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
+capacity_argument = number_argument(
     float, is_cell_capacity, "a cell capacity in Ah within {:g}…{:g}".format(*CAPACITY_RANGE_AH))
+
+_positive = number_argument(float, lambda v: v > 0, "a number > 0")
 _cell_voltage = number_argument(
     float, lambda v: VOLTAGE_RANGE_V[0] <= v <= VOLTAGE_RANGE_V[1],
     "a cell voltage in V within {:g}…{:g}".format(*VOLTAGE_RANGE_V))
@@ -135,10 +137,21 @@ _ambient = number_argument(
     "an ambient temperature in °C within {:g}…{:g} (not K)".format(*CELL_TEMPERATURE_RANGE_C))
 
 
+def capacity_or_auto_argument(text: str) -> float | None:
+    """capacity_argument, or 'auto' → None (the capacity estimated by the training)."""
+    if text == "auto":
+        return None
+    try:
+        return capacity_argument(text)
+    except argparse.ArgumentTypeError as exc:
+        raise argparse.ArgumentTypeError(f"{exc} or 'auto' (estimated by the training)"
+                                         ) from None
+
+
 def soc_list_argument(text: str) -> list[float]:
     """An argparse type: F or F,F,… → start SoCs within 0…1 (one for all files, or one per
     file in order)."""
-    return [_float01(part.strip()) for part in text.split(",")]
+    return [soc_argument(part.strip()) for part in text.split(",")]
 
 
 def _columns(text: str) -> dict[str, str]:
@@ -445,8 +458,8 @@ def _add_inspect_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("files", nargs="+", help="data files (CSV, .mat, BDF; .gz too)")
     s.add_argument("--plot", type=figure_file_argument, metavar="OUT.png",
                    help="one figure of all files")
-    s.add_argument("--capacity", type=_capacity, help="Ah, for C-rates and SoC (default: the "
-                   "discharged charge of a record that starts full)")
+    s.add_argument("--capacity", type=capacity_argument, help="Ah, for C-rates and SoC "
+                   "(default: the discharged charge of a record that starts full)")
     _add_reader_options(s)
     s.set_defaults(func=cmd_inspect)
 
@@ -457,10 +470,10 @@ def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("data", nargs="+", help="training data files")
     s.add_argument("--out", required=True, type=output_file_argument, metavar="MODEL.json",
                    help="model file to write")
-    s.add_argument("--capacity", type=_capacity, help="Ah from full to the cut-off at a slow "
-                   "rate (default: with --ocv-tests, of the largest discharge from full among the "
-                   "records and up to 15 %% more, the one whose model follows them best; else "
-                   "that largest discharge, a lower bound)")
+    s.add_argument("--capacity", type=capacity_argument, help="Ah from full to the cut-off at "
+                   "a slow rate (default: with --ocv-tests, of the largest discharge from full "
+                   "among the records and up to 15 %% more, the one whose model follows them "
+                   "best; else that largest discharge, a lower bound)")
     s.add_argument("--soc0", type=soc_list_argument, help="start SoC: one value for every "
                    "record, or a comma list with one per data file in order, e.g. 1,1,0 for "
                    "two records that start full and one that starts empty (default: 1.0 for "
@@ -512,9 +525,10 @@ def _add_evaluate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    "with a current delay sees what the current did within each step)")
     s.add_argument("--observer", choices=["ekf", "fuzzy", "imm"],
                    help="judge a SoC observer instead of the voltage")
-    s.add_argument("--soc0-est", type=_float01, help="the observer's start SoC guess")
-    s.add_argument("--start-soc", type=_float01, help="start the observer where the reference "
-                   "SoC first falls to this value (under load; default: the record's start)")
+    s.add_argument("--soc0-est", type=soc_argument, help="the observer's start SoC guess")
+    s.add_argument("--start-soc", type=soc_argument, help="start the observer where the "
+                   "reference SoC first falls to this value (under load; default: the record's "
+                   "start)")
     _add_reader_options(s)
     s.set_defaults(func=cmd_evaluate)
 
@@ -578,7 +592,7 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--vehicle", metavar="FILE.toml", help="vehicle and pack (default: the "
                    "built-in compact EV; not with --current)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")
-    s.add_argument("--soc0", type=_float01, default=0.9, help="start SoC")
+    s.add_argument("--soc0", type=soc_argument, default=0.9, help="start SoC")
     s.add_argument("--ambient", type=_ambient, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
@@ -636,7 +650,7 @@ def _add_design_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell design` subcommand."""
     s = sub.add_parser("design", help="optimal excitation programme for a target SoC profile",
                        **fmt)
-    s.add_argument("--capacity", type=_capacity, required=True, help="cell capacity, Ah")
+    s.add_argument("--capacity", type=capacity_argument, required=True, help="cell capacity, Ah")
     s.add_argument("--soc-profile", required=True, help="SoC points, e.g. 0.8,0.2,0.8 or 0.8:0.2")
     s.add_argument("--max-c-rate", type=_positive, default=20.0, help="current limit, C")
     s.add_argument("--max-current", type=_positive, default=100.0, help="cycler limit, A")
