@@ -22,7 +22,7 @@ import argparse
 import tempfile
 from pathlib import Path
 
-from lmncell.cli import run_script
+from lmncell.cli import capacity_argument, output_folder_argument, run_script
 from lmncell.data.records import DataError
 from lmncell.evaluation.evaluate import Trace, evaluate_model
 from lmncell.evaluation.metrics import pooled
@@ -69,15 +69,16 @@ def plot_fold(held: str, traces: dict[str, list[Trace]], out: Path) -> Path:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=float)
+    ap.add_argument("capacity_ah", type=capacity_argument)
     ap.add_argument("dyn_dir", type=Path)
     ap.add_argument("--temperatures", default="N15,N05,P05,P25,P45")
     ap.add_argument("--hold-out", default="P05,P25")
-    ap.add_argument("--plot", type=Path, metavar="DIR")
+    ap.add_argument("--plot", type=output_folder_argument, metavar="DIR")
     a = ap.parse_args()
     temps = a.temperatures.split(",")
-    if a.plot:
-        a.plot.mkdir(parents=True, exist_ok=True)
+    plot_dir = Path(a.plot) if a.plot else None
+    if plot_dir:
+        plot_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix="lmncell-charge-"))
     for held in a.hold_out.split(","):
         if held not in temps:
@@ -103,8 +104,8 @@ def main() -> None:
             print(f"held out {held}, trained on {name:7s} (M={model.n_local_models}, hysteresis "
                   f"{'off' if gamma is None else f'γ = {gamma:g}'}): " + "  ".join(cells),
                   flush=True)
-        if a.plot:
-            print(f"  wrote {plot_fold(held, traces, a.plot)}")
+        if plot_dir:
+            print(f"  wrote {plot_fold(held, traces, plot_dir)}")
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from lmncell.cli import number_argument, run_script
+from lmncell.cli import capacity_argument, number_argument, run_script
 from lmncell.data.readers import read_record
 from lmncell.data.records import DataError, Record
 from lmncell.data.soc import REST_CURRENT_A, coulomb_count, discharged_ah
@@ -103,7 +103,7 @@ def mean_ocv(ocv_tests: list[str], capacity_ah: float) -> tuple[np.ndarray, np.n
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=number_argument(float, lambda v: v > 0, "Ah > 0"))
+    ap.add_argument("capacity_ah", type=capacity_argument)
     ap.add_argument("s1_files", nargs="+", type=Path)
     ap.add_argument("--ocv-tests", nargs="*", default=[])
     ap.add_argument("--rest-s", type=number_argument(float, lambda v: v >= 0, "s ≥ 0"),

@@ -10,10 +10,8 @@ from __future__ import annotations
 
 import argparse
 
-from lmncell.cli import number_argument, run_script
+from lmncell.cli import run_script, soc_argument
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
-
-_soc0 = number_argument(float, lambda v: 0.0 <= v <= 1.0, "a SoC fraction within 0…1")
 
 
 def main() -> None:
@@ -21,7 +19,7 @@ def main() -> None:
     ap.add_argument("model", help="the model file (JSON) the FMU was built from")
     ap.add_argument("fmu", help="the LMNCell FMU")
     ap.add_argument("record", help="a cycler record (any format lmncell reads)")
-    ap.add_argument("soc0", nargs="?", type=_soc0,
+    ap.add_argument("soc0", nargs="?", type=soc_argument,
                     help="the record's start SoC (default: as lmncell evaluate finds it)")
     ap.add_argument("--ambient", action="store_true", help="drive both by the ambient "
                     "temperature only (the model's thermal model gives the cell temperature)")
