@@ -23,7 +23,7 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   ``[tau_fast_s, tau_slow_s]`` each giving v = LP_fast(i) − LP_slow(i) (zero DC gain, eq. 19),
   ``hysteresis_gamma`` (null, or γ > 0 of h(k) = e·h(k−1) + (1−e)·sgn(i),
   e = exp(−γ|i|Ts/(3600·Cn))), ``ocv_input``, ``soc_input`` (extra regressors), ``offset``
-  (constant 1),
+  (constant 1): true or false (absent: false, false, true),
   ``arrhenius_k`` (null, or E in K, 0…20000: the current and filter regressors are multiplied by
   g(T) = exp(E·(1/(T+273.15) − 1/(T_ref+273.15))), T_ref = ``reference_temperature_c``),
   ``time_constant_activation_k`` (version 5; null or absent: none, or Eτ in K: every filter
@@ -485,6 +485,15 @@ def _real(doc: dict, key: str, where: str, low: float, high: float, default: flo
     return float(val)
 
 
+def _flag(doc: dict, key: str, where: str, default: bool) -> bool:
+    """doc[key] (default where it is absent) as JSON true or false, else ModelFileError naming
+    the key and the value (the string "false" read as a flag would be true)."""
+    val = doc.get(key, default)
+    if not isinstance(val, bool):
+        raise ModelFileError(f"{where}: '{key}' is {val!r}, expected true or false")
+    return val
+
+
 def _ref(val, where: str) -> tuple[str, int]:
     if (not isinstance(val, list) or len(val) != 2 or val[0] not in ("node", "leaf")
             or not isinstance(val[1], int)):
@@ -646,8 +655,8 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
         current_terms=nb, filters=filters,
         hysteresis_gamma=gamma,
-        ocv_input=bool(reg.get("ocv_input", False)), soc_input=bool(reg.get("soc_input", False)),
-        offset=bool(reg.get("offset", True)), relative_ocv=output == "relative_ocv",
+        ocv_input=_flag(reg, "ocv_input", w, False), soc_input=_flag(reg, "soc_input", w, False),
+        offset=_flag(reg, "offset", w, True), relative_ocv=output == "relative_ocv",
         partition_variables=list(variables), partition_center=center, partition_scale=scale,
         roots=roots, node_weights=weights, node_children=children,
         theta=theta, efficiency_charge=efficiency[0], efficiency_discharge=efficiency[1],

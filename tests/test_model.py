@@ -304,6 +304,11 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
      "'rest_current_a' is inf"),
     (lambda d: d.update(gating={"mode": "none", "initial_direction": "up"}),
      "'initial_direction' is 'up'"),
+    # flags read as bool() took the string "false" as true
+    (lambda d: d["regressors"].update(offset="false"),
+     "regressors: 'offset' is 'false', expected true or false"),
+    (lambda d: d["regressors"].update(ocv_input=1), "'ocv_input' is 1, expected true or false"),
+    (lambda d: d["regressors"].update(soc_input=None), "'soc_input' is None"),
     (lambda d: d.update(limits={"current_a": 5}), "limits.current_a is 5, expected \\[low, high"),
     (lambda d: d.update(limits={"soc": [1.0, 0.0]}), "limits.soc is \\[1.0, 0.0\\]"),
     (lambda d: d.update(noise={"residual_std_v": float("inf")}), "'residual_std_v' is inf"),
