@@ -14,7 +14,7 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   voltage lines up with such measurements when the current is given finer than Ts.
 - ``cell``: ``capacity_ah`` (1e-4 … 1e5), ``efficiency_charge``, ``efficiency_discharge``
   (coulombic, η(i), 0 < η ≤ 1, absent: 1), ``voltage_min_v`` < ``voltage_max_v`` (0 … 10 V),
-  ``name``.
+  ``name`` (a string; no control characters but tab and line breaks).
 - ``output``: ``"relative_ocv"`` (local models describe u − OCV(SoC)) or ``"absolute"`` (the
   paper's form: local models describe u itself, OCV carried by their offsets).
 - ``ocv``: ``soc`` (increasing, within −1 … 2) and ``voltage_v`` (0 … 10 V) knots, linear
@@ -89,7 +89,8 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   thermal.py, ``resistance_k_per_w`` R (K/W), ``time_constant_s`` τ (s), ``offset_k`` (rested
   cell above ambient, K). With it, the FMU's ``temperature`` input is the ambient temperature
   and the model computes the cell temperature (unless ``temperature_is_cell`` is set).
-- ``baselines`` (optional) and ``training`` (metadata: files with hashes, settings, metrics).
+- ``baselines`` (optional) and ``training`` (metadata: files with hashes, settings, metrics);
+  ``description`` (optional, a string as the cell's name: the FMU's description).
 """
 
 from __future__ import annotations
@@ -97,6 +98,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import shutil
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
@@ -632,6 +634,7 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     efficiency = [_real(cell, f"efficiency_{k}", f"{source}: cell", 0.0, 1.0, 1.0, low_open=True)
                   for k in ("charge", "discharge")]
     _check_cell_voltages(cell, f"{source}: cell")
+    _check_texts(doc, cell, source)
     output = _get(doc, "output", source, str)
     if output not in ("relative_ocv", "absolute"):
         raise ModelFileError(f"{source}: 'output' is {output!r}, expected 'relative_ocv' or "
@@ -730,6 +733,33 @@ def _check_cell_voltages(cell: dict, where: str) -> None:
     if len(given) == 2 and not given[0] < given[1]:
         raise ModelFileError(f"{where}: voltage_min_v {given[0]:g} V is not below voltage_max_v "
                              f"{given[1]:g} V")
+
+
+# characters that XML 1.0 does not allow, not even escaped (control characters, surrogates)
+_NOT_XML = re.compile("[^\t\n\r\x20-\ud7ff\ue000-\ufffd\U00010000-\U0010ffff]")
+
+
+def xml_text(text: str) -> str:
+    """text with each character that XML does not allow replaced by U+FFFD (for names taken
+    from file names, which may hold control characters or undecodable bytes)."""
+    return _NOT_XML.sub("\ufffd", text)
+
+
+def _check_texts(doc: dict, cell: dict, source: str) -> None:
+    """The cell's name and the model's description, where given, are strings of characters
+    that XML allows (the FMU builders write them into modelDescription.xml, the FMU's
+    documentation and its sources)."""
+    for where, holder, key in ((f"{source}: cell", cell, "name"), (source, doc, "description")):
+        if key not in holder:
+            continue
+        text = holder[key]
+        if not isinstance(text, str):
+            raise ModelFileError(f"{where}: '{key}' is {text!r:.60}, expected a string")
+        bad = _NOT_XML.search(text)
+        if bad:
+            raise ModelFileError(f"{where}: '{key}' holds the character {bad.group()!r} at "
+                                 f"position {bad.start()}, expected text that XML allows (no "
+                                 "control characters but tab and line breaks)")
 
 
 def _gating(doc: object, where: str) -> dict:

@@ -20,6 +20,7 @@ from lmncell.runtime.model import (
     model_to_dict,
     replaced_whole,
     save_model,
+    xml_text,
 )
 from lmncell.runtime.step import CellStepper, simulate
 from lmncell.runtime.vector import VectorCells
@@ -304,6 +305,12 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
      "'rest_current_a' is inf"),
     (lambda d: d.update(gating={"mode": "none", "initial_direction": "up"}),
      "'initial_direction' is 'up'"),
+    # written into the FMUs' modelDescription.xml, documentation and C sources: a number
+    # ended the build in an AttributeError, a control character in unreadable XML
+    (lambda d: d["cell"].update(name=5), "cell: 'name' is 5, expected a string"),
+    (lambda d: d.update(description=["x"]), "'description' is \\['x'\\], expected a string"),
+    (lambda d: d["cell"].update(name="A\x07"), "'name' holds the character '\\\\x07' at position 1"),
+    (lambda d: d.update(description="b\udcff"), "'description' holds the character '\\\\udcff'"),
     # flags read as bool() took the string "false" as true
     (lambda d: d["regressors"].update(offset="false"),
      "regressors: 'offset' is 'false', expected true or false"),
@@ -326,6 +333,17 @@ def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
     p.write_text(json.dumps(doc))
     with pytest.raises((ModelFileError, ValueError), match=message):
         load_model(p)
+
+
+def test_names_from_file_names_are_made_xml_text(tmp_path) -> None:
+    """A cell name made of file names (train._cell_name) keeps what XML allows and replaces the
+    rest, so that the model file it goes into loads."""
+    assert xml_text("cell of a\x07.csv, b\udcff.csv\tc\n") == "cell of a\ufffd.csv, b\ufffd.csv\tc\n"
+    doc = model_to_dict(random_tree_model())
+    doc["cell"]["name"] = doc["description"] = xml_text("\x00\x1f\ud800 x \U0001f50b")
+    p = tmp_path / "m.json"
+    p.write_text(json.dumps(doc))
+    assert load_model(p).cell["name"] == "\ufffd\ufffd\ufffd x \U0001f50b"
 
 
 def test_not_json_is_refused(tmp_path) -> None:

@@ -116,6 +116,17 @@ def test_source_date_epoch_makes_the_build_reproducible(quick_model, tmp_path,
     assert not (tmp_path / "c.fmu").exists()
 
 
+def test_a_cell_name_cannot_end_the_header_comment(quick_model) -> None:
+    """The cell's name goes into a C comment of lmncell_model.h: a "*/" in it used to end the
+    comment and the rest of the name failed the build as C."""
+    from lmncell.fmu.native_build import model_header
+
+    model = load_model(quick_model)
+    model.cell["name"] = "A123 */ int x; /* 26650"
+    first = model_header(model, "{guid}").splitlines()[0]
+    assert first.startswith("/* ") and first.endswith(" */") and first.count("*/") == 1
+
+
 def test_same_interface_as_pythonfmu(native_fmu, quick_fmu) -> None:
     from fmpy import read_model_description
 

@@ -54,6 +54,7 @@ from lmncell.runtime.model import (
     model_from_dict,
     model_to_dict,
     save_model,
+    xml_text,
 )
 from lmncell.runtime.observers import offline_fuzzy_design
 from lmncell.runtime.step import exo_series, initial_hysteresis
@@ -546,7 +547,7 @@ def _cell_name(records: list[Record]) -> str:
         return "A123 26650 LFP (Plett data)"
     if "Pan18650PF" in names or "3349" in names:
         return "Panasonic NCR18650PF NCA (Kollmeyer data)"
-    return "cell of " + ", ".join(r.name for r in records[:3])
+    return xml_text("cell of " + ", ".join(r.name for r in records[:3]))
 
 
 def fit_baselines(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnModel,
