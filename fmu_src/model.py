@@ -498,7 +498,7 @@ def _flag(doc: dict, key: str, where: str, default: bool) -> bool:
 
 def _ref(val, where: str) -> tuple[str, int]:
     if (not isinstance(val, list) or len(val) != 2 or val[0] not in ("node", "leaf")
-            or not isinstance(val[1], int)):
+            or not isinstance(val[1], int) or isinstance(val[1], bool)):
         raise ModelFileError(f"{where}: expected [\"node\"|\"leaf\", index], got {val!r}")
     return val[0], val[1]
 
@@ -876,6 +876,9 @@ def _read_tree(doc: dict, source: str, d: int
                          _ref(ch[1], f"{source}: tree.nodes[{k}]")))
     roots = []
     for k, r in enumerate(_get(tree, "roots", f"{source}: tree", list)):
+        if not isinstance(r, dict):
+            raise ModelFileError(f"{source}: tree.roots[{k}] is {r!r:.60}, expected an object "
+                                 "{\"gate\": …, \"child\": [kind, index]}")
         gate = r.get("gate")
         if gate not in GATES:
             raise ModelFileError(f"{source}: tree.roots[{k}].gate is {gate!r}, expected {GATES}")

@@ -311,6 +311,9 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
     (lambda d: d.update(description=["x"]), "'description' is \\['x'\\], expected a string"),
     (lambda d: d["cell"].update(name="A\x07"), "'name' holds the character '\\\\x07' at position 1"),
     (lambda d: d.update(description="b\udcff"), "'description' holds the character '\\\\udcff'"),
+    (lambda d: d["tree"]["roots"].__setitem__(0, None),
+     "tree.roots\\[0\\] is None, expected an object"),             # was an AttributeError
+    (lambda d: d["tree"]["roots"][0].update(child=["leaf", True]), "got \\['leaf', True\\]"),
     # flags read as bool() took the string "false" as true
     (lambda d: d["regressors"].update(offset="false"),
      "regressors: 'offset' is 'false', expected true or false"),
