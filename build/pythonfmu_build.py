@@ -163,25 +163,10 @@ def documentation_html(model: LmnModel, model_path: Path, flavour: str = "python
     tr = model.extra.get("training", {})
     files = "".join(f"<li>{html.escape(Path(f['path']).name)} <small>sha256 {f['sha256'][:16]}…"
                     "</small></li>" for f in tr.get("files", []))
-    lim = model.limits
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v[0]:.4g} … {v[1]:.4g}</td></tr>"
-                   for k, v in lim.items())
-    metrics = tr.get("train_metrics", [])
-
-    def num(v: float | None, fmt: str) -> str:
-        return "–" if v is None else format(v, fmt)
-
-    acc = "".join(f"<tr><td>{html.escape(m['segment'])}</td><td>{num(m['rmse_mv'], '.2f')}</td>"
-                  f"<td>{num(m['window_rmse_mv'], '.2f')}</td><td>{num(m['max_mv'], '.1f')}</td>"
-                  "</tr>" for m in metrics)
-    th = model.thermal
-    thermal_text = ("the ambient temperature; the model computes the cell temperature with its "
-                    f"lumped thermal model (R = {th.resistance_k_per_w:.3g} K/W, τ = "
-                    f"{th.time_constant_s:.0f} s), output <b>cell_temperature</b>. With the "
-                    "parameter <b>temperature_is_cell</b> = true it is the measured cell "
-                    "temperature instead." if th is not None else
-                    "the cell temperature (the model has no thermal model: its training data "
-                    "had no measured cell temperature); <b>cell_temperature</b> repeats it.")
+                   for k, v in model.limits.items())
+    acc = _accuracy_rows(tr.get("train_metrics", []))
+    thermal_text = _temperature_input_text(model)
     return f"""<!DOCTYPE html><html><head><meta charset="utf-8"><title>LMNCell FMU</title></head>
 <body><h1>LMNCell FMU: {html.escape(model.cell.get('name', 'cell'))}</h1>
 <p>{html.escape(model.extra.get('description', ''))}. Model file {html.escape(model_path.name)},
@@ -217,6 +202,31 @@ and a logged message; the step is not taken.</p>
 </body></html>"""
 
 
+def _accuracy_rows(metrics: list[dict]) -> str:
+    """The documentation's rows of free-run accuracy per training segment (mV; – where a figure
+    is missing, e.g. no sample in the 20–80 % SoC window)."""
+    def num(v: float | None, fmt: str) -> str:
+        return "–" if v is None else format(v, fmt)
+
+    return "".join(f"<tr><td>{html.escape(m['segment'])}</td><td>{num(m['rmse_mv'], '.2f')}</td>"
+                   f"<td>{num(m['window_rmse_mv'], '.2f')}</td><td>{num(m['max_mv'], '.1f')}"
+                   "</td></tr>" for m in metrics)
+
+
+def _temperature_input_text(model: LmnModel) -> str:
+    """What the documentation says the `temperature` input is: the ambient temperature where the
+    model has a thermal model, else the cell temperature."""
+    th = model.thermal
+    if th is None:
+        return ("the cell temperature (the model has no thermal model: its training data "
+                "had no measured cell temperature); <b>cell_temperature</b> repeats it.")
+    return ("the ambient temperature; the model computes the cell temperature with its "
+            f"lumped thermal model (R = {th.resistance_k_per_w:.3g} K/W, τ = "
+            f"{th.time_constant_s:.0f} s), output <b>cell_temperature</b>. With the "
+            "parameter <b>temperature_is_cell</b> = true it is the measured cell "
+            "temperature instead.")
+
+
 def _indent(elem: ET.Element) -> None:
     ET.indent(elem, space="  ")
 
@@ -244,6 +254,23 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
     root.set("version", module_hash)
     root.set("description", model.extra.get("description", "LMNCell model"))
     variables = _element(root, "ModelVariables")
+    _add_units_and_bounds(root, variables)
+    ex = root.find("DefaultExperiment")
+    if ex is None:
+        ex = ET.Element("DefaultExperiment")
+        root.insert(list(root).index(variables), ex)
+    ex.set("startTime", "0.0")
+    ex.set("stopTime", repr(3600.0))
+    ex.set("stepSize", repr(float(model.sample_time_s)))
+    _set_initial_unknowns(_element(root, "ModelStructure"),
+                          [sv.get("name", "") for sv in variables.findall("ScalarVariable")])
+    _indent(root)
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode")
+
+
+def _add_units_and_bounds(root: ET.Element, variables: ET.Element) -> None:
+    """Each Real variable's unit (UNITS) and input bounds (INPUT_BOUNDS), and the
+    UnitDefinitions of the units used, inserted where FMI 2.0's element order puts them."""
     used = set()
     for sv in variables.findall("ScalarVariable"):
         name = sv.get("name")
@@ -264,30 +291,26 @@ def patch_model_description(xml_text: str, model: LmnModel, module_hash: str,
                                                               "DefaultExperiment",
                                                               "ModelVariables"))
     root.insert(pos, units)
-    ex = root.find("DefaultExperiment")
-    if ex is None:
-        ex = ET.Element("DefaultExperiment")
-        root.insert(list(root).index(variables), ex)
-    ex.set("startTime", "0.0")
-    ex.set("stopTime", repr(3600.0))
-    ex.set("stepSize", repr(float(model.sample_time_s)))
-    structure = _element(root, "ModelStructure")
+
+
+def _set_initial_unknowns(structure: ET.Element, names: list[str]) -> None:
+    """ModelStructure's InitialUnknowns (each output with the variables it depends on at
+    initialisation, dependency_indices) in place of pythonfmu's, and the outputs' empty
+    dependencies (no direct feedthrough within a communication step)."""
     outputs = structure.find("Outputs")
-    names = [sv.get("name", "") for sv in variables.findall("ScalarVariable")]
     old = structure.find("InitialUnknowns")
     if old is not None:
         structure.remove(old)
-    if outputs is not None:
-        init = ET.SubElement(structure, "InitialUnknowns")
-        for u in outputs.findall("Unknown"):
-            index = u.get("index", "")
-            name = names[int(index) - 1]
-            ET.SubElement(init, "Unknown", {"index": index,
-                                            "dependencies": dependency_indices(name, names)})
-    for u in outputs.findall("Unknown") if outputs is not None else []:
+    if outputs is None:
+        return
+    init = ET.SubElement(structure, "InitialUnknowns")
+    for u in outputs.findall("Unknown"):
+        index = u.get("index", "")
+        name = names[int(index) - 1]
+        ET.SubElement(init, "Unknown", {"index": index,
+                                        "dependencies": dependency_indices(name, names)})
+    for u in outputs.findall("Unknown"):
         u.set("dependencies", "")
-    _indent(root)
-    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode")
 
 
 def _rewrite_members(fmu: Path, members: dict[str, bytes], when: datetime | None = None
