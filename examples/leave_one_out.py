@@ -36,6 +36,7 @@ the "fmu" figures, which equal the lmn ones unless --at-model-steps; for a recor
 faster than Ts also "fmu_samples", the FMU's voltage at each of the record's own samples
 against the voltage logged then (lmncell evaluate CELL.fmu's row). --plot FILE.png draws the
 same figures as bars per held-out record, with a caption naming the split and the settings.
+Progress (each training, its time) goes to stderr, the figures to stdout.
 """
 
 from __future__ import annotations
@@ -43,6 +44,7 @@ from __future__ import annotations
 import argparse
 import math
 import tempfile
+import time
 from pathlib import Path
 
 from lmncell.api import build_fmu
@@ -64,6 +66,7 @@ from lmncell.evaluation.evaluate import (
 from lmncell.evaluation.fmueval import evaluate_fmu
 from lmncell.evaluation.metrics import ENDS, pooled
 from lmncell.identification.train import train_files
+from lmncell.progress import print_progress_stderr
 from lmncell.report.plots import folds_figure
 from lmncell.runtime.model import LmnModel
 
@@ -82,11 +85,16 @@ def main() -> None:
     tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
 
     def train(records: list[str], socs: list[float | None]) -> tuple[LmnModel, Path | None]:
+        start = time.monotonic()
+        print_progress_stderr(f"training on {', '.join(Path(r).name for r in records)} …")
         model, _ = train_files(records, Path(tmp) / "model.json", capacity_ah=a.capacity_ah,
                                soc0=socs, baselines=not a.no_baselines,
                                progress=lambda _m: None, **settings)
-        return model, (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
-                                 native=a.fmu == "native") if a.fmu else None)
+        fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
+                         native=a.fmu == "native") if a.fmu else None)
+        print_progress_stderr(f"  {model.n_local_models} local models in "
+                              f"{time.monotonic() - start:.0f} s; scoring the held-out record")
+        return model, fmu
 
     folds = [(Path(held).name, _scored_fold(a, model, fmu, held, held_soc0))
              for held, held_soc0, (model, fmu) in trained_per_fold(

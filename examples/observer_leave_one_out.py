@@ -20,13 +20,15 @@ records whose name contains PATTERN (e.g. 10degC), or one of a comma list (N05,P
 --through-hidden-pauses runs the observers through pauses that only the wall clock shows, as in
 an FMU driven through the record's time column (default: the record is split there).
 --plot FILE.png draws the RMSE and the share outside ±3σ per held-out record and observer, with
-a caption naming the run.
+a caption naming the run. Progress (each training, its time) goes to stderr, the figures to
+stdout.
 """
 
 from __future__ import annotations
 
 import argparse
 import tempfile
+import time
 from pathlib import Path
 
 import numpy as np
@@ -53,6 +55,7 @@ from lmncell.evaluation.observe import (
     start_index,
 )
 from lmncell.identification.train import train_files
+from lmncell.progress import print_progress_stderr
 from lmncell.report.plots import observer_folds_figure
 from lmncell.runtime.model import LmnModel, load_model
 
@@ -71,10 +74,15 @@ def main() -> None:
     folds: list[tuple[str, Scores]] = []
     with tempfile.TemporaryDirectory() as tmp:
         def train(records: list[str], socs: list[float | None]) -> LmnModel:
+            start = time.monotonic()
+            print_progress_stderr(f"training on {', '.join(Path(r).name for r in records)} …")
             out = Path(tmp) / "model.json"
             train_files(records, out, a.capacity_ah, socs, progress=lambda _m: None,
                         **settings)
-            return load_model(out)
+            model = load_model(out)
+            print_progress_stderr(f"  {model.n_local_models} local models in "
+                                  f"{time.monotonic() - start:.0f} s; running the observers")
+            return model
 
         for held, held_soc0, model in trained_per_fold(
                 leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train):
