@@ -338,7 +338,6 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
     model), why it stopped early ('' where it did not), and the FMU's first warning (the
     start of its first out-of-range excursion: what left the trained region; '' for none)."""
     from fmpy import extract
-    from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
     from lmncell.evaluation.fmueval import first_warning, fmu_log
 
@@ -354,27 +353,14 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
                           modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         try:
             slave.instantiate(callbacks=callbacks, loggingOn=True)   # its warnings kept in log
-            slave.setupExperiment(startTime=0.0)
-            slave.enterInitializationMode()
-            slave.setReal([vr["soc0"]], [soc0])
-            slave.setReal([vr["temperature"]], [temperature_c])
-            slave.exitInitializationMode()
-            u = slave.getReal([vr["voltage"]])[0]
+            u = _initialised(slave, vr, soc0, temperature_c)
             for k in range(n):
                 t0 = k * h
                 i = -load[k] / u if by_power else float(load[k])
-                slave.setReal([vr["current"]], [i])
-                try:
-                    slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
-                except FMICallException:
-                    said = log[-1] if log else "nothing in its log"
-                    raise FmuStepError(f"the FMU refused the step at t = {t0:g} s with the "
-                                       f"cell current {i:g} A: {said}", t0) from None
-                u, soc, *cell_t = slave.getReal(outputs)
+                u, soc, cell_t = _stepped(slave, vr, outputs, t0, h, i, log)
                 out["time"][k], out["current"][k], out["voltage"][k] = t0 + h, i, u
-                out["soc"][k] = soc
+                out["soc"][k], out["cell_t"][k] = soc, cell_t
                 out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
-                out["cell_t"][k] = cell_t[0] if cell_t else math.nan
                 stop = empty_reason(u, soc, cutoff_v) or full_reason(u, soc, charge_cutoff_v)
                 if stop:
                     n = k + 1
@@ -385,6 +371,35 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
             shutil.rmtree(unzipped, ignore_errors=True)
         first = first_warning(log, name)
     return {key: values[:n] for key, values in out.items()}, stop, first
+
+
+def _initialised(slave: Any, vr: dict[str, int], soc0: float, temperature_c: float) -> float:
+    """Take the instantiated FMU through initialisation with the start SoC and temperature
+    (°C); returns its voltage (V) there."""
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.setReal([vr["soc0"]], [soc0])
+    slave.setReal([vr["temperature"]], [temperature_c])
+    slave.exitInitializationMode()
+    return slave.getReal([vr["voltage"]])[0]
+
+
+def _stepped(slave: Any, vr: dict[str, int], outputs: list[int], t0: float, h: float,
+             current_a: float, log: list[str]) -> tuple[float, float, float]:
+    """One communication step from t0 (s) over h (s) with the cell current (A, > 0 charges);
+    returns the voltage (V), SoC and cell temperature (°C; NaN without that output) after it.
+    FmuStepError where the FMU refuses the step, with the last message of its log."""
+    from fmpy.fmi1 import FMICallException
+
+    slave.setReal([vr["current"]], [current_a])
+    try:
+        slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
+    except FMICallException:
+        said = log[-1] if log else "nothing in its log"
+        raise FmuStepError(f"the FMU refused the step at t = {t0:g} s with the cell current "
+                           f"{current_a:g} A: {said}", t0) from None
+    u, soc, *cell_t = slave.getReal(outputs)
+    return u, soc, cell_t[0] if cell_t else math.nan
 
 
 def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,
