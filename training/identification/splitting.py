@@ -51,9 +51,27 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
     sel = Pj > 1e-6 * Pj.max()
     X, y, w, Z, Pj, r_rest = X[sel], y[sel], w[sel], Z[sel], Pj[sel], r_rest[sel]
     Z1 = np.hstack([np.ones((Z.shape[0], 1)), Z])
-    wl = w * Pj
-    if wl.sum() <= 0:
+    if (w * Pj).sum() <= 0:
         return None
+
+    def children(psi: np.ndarray) -> tuple:
+        return _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole, fit)
+
+    best = _best_orthogonal_split(Z, w * Pj, fixed_axes, children)
+    if best is None:
+        return None
+    psi, axis, res = best
+    free = (np.array([0] + [a + 1 for a in range(Z.shape[1]) if a not in fixed_axes])
+            if cfg.oblique else np.array([0, axis + 1]))
+    return _levenberg_marquardt(psi, res, free, w, Pj, Z1, cfg.lm_iterations, children)
+
+
+def _best_orthogonal_split(Z: np.ndarray, wl: np.ndarray, fixed_axes: frozenset[int],
+                           children: Callable[[np.ndarray], tuple]
+                           ) -> tuple[np.ndarray, int, tuple] | None:
+    """The orthogonal split (ψ, its axis, children(ψ)) of least loss among the free axes: each
+    at the weighted median of its partition input, its steepness 2 / the weighted spread
+    (wl: the samples' weights times the leaf's validity); None where no axis spreads."""
     best = None
     for axis in range(Z.shape[1]):
         if axis in fixed_axes:
@@ -66,19 +84,23 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
         if spread < 1e-6:
             continue
         kappa = 2.0 / spread
-        psi = np.zeros(Z1.shape[1])
+        psi = np.zeros(Z.shape[1] + 1)
         psi[0], psi[axis + 1] = -kappa * median, kappa
-        res = _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole, fit)
-        if best is None or res[-1] < best[1]:
-            best = (psi, res[-1], axis, res)
-    if best is None:
-        return None
-    psi, loss, axis, res = best
-    free = (np.array([0] + [a + 1 for a in range(Z.shape[1]) if a not in fixed_axes])
-            if cfg.oblique else np.array([0, axis + 1]))
-    lam, history = 1e-2, [loss]
+        res = children(psi)
+        if best is None or res[-1] < best[2][-1]:
+            best = (psi, axis, res)
+    return best
+
+
+def _levenberg_marquardt(psi: np.ndarray, res: tuple, free: np.ndarray, w: np.ndarray,
+                         Pj: np.ndarray, Z1: np.ndarray, iterations: int,
+                         children: Callable[[np.ndarray], tuple]) -> SplitResult:
+    """Levenberg–Marquardt on the split's weights ψ[free] from ψ (res = children(ψ)): the two
+    local models are refitted at each trial ψ, a step is kept where the loss falls, and the
+    iterations stop where it falls by less than a millionth."""
+    lam, history = 1e-2, [res[-1]]
     ta, tb, ya, yb, phi, e, loss = res
-    for _ in range(cfg.lm_iterations):
+    for _ in range(iterations):
         F = (Pj * (ya - yb) * phi * (1.0 - phi))[:, None] * Z1[:, free]
         H = F.T @ (F * w[:, None])
         g = F.T @ (w * e)
@@ -87,7 +109,7 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
             step = np.linalg.solve(H + lam * np.diag(np.diag(H) + 1e-12), g)
             cand = psi.copy()
             cand[free] += step
-            new = _split_children(cand, X, y, w, Pj, Z1, r_rest, na, max_pole, fit)
+            new = children(cand)
             if new[-1] < loss:
                 psi, (ta, tb, ya, yb, phi, e, loss) = cand, new
                 lam = max(lam / 3.0, 1e-9)
