@@ -15,7 +15,7 @@ import dataclasses
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
@@ -33,6 +33,10 @@ from lmncell.design.optimal import (
     voltage_window,
 )
 from lmncell.design.pybamm_cell import VirtualCellRunError
+
+if TYPE_CHECKING:
+    from lmncell.config import TrainConfig
+    from lmncell.data.dataset import Segment
 
 RANDOM_SEEDS = (1, 2, 3, 4, 5)
 OCV_TEST_C_RATE = 1 / 20
@@ -227,11 +231,7 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     """Train an LMN on each programme run on vc (with the OCV test ocv_path), validate each in
     free run on the validation profiles run on vc. Returns per profile designed_mv and the lists
     prbs_mv / aprbs_mv (whole-record RMSE, mV), and per programme its model and log det."""
-    from lmncell.config import load_config
     from lmncell.data.dataset import Segment
-    from lmncell.evaluation.evaluate import simulate_segment
-    from lmncell.evaluation.metrics import record_metrics
-    from lmncell.identification.construction import train_lmn
 
     def segment(name: str, cur: np.ndarray, s0: float) -> Segment:
         u, soc = vc.run(cur, s0, name=name)
@@ -248,13 +248,7 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
     programmes = [("designed", designed.current_a)] + [
         (f"{kind}_seed_{s}", random_programme(cell, same_hold, spec, s, kind).current_a)
         for kind in kinds for s in seeds]
-    # free local models, no offset ridge and only a numerical refinement ridge (oe_ridge): the
-    # design maximises the information of the unconstrained least-squares estimator, which the
-    # RC-ladder bounds or a ridge on the coefficients or the local OCV offsets (parameters of
-    # that information) would replace by another one
-    cfg = load_config(partition=["soc", "current"], validation="none", stop="aicc",
-                      max_local_models=8, ocv_tests=[str(ocv_path)], local_model_form="free",
-                      offset_ridge=0.0, oe_ridge=DESIGN_PROOF_OE_RIDGE)
+    cfg = _proof_config(ocv_path)
     rows: dict = {}
     skipped: dict[str, str] = {}
     for name, cur in programmes:
@@ -268,17 +262,42 @@ def compare_on_virtual_cell(designed: Programme, cell: CellSpec, cyc: CyclerSpec
             skipped[name] = str(exc)
             progress(f"  {name}: not compared, the virtual cell cannot run it ({exc})")
             continue
-        res = train_lmn([seg], cfg, cell.capacity_ah)
-        row = {"local_models": res.chosen_m, "peak_current_a": float(np.abs(cur).max()),
-               "log_det_information": log_det_information(cell, cur, cyc.sample_time_s,
-                                                          information=spec.information)}
-        for key, val in vals.items():
-            sim = simulate_segment(res.model, val)
-            row[f"{key}_mv"] = record_metrics(val.voltage_v, sim.voltage_v, val.soc_ref)["rmse_mv"]
-        rows[name] = row
-        progress(f"  {name}: {res.chosen_m} local models, free-run RMSE "
-                 + ", ".join(f"{k} {row[f'{k}_mv']:.2f} mV" for k in vals))
+        rows[name] = _programme_row(seg, cfg, cell, cyc.sample_time_s, spec.information, vals)
+        progress(f"  {name}: {rows[name]['local_models']} local models, free-run RMSE "
+                 + ", ".join(f"{k} {rows[name][f'{k}_mv']:.2f} mV" for k in vals))
     return summarise(rows, profiles, kinds, skipped)
+
+
+def _proof_config(ocv_path: Path) -> TrainConfig:
+    """The training settings of the proof. Free local models, no offset ridge and only a
+    numerical refinement ridge (oe_ridge): the design maximises the information of the
+    unconstrained least-squares estimator, which the RC-ladder bounds or a ridge on the
+    coefficients or the local OCV offsets (parameters of that information) would replace by
+    another one."""
+    from lmncell.config import load_config
+
+    return load_config(partition=["soc", "current"], validation="none", stop="aicc",
+                       max_local_models=8, ocv_tests=[str(ocv_path)], local_model_form="free",
+                       offset_ridge=0.0, oe_ridge=DESIGN_PROOF_OE_RIDGE)
+
+
+def _programme_row(seg: Segment, cfg: TrainConfig, cell: CellSpec, sample_time_s: float,
+                   information: str, vals: dict[str, Segment]) -> dict:
+    """The LMN trained on one programme's run (seg): its local models, the programme's peak
+    current (A) and log det of its information, and its whole-record free-run RMSE (mV) on
+    each validation profile's run ("<key>_mv")."""
+    from lmncell.evaluation.evaluate import simulate_segment
+    from lmncell.evaluation.metrics import record_metrics
+    from lmncell.identification.construction import train_lmn
+
+    res = train_lmn([seg], cfg, cell.capacity_ah)
+    row = {"local_models": res.chosen_m, "peak_current_a": float(np.abs(seg.current_a).max()),
+           "log_det_information": log_det_information(cell, seg.current_a, sample_time_s,
+                                                      information=information)}
+    for key, val in vals.items():
+        sim = simulate_segment(res.model, val)
+        row[f"{key}_mv"] = record_metrics(val.voltage_v, sim.voltage_v, val.soc_ref)["rmse_mv"]
+    return row
 
 
 def summarise(rows: dict, profiles: list[Profile], kinds: tuple[str, ...],
