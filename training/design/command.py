@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 import sys
 from pathlib import Path
 
@@ -21,6 +22,7 @@ from lmncell.design.optimal import (
     soc_window,
     write_programme,
 )
+from lmncell.progress import Progress
 from lmncell.report.jsontext import json_text
 from lmncell.runtime.model import LmnModel, write_text_whole
 
@@ -196,8 +198,10 @@ def programme_figures(prog, files: list[Path], model_check_text: str | None) -> 
             "spread_kept_by_sequence": prog.settings.get("spread_kept_by_sequence", {})}
 
 
-def run_design(a) -> int:
-    # with --json, stdout carries the JSON only; progress goes to stderr
+def run_design(a: argparse.Namespace) -> int:
+    """`lmncell design`: design the programme (on the virtual cell's design model with
+    --compare-virtual, and prove it there against random programmes), write it, print its
+    figures. With --json, stdout carries the JSON only; progress goes to stderr."""
     out_stream = sys.stderr if a.json else sys.stdout
 
     def say(msg: str) -> None:
@@ -218,7 +222,7 @@ def run_design(a) -> int:
 
     result = model_v = None
     if a.compare_virtual:
-        from lmncell.design.proof import make_virtual_cell, plot_proof, prove_design
+        from lmncell.design.proof import make_virtual_cell, prove_design
 
         kind = a.virtual_cell or default_virtual_cell()
         vc = make_virtual_cell(kind, cell.capacity_ah)
@@ -242,14 +246,21 @@ def run_design(a) -> int:
     if a.json and result is None:
         print(json_text(programme_figures(prog, files, check)))
     if result is not None:
-        proof_json = Path(a.out).with_suffix(".proof.json")
-        write_text_whole(proof_json, json_text(result))
-        fig = plot_proof(result, Path(a.plot) if a.plot else Path(a.out).parent,
-                         Path(a.out).stem)
-        left_out = result["skipped"]
-        say(f"wrote {proof_json}, {fig}; the design beats the median of every random kind on "
-            f"every profile: {'yes' if result['designed_beats_every_median'] else 'no'}"
-            + (f" ({len(left_out)} random programme(s) left out, the virtual cell could not run "
-               f"them: {', '.join(left_out)})" if left_out else ""))
-        print(json_text(result if a.json else result["profiles"]))
+        _write_proof(result, a, say)
     return 0
+
+
+def _write_proof(result: dict, a: argparse.Namespace, say: Progress) -> None:
+    """Write the proof's JSON beside the programme and its figure (in --plot's folder, else
+    beside the programme), say so, and print the proof (its profiles only without --json)."""
+    from lmncell.design.proof import plot_proof
+
+    proof_json = Path(a.out).with_suffix(".proof.json")
+    write_text_whole(proof_json, json_text(result))
+    fig = plot_proof(result, Path(a.plot) if a.plot else Path(a.out).parent, Path(a.out).stem)
+    left_out = result["skipped"]
+    say(f"wrote {proof_json}, {fig}; the design beats the median of every random kind on "
+        f"every profile: {'yes' if result['designed_beats_every_median'] else 'no'}"
+        + (f" ({len(left_out)} random programme(s) left out, the virtual cell could not run "
+           f"them: {', '.join(left_out)})" if left_out else ""))
+    print(json_text(result if a.json else result["profiles"]))
