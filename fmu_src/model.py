@@ -629,44 +629,57 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     """Check a model document and build the runtime model; errors name the file and key."""
     ver = _check_format(doc, source)
     ts, delay = _read_timing(doc, source)
-    cell = _get(doc, "cell", source, dict)
-    cap = _real(cell, "capacity_ah", f"{source}: cell", *CAPACITY_RANGE_AH)
-    efficiency = [_real(cell, f"efficiency_{k}", f"{source}: cell", 0.0, 1.0, 1.0, low_open=True)
-                  for k in ("charge", "discharge")]
-    _check_cell_voltages(cell, f"{source}: cell")
-    _check_texts(doc, cell, source)
+    cell = _cell_fields(doc, source)
     output = _get(doc, "output", source, str)
     if output not in ("relative_ocv", "absolute"):
         raise ModelFileError(f"{source}: 'output' is {output!r}, expected 'relative_ocv' or "
                              "'absolute'")
     ocv_soc, ocv_v = _read_ocv(doc, source)
-    reg = _get(doc, "regressors", source, dict)
-    w = f"{source}: regressors"
-    na, nb, filters = _read_structure(reg, w)
-    gamma = _read_hysteresis_gamma(reg, w)
-    arrhenius, tau_activation, temperature_terms = _read_temperature(reg, w)
+    regressors = _regressor_fields(_get(doc, "regressors", source, dict),
+                                   f"{source}: regressors", ver)
     variables, center, scale = _read_partition(doc, source)
     weights, children, roots = _read_tree(doc, source, len(variables))
     lm = _get(doc, "local_models", source, dict)
-    theta = _array(lm, "theta", f"{source}: local_models", 2)
-    if theta.size and np.abs(theta).max() > MAX_THETA:
-        raise ModelFileError(f"{source}: local_models.theta holds {np.abs(theta).max():g}, "
-                             f"expected coefficients within ±{MAX_THETA:g}")
-    gating = _gating(doc.get("gating", {"mode": "none"}), f"{source}: gating")
-    t_low, t_high = CELL_TEMPERATURE_RANGE_C
     model = LmnModel(
-        sample_time_s=ts, capacity_ah=cap, ocv_soc=ocv_soc, ocv_v=ocv_v, output_lags=na,
-        current_terms=nb, filters=filters,
-        hysteresis_gamma=gamma,
-        ocv_input=_flag(reg, "ocv_input", w, False), soc_input=_flag(reg, "soc_input", w, False),
-        offset=_flag(reg, "offset", w, True), relative_ocv=output == "relative_ocv",
+        sample_time_s=ts, ocv_soc=ocv_soc, ocv_v=ocv_v, relative_ocv=output == "relative_ocv",
         partition_variables=list(variables), partition_center=center, partition_scale=scale,
         roots=roots, node_weights=weights, node_children=children,
-        theta=theta, efficiency_charge=efficiency[0], efficiency_discharge=efficiency[1],
-        gating_mode=str(gating.get("mode", "none")),
-        rest_current_a=_real(gating, "rest_current_a", f"{source}: gating", 0.0, 1e3, 0.01,
-                             low_open=True),
-        initial_direction=str(gating.get("initial_direction", "discharge")),
+        theta=_read_theta(lm, source), **cell, **regressors, **_gating_fields(doc, source),
+        thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
+        limits=_limits(doc.get("limits", {}), source),
+        noise=_noise(doc.get("noise", {}), source),
+        extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
+               if k in doc})
+    _check_observers(doc.get("observers"), source, model.n_local_models)
+    _check_local_models(model, lm, source)
+    return model
+
+
+def _cell_fields(doc: dict, source: str) -> dict:
+    """The LmnModel fields of the document's 'cell': capacity (Ah), coulombic efficiencies and
+    the cell's entry itself (its voltage limits and name checked)."""
+    cell = _get(doc, "cell", source, dict)
+    where = f"{source}: cell"
+    fields = {"capacity_ah": _real(cell, "capacity_ah", where, *CAPACITY_RANGE_AH)}
+    for k in ("charge", "discharge"):
+        fields[f"efficiency_{k}"] = _real(cell, f"efficiency_{k}", where, 0.0, 1.0, 1.0,
+                                          low_open=True)
+    _check_cell_voltages(cell, where)
+    _check_texts(doc, cell, source)
+    return {**fields, "cell": dict(cell)}
+
+
+def _regressor_fields(reg: dict, w: str, ver: int) -> dict:
+    """The LmnModel fields of the document's 'regressors' (w: where, for the errors; ver: the
+    format's version)."""
+    na, nb, filters = _read_structure(reg, w)
+    arrhenius, tau_activation, temperature_terms = _read_temperature(reg, w)
+    t_low, t_high = CELL_TEMPERATURE_RANGE_C
+    return dict(
+        output_lags=na, current_terms=nb, filters=filters,
+        hysteresis_gamma=_read_hysteresis_gamma(reg, w),
+        ocv_input=_flag(reg, "ocv_input", w, False), soc_input=_flag(reg, "soc_input", w, False),
+        offset=_flag(reg, "offset", w, True),
         arrhenius_k=None if arrhenius is None else float(arrhenius),
         tau_activation_k=None if tau_activation is None else float(tau_activation),
         activation_t0_k=_real(reg, "activation_t0_k", w, 0.0, MAX_ACTIVATION_T0_K, 0.0),
@@ -674,15 +687,26 @@ def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
         reference_temperature_c=_real(reg, "reference_temperature_c", w, t_low, t_high, 25.0),
         temperature_terms=temperature_terms,
         hysteresis_terms=_read_hysteresis_terms(reg, w, arrhenius, ver),
-        depletion=_depletion(reg.get("depletion"), filters, w, ver),
-        thermal=_thermal(doc.get("thermal"), source), current_delay_s=float(delay),
-        limits=_limits(doc.get("limits", {}), source), cell=dict(cell),
-        noise=_noise(doc.get("noise", {}), source),
-        extra={k: doc[k] for k in ("baselines", "training", "observers", "description")
-               if k in doc})
-    _check_observers(doc.get("observers"), source, model.n_local_models)
-    _check_local_models(model, lm, source)
-    return model
+        depletion=_depletion(reg.get("depletion"), filters, w, ver))
+
+
+def _read_theta(lm: dict, source: str) -> np.ndarray:
+    """local_models.theta: a finite 2-D array within ±MAX_THETA (its shape is checked against
+    the columns by _check_local_models)."""
+    theta = _array(lm, "theta", f"{source}: local_models", 2)
+    if theta.size and np.abs(theta).max() > MAX_THETA:
+        raise ModelFileError(f"{source}: local_models.theta holds {np.abs(theta).max():g}, "
+                             f"expected coefficients within ±{MAX_THETA:g}")
+    return theta
+
+
+def _gating_fields(doc: dict, source: str) -> dict:
+    """The LmnModel fields of the document's 'gating' (absent: one tree for both directions)."""
+    gating = _gating(doc.get("gating", {"mode": "none"}), f"{source}: gating")
+    return dict(gating_mode=str(gating.get("mode", "none")),
+                rest_current_a=_real(gating, "rest_current_a", f"{source}: gating", 0.0, 1e3,
+                                     0.01, low_open=True),
+                initial_direction=str(gating.get("initial_direction", "discharge")))
 
 
 def _check_format(doc: dict, source: str) -> int:
