@@ -51,6 +51,7 @@ from lmncell.api import build_fmu
 from lmncell.cli import (
     THROUGH_PAUSES_HELP,
     capacity_or_auto_argument,
+    figure_file_argument,
     run_script,
     soc_list_argument,
 )
@@ -103,7 +104,7 @@ def main() -> None:
         f"{m} {sum(w for w, _ in v) / len(v):.2f} / {sum(x for _, x in v) / len(v):.2f}"
         for m, v in _per_model(folds).items()))
     if a.plot:
-        print(f"figure: {folds_figure(folds, a.plot, _caption(a, len(folds)))}")
+        print(f"figure: {folds_figure(folds, Path(a.plot), _caption(a, len(folds)))}")
 
 
 def _arguments() -> argparse.Namespace:
@@ -133,7 +134,7 @@ def _arguments() -> argparse.Namespace:
                     "this FMU, driven by fmpy")
     ap.add_argument("--at-model-steps", action="store_true",
                     help="with --fmu: step the FMU at Ts with the mean current over each step")
-    ap.add_argument("--plot", type=Path, metavar="FILE.png",
+    ap.add_argument("--plot", type=figure_file_argument, metavar="FILE.png",
                     help="also draw the results per held-out record")
     a = ap.parse_args()
     if a.at_model_steps and not a.fmu:

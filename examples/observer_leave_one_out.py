@@ -35,6 +35,7 @@ import numpy as np
 from lmncell.cli import (
     THROUGH_PAUSES_HELP,
     capacity_argument,
+    figure_file_argument,
     run_script,
     soc_argument,
     soc_list_argument,
@@ -96,7 +97,7 @@ def main() -> None:
                   f"{out3:.1f} % (worst fold {worst:.1f} %), median 3σ {width:.1f} %")
     if a.plot:
         bars = [(name, {k: (r[0], r[1]) for k, r in scores.items()}) for name, scores in folds]
-        print(f"figure: {observer_folds_figure(bars, a.plot, _caption(a, len(folds)))}")
+        print(f"figure: {observer_folds_figure(bars, Path(a.plot), _caption(a, len(folds)))}")
 
 
 def _arguments() -> argparse.Namespace:
@@ -115,7 +116,7 @@ def _arguments() -> argparse.Namespace:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--through-hidden-pauses", action="store_true",
                     help=THROUGH_PAUSES_HELP)
-    ap.add_argument("--plot", type=Path, metavar="FILE.png",
+    ap.add_argument("--plot", type=figure_file_argument, metavar="FILE.png",
                     help="also draw the results per held-out record")
     a = ap.parse_args()
     if a.together and not a.hold_out:

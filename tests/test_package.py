@@ -382,11 +382,16 @@ def test_every_example_without_its_arguments_prints_its_usage(script: Path) -> N
      "argument --soc0-est: 'nan': expected a SoC fraction within 0…1"),
     ("observer_leave_one_out.py", ["2.85", "a.csv", "--start-soc", "1.5"],
      "argument --start-soc: '1.5': expected a SoC fraction within 0…1"),
+    ("leave_one_out.py", ["2.85", "a.csv", "--plot", "no-such-folder/loo.png"],
+     "argument --plot: 'no-such-folder/loo.png': the folder 'no-such-folder' does not exist"),
+    ("observer_leave_one_out.py", ["2.85", "a.csv", "--plot", "obs.txt"],
+     "argument --plot: 'obs.txt': a figure's file name ends in one of"),
 ])
-def test_the_leave_one_out_examples_refuse_bad_numbers_before_training(
+def test_the_leave_one_out_examples_refuse_bad_arguments_before_training(
         script: str, args: list[str], expected: str) -> None:
-    """Their capacity and SoCs are checked as the commands check them, before any file is read
-    (a NaN start estimate used to run every fold and print NaN bands)."""
+    """Their capacity, SoCs and figure file are checked as the commands check them, before any
+    file is read (a NaN start estimate used to run every fold and print NaN bands, and a figure
+    in a missing folder failed after every fold had been trained)."""
     path = Path(__file__).resolve().parents[1] / "examples" / script
     out = subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True,
                          timeout=120)
