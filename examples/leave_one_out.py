@@ -52,6 +52,7 @@ from lmncell.cli import (
     THROUGH_PAUSES_HELP,
     capacity_or_auto_argument,
     figure_file_argument,
+    input_file_argument,
     run_script,
     soc_list_argument,
 )
@@ -113,12 +114,12 @@ def _arguments() -> argparse.Namespace:
     ap.add_argument("capacity_ah", type=capacity_or_auto_argument,
                     help="Ah, or 'auto': each fold's training estimates it (with --ocv-tests "
                          "by the free-run error, lmncell.identification.train.fit_capacity)")
-    ap.add_argument("records", nargs="+")
+    ap.add_argument("records", nargs="+", type=input_file_argument)
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
                     help="start SoC: one for every record or one per record, in order")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a training setting, e.g. 'partition=[\"soc\",\"current\"]'")
-    ap.add_argument("--ocv-tests", nargs="*", default=[])
+    ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument)
     ap.add_argument("--no-baselines", action="store_true")
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
                     help="hold out only records whose name contains PATTERN, or one of a "

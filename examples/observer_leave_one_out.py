@@ -36,6 +36,7 @@ from lmncell.cli import (
     THROUGH_PAUSES_HELP,
     capacity_argument,
     figure_file_argument,
+    input_file_argument,
     run_script,
     soc_argument,
     soc_list_argument,
@@ -104,8 +105,8 @@ def _arguments() -> argparse.Namespace:
     """The command line, checked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("capacity_ah", type=capacity_argument)
-    ap.add_argument("records", nargs="+")
-    ap.add_argument("--ocv-tests", nargs="*", default=[])
+    ap.add_argument("records", nargs="+", type=input_file_argument)
+    ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument)
     ap.add_argument("--hold-out", default="", metavar="PATTERN")
     ap.add_argument("--together", action="store_true",
                     help="hold out the records of each --hold-out pattern at once")

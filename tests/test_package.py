@@ -374,26 +374,33 @@ def test_every_example_without_its_arguments_prints_its_usage(script: Path) -> N
     assert out.stderr.startswith("usage: ") and "Traceback" not in out.stderr
 
 
+THIS_FILE = str(Path(__file__).resolve())    # an existing file, for the record arguments
+
+
 @pytest.mark.parametrize(("script", "args", "expected"), [
-    ("leave_one_out.py", ["x", "a.csv"], "'x': expected a cell capacity in Ah within "
+    ("leave_one_out.py", ["x", THIS_FILE], "'x': expected a cell capacity in Ah within "
      "0.0001…100000 or 'auto'"),
-    ("observer_leave_one_out.py", ["auto", "a.csv"], "'auto': expected a cell capacity"),
-    ("observer_leave_one_out.py", ["2.85", "a.csv", "--soc0-est", "nan"],
+    ("observer_leave_one_out.py", ["auto", THIS_FILE], "'auto': expected a cell capacity"),
+    ("observer_leave_one_out.py", ["2.85", THIS_FILE, "--soc0-est", "nan"],
      "argument --soc0-est: 'nan': expected a SoC fraction within 0…1"),
-    ("observer_leave_one_out.py", ["2.85", "a.csv", "--start-soc", "1.5"],
+    ("observer_leave_one_out.py", ["2.85", THIS_FILE, "--start-soc", "1.5"],
      "argument --start-soc: '1.5': expected a SoC fraction within 0…1"),
-    ("leave_one_out.py", ["2.85", "a.csv", "--plot", "no-such-folder/loo.png"],
+    ("leave_one_out.py", ["2.85", THIS_FILE, "--plot", "no-such-folder/loo.png"],
      "argument --plot: 'no-such-folder/loo.png': the folder 'no-such-folder' does not exist"),
-    ("observer_leave_one_out.py", ["2.85", "a.csv", "--plot", "obs.txt"],
+    ("observer_leave_one_out.py", ["2.85", THIS_FILE, "--plot", "obs.txt"],
      "argument --plot: 'obs.txt': a figure's file name ends in one of"),
+    ("leave_one_out.py", ["2.85", "no-such.csv"],
+     "argument records: 'no-such.csv': no such file; expected a file"),
+    ("observer_leave_one_out.py", ["2.85", THIS_FILE, "--ocv-tests", "tests"],
+     "argument --ocv-tests: 'tests': is a folder; expected a file"),
 ])
 def test_the_leave_one_out_examples_refuse_bad_arguments_before_training(
         script: str, args: list[str], expected: str) -> None:
-    """Their capacity, SoCs and figure file are checked as the commands check them, before any
-    file is read (a NaN start estimate used to run every fold and print NaN bands, and a figure
-    in a missing folder failed after every fold had been trained)."""
-    path = Path(__file__).resolve().parents[1] / "examples" / script
-    out = subprocess.run([sys.executable, str(path), *args], capture_output=True, text=True,
-                         timeout=120)
+    """Their capacity, SoCs, input files and figure file are checked as the commands check them,
+    before any training (a NaN start estimate used to run every fold and print NaN bands, a
+    missing held-out record or a figure in a missing folder failed only after a training)."""
+    root = Path(__file__).resolve().parents[1]              # where "tests" is a folder
+    out = subprocess.run([sys.executable, str(root / "examples" / script), *args], cwd=root,
+                         capture_output=True, text=True, timeout=120)
     assert out.returncode == 2, out.stderr
     assert expected in out.stderr and "Traceback" not in out.stderr

@@ -60,6 +60,16 @@ def number_argument(cast: type, ok, expected: str):
     return parse
 
 
+def input_file_argument(text: str) -> str:
+    """An argparse type for a file to read: refused at once (not after a training) where it
+    does not exist or is a folder."""
+    path = Path(text)
+    if not path.is_file():
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: {'is a folder' if path.is_dir() else 'no such file'}; expected a file")
+    return text
+
+
 def output_file_argument(text: str) -> str:
     """An argparse type for a file to write: refused at once (not after a training) where its
     folder does not exist or the path is a folder (config.output_file_problem)."""
