@@ -55,6 +55,9 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
     (["--pack", "4s2p", "--spread", "capacity=0.5"], "--spread capacity=0.5"),
     (["--cutoff", "-1"], "--cutoff: '-1': expected a cell voltage in V"),
     (["--cutoff", "nan"], "--cutoff: 'nan'"),
+    # blanks in the list are dropped, as in the number lists ('' read as the folder '.')
+    (["--cycles", " , "], "sweep: --cycles, --ambient and --soc0 each need at least one value"),
+    (["--cycles", "us06,,us06"], "--cycles names 'us06' twice"),
 ])
 def test_bad_options_name_the_option(native_fmu, tmp_path, capsys, args, message) -> None:
     code = None

@@ -380,7 +380,8 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     )
 
     check_table_path(a.out)
-    cases = scenarios(a.cycles.split(","), a.ambient, a.soc0, a.vehicle or [None], a.repeat,
+    cycles = [c.strip() for c in a.cycles.split(",") if c.strip()]    # as _floats: no blanks
+    cases = scenarios(cycles, a.ambient, a.soc0, a.vehicle or [None], a.repeat,
                       a.pack, a.spread, a.seed, a.cells, a.cutoff)
     check_sweep(a.fmu, cases, a.workers)
     print(f"sweep: {len(cases)} scenario(s) on "
