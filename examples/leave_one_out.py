@@ -84,23 +84,23 @@ def main() -> None:
     settings = dict(parse_setting(s) for s in a.set)
     if a.ocv_tests:
         settings["ocv_tests"] = a.ocv_tests
-    tmp = tempfile.mkdtemp(prefix="lmncell-loo-")
+    with tempfile.TemporaryDirectory(prefix="lmncell-loo-") as tmp:
+        def train(records: list[str], socs: list[float | None]) -> tuple[LmnModel, Path | None]:
+            start = time.monotonic()
+            print_progress_stderr(f"training on {', '.join(Path(r).name for r in records)} …")
+            model, _ = train_files(records, Path(tmp) / "model.json", capacity_ah=a.capacity_ah,
+                                   soc0=socs, baselines=not a.no_baselines,
+                                   progress=lambda _m: None, **settings)
+            fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
+                             native=a.fmu == "native") if a.fmu else None)
+            print_progress_stderr(f"  {model.n_local_models} local models in "
+                                  f"{time.monotonic() - start:.0f} s; scoring the held-out "
+                                  "record")
+            return model, fmu
 
-    def train(records: list[str], socs: list[float | None]) -> tuple[LmnModel, Path | None]:
-        start = time.monotonic()
-        print_progress_stderr(f"training on {', '.join(Path(r).name for r in records)} …")
-        model, _ = train_files(records, Path(tmp) / "model.json", capacity_ah=a.capacity_ah,
-                               soc0=socs, baselines=not a.no_baselines,
-                               progress=lambda _m: None, **settings)
-        fmu = (build_fmu(Path(tmp) / "model.json", Path(tmp) / "model.fmu",
-                         native=a.fmu == "native") if a.fmu else None)
-        print_progress_stderr(f"  {model.n_local_models} local models in "
-                              f"{time.monotonic() - start:.0f} s; scoring the held-out record")
-        return model, fmu
-
-    folds = [(Path(held).name, _scored_fold(a, model, fmu, held, held_soc0))
-             for held, held_soc0, (model, fmu) in trained_per_fold(
-                 leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train)]
+        folds = [(Path(held).name, _scored_fold(a, model, fmu, held, held_soc0))
+                 for held, held_soc0, (model, fmu) in trained_per_fold(
+                     leave_one_out_folds(a.records, a.hold_out, a.soc0, a.together), train)]
     print("mean over the folds, RMSE 20–80 % SoC / whole record (mV): " + ", ".join(
         f"{m} {sum(w for w, _ in v) / len(v):.2f} / {sum(x for _, x in v) / len(v):.2f}"
         for m, v in _per_model(folds).items()))
