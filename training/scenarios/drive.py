@@ -338,6 +338,7 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
     model), why it stopped early ('' where it did not), and the FMU's first warning (the
     start of its first out-of-range excursion: what left the trained region; '' for none)."""
     from fmpy import extract
+    from fmpy.fmi1 import FMICallException
     from fmpy.fmi2 import FMU2Slave
     from lmncell.evaluation.fmueval import first_warning, fmu_log
 
@@ -357,7 +358,7 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
             for k in range(n):
                 t0 = k * h
                 i = -load[k] / u if by_power else float(load[k])
-                u, soc, cell_t = _stepped(slave, vr, outputs, t0, h, i, log)
+                u, soc, cell_t = _stepped(slave, vr, outputs, t0, h, i, log, FMICallException)
                 out["time"][k], out["current"][k], out["voltage"][k] = t0 + h, i, u
                 out["soc"][k], out["cell_t"][k] = soc, cell_t
                 out["oor"][k] = slave.getBoolean([vr["out_of_range"]])[0]
@@ -385,16 +386,17 @@ def _initialised(slave: Any, vr: dict[str, int], soc0: float, temperature_c: flo
 
 
 def _stepped(slave: Any, vr: dict[str, int], outputs: list[int], t0: float, h: float,
-             current_a: float, log: list[str]) -> tuple[float, float, float]:
+             current_a: float, log: list[str], refused: type[Exception]
+             ) -> tuple[float, float, float]:
     """One communication step from t0 (s) over h (s) with the cell current (A, > 0 charges);
     returns the voltage (V), SoC and cell temperature (°C; NaN without that output) after it.
-    FmuStepError where the FMU refuses the step, with the last message of its log."""
-    from fmpy.fmi1 import FMICallException
-
+    FmuStepError where the FMU refuses the step (fmpy raises `refused`, its
+    FMICallException, imported once per run by the caller, not once per step), with the last
+    message of its log."""
     slave.setReal([vr["current"]], [current_a])
     try:
         slave.doStep(currentCommunicationPoint=t0, communicationStepSize=h)
-    except FMICallException:
+    except refused:
         said = log[-1] if log else "nothing in its log"
         raise FmuStepError(f"the FMU refused the step at t = {t0:g} s with the cell current "
                            f"{current_a:g} A: {said}", t0) from None
