@@ -51,13 +51,14 @@ def optimise_split(X: np.ndarray, y: np.ndarray, w: np.ndarray, Z: np.ndarray, P
     sel = Pj > 1e-6 * Pj.max()
     X, y, w, Z, Pj, r_rest = X[sel], y[sel], w[sel], Z[sel], Pj[sel], r_rest[sel]
     Z1 = np.hstack([np.ones((Z.shape[0], 1)), Z])
-    if (w * Pj).sum() <= 0:
+    wl = w * Pj
+    if wl.sum() <= 0:
         return None
 
     def children(psi: np.ndarray) -> tuple:
         return _split_children(psi, X, y, w, Pj, Z1, r_rest, na, max_pole, fit)
 
-    best = _best_orthogonal_split(Z, w * Pj, fixed_axes, children)
+    best = _best_orthogonal_split(Z, wl, fixed_axes, children)
     if best is None:
         return None
     psi, axis, res = best
