@@ -79,34 +79,42 @@ def main() -> None:
     plot_dir = Path(a.plot) if a.plot else None
     if plot_dir:
         plot_dir.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix="lmncell-charge-"))
     for held in a.hold_out.split(","):
         if held not in temps:
             raise DataError(f"--hold-out {held}: not among --temperatures {a.temperatures}")
-        others = [t for t in temps if t != held]
-        discharges = [test_file(a.dyn_dir, t, "s1") for t in others]
-        charges = [test_file(a.dyn_dir, t, "s3") for t in others]
-        records = {"discharge": test_file(a.dyn_dir, held, "s1"),
-                   "charge": test_file(a.dyn_dir, held, "s3")}
-        traces: dict[str, list[Trace]] = {}
-        for name, files, soc0 in (
-                ("s1 only", discharges, [1.0] * len(discharges)),
-                ("s1 + s3", discharges + charges, [1.0] * len(discharges) + [0.0] * len(charges))):
-            model, _ = train_files(files, tmp / "model.json", capacity_ah=a.capacity_ah,
-                                   soc0=soc0, progress=lambda _m: None)
-            cells = []
-            for kind, path in records.items():
-                window, whole, tr = judged(model, path, 1.0 if kind == "discharge" else 0.0)
-                cells.append(f"{kind} {window:5.2f} / {whole:5.1f}")
-                if kind == "charge":
-                    traces[f"trained on {name}"] = tr
-            gamma = model.hysteresis_gamma
-            print(f"held out {held}, trained on {name:7s} (M={model.n_local_models}, hysteresis "
-                  f"{'off' if gamma is None else f'γ = {gamma:g}'}): " + "  ".join(cells),
-                  flush=True)
-        if plot_dir:
-            print(f"  wrote {plot_fold(held, traces, plot_dir)}")
+    with tempfile.TemporaryDirectory(prefix="lmncell-charge-") as tmp:
+        for held in a.hold_out.split(","):
+            traces = held_out_fold(a.dyn_dir, held, [t for t in temps if t != held],
+                                   a.capacity_ah, Path(tmp) / "model.json")
+            if plot_dir:
+                print(f"  wrote {plot_fold(held, traces, plot_dir)}")
 
+
+def held_out_fold(dyn: Path, held: str, others: list[str], capacity_ah: float,
+                  model_file: Path) -> dict[str, list[Trace]]:
+    """Train on the other temperatures' s1 records alone and with their s3 records, print
+    each model's figures on the held-out temperature's s1 and s3 records, and return each
+    model's traces of the held-out charge record."""
+    discharges = [test_file(dyn, t, "s1") for t in others]
+    charges = [test_file(dyn, t, "s3") for t in others]
+    records = {"discharge": test_file(dyn, held, "s1"), "charge": test_file(dyn, held, "s3")}
+    traces: dict[str, list[Trace]] = {}
+    for name, files, soc0 in (
+            ("s1 only", discharges, [1.0] * len(discharges)),
+            ("s1 + s3", discharges + charges, [1.0] * len(discharges) + [0.0] * len(charges))):
+        model, _ = train_files(files, model_file, capacity_ah=capacity_ah, soc0=soc0,
+                               progress=lambda _m: None)
+        cells = []
+        for kind, path in records.items():
+            window, whole, tr = judged(model, path, 1.0 if kind == "discharge" else 0.0)
+            cells.append(f"{kind} {window:5.2f} / {whole:5.1f}")
+            if kind == "charge":
+                traces[f"trained on {name}"] = tr
+        gamma = model.hysteresis_gamma
+        print(f"held out {held}, trained on {name:7s} (M={model.n_local_models}, hysteresis "
+              f"{'off' if gamma is None else f'γ = {gamma:g}'}): " + "  ".join(cells),
+              flush=True)
+    return traces
 
 if __name__ == "__main__":
     run_script(main, __file__)
