@@ -25,9 +25,12 @@ def cases():
     return scenarios(["us06", "hwfet"], [10.0, 35.0], [0.9], repeat=1)
 
 
-def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases) -> None:
+def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases, tmp_path,
+                                                     monkeypatch) -> None:
+    monkeypatch.setenv("TMPDIR", str(tmp_path))      # the worker processes' temporary folder
     one = sweep(native_fmu, cases, workers=1, progress=False)
     two = sweep(native_fmu, cases, workers=2, progress=False)
+    assert not list(tmp_path.glob("lmncell-sweep-*"))   # the workers' FMU copies are removed
     deterministic = [c for c in one.columns if c != "wall_s"]
     assert one[deterministic].equals(two[deterministic])
     assert list(one["cycle"]) == ["us06", "us06", "hwfet", "hwfet"]

@@ -10,6 +10,7 @@ deterministic.
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import io
 import itertools
@@ -148,13 +149,26 @@ def check_pack_size(n_cells: int, source: str) -> None:
 
 _UNPACKED: dict[str, Path] = {}
 _MODELS: dict[str, LmnModel] = {}
+_CACHE_DIR: list[tempfile.TemporaryDirectory] = []   # this process's folder of FMU files
+
+
+def _cache_dir() -> Path:
+    """This process's folder for the FMU files of _fmu_file, made on first use and removed
+    when the process exits (a Dask worker's at the cluster's close; each run left one behind
+    per worker process before)."""
+    if not _CACHE_DIR:
+        folder = tempfile.TemporaryDirectory(prefix="lmncell-sweep-")
+        atexit.register(folder.cleanup)
+        _CACHE_DIR.append(folder)
+    return Path(_CACHE_DIR[0].name)
 
 
 def _fmu_file(fmu_bytes: bytes) -> Path:
     """The FMU as a file in this process (written once per process and FMU)."""
     key = hashlib.sha256(fmu_bytes).hexdigest()[:16]
     if key not in _UNPACKED or not _UNPACKED[key].exists():
-        path = Path(tempfile.mkdtemp(prefix="lmncell-sweep-")) / f"{key}.fmu"
+        path = _cache_dir() / f"{key}.fmu"
+        path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(fmu_bytes)
         _UNPACKED[key] = path
     return _UNPACKED[key]
