@@ -91,6 +91,10 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   and the model computes the cell temperature (unless ``temperature_is_cell`` is set).
 - ``baselines`` (optional) and ``training`` (metadata: files with hashes, settings, metrics);
   ``description`` (optional, a string as the cell's name: the FMU's description).
+
+Any other key, at the top or in an object above (KNOWN_KEYS), is refused with its name: a
+misspelt optional key would otherwise be ignored. The contents of ``baselines`` and
+``training`` are not checked.
 """
 
 from __future__ import annotations
@@ -131,6 +135,34 @@ MAX_THETA = 1e9                        # |θ| beyond it is no cell's (squares ov
 LIMIT_KEYS = ("current_a", "soc", "voltage_v", "temperature_c")
 TEMPERATURE_STEP_K = 10.0     # dT = (T − T_ref)/TEMPERATURE_STEP_K in the temperature terms
 GATES = ("all", "charge", "discharge")
+# The keys each object of a model file may hold (the module docstring says what each means); any
+# other is refused by _check_known_keys, since a misspelt optional key would be ignored. The
+# values of "baselines" and "training" are metadata, read by no model step, and not checked.
+KNOWN_KEYS: dict[str, tuple[str, ...]] = {
+    "": ("format", "version", "description", "sample_time_s", "current_delay_s", "cell",
+         "output", "ocv", "regressors", "partition", "gating", "tree", "local_models", "limits",
+         "noise", "observers", "thermal", "baselines", "training"),
+    "cell": ("capacity_ah", "efficiency_charge", "efficiency_discharge", "voltage_min_v",
+             "voltage_max_v", "name"),
+    "ocv": ("soc", "voltage_v"),
+    "regressors": ("output_lags", "current_terms", "filters", "hysteresis_gamma", "ocv_input",
+                   "soc_input", "offset", "arrhenius_k", "time_constant_activation_k",
+                   "activation_t0_k", "core_rise", "reference_temperature_c",
+                   "temperature_terms", "hysteresis_terms", "depletion"),
+    "partition": ("variables", "center", "scale"),
+    "gating": ("mode", "rest_current_a", "initial_direction"),
+    "tree": ("roots", "nodes"),
+    "tree.roots": ("gate", "child"),
+    "tree.nodes": ("weights", "children"),
+    "local_models": ("columns", "theta"),
+    "limits": LIMIT_KEYS,
+    "noise": ("residual_std_v", "residual_std_by_soc", "residual_rms_by_soc",
+              "recent_current_rms_a"),
+    "noise.residual_std_by_soc": ("soc", "std_v"),
+    "noise.residual_rms_by_soc": ("soc", "rms_v"),
+    "observers": ("fuzzy",),
+    "observers.fuzzy": ("q", "r", "ocv_slopes_v", "gains", "variances"),
+}
 
 
 class ModelFileError(ValueError):
@@ -628,6 +660,7 @@ def _check_observers(doc: object, source: str, n_local_models: int) -> None:
 def model_from_dict(doc: dict, source: str = "<model>") -> LmnModel:
     """Check a model document and build the runtime model; errors name the file and key."""
     ver = _check_format(doc, source)
+    _check_known_keys(doc, source)
     ts, delay = _read_timing(doc, source)
     cell = _cell_fields(doc, source)
     output = _get(doc, "output", source, str)
@@ -721,6 +754,31 @@ def _check_format(doc: dict, source: str) -> int:
         raise ModelFileError(f"{source}: model file version {ver!r}; this LMNCell reads versions "
                              f"{list(READABLE_VERSIONS)} (re-train or convert the model)")
     return ver
+
+
+def _check_known_keys(doc: dict, source: str) -> None:
+    """ModelFileError naming the object and the key where an object of the document holds a
+    key that KNOWN_KEYS does not list for it (a misspelt "arrhenius" beside "arrhenius_k" was
+    ignored, and the model stepped without its temperature scaling). Objects that are not
+    JSON objects are left to the readers, which refuse them by type."""
+    def objects(path: str, value: object) -> Iterator[tuple[str, str, dict]]:
+        if isinstance(value, dict):
+            yield path, path, value
+            for key in value:
+                child = f"{path}.{key}" if path else key
+                if child in KNOWN_KEYS:
+                    yield from objects(child, value[key])
+        elif isinstance(value, list) and path in ("tree.roots", "tree.nodes"):
+            for k, item in enumerate(value):
+                if isinstance(item, dict):
+                    yield path, f"{path}[{k}]", item
+
+    for kind, where, obj in objects("", doc):
+        unknown = [key for key in obj if key not in KNOWN_KEYS[kind]]
+        if unknown:
+            raise ModelFileError(
+                f"{source}{': ' + where if where else ''}: unknown key {unknown[0]!r}; expected "
+                f"only {', '.join(KNOWN_KEYS[kind])} (a misspelt key would be ignored)")
 
 
 def _read_timing(doc: dict, source: str) -> tuple[float, float]:

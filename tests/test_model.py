@@ -328,6 +328,17 @@ def test_model_round_trip_is_bit_identical(tmp_path) -> None:
     (lambda d: d.update(observers={"fuzzy": {"q": None, "r": 1e-4}}), "key 'q' is NoneType"),
     (lambda d: d["local_models"]["theta"][0].__setitem__(0, 1e300),
      "theta holds 1e\\+300, expected coefficients within ±1e\\+09"),
+    # a misspelt key would be ignored: the model would step without what it names
+    (lambda d: d.update(thermall=None), "bad.json: unknown key 'thermall'; expected only format"),
+    (lambda d: d["regressors"].update(arrhenius=3000.0),
+     "regressors: unknown key 'arrhenius'; expected only output_lags, .*arrhenius_k"),
+    (lambda d: d["cell"].update(capacity=2.0), "cell: unknown key 'capacity'"),
+    (lambda d: d.update(limits={"temperature": [0.0, 40.0]}), "limits: unknown key 'temperature'"),
+    (lambda d: d["tree"]["nodes"][0].update(weight=[0.0]), r"tree.nodes\[0\]: unknown key 'weight'"),
+    (lambda d: d["tree"]["roots"][0].update(gates="all"), r"tree.roots\[0\]: unknown key 'gates'"),
+    (lambda d: d.update(noise={"residual_std_by_soc": {"soc": [0.5], "std": [0.01]}}),
+     "noise.residual_std_by_soc: unknown key 'std'; expected only soc, std_v"),
+    (lambda d: d.update(observers={"fuzy": {}}), "observers: unknown key 'fuzy'"),
 ])
 def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
     doc = model_to_dict(random_tree_model())
@@ -336,6 +347,17 @@ def test_bad_model_files_are_refused(tmp_path, edit, message) -> None:
     p.write_text(json.dumps(doc))
     with pytest.raises((ModelFileError, ValueError), match=message):
         load_model(p)
+
+
+def test_training_and_baselines_metadata_are_not_checked_key_by_key(tmp_path) -> None:
+    """The contents of 'training' and 'baselines' are metadata that no model step reads: keys
+    of any name load (KNOWN_KEYS covers every other object)."""
+    doc = model_to_dict(random_tree_model())
+    doc["training"] = {"files": [{"path": "a.csv"}], "anything": 1}
+    doc["baselines"] = {"ecm2rc": {"any_key": [1, 2]}}
+    p = tmp_path / "meta.json"
+    p.write_text(json.dumps(doc))
+    assert load_model(p).extra["training"]["anything"] == 1
 
 
 def test_names_from_file_names_are_made_xml_text(tmp_path) -> None:
