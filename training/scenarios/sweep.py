@@ -10,7 +10,6 @@ deterministic.
 
 from __future__ import annotations
 
-import atexit
 import hashlib
 import io
 import itertools
@@ -154,12 +153,10 @@ _CACHE_DIR: list[tempfile.TemporaryDirectory] = []   # this process's folder of 
 
 def _cache_dir() -> Path:
     """This process's folder for the FMU files of _fmu_file, made on first use and removed
-    when the process exits (a Dask worker's at the cluster's close; each run left one behind
-    per worker process before)."""
+    when the process exits (TemporaryDirectory's finaliser; a Dask worker's at the cluster's
+    close; tempfile.mkdtemp left one behind per worker process and run)."""
     if not _CACHE_DIR:
-        folder = tempfile.TemporaryDirectory(prefix="lmncell-sweep-")
-        atexit.register(folder.cleanup)
-        _CACHE_DIR.append(folder)
+        _CACHE_DIR.append(tempfile.TemporaryDirectory(prefix="lmncell-sweep-"))
     return Path(_CACHE_DIR[0].name)
 
 
