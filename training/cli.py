@@ -380,8 +380,7 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     )
 
     check_table_path(a.out)
-    cycles = [c.strip() for c in a.cycles.split(",") if c.strip()]    # as _floats: no blanks
-    cases = scenarios(cycles, a.ambient, a.soc0, a.vehicle or [None], a.repeat,
+    cases = scenarios(a.cycles, a.ambient, a.soc0, a.vehicle or [None], a.repeat,
                       a.pack, a.spread, a.seed, a.cells, a.cutoff)
     check_sweep(a.fmu, cases, a.workers)
     print(f"sweep: {len(cases)} scenario(s) on "
@@ -566,15 +565,16 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
                    "importer (linux64 binary built here with gcc, sources included)")
-    s.add_argument("--platforms", type=_platform_list, metavar="linux64,win64,darwin64",
+    s.add_argument("--platforms", type=_name_list, metavar="linux64,win64,darwin64",
                    help="with --native: the binaries to put in (default linux64; win64 and "
                    "darwin64, a universal binary for Intel and Apple silicon Macs, are "
                    "cross-compiled with zig: pip install ziglang)")
     s.set_defaults(func=cmd_build_fmu)
 
 
-def _platform_list(text: str) -> list[str]:
-    """--platforms: comma-separated FMI platform names (checked by the build)."""
+def _name_list(text: str) -> list[str]:
+    """An argparse type for comma-separated names (--platforms, --cycles), blank entries
+    dropped as _floats drops them; the names are checked where they are used."""
     return [name.strip() for name in text.split(",") if name.strip()]
 
 
@@ -623,8 +623,9 @@ def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell sweep` subcommand."""
     s = sub.add_parser("sweep", help="many drive-cycle scenarios of an FMU on Dask", **fmt)
     s.add_argument("fmu", help="an LMNCell FMU (pythonfmu or native)")
-    s.add_argument("--cycles", default="wltc", help="comma list of wltc, udds, us06, hwfet "
-                   "and speed-trace CSV files (as simulate --cycle takes them)")
+    s.add_argument("--cycles", type=_name_list, default="wltc", help="comma list of wltc, "
+                   "udds, us06, hwfet and speed-trace CSV files (as simulate --cycle takes "
+                   "them)")
     s.add_argument("--ambient", type=_floats("--ambient"), default=[25.0],
                    help="comma list of ambient temperatures, °C (default: 25)")
     s.add_argument("--soc0", type=_floats("--soc0"), default=[0.9],
