@@ -148,46 +148,10 @@ DEPLETION_HEADS = {   # explain_text's depletion columns: R_d at SoC 0.1, and at
 def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
     """The table of `lmncell explain`: every local model as the cell it describes."""
     rows = local_model_table(model, temperature_c)
-    lines = []
-    form = "RC ladder"
-    if model.output_lags or not model.filters:
-        form = f"ARX with {model.output_lags} output lags (time constants from its poles)"
-    elif not is_ladder(model.filters, model.sample_time_s, 0):
-        form = "filter terms that are not a chain (RC elements may be negative)"
-    lines.append(f"{model.n_local_models} local model(s), {form}; partition: "
-                 f"{', '.join(model.partition_variables)}; hysteresis: "
-                 + ("off" if model.hysteresis_gamma is None
-                    else f"γ = {model.hysteresis_gamma:g}")
-                 + _temperature_text(model)
-                 + ("" if not model.current_delay_s
-                    else f"; current delayed by {model.current_delay_s:g} s (the voltage "
-                         "channel's lag)"))
-    lines.append("resistances in mΩ, voltages in mV; current > 0 charges")
-    if model.depletion is not None and "r_depletion_mohm" in rows[0]:
-        lines.append(f"R_dep: the depletion resistance R_d·(0.1/SoC)^{model.depletion.power:g}"
-                     f" (held below SoC {model.depletion.soc_min:.3g}) that a steady current "
-                     "sees beside R static; @0.1 at SoC 0.1 (for a local model valid far above "
-                     "it, a coefficient its data never reach), @SoC at the local model's own")
+    lines = _explain_head(model, rows)
     part = model.partition_variables
     if "rc_mohm_by_tau_s" in rows[0]:
-        taus = [k for k in rows[0]["rc_mohm_by_tau_s"] if k != "0"]
-        head = (["LM", "gate", *part, "T/°C", "R0"] + [f"R@{t}s" for t in taus]
-                + ["R static"] + (["H"] if "hysteresis_mv" in rows[0] else [])
-                + [DEPLETION_HEADS[k] for k in DEPLETION_HEADS if k in rows[0]]
-                + (["U_off"] if "ocv_offset_mv" in rows[0] else []) + ["R ≥ 0"])
-        body = []
-        for r in rows:
-            cells = [str(r["local_model"]), r["gate"], *[f"{r[v]:.2f}" for v in part],
-                     f"{r['temperature_c']:.1f}", f"{r['r0_mohm']:.2f}"]
-            cells += [f"{r['rc_mohm_by_tau_s'][t]:.2f}" for t in taus]
-            cells.append(f"{r['r_static_mohm']:.2f}")
-            if "hysteresis_mv" in r:
-                cells.append(f"{r['hysteresis_mv']:.1f}")
-            cells += [f"{r[key]:.2f}" for key in DEPLETION_HEADS if key in r]
-            if "ocv_offset_mv" in r:
-                cells.append(f"{r['ocv_offset_mv']:.1f}")
-            cells.append("yes" if r["rc_positive"] else "NO")
-            body.append(cells)
+        head, body = _ladder_table(rows, part)
     else:
         head = ["LM", "gate", *part, "R0", "R static", "time constants/s", "max pole"]
         body = [[str(r["local_model"]), r["gate"], *[f"{r[v]:.2f}" for v in part],
@@ -199,6 +163,54 @@ def explain_text(model: LmnModel, temperature_c: float | None = None) -> str:
     lines += ["  ".join(c.rjust(w) for c, w in zip(b, widths, strict=True)) for b in body]
     lines += _training_error_lines(model)
     return "\n".join(lines)
+
+
+def _explain_head(model: LmnModel, rows: list[dict[str, Any]]) -> list[str]:
+    """The lines above explain's table: the model's form, its inputs' effects and units."""
+    form = "RC ladder"
+    if model.output_lags or not model.filters:
+        form = f"ARX with {model.output_lags} output lags (time constants from its poles)"
+    elif not is_ladder(model.filters, model.sample_time_s, 0):
+        form = "filter terms that are not a chain (RC elements may be negative)"
+    lines = [f"{model.n_local_models} local model(s), {form}; partition: "
+             f"{', '.join(model.partition_variables)}; hysteresis: "
+             + ("off" if model.hysteresis_gamma is None
+                else f"γ = {model.hysteresis_gamma:g}")
+             + _temperature_text(model)
+             + ("" if not model.current_delay_s
+                else f"; current delayed by {model.current_delay_s:g} s (the voltage "
+                     "channel's lag)"),
+             "resistances in mΩ, voltages in mV; current > 0 charges"]
+    if model.depletion is not None and "r_depletion_mohm" in rows[0]:
+        lines.append(f"R_dep: the depletion resistance R_d·(0.1/SoC)^{model.depletion.power:g}"
+                     f" (held below SoC {model.depletion.soc_min:.3g}) that a steady current "
+                     "sees beside R static; @0.1 at SoC 0.1 (for a local model valid far above "
+                     "it, a coefficient its data never reach), @SoC at the local model's own")
+    return lines
+
+
+def _ladder_table(rows: list[dict[str, Any]],
+                  part: list[str]) -> tuple[list[str], list[list[str]]]:
+    """Explain's head and rows for RC-ladder local models: R0, each RC element, R static, …"""
+    taus = [k for k in rows[0]["rc_mohm_by_tau_s"] if k != "0"]
+    head = (["LM", "gate", *part, "T/°C", "R0"] + [f"R@{t}s" for t in taus]
+            + ["R static"] + (["H"] if "hysteresis_mv" in rows[0] else [])
+            + [DEPLETION_HEADS[k] for k in DEPLETION_HEADS if k in rows[0]]
+            + (["U_off"] if "ocv_offset_mv" in rows[0] else []) + ["R ≥ 0"])
+    body = []
+    for r in rows:
+        cells = [str(r["local_model"]), r["gate"], *[f"{r[v]:.2f}" for v in part],
+                 f"{r['temperature_c']:.1f}", f"{r['r0_mohm']:.2f}"]
+        cells += [f"{r['rc_mohm_by_tau_s'][t]:.2f}" for t in taus]
+        cells.append(f"{r['r_static_mohm']:.2f}")
+        if "hysteresis_mv" in r:
+            cells.append(f"{r['hysteresis_mv']:.1f}")
+        cells += [f"{r[key]:.2f}" for key in DEPLETION_HEADS if key in r]
+        if "ocv_offset_mv" in r:
+            cells.append(f"{r['ocv_offset_mv']:.1f}")
+        cells.append("yes" if r["rc_positive"] else "NO")
+        body.append(cells)
+    return head, body
 
 
 def _temperature_text(model: LmnModel) -> str:
