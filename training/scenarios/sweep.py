@@ -10,6 +10,7 @@ deterministic.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import itertools
@@ -148,23 +149,19 @@ def check_pack_size(n_cells: int, source: str) -> None:
 
 _UNPACKED: dict[str, Path] = {}
 _MODELS: dict[str, LmnModel] = {}
-_CACHE_DIR: list[tempfile.TemporaryDirectory] = []   # this process's folder of FMU files
-
-
-def _cache_dir() -> Path:
+@functools.cache
+def _cache_dir() -> tempfile.TemporaryDirectory:
     """This process's folder for the FMU files of _fmu_file, made on first use and removed
     when the process exits (TemporaryDirectory's finaliser; a Dask worker's at the cluster's
     close; tempfile.mkdtemp left one behind per worker process and run)."""
-    if not _CACHE_DIR:
-        _CACHE_DIR.append(tempfile.TemporaryDirectory(prefix="lmncell-sweep-"))
-    return Path(_CACHE_DIR[0].name)
+    return tempfile.TemporaryDirectory(prefix="lmncell-sweep-")
 
 
 def _fmu_file(fmu_bytes: bytes) -> Path:
     """The FMU as a file in this process (written once per process and FMU)."""
     key = hashlib.sha256(fmu_bytes).hexdigest()[:16]
     if key not in _UNPACKED or not _UNPACKED[key].exists():
-        path = _cache_dir() / f"{key}.fmu"
+        path = Path(_cache_dir().name) / f"{key}.fmu"
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_bytes(fmu_bytes)
         _UNPACKED[key] = path
