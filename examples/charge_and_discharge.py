@@ -116,5 +116,6 @@ def held_out_fold(dyn: Path, held: str, others: list[str], capacity_ah: float,
               flush=True)
     return traces
 
+
 if __name__ == "__main__":
     run_script(main, __file__)
