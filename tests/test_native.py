@@ -538,6 +538,59 @@ def test_sanitizers_find_nothing_on_hostile_inputs(request, us06, tmp_path, obse
             assert 0.0 <= res["soc"] <= 1.0
 
 
+FUZZ_C = Path(__file__).parent / "native" / "fuzz_calls.c"
+
+
+def _libfuzzer_clang(tmp_path: Path) -> str | None:
+    """A clang that links libFuzzer with the address and undefined-behaviour sanitizers (it
+    compiles and links an empty fuzz target), or None."""
+    probe = tmp_path / "probe.c"
+    probe.write_text("#include <stddef.h>\n#include <stdint.h>\n"
+                     "int LLVMFuzzerTestOneInput(const uint8_t *d, size_t n) "
+                     "{ (void)d; (void)n; return 0; }\n")
+    for name in ("clang", *(f"clang-{v}" for v in range(20, 13, -1))):
+        exe = shutil.which(name)
+        if exe and subprocess.run([exe, "-fsanitize=fuzzer,address,undefined", str(probe), "-o",
+                                   str(tmp_path / "probe")], capture_output=True).returncode == 0:
+            return exe
+    return None
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model_fixture", ["quick_model", "fast_depletion_model", "a123_model"])
+def test_fuzzed_call_sequences_find_nothing(request, tmp_path, model_fixture) -> None:
+    """Coverage-guided fuzzing (libFuzzer, tests/native/fuzz_calls.c) of FMI call sequences on
+    the native FMU's shipped sources, built with the address and undefined-behaviour
+    sanitizers: any value into any input or parameter, steps of any size from any point,
+    set-up, initialisation, reset and terminate in any order, FMU states saved, restored, freed
+    and read back from serialised bytes partly overwritten. 50 000 seeded runs per model (thermal
+    and depletion; the fast depletion regressor; hysteresis); no finding (a sanitizer report,
+    a leak, a crash, or a non-finite output after a step that returned OK), and taken steps
+    among them, so that the check on the outputs was reached."""
+    from lmncell.fmu.native_build import build_native_fmu, fmi_headers
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    clang = _libfuzzer_clang(tmp_path)
+    if clang is None:
+        pytest.skip("no clang with libFuzzer (apt install clang libclang-rt-dev)")
+    fmu = build_native_fmu(request.getfixturevalue(model_fixture), tmp_path / "cell.fmu")
+    guid = unzip_fmu(fmu, tmp_path / "fmu")
+    src = tmp_path / "fmu" / "sources"
+    exe = tmp_path / "fuzz_calls"
+    subprocess.run([clang, "-g", "-O1", "-fsanitize=fuzzer,address,undefined",
+                    "-fno-sanitize-recover=undefined", "-Wall", "-Wno-unused-function",
+                    f"-I{src}", f"-I{fmi_headers()}", f'-DLMNCELL_FUZZ_GUID="{guid}"',
+                    str(FUZZ_C), str(src / "lmncell.c"), "-lm", "-o", str(exe)], check=True)
+    out = subprocess.run([str(exe), "-seed=1", "-runs=50000", "-max_len=512", "-timeout=60",
+                          f"-artifact_prefix={tmp_path}/"], capture_output=True, text=True,
+                         cwd=tmp_path, timeout=1200)
+    assert out.returncode == 0, out.stderr[-4000:]
+    made, taken = map(int, re.search(r"fuzz_calls: (\d+) steps, (\d+) taken",
+                                     out.stderr).groups())
+    assert taken >= 100 and made > taken, out.stderr[-2000:]
+
+
 def test_build_description_validates_and_names_libm(native_fmu) -> None:
     from fmpy.model_description import read_build_description
 
