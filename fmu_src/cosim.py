@@ -92,6 +92,11 @@ class Parameters:
     temperature_is_cell: bool = False
 
 
+def state_fault(exc: Exception) -> str:
+    """What an exception raised while reading an FMU state says is wrong with it."""
+    return f"no {exc}" if isinstance(exc, KeyError) else str(exc)
+
+
 class CellCosim:
     """Holds a CellStepper, the partial-step accumulators and the trained-range flag."""
 
@@ -344,12 +349,21 @@ class CellCosim:
                            self.params.temperature_is_cell]}
 
     def set_state(self, state: dict) -> None:
-        """Restore a get_state() dict; one of another shape (e.g. saved by another LMNCell
-        version) is refused with a ValueError before anything changes."""
+        """Restore a get_state() dict. One that cannot be restored (another shape, e.g. saved by
+        another LMNCell version, or values of the wrong kind or out of range) is refused with a
+        ValueError, and the instance stays as it was."""
+        saved = self.get_state()
+        try:
+            self._restore(state)
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+            self._restore(saved)
+            raise ValueError(f"FMU state: {state_fault(exc)}") from exc
+
+    def _restore(self, state: dict) -> None:
+        """set_state's work, which may stop half-way on a bad state."""
         acc = [float(x) for x in state["acc"]]
         if len(acc) != ACCUMULATORS:
-            raise ValueError(f"FMU state: 'acc' holds {len(acc)} values, expected "
-                             f"{ACCUMULATORS} (a state saved by another LMNCell version?)")
+            raise ValueError(f"'acc' holds {len(acc)} values, expected {ACCUMULATORS}")
         soc0, cap, obs, is_cell = state["params"]
         self.params = Parameters(float(soc0), float(cap), int(obs), bool(is_cell))
         self.reset()
@@ -366,3 +380,5 @@ class CellCosim:
         self.out_of_range, self.range_message, self.steps = (
             bool(state["flags"][0]), str(state["flags"][1]), int(state["flags"][2]))
         self.preview_v = self._preview()
+        if not self._outputs_finite():
+            raise ValueError("its outputs are not finite")

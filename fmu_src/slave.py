@@ -19,7 +19,7 @@ from typing import Any
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters
+from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters, state_fault
 from .model import ModelFileError, is_cell_capacity, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
@@ -381,18 +381,38 @@ class LmnCellSlave(Fmi2Slave):
                 "cosim": None if self._cosim is None else self._cosim.get_state()}
 
     def _set_fmu_state(self, state: dict) -> None:
-        self.current, self.voltage_measured, self.temperature = state["inputs"]
-        self._time = float(state["time"])
-        self.soc0, self.capacity, self.observer, self.temperature_is_cell = state["params"]
+        """Restore a _get_fmu_state() dict. One that is not a state of this FMU (another shape,
+        values of the wrong kind, a non-finite time) is refused as an ordinary call error
+        (fmi2Error with LMNCell's wrapper) and changes nothing."""
+        try:
+            inputs = [float(x) for x in state["inputs"]]
+            time = float(state["time"])
+            soc0, capacity, observer, is_cell = state["params"]
+            if len(inputs) != 3 or not math.isfinite(time):
+                raise ValueError(f"inputs {state['inputs']!r}, time {time!r}: expected three "
+                                 "inputs and a finite time")
+            cosim = self._restored_cosim(state["cosim"], float(soc0), float(capacity))
+        except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
+            self._error(f"fmi2SetFMUstate: the FMU state is not one of this FMU's "
+                        f"({state_fault(exc)}); nothing was changed")
+            return
+        self._cosim = cosim
+        self.current, self.voltage_measured, self.temperature = inputs
+        self._time = time
+        self.soc0, self.capacity, self.observer, self.temperature_is_cell = (
+            soc0, capacity, observer, is_cell)
         # as the native FMU: step mode where the state is initialised, else instantiated
         self._terminated = self._in_initialization = False
-        if state["cosim"] is None:
-            self._cosim = None
-        else:
-            if self._cosim is None:
-                self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
-                                                                float(self.capacity)))
-            self._cosim.set_state(state["cosim"])
+
+    def _restored_cosim(self, cosim_state: dict | None, soc0: float,
+                        capacity: float) -> CellCosim | None:
+        """The engine of an FMU state (None: not initialised): this instance's own with the
+        state restored, or a new one; ValueError (nothing changed) where it cannot be."""
+        if cosim_state is None:
+            return None
+        cosim = self._cosim or CellCosim(self._model, Parameters(soc0, capacity))
+        cosim.set_state(cosim_state)
+        return cosim
 
     @staticmethod
     def _fmu_state_to_bytes(state: dict) -> bytes:

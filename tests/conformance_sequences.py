@@ -576,6 +576,72 @@ def state_reuse(fmu: str) -> dict:
     return out
 
 
+def _damaged(serialized: bytes) -> dict[str, bytes]:
+    """Damaged copies of a serialised FMU state: for the pythonfmu FMU's JSON, a non-finite
+    time, a part missing, parameters, model state and accumulators of the wrong shape or kind;
+    for the native FMU's bytes, everything after the magic number set to 0xFF (a NaN time,
+    switches out of range)."""
+    try:
+        doc = json.loads(serialized)
+    except (UnicodeDecodeError, ValueError):
+        return {"0xFF after the magic number": serialized[:4] + b"\xff" * (len(serialized) - 4)}
+
+    def changed(edit: Callable[[dict], object]) -> bytes:
+        copy = json.loads(serialized)
+        edit(copy)
+        return json.dumps(copy, allow_nan=True).encode()
+
+    return {"NaN time": changed(lambda d: d.update(time=math.nan)),
+            "no engine": changed(lambda d: d.pop("cosim")),
+            "one parameter": changed(lambda d: d.update(params=d["params"][:1])),
+            "model state cut short": changed(
+                lambda d: d["cosim"].update(stepper=d["cosim"]["stepper"][:3])),
+            "text accumulator": changed(lambda d: d["cosim"]["acc"].__setitem__(0, "x")),
+            "NaN voltage": changed(lambda d: d["cosim"]["stepper"].__setitem__(-1, math.nan)),
+            } if doc.get("cosim") else {}
+
+
+def _read_back(slave: FMU2Slave, data: bytes) -> tuple[int, int | None]:
+    """The statuses of fmi2DeSerializeFMUstate of data and, where it gave a state,
+    fmi2SetFMUstate of that state (else None)."""
+    got: list = []
+    read = _status(lambda: got.append(slave.deSerializeFMUstate(data)))
+    return read, _status(lambda: slave.setFMUstate(got[0])) if got else None
+
+
+def damaged_states(fmu: str) -> dict:
+    """A state saved after 10 s at −1 A, serialised, damaged (_damaged) and read back
+    (fmi2DeSerializeFMUstate, then fmi2SetFMUstate) at 11 s: the statuses, the messages, and
+    whether the instance's outputs and time are still those of 11 s (its next step gives the
+    voltage of an undamaged twin)."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    out: dict = {}
+    with fmu_log("damaged") as (name, callbacks, log):
+        slave, vr = _raw_initialised(fmu, name, callbacks)
+        outputs = [vr["voltage"], vr["soc"], vr["soc_std"], vr["cell_temperature"]]
+        slave.setReal([vr["current"]], [-1.0])
+        for k in range(10):
+            slave.doStep(float(k), 1.0)
+        serialized = bytes(slave.serializeFMUstate(slave.getFMUstate()))
+        slave.setReal([vr["current"]], [-2.0])
+        slave.doStep(10.0, 1.0)
+        now, at_11 = slave.getFMUstate(), slave.getReal(outputs)
+        slave.doStep(11.0, 1.0)
+        out["twin_next"] = slave.getReal([vr["voltage"]])[0]
+        for label, data in _damaged(serialized).items():
+            slave.setFMUstate(now)
+            before = len(log)
+            read, put = _read_back(slave, data)
+            kept = slave.getReal(outputs) == at_11
+            nxt = _status(lambda: slave.doStep(11.0, 1.0))
+            out[label] = {"read": read, "set": put, "kept": kept, "next_step": nxt,
+                          "next": slave.getReal([vr["voltage"]])[0],
+                          "log": [entry.replace(name, "NAME") for entry in log[before:]]}
+        slave.freeInstance()
+    return out
+
+
 def _rss_kb() -> int:
     """Resident set size of this process (kB, Linux)."""
     with open("/proc/self/statm") as fh:
@@ -824,7 +890,7 @@ SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_rang
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,
                                       null_pointers, status_inquiries, mode_rules,
-                                      state_reuse,
+                                      state_reuse, damaged_states,
                                       instantiate_many, random_calls, random_calls_long)}
 
 if __name__ == "__main__":

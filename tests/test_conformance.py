@@ -400,6 +400,22 @@ def test_fmu_states_are_reused_freed_and_checked(fmu) -> None:
     assert res["step_after"] == 0
 
 
+def test_a_damaged_fmu_state_is_refused_and_changes_nothing(fmu) -> None:
+    """A serialised state damaged before it is read back (the pythonfmu FMU's JSON: a NaN time,
+    a part missing, parts of the wrong shape or kind, a NaN voltage; the native FMU's bytes:
+    0xFF after the magic number) is refused with fmi2Error and a message, by
+    fmi2DeSerializeFMUstate or by fmi2SetFMUstate, and the instance keeps its outputs and time:
+    its next step gives the voltage of an undamaged twin. The pythonfmu FMU took the inputs,
+    time and parameters of a state whose engine part it then failed to read."""
+    res = _run(fmu, "damaged_states")
+    twin = res.pop("twin_next")
+    assert len(res) >= 1
+    for label, got in res.items():
+        assert ERROR in (got["read"], got["set"]), (label, got)
+        assert len(got["log"]) == 1 and "nothing was" in got["log"][0], (label, got)
+        assert got["kept"] and got["next_step"] == 0 and got["next"] == twin, (label, got)
+
+
 def test_both_fmus_answer_null_pointers_status_inquiries_modes_and_states_alike(quick_fmu,
                                                                   native_fmu) -> None:
     for sequence in ("null_pointers", "status_inquiries", "mode_rules", "state_reuse"):

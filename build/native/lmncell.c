@@ -1708,6 +1708,18 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[],
     return fmi2OK;
 }
 
+/* whether s is a state this FMU can be in, as far as its switches, time, parameters and
+   outputs tell (bytes with the right size and magic number may still be none: another model
+   of the same shape, or bytes changed on the way) */
+static int state_plausible(const State *s) {
+    if (!isfinite(s->time) || (s->temperature_is_cell != 0 && s->temperature_is_cell != 1)
+        || (s->initialized != 0 && s->initialized != 1))
+        return 0;
+    return !s->initialized || (s->observer >= 0 && s->observer <= 3
+                               && is_cell_capacity(s->capacity) && s->soc0 >= 0.0
+                               && s->soc0 <= 1.0 && outputs_finite(s));
+}
+
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size,
                                    fmi2FMUstate *st) {
     Instance *in = (Instance *)c;
@@ -1725,6 +1737,12 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t s
     if (tmp.magic != STATE_MAGIC) {
         logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: the bytes are not a "
               "state of this model (another model or version?)");
+        return fmi2Error;
+    }
+    if (!state_plausible(&tmp)) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DeSerializeFMUstate: the bytes are not a "
+              "state this FMU can be in (a non-finite time, a switch out of range, or, once "
+              "initialised, a bad parameter or a non-finite output); nothing was read");
         return fmi2Error;
     }
     return store_state(in, "fmi2DeSerializeFMUstate", st, &tmp);
