@@ -679,7 +679,8 @@ class RandomHost:
     """A host that makes the FMI 2.0 calls of one instance in an order and with arguments
     chosen by a seeded random generator: NaN, ±inf, ±1e308, negative or zero step sizes,
     communication points that are not the FMU's time, unknown references, NULL log
-    categories, FMU states saved, restored, serialised and freed in any mode."""
+    categories, FMU states saved, restored, serialised (some damaged on the way) and freed
+    in any mode."""
 
     def __init__(self, slave: FMU2Slave, md: ModelDescription, rng: random.Random) -> None:
         self.slave, self.rng, self.clock = slave, rng, 0.0
@@ -807,16 +808,21 @@ class RandomHost:
         return f" #{k + 1}", status
 
     def serialize_state(self) -> tuple[str, int]:
-        """A saved state serialised and read back as a new one."""
+        """A saved state serialised and read back as a new one, in two of five cases with one
+        of its bytes after the first four (the native FMU's magic number) overwritten."""
         if not self.states:
             return " (none saved)", -1
         k = self.rng.randrange(len(self.states))
+        data = bytearray(self.slave.serializeFMUstate(self.states[k][0]))
+        damage = ""
+        if self.rng.random() < 0.4 and len(data) > 4:
+            at, value = self.rng.randrange(4, len(data)), self.rng.randrange(256)
+            data[at], damage = value, f" with byte {at} = {value}"
         got: list = []
-        status = _status(lambda: got.append(self.slave.deSerializeFMUstate(
-            self.slave.serializeFMUstate(self.states[k][0]))))
+        status = _status(lambda: got.append(self.slave.deSerializeFMUstate(bytes(data))))
         if status == OK:
             self.states.append((got[0], self.states[k][1]))
-        return f" #{k + 1}", status
+        return f" #{k + 1}{damage}", status
 
     def free_state(self) -> tuple[str, int]:
         if not self.states:
