@@ -599,12 +599,14 @@ class SocObserver:
         if history and len(history) != len(self.lowpass_slots):
             raise ValueError(f"observer state: history has {len(history)} entries, expected "
                              f"0 or {len(self.lowpass_slots)} (one per low-pass state)")
-        modes = [[float(v) for v in d[key]] for key in ("mode_soc", "mode_var", "mode_prob")]
+        mode_soc, mode_var, mode_prob = modes = [
+            [float(v) for v in d[key]] for key in ("mode_soc", "mode_var", "mode_prob")]
         if any(len(m) != len(self.state.mode_soc) for m in modes):
             raise ValueError(f"observer state: the IMM's modes hold {[len(m) for m in modes]} "
                              f"values, expected {len(self.state.mode_soc)} each")
         self.state = ObserverState(float(d["soc"]), float(d["var"]), int(d["skipped"]),
-                                   cov.reshape(n, n), *modes, float(d["var_floor"]),
+                                   cov.reshape(n, n), mode_soc, mode_var, mode_prob,
+                                   float(d["var_floor"]),
                                    float(d["innovation_ms"]), float(d["innovation_weight"]),
                                    history)
 
