@@ -241,7 +241,7 @@ class CellCosim:
         except (ArithmeticError, ValueError):   # OverflowError of math.exp, LinAlgError, …
             finite = False
         if not finite:
-            self.set_state(before)
+            self._restore(before)   # this instance's own state: no rollback needed
             raise InputError("the model produced a non-finite output (inputs far outside the "
                              "trained region?)")
         return taken
@@ -373,7 +373,7 @@ class CellCosim:
         if self.observer:
             self.observer.set_state(state["observer"])
         else:
-            self.stepper.set_state(list(state["stepper"]))
+            self.stepper.load_state(list(state["stepper"]))
         (self.covered_s, self.charge_as, self.temp_int, self.volt_int, self.volt_time,
          self.delay_covered_s, self.delay_charge_as, self.delayed_current_a,
          self.preview_current_a) = acc

@@ -589,7 +589,7 @@ class SocObserver:
                 "innovation_weight": s.innovation_weight, "history": list(s.history)}
 
     def set_state(self, d: dict) -> None:
-        self.stepper.set_state(list(d["stepper"]))
+        self.stepper.load_state(list(d["stepper"]))
         cov = np.array([float(v) for v in d["cov"]])
         n = self.state.cov.shape[0]         # this observer's: ξ's size for the EKF, else 0
         if cov.size != n * n:

@@ -763,18 +763,23 @@ class CellStepper:
         return [*self.state.as_list(), *self.lags, self.voltage_v]
 
     def set_state(self, values: list[float]) -> None:
-        """Restore a get_state() list: ValueError (nothing changed) for one of another length
-        or with a value that is not a number."""
+        """Restore this stepper's own get_state() list (the preview's save, taken back at
+        every partial step: unchecked)."""
         m = self.model
         n_exo_state = len(self.state.as_list())     # this model's ExoState layout
-        if len(values) != n_exo_state + m.output_lags + 1:
-            raise ValueError(f"the model state holds {len(values)} values, expected "
-                             f"{n_exo_state + m.output_lags + 1}")
-        values = [float(v) for v in values]
-        self.state = ExoState.from_list(values[:n_exo_state], len(m.filters),
+        self.state = ExoState.from_list(list(values[:n_exo_state]), len(m.filters),
                                         m.current_terms - 1)
         self.lags = list(values[n_exo_state:n_exo_state + m.output_lags])
         self.voltage_v = float(values[n_exo_state + m.output_lags])
+
+    def load_state(self, values: list) -> None:
+        """Restore a get_state() list read from outside (an FMU state a host gave back):
+        ValueError, and nothing changed, for one of another length or with a value that is not
+        a number."""
+        expected = len(self.state.as_list()) + self.model.output_lags + 1
+        if len(values) != expected:
+            raise ValueError(f"the model state holds {len(values)} values, expected {expected}")
+        self.set_state([float(v) for v in values])
 
 
 class CellThermal:
