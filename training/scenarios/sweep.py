@@ -149,6 +149,8 @@ def check_pack_size(n_cells: int, source: str) -> None:
 
 _UNPACKED: dict[str, Path] = {}
 _MODELS: dict[str, LmnModel] = {}
+
+
 @functools.cache
 def _cache_dir() -> tempfile.TemporaryDirectory:
     """This process's folder for the FMU files of _fmu_file, made on first use and removed
