@@ -24,6 +24,8 @@ from .model import ModelFileError, is_cell_capacity, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
+UNREADABLE = "unreadable"   # key of the state that _fmu_state_from_bytes gives for bad bytes
+
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never
 # owned, at every instantiation: without a counterweight the module dictionary is freed while
@@ -384,6 +386,9 @@ class LmnCellSlave(Fmi2Slave):
         """Restore a _get_fmu_state() dict. One that is not a state of this FMU (another shape,
         values of the wrong kind, a non-finite time) is refused as an ordinary call error
         (fmi2Error with LMNCell's wrapper) and changes nothing."""
+        if UNREADABLE in state:   # pythonfmu's own wrapper: bytes that were no state
+            self._error(f"fmi2SetFMUstate: {state[UNREADABLE]}; nothing was changed")
+            return
         try:
             inputs = [float(x) for x in state["inputs"]]
             time = float(state["time"])
@@ -420,7 +425,42 @@ class LmnCellSlave(Fmi2Slave):
 
     @staticmethod
     def _fmu_state_from_bytes(data: bytes) -> dict:
-        return json.loads(data.decode("utf-8"))
+        """The state of serialised bytes, never raising (pythonfmu's own wrapper, the win64
+        binary's, turns an exception here into fmi2Fatal and frees the instance): bytes that
+        are no state of this FMU read as {UNREADABLE: why}, which fmi2SetFMUstate refuses."""
+        try:
+            return _state_document(data)
+        except ValueError as exc:
+            return {UNREADABLE: f"the state read back by fmi2DeSerializeFMUstate: {exc}"}
+
+    @staticmethod
+    def _read_fmu_state_bytes(data: bytes) -> dict:
+        """The state of serialised bytes, CallError where they are not this FMU's JSON object:
+        LMNCell's wrapper calls it, so that fmi2DeSerializeFMUstate itself returns fmi2Error
+        with the message."""
+        try:
+            return _state_document(data)
+        except ValueError as exc:
+            raise CallError(f"fmi2DeSerializeFMUstate: {exc}; nothing was changed") from None
+
+
+def _state_document(data: bytes) -> dict:
+    """The JSON object of serialised state bytes; ValueError naming what is wrong."""
+    try:
+        doc = json.loads(data.decode("utf-8"))
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"the {len(data)} bytes are not a state of this FMU ({exc.reason} "
+                         f"at byte {exc.start}; expected fmi2SerializeFMUstate's JSON)") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"the {len(data)} bytes are not a state of this FMU ({exc.msg} at "
+                         f"byte {exc.pos}; expected fmi2SerializeFMUstate's JSON)") from None
+    except RecursionError:
+        raise ValueError(f"the {len(data)} bytes are not a state of this FMU (JSON nested too "
+                         "deeply; expected fmi2SerializeFMUstate's JSON)") from None
+    if not isinstance(doc, dict):
+        raise ValueError(f"the {len(data)} bytes are not a state of this FMU (JSON "
+                         f"{type(doc).__name__}, expected an object)")
+    return doc
 
 
 __all__ = ["LmnCellSlave", "ModelFileError", "keep_module_dict"]

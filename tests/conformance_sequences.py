@@ -578,7 +578,8 @@ def state_reuse(fmu: str) -> dict:
 
 def _damaged(serialized: bytes) -> dict[str, bytes]:
     """Damaged copies of a serialised FMU state: for the pythonfmu FMU's JSON, a non-finite
-    time, a part missing, parameters, model state and accumulators of the wrong shape or kind;
+    time, a part missing, parameters, model state and accumulators of the wrong shape or kind,
+    bytes that are no JSON or JSON of another kind;
     for the native FMU's bytes, everything after the magic number set to 0xFF (a NaN time,
     switches out of range)."""
     try:
@@ -598,6 +599,9 @@ def _damaged(serialized: bytes) -> dict[str, bytes]:
                 lambda d: d["cosim"].update(stepper=d["cosim"]["stepper"][:3])),
             "text accumulator": changed(lambda d: d["cosim"]["acc"].__setitem__(0, "x")),
             "NaN voltage": changed(lambda d: d["cosim"]["stepper"].__setitem__(-1, math.nan)),
+            "not JSON": b"\xff" + serialized[1:],
+            "not a JSON object": b"[]",
+            "JSON nested too deeply": b"[" * 100_000,
             } if doc.get("cosim") else {}
 
 

@@ -139,6 +139,20 @@ def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(stock_fmu) -> N
     assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
 
 
+def test_pythonfmus_own_wrapper_survives_damaged_fmu_states(stock_fmu) -> None:
+    """Under pythonfmu's own wrapper (the win64 binary, or linux64 built without C++) an
+    exception in fmi2DeSerializeFMUstate is fatal and frees the instance, so the host's next call
+    crashes: bytes that are no JSON state read as a state that fmi2SetFMUstate refuses (logged,
+    the call ignored), and every damaged state leaves the instance as it was."""
+    res = _run(stock_fmu, "damaged_states")
+    twin = res.pop("twin_next")
+    assert {"not JSON", "not a JSON object", "JSON nested too deeply"} <= set(res)
+    for label, got in res.items():
+        assert got["read"] < ERROR and len(got["log"]) == 1, (label, got)
+        assert got["log"][0].startswith("fmi2SetFMUstate: ") and "nothing was" in got["log"][0]
+        assert got["kept"] and got["next_step"] == 0 and got["next"] == twin, (label, got)
+
+
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
 def test_pythonfmus_own_wrapper_leaves_the_heap_intact_at_exit(stock_fmu) -> None:
     """pythonfmu 0.7.0's wrapper releases its interpreter state twice when the host exits with the

@@ -621,8 +621,12 @@ public:
             if (pyStateBytes == nullptr) {
                 handle_py_exception("[DeSerializeFMUstate] PyBytes_FromStringAndSize", gilState);
             }
-            PyObject* pyState = PyObject_CallMethod(pClass_, "_fmu_state_from_bytes", "(O)", pyStateBytes);
+            // LMNCell: the slave's strict reader, which raises (→ fmi2Error with its message) for
+            // bytes that are no state of this FMU (upstream: _fmu_state_from_bytes, which
+            // LMNCell's slave keeps lenient for pythonfmu's own wrapper, where it is fatal)
+            PyObject* pyState = PyObject_CallMethod(pClass_, "_read_fmu_state_bytes", "(O)", pyStateBytes);
             if (pyState == nullptr) {
+                Py_DECREF(pyStateBytes);
                 handle_py_exception("[DeSerializeFMUstate] PyObject_CallMethod", gilState);
             }
             state = reinterpret_cast<fmi2FMUstate*>(pyState);
@@ -700,6 +704,20 @@ private:
     }
 
 
+    // LMNCell: str() or repr() of a Python object as UTF-8, "unknown error" where there is none
+    // or it cannot be had (any error that raises is cleared)
+    static std::string py_text(PyObject* obj, bool repr)
+    {
+        PyObject* text = obj ? (repr ? PyObject_Repr(obj) : PyObject_Str(obj)) : nullptr;
+        PyObject* bytes = text ? PyUnicode_AsEncodedString(text, "utf-8", "replace") : nullptr;
+        const char* chars = bytes ? PyBytes_AsString(bytes) : nullptr;
+        std::string out = chars ? chars : "unknown error";
+        Py_XDECREF(bytes);
+        Py_XDECREF(text);
+        PyErr_Clear();
+        return out;
+    }
+
     void handle_py_exception(const std::string& what, PyGILState_STATE gilState) const
     {
         const auto err = PyErr_Occurred();
@@ -712,16 +730,17 @@ private:
             PyErr_Fetch(&pExcType, &pExcValue, &pExcTraceback);
 
             std::ostringstream oss;
-            oss << (fatal ? "Fatal py exception encountered: " : "");
-            oss << what << "\n";
-            if (pExcValue != nullptr) {
-                PyObject* pRepr = PyObject_Repr(pExcValue);
-                PyObject* pyStr = PyUnicode_AsEncodedString(pRepr, "utf-8", nullptr);
-                oss << PyBytes_AsString(pyStr);
-                Py_DECREF(pyStr);
-                Py_DECREF(pRepr);
+            // LMNCell: an ordinary call error (the slave's CallError) is logged as its message
+            // alone, which names the call; any other exception with the call and its repr
+            // (upstream: always "what\nrepr", and a NULL repr or text dereferenced)
+            PyObject* typeName = pExcType ? PyObject_GetAttrString(pExcType, "__name__") : nullptr;
+            const bool callError = !fatal && py_text(typeName, false) == "CallError";
+            Py_XDECREF(typeName);
+            if (callError) {
+                oss << py_text(pExcValue, false);
             } else {
-                oss << "unknown error";
+                oss << (fatal ? "Fatal py exception encountered: " : "");
+                oss << what << "\n" << py_text(pExcValue, true);
             }
 
             PyErr_Clear();

@@ -229,7 +229,8 @@ def _keep_or_print(env, name, status, category, message) -> None:
         printLogMessage(env, name, status, category, message)
         return
     text = (message or b"").decode("utf-8", "replace")
-    # the pythonfmu wrapper logs "[doStep] PyObject_CallMethod\nCallError('…')"
+    # LMNCell's pythonfmu wrapper logs a call error as its message; another exception (a fault
+    # of the slave) as "[doStep] PyObject_CallMethod\nTypeError('…')"
     inner = re.search(r"\w+Error\((['\"])(.*)\1\)\s*$", text, re.DOTALL)
     log.append(f"{inner.group(2) if inner else text} "
                f"[{(category or b'').decode('utf-8', 'replace')}, status {status}]")
