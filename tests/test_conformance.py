@@ -153,6 +153,15 @@ def test_pythonfmus_own_wrapper_survives_damaged_fmu_states(stock_fmu) -> None:
         assert got["kept"] and got["next_step"] == 0 and got["next"] == twin, (label, got)
 
 
+def test_pythonfmus_own_wrapper_survives_random_call_sequences(stock_fmu) -> None:
+    """Random calls (some serialised states damaged on the way) under pythonfmu's own wrapper,
+    where any exception out of the slave frees the instance and the next call crashes the host:
+    the slave never raises there. The wrapper's own faults are left out (RandomHost)."""
+    res = _run(stock_fmu, "random_calls_stock")
+    assert res["calls"] > 600
+    assert res["findings"] == []
+
+
 @pytest.mark.skipif(shutil.which("valgrind") is None, reason="valgrind is not installed")
 def test_pythonfmus_own_wrapper_leaves_the_heap_intact_at_exit(stock_fmu) -> None:
     """pythonfmu 0.7.0's wrapper releases its interpreter state twice when the host exits with the
