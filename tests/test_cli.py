@@ -202,9 +202,27 @@ def test_explain_prints_every_local_model_as_a_positive_rc_ladder(quick_model, t
     factor = Depletion(**json.loads(quick_model.read_text())["regressors"]["depletion"]).factor
     assert all(r["r_depletion_at_soc_mohm"] == pytest.approx(
         r["r_depletion_mohm"] * factor(r["soc"]), rel=1e-12, abs=1e-3) for r in doc)
+    # R_d at SoC 0.1 is shown as "–" exactly for the local models under 1 % valid there
+    # (the demo's A123 model near full read 23 Ω there)
+    assert all(0.0 <= r["validity_at_soc_0_1"] <= 1.0 for r in doc)
+    assert max(r["validity_at_soc_0_1"] for r in doc) > 0.3
+    column = lines[head].split().index("R_dep@0.1")
+    assert [row.split()[column] == "–" for row in rows] == \
+        [r["validity_at_soc_0_1"] < 0.01 for r in doc]
     (tmp_path / "bad.json").write_text("{}")
     assert main(["explain", str(tmp_path / "bad.json")]) == 2
     assert "bad.json" in capsys.readouterr().err
+
+
+def test_a_depletion_coefficient_out_of_its_local_models_reach_is_not_shown() -> None:
+    from lmncell.evaluation.interpret import depletion_shown
+
+    row = {"r_depletion_mohm": 23182.8, "r_depletion_at_soc_mohm": 4.46,
+           "r_depletion_fast_mohm": 900.0, "validity_at_soc_0_1": 0.004}
+    assert [depletion_shown(row, k) for k in row if k != "validity_at_soc_0_1"] == \
+        ["–", 4.46, "–"]
+    row["validity_at_soc_0_1"] = 0.02
+    assert depletion_shown(row, "r_depletion_mohm") == 23182.8
 
 
 def test_explain_reads_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path,

@@ -64,12 +64,35 @@ def local_model_table(model: LmnModel, temperature_c: float | None = None) -> li
 def _depletion_at_soc(model: LmnModel, row: dict) -> dict:
     """The depletion resistances at the local model's own SoC (mΩ; R_d·(0.1/SoC)^p, which a
     steady current sees there beside R static), where the model has the regressor and the
-    partition the SoC: r_depletion_at_soc_mohm (and r_depletion_fast_at_soc_mohm)."""
+    partition the SoC: r_depletion_at_soc_mohm (and r_depletion_fast_at_soc_mohm); and the
+    local model's validity at SoC 0.1, its other partition inputs at its centre
+    (validity_at_soc_0_1, 0…1: where it is near 0, R_d is a coefficient the local model's
+    data never reach)."""
     if model.depletion is None or "soc" not in row:
         return {}
     factor = model.depletion.factor(float(row["soc"]))
-    return {f"{key[:-5]}_at_soc_mohm": _clean(row[key] * factor)
-            for key in ("r_depletion_mohm", "r_depletion_fast_mohm") if key in row}
+    out = {f"{key[:-5]}_at_soc_mohm": _clean(row[key] * factor)
+           for key in ("r_depletion_mohm", "r_depletion_fast_mohm") if key in row}
+    point = np.array([[0.1 if v == "soc" else float(row[v])
+                       for v in model.partition_variables]])
+    code = np.array([1 if row["gate"] == "charge" else 2])
+    phi = model.validities(model.normalise(point), code)[0, row["local_model"] - 1]
+    return {**out, "validity_at_soc_0_1": float(phi)}
+
+
+# explain's and the report's tables show R_d at SoC 0.1 as "–" for a local model whose
+# validity there is below this: no data of its own reach that SoC, and its coefficient,
+# scaled up by (SoC/0.1)^p from where it acts, reads tens of Ω
+MIN_VALIDITY_SHOWN = 0.01
+
+
+def depletion_shown(row: dict, key: str) -> float | str:
+    """A depletion column of a local_model_table row for display: "–" for the resistance at
+    SoC 0.1 of a local model that is not valid there (MIN_VALIDITY_SHOWN)."""
+    if key in ("r_depletion_mohm", "r_depletion_fast_mohm") and \
+            row.get("validity_at_soc_0_1", 1.0) < MIN_VALIDITY_SHOWN:
+        return "–"
+    return row[key]
 
 
 def _arx_row(model: LmnModel, th: np.ndarray, cols: list[str]) -> dict:
@@ -184,8 +207,9 @@ def _explain_head(model: LmnModel, rows: list[dict[str, Any]]) -> list[str]:
     if model.depletion is not None and "r_depletion_mohm" in rows[0]:
         lines.append(f"R_dep: the depletion resistance R_d·(0.1/SoC)^{model.depletion.power:g}"
                      f" (held below SoC {model.depletion.soc_min:.3g}) that a steady current "
-                     "sees beside R static; @0.1 at SoC 0.1 (for a local model valid far above "
-                     "it, a coefficient its data never reach), @SoC at the local model's own")
+                     "sees beside R static; @0.1 at SoC 0.1 (– for a local model with under "
+                     f"{100 * MIN_VALIDITY_SHOWN:g} % validity there: a coefficient its data never "
+                     "reach), @SoC at the local model's own")
     return lines
 
 
@@ -205,7 +229,8 @@ def _ladder_table(rows: list[dict[str, Any]],
         cells.append(f"{r['r_static_mohm']:.2f}")
         if "hysteresis_mv" in r:
             cells.append(f"{r['hysteresis_mv']:.1f}")
-        cells += [f"{r[key]:.2f}" for key in DEPLETION_HEADS if key in r]
+        cells += [f"{shown:.2f}" if isinstance(shown := depletion_shown(r, key), float)
+                  else shown for key in DEPLETION_HEADS if key in r]
         if "ocv_offset_mv" in r:
             cells.append(f"{r['ocv_offset_mv']:.1f}")
         cells.append("yes" if r["rc_positive"] else "NO")

@@ -25,7 +25,12 @@ from lmncell.data.soc import (
 )
 from lmncell.evaluation.evaluate import evaluate_model, evaluate_records
 from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline
-from lmncell.evaluation.interpret import local_model_table
+from lmncell.evaluation.interpret import (
+    DEPLETION_HEADS,
+    MIN_VALIDITY_SHOWN,
+    depletion_shown,
+    local_model_table,
+)
 from lmncell.evaluation.observe import observer_figure, observer_runs, soc_metrics
 from lmncell.identification.train import train_files
 from lmncell.report.html import Report
@@ -189,7 +194,9 @@ def _refinement_text(refinement: dict | None) -> str:
 
 def _local_model_table(rep: Report, model: LmnModel) -> None:
     """The local models at the reference temperature, as `lmncell explain` prints them."""
-    table = local_model_table(model, model.reference_temperature_c)
+    table = [{**row, **{key: depletion_shown(row, key) for key in DEPLETION_HEADS
+                        if key in row}}
+             for row in local_model_table(model, model.reference_temperature_c)]
     cols = [("local_model", "LM", ""), *[(v, v, ".2f") for v in model.partition_variables],
             ("r0_mohm", "R0 / mΩ", ".1f"), ("r_static_mohm", "R static / mΩ", ".1f")]
     ladder = "rc_mohm_by_tau_s" in table[0]
@@ -212,8 +219,9 @@ def _local_model_table(rep: Report, model: LmnModel) -> None:
                            "static resistance (R0 plus all RC elements), the RC elements at the "
                            "model's fixed time constants (the filters of the structure), the "
                            "depletion resistance R_d (its regressor grows as (0.1/SoC)⁴ near "
-                           "empty: the collapse before cut-off; at SoC 0.1 and at the local "
-                           "model's own SoC, which a steady current sees there beside R static) "
+                           "empty: the collapse before cut-off; at SoC 0.1, – where the local "
+                           f"model has under {100 * MIN_VALIDITY_SHOWN:g} % validity there, and at "
+                           "its own SoC, which a steady current sees there beside R static) "
                            "and the local OCV offset, at the "
                            "reference temperature (25 °C)"
               + (" (resistances × the Arrhenius factor elsewhere)" if model.arrhenius_k else "")
