@@ -265,6 +265,7 @@ def test_random_programmes_the_cell_cannot_run_are_left_out_and_named(tmp_path) 
     the medians and named, instead of ending the whole comparison (and the design with it). The
     designed programme itself still may not fail."""
     from lmncell.design.proof import (
+        _left_out_text,
         characterise,
         compare_on_virtual_cell,
         make_virtual_cell,
@@ -302,6 +303,8 @@ def test_random_programmes_the_cell_cannot_run_are_left_out_and_named(tmp_path) 
                                   said.append, (1, 2), ("prbs",))
     assert list(res["skipped"]) == ["prbs_seed_2"] and "45.5 s" in res["skipped"]["prbs_seed_2"]
     assert any(m.startswith("  prbs_seed_2: not compared") for m in said)
+    # the figure's title counts them (their names overflowed it)
+    assert _left_out_text(res) == "\nleft out, the cell could not run them: 1 of 2 PRBS"
     for entry in res["profiles"].values():
         assert len(entry["prbs_mv"]) == 1 and entry["prbs_median_mv"] == entry["prbs_mv"][0]
     res = compare_on_virtual_cell(designed, model, cyc, spec, StopsOn("prbs_seed_1"), ocv,

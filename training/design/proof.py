@@ -357,6 +357,22 @@ def prove_design(vc: VirtualCellLike, cell: CellSpec, cyc: CyclerSpec, spec: Des
     return result, prog
 
 
+def _left_out_text(result: dict) -> str:
+    """The proof figure's note of the random programmes the virtual cell could not run, counted
+    per kind ("left out, the cell could not run them: 5 of 5 PRBS, 1 of 5 APRBS"), a line of the
+    title that fits whatever their number; their names and reasons are in the proof JSON."""
+    skipped = result.get("skipped") or {}
+    if not skipped:
+        return ""
+    counts = []
+    for kind in result["random_kinds"]:
+        n_skipped = sum(name.startswith(f"{kind}_") for name in skipped)
+        n_ran = sum(name.startswith(f"{kind}_") for name in result["programmes"])
+        if n_skipped:
+            counts.append(f"{n_skipped} of {n_skipped + n_ran} {kind.upper()}")
+    return f"\nleft out, the cell could not run them: {', '.join(counts)}"
+
+
 def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
     """Per validation profile the designed programme's free-run RMSE beside every random
     programme's (dots) and their medians (bars); the title gives the covariance ratios."""
@@ -384,8 +400,7 @@ def plot_proof(result: dict, out_dir: Path, stem: str = "design") -> Path:
     ratios = ", ".join(f"{k.split('_')[0].upper()} {v:.3g}"
                        for k, v in result["covariance_det_ratio"].items())
     cell = result.get("virtual_cell", "virtual cell").split(",")[0].split(";")[0]
-    left_out = (f"; left out, the cell could not run them: {', '.join(result['skipped'])}"
-                if result.get("skipped") else "")
+    left_out = _left_out_text(result)
     ax.set_title(f"LMNs trained on each programme run on {cell}, validated in free run\n"
                  f"information-determinant ratio designed/random (median): {ratios}{left_out}",
                  fontsize=9)
