@@ -179,6 +179,25 @@ def test_virtual_ocv_test_gives_the_virtual_cells_ocv(tmp_path) -> None:
     assert np.max(np.abs(ocv - np.interp(knots, DEFAULT_OCV_SOC, DEFAULT_OCV_V))) < 0.005
 
 
+def test_a_capacity_the_virtual_cell_does_not_have_is_refused(tmp_path, capsys) -> None:
+    """--capacity places the virtual cell's OCV and pulse tests and the design on SoC: given
+    2.85 Ah for the 2.30 Ah PyBaMM cell, every LMN of the proof came out 5…10 times worse, with
+    no word of why. The virtual cell's slow discharge now says what it holds."""
+    from lmncell.design import proof
+    from lmncell.design.virtual_cell import VirtualCell
+
+    assert proof.ocv_test_record(VirtualCell(capacity_ah=2.3), 2.36, tmp_path).exists()
+    with pytest.raises(DataError, match=r"--capacity 2.85 Ah: the virtual cell \(.*\) delivers "
+                                        r"2.300 Ah in its C/20 discharge from full to .* give "
+                                        r"--capacity 2.30"):
+        proof.ocv_test_record(VirtualCell(capacity_ah=2.3), 2.85, tmp_path)
+    with pytest.MonkeyPatch.context() as mp:      # the PyBaMM cell holds its own 2.3 Ah
+        mp.setattr(proof, "make_virtual_cell", lambda kind, cap: VirtualCell(capacity_ah=2.3))
+        assert main(["design", "--capacity", "2.85", "--soc-profile", "0.8,0.2", "--duration",
+                     "600", "--compare-virtual", "--out", str(tmp_path / "P.csv")]) == 2
+    assert "give --capacity 2.30" in capsys.readouterr().err
+
+
 class _LinearCell:
     """A virtual cell that is exactly the design model (no noise): characterise must recover it."""
 
