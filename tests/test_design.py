@@ -400,6 +400,17 @@ def test_design_takes_the_model_an_fmu_ships(quick_model, native_fmu, tmp_path) 
     assert outs[0] == outs[1]
 
 
+def test_design_notes_a_capacity_other_than_its_models(quick_model, tmp_path, capsys) -> None:
+    """--capacity far from the model's (2.85 Ah) is taken, as for an aged cell, with a note."""
+    for capacity, noted in (("2.85", False), ("2.3", True)):
+        assert main(["design", "--capacity", capacity, "--soc-profile", "0.9,0.6",
+                     "--duration", "600", "--model", str(quick_model), "--out",
+                     str(tmp_path / "P.csv")]) == 0
+        out = capsys.readouterr().out
+        assert ("note: --capacity 2.3 Ah is not the 2.85 Ah of pan.json" in out) == noted
+        assert noted == ("give --capacity 2.85 for the cell the model describes" in out)
+
+
 def test_design_with_a_model_keeps_that_model_inside_its_voltage_limits(quick_model,
                                                                         tmp_path,
                                                                         capsys) -> None:

@@ -7,6 +7,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from lmncell.design import CAPACITY_TOLERANCE
 from lmncell.design.optimal import (
     CellSpec,
     CyclerSpec,
@@ -48,6 +49,11 @@ def _cell(a, say=print) -> tuple[CellSpec, LmnModel | None]:
         from lmncell.evaluation.fmueval import model_or_shipped
 
         m = model_or_shipped(a.model)
+        if abs(a.capacity / m.capacity_ah - 1.0) > CAPACITY_TOLERANCE:
+            say(f"note: --capacity {a.capacity:g} Ah is not the {m.capacity_ah:g} Ah of "
+                f"{Path(a.model).name}: the design counts SoC with {a.capacity:g} Ah on the "
+                "model's OCV over SoC, as the FMU's capacity parameter does for an aged cell; "
+                f"give --capacity {m.capacity_ah:g} for the cell the model describes")
         cell.ocv_soc, cell.ocv_v = tuple(m.ocv_soc), tuple(m.ocv_v)
         cell.voltage_min_v = float(m.limits.get("voltage_v", [cell.voltage_min_v])[0])
         cell.voltage_max_v = float(m.limits.get("voltage_v", [0, cell.voltage_max_v])[1])

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from lmncell.data.records import DataError, Record, RecordMeta
-from lmncell.design import VIRTUAL_CELLS
+from lmncell.design import CAPACITY_TOLERANCE, VIRTUAL_CELLS
 from lmncell.design.optimal import (
     RANDOM_KINDS,
     CellSpec,
@@ -74,12 +74,6 @@ def make_virtual_cell(kind: str, capacity_ah: float) -> VirtualCellLike:
 
 
 # ----- characterisation: the design model from tests on the cell ------------------------------
-# the largest relative difference between --capacity and what the virtual cell's slow
-# discharge delivers that the proof takes (the pulse tests and the design are placed on SoC with
-# --capacity: 2.85 Ah given for the 2.30 Ah PyBaMM cell made every LMN 5…10 times worse)
-CAPACITY_TOLERANCE = 0.03
-
-
 def ocv_test_record(vc: VirtualCellLike, capacity_ah: float, folder: Path) -> Path:
     """A slow full → empty → full test run on the virtual cell, written as a BDF file;
     DataError where its discharge delivers a capacity other than capacity_ah (Ah)."""
