@@ -1107,6 +1107,22 @@ def _logged_every(step_s: float, name: str) -> Record:
                   RecordMeta(f"/logs/{name}", "test", sample_time_s=step_s))   # as readers do
 
 
+def test_a_capacity_far_from_the_ocv_tests_gets_a_note() -> None:
+    """The A123 C/30 tests deliver 2.06 Ah: 2.0307 Ah is taken silently, 2.85 Ah (the
+    Panasonic cell's, a slip) and 1.8 Ah are named with the tests' capacity."""
+    from lmncell.identification.train import capacity_note
+
+    tests = [str(DATA / f"a123_plett/ocv/A123_OCV_P25_{k}.csv.gz") for k in ("S1", "S3")]
+    assert capacity_note(2.0307, tests) is None and capacity_note(2.22, tests) is None
+    assert capacity_note(2.85, tests) == (
+        "note: --capacity 2.85 Ah lies 38 % above the 2.060 Ah that the OCV tests "
+        "(A123_OCV_P25_S1.csv.gz, A123_OCV_P25_S3.csv.gz) deliver from full to empty; they are "
+        "put on the model's SoC scale with it, so the model's OCV lies that far off: check "
+        "--capacity (the cell's Ah from full to the cut-off at a slow rate)")
+    assert "13 % below the 2.060 Ah" in capacity_note(1.8, tests)
+    assert capacity_note(None, tests) is None and capacity_note(2.85, []) is None
+
+
 def test_a_log_faster_or_slower_than_the_model_gets_a_note() -> None:
     fast, slow = _logged_every(0.1, "fast.csv"), _logged_every(1.0, "slow.csv")
     note = sampling_note([slow, fast], 1.0)

@@ -148,6 +148,18 @@ def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, 
     return OcvFit(knots, ocv_v.copy(), rmse, coef)
 
 
+def ocv_test_capacity_ah(paths: list) -> float:
+    """The capacity (Ah) that slow OCV tests deliver from full to empty: a round trip's own
+    (its current offset balanced out), else the discharge test's discharged charge."""
+    from lmncell.data.readers import read_record
+    from lmncell.data.soc import charge_throughput_ah, ocv_from_round_trip
+
+    recs = [read_record(p) for p in paths]
+    if len(recs) == 1:
+        return ocv_from_round_trip(recs[0]).capacity_ah
+    return max(-float(charge_throughput_ah(r).min()) for r in recs)
+
+
 def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarray:
     """Mean of the charge and discharge branches of slow tests at the knots (V).
 
