@@ -164,6 +164,23 @@ def test_a_record_that_starts_rested_part_way_down_is_not_taken_as_full(
     assert f"puts below SoC {START_FULL_MIN_SOC:g}, such as a rest part-way down" in readme
 
 
+def test_a_record_of_another_cell_than_the_ocv_is_refused(a123_model, tmp_path,
+                                                          capsys) -> None:
+    """A Panasonic record (rested full at 4.18 V) given the A123 OCV tests or the A123 model
+    (OCV top 3.5…3.6 V): refused by name. Training made a 408 mV model of it without a word."""
+    ocv = [str(DATA / f"a123_plett/ocv/A123_OCV_P25_{k}.csv.gz") for k in ("S1", "S3")]
+    assert main(["train", str(PAN_US06), "--out", str(tmp_path / "m.json"), "--capacity",
+                 "2.85", "--ocv-tests", *ocv]) == 2
+    expected = re.compile(r"US06_Pan18650PF\.mat: starts rested at 4\.178 V, \d+ mV above the "
+                          r"top of (the OCV of the slow tests \(--ocv-tests\)|the model's OCV) "
+                          r"\(3\.\d+ V at SoC 1\), where a rested full cell lies within 200 mV "
+                          r"of it: that OCV is not this cell's")
+    assert expected.search(capsys.readouterr().err)
+    assert main(["evaluate", str(a123_model), str(PAN_US06)]) == 2
+    assert expected.search(capsys.readouterr().err)
+    assert not (tmp_path / "m.json").exists()
+
+
 def test_ocv_soc_reads_the_last_rise_through_a_voltage() -> None:
     from lmncell.data.dataset import ocv_soc
 

@@ -104,6 +104,10 @@ def starts_rested_full(rec: Record) -> bool:
 
 START_FULL_MIN_SOC = 0.8   # a record whose rested start voltage an OCV puts below this SoC
 #                            does not start full (start_soc)
+FULL_START_MAX_ABOVE_OCV_V = 0.2   # a rested full start further above the OCV's top (V) is
+#                                    another cell's (the A123 s1 records start 31…72 mV above
+#                                    their C/30 tests' mean branch, the Panasonic drive cycles
+#                                    within 2 mV of or below their C/20 test's)
 
 
 def start_soc(rec: Record, soc0: float | None,
@@ -140,8 +144,15 @@ def ocv_soc(voltage_v: float, soc_knots: np.ndarray, ocv_v: np.ndarray) -> float
 def _check_full_start(rec: Record, soc_knots: np.ndarray, ocv_v: np.ndarray,
                       ocv_name: str) -> None:
     """DataError where the record's rested start voltage lies below START_FULL_MIN_SOC on the
-    OCV."""
-    v0 = float(rec.voltage_v[0])
+    OCV, or more than FULL_START_MAX_ABOVE_OCV_V above its top."""
+    v0, top = float(rec.voltage_v[0]), float(ocv_v[-1])
+    if v0 > top + FULL_START_MAX_ABOVE_OCV_V:
+        raise DataError(f"{rec.meta.source}: starts rested at {v0:.4g} V, "
+                        f"{1e3 * (v0 - top):.0f} mV above the top of {ocv_name} ({top:.4g} V "
+                        f"at SoC 1), where a rested full cell lies within "
+                        f"{1e3 * FULL_START_MAX_ABOVE_OCV_V:.0f} mV of it: that OCV is not "
+                        "this cell's (another cell's OCV test or model?), or the voltage "
+                        "column is not the cell's")
     soc = ocv_soc(v0, soc_knots, ocv_v)
     if soc < START_FULL_MIN_SOC:
         raise DataError(f"{rec.meta.source}: starts rested at {v0:.4g} V, which {ocv_name} "
