@@ -151,8 +151,9 @@ def _check_full_start(rec: Record, soc_knots: np.ndarray, ocv_v: np.ndarray,
                         f"{1e3 * (v0 - top):.0f} mV above the top of {ocv_name} ({top:.4g} V "
                         f"at SoC 1), where a rested full cell lies within "
                         f"{1e3 * FULL_START_MAX_ABOVE_OCV_V:.0f} mV of it: that OCV is not "
-                        "this cell's (another cell's OCV test or model?), or the voltage "
-                        "column is not the cell's")
+                        "this cell's (another cell's OCV test or model?) or does not reach its "
+                        "full charge (a model trained only on records below full), or the "
+                        "voltage column is not the cell's")
     soc = ocv_soc(v0, soc_knots, ocv_v)
     if soc < START_FULL_MIN_SOC:
         raise DataError(f"{rec.meta.source}: starts rested at {v0:.4g} V, which {ocv_name} "
