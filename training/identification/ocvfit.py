@@ -9,10 +9,14 @@ with SoC) and chooses the hysteresis rate γ and the Arrhenius temperature gain.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import lsq_linear
 from scipy.signal import lfilter
+
+if TYPE_CHECKING:
+    from lmncell.data.records import Record
 
 SMOOTHNESS = 3e-3   # penalty weight per knot, relative to the number of samples
 HYSTERESIS_MAX_V = 0.2   # |H| of the pre-fit at most (V): a cell's hysteresis is tens of mV
@@ -148,16 +152,37 @@ def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, 
     return OcvFit(knots, ocv_v.copy(), rmse, coef)
 
 
-def ocv_test_capacity_ah(paths: list) -> float:
-    """The capacity (Ah) that slow OCV tests deliver from full to empty: a round trip's own
-    (its current offset balanced out), else the discharge test's discharged charge."""
+def _read_slow_tests(paths: list) -> list[Record]:
+    """The slow OCV tests' records: [the round trip] for one file (full → empty → full), else
+    [the discharge from full, the charge from empty] of two files given in either order;
+    DataError for two that run the same way or another number of files."""
     from lmncell.data.readers import read_record
-    from lmncell.data.soc import charge_throughput_ah, ocv_from_round_trip
+    from lmncell.data.records import DataError
+    from lmncell.data.soc import charge_throughput_ah
 
     recs = [read_record(p) for p in paths]
     if len(recs) == 1:
-        return ocv_from_round_trip(recs[0]).capacity_ah
-    return max(-float(charge_throughput_ah(r).min()) for r in recs)
+        return recs
+    if len(recs) != 2:
+        raise DataError(f"ocv_tests: expected one or two files, got {len(recs)}")
+    net = [float(charge_throughput_ah(r)[-1]) for r in recs]
+    if (net[0] < 0) == (net[1] < 0):
+        raise DataError(f"ocv_tests: {recs[0].name} and {recs[1].name} both "
+                        f"{'discharge' if net[0] < 0 else 'charge'} (net {net[0]:+.3f} and "
+                        f"{net[1]:+.3f} Ah); expected a discharge from full and a charge "
+                        "from empty")
+    return recs if net[0] < 0 else recs[::-1]
+
+
+def ocv_test_capacity_ah(paths: list) -> float:
+    """The capacity (Ah) that slow OCV tests deliver from full to empty: a round trip's own
+    (its current offset balanced out), else the discharge test's discharged charge."""
+    from lmncell.data.soc import charge_throughput_ah, ocv_from_round_trip
+
+    tests = _read_slow_tests(paths)
+    if len(tests) == 1:
+        return ocv_from_round_trip(tests[0]).capacity_ah
+    return -float(charge_throughput_ah(tests[0]).min())
 
 
 def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarray:
@@ -166,22 +191,9 @@ def measured_ocv(paths: list, capacity_ah: float, knots: np.ndarray) -> np.ndarr
     paths: a discharge test (starts full) and a charge test (starts empty), in either order,
     or one file that holds both (full → empty → full; its current offset is balanced out and
     its SoC is a fraction of its own capacity, see lmncell.data.soc.ocv_from_round_trip)."""
-    from lmncell.data.readers import read_record
-    from lmncell.data.records import DataError
-    from lmncell.data.soc import charge_throughput_ah, ocv_from_round_trip, ocv_from_slow_tests
+    from lmncell.data.soc import ocv_from_round_trip, ocv_from_slow_tests
 
-    recs = [read_record(p) for p in paths]
-    if len(recs) == 1:
-        curve = ocv_from_round_trip(recs[0], model_capacity_ah=capacity_ah).curve
-    elif len(recs) == 2:
-        net = [float(charge_throughput_ah(r)[-1]) for r in recs]
-        if (net[0] < 0) == (net[1] < 0):
-            raise DataError(f"ocv_tests: {recs[0].name} and {recs[1].name} both "
-                            f"{'discharge' if net[0] < 0 else 'charge'} (net {net[0]:+.3f} and "
-                            f"{net[1]:+.3f} Ah); expected a discharge from full and a charge "
-                            "from empty")
-        discharge, charge = recs if net[0] < 0 else recs[::-1]
-        curve = ocv_from_slow_tests(discharge, charge, capacity_ah)
-    else:
-        raise DataError(f"ocv_tests: expected one or two files, got {len(recs)}")
+    tests = _read_slow_tests(paths)
+    curve = (ocv_from_round_trip(tests[0], model_capacity_ah=capacity_ah).curve
+             if len(tests) == 1 else ocv_from_slow_tests(tests[0], tests[1], capacity_ah))
     return np.interp(knots, curve.soc, curve.mean_v)
