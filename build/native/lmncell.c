@@ -57,6 +57,12 @@ static int is_cell_capacity(double ah) {
     return isfinite(ah) && ah >= CAPACITY_MIN_AH && ah <= CAPACITY_MAX_AH;
 }
 
+/* A 'soc0' parameter the FMU takes: a fraction within 0...1 (NaN is not). */
+static int is_soc_fraction(double soc) { return soc >= 0.0 && soc <= 1.0; }
+
+/* An 'observer' parameter the FMU takes: 0 none, 1 EKF, 2 fuzzy, 3 IMM. */
+static int is_observer(int observer) { return observer >= 0 && observer <= 3; }
+
 /* ----- the whole simulation state (copied by get/set FMU state) ----------------------------- */
 typedef struct {
     unsigned magic;
@@ -1225,7 +1231,7 @@ static void init_state(State *s) {
        refuses it; the outputs until then stay finite), as the pythonfmu FMU's slave */
     double t_in = isfinite(s->temperature) && s->temperature >= MIN_TEMPERATURE_C &&
                   s->temperature <= MAX_TEMPERATURE_C ? s->temperature : DEFAULT_TEMPERATURE_C;
-    double soc0 = s->soc0 >= 0.0 && s->soc0 <= 1.0 ? s->soc0 : (s->soc0 > 1.0 ? 1.0 : 0.0);
+    double soc0 = is_soc_fraction(s->soc0) ? s->soc0 : (s->soc0 > 1.0 ? 1.0 : 0.0);
     s->t_cell_set = 0;
     s->t_last_input = cell_temperature(s, t_in);
     s->t_cell_set = 0;
@@ -1242,7 +1248,7 @@ static void init_state(State *s) {
 
 static fmi2Status initialise(Instance *in) {
     State *s = &in->s;
-    if (!(s->soc0 >= 0.0 && s->soc0 <= 1.0)) {
+    if (!is_soc_fraction(s->soc0)) {
         logf_(in, fmi2Error, "logStatusError", "parameter 'soc0' = %g: expected a fraction "
               "within 0..1; not initialised, every step will be refused", s->soc0);
         return fmi2Error;
@@ -1253,7 +1259,7 @@ static fmi2Status initialise(Instance *in) {
               s->capacity, CAPACITY_MIN_AH, CAPACITY_MAX_AH);
         return fmi2Error;
     }
-    if (s->observer < 0 || s->observer > 3) {
+    if (!is_observer(s->observer)) {
         logf_(in, fmi2Error, "logStatusError", "parameter 'observer' = %d: expected 0 none, 1 EKF, "
               "2 fuzzy, 3 IMM; not initialised, every step will be refused", s->observer);
         return fmi2Error;
@@ -1425,7 +1431,7 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
     if (!s0->initialized && (vr == VR_VOLTAGE || vr == VR_SOC || vr == VR_SOC_STD ||
                              vr == VR_CELL_TEMPERATURE)) {
         tmp = *s0;                       /* what exitInitializationMode will give, unchanged */
-        if (!(tmp.observer >= 0 && tmp.observer <= 3)) tmp.observer = 0;
+        if (!is_observer(tmp.observer)) tmp.observer = 0;
         if (!is_cell_capacity(tmp.capacity)) tmp.capacity = CAPACITY_AH;
         init_state(&tmp);
         s = &tmp;
@@ -1715,9 +1721,8 @@ static int state_plausible(const State *s) {
     if (!isfinite(s->time) || (s->temperature_is_cell != 0 && s->temperature_is_cell != 1)
         || (s->initialized != 0 && s->initialized != 1))
         return 0;
-    return !s->initialized || (s->observer >= 0 && s->observer <= 3
-                               && is_cell_capacity(s->capacity) && s->soc0 >= 0.0
-                               && s->soc0 <= 1.0 && outputs_finite(s));
+    return !s->initialized || (is_observer(s->observer) && is_cell_capacity(s->capacity)
+                               && is_soc_fraction(s->soc0) && outputs_finite(s));
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size,
