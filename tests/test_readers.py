@@ -262,7 +262,8 @@ GOOD = [f"{k}, 1, 1.0, 3.3, 0, {k / 3600:.6f}" for k in range(10)]
     ("nan", GOOD[:3] + ["3, 1, nan, 3.3, 0, 0"] + GOOD[4:],
      "column 'current' (current_a) has 1 NaN or infinite value(s), first at line 5"),
     ("inf", GOOD[:3] + ["3, 1, 1.0, inf, 0, 0"] + GOOD[4:], "column 'voltage' (voltage_v) has 1 NaN or infinite"),
-    ("repeated", GOOD[:3] + [GOOD[2]] + GOOD[4:], "column 'time' (time_s) is repeated at line 5: 2.0 s then 2.0 s"),
+    ("repeated", GOOD[:3] + ["2, 1, 1.0, 3.31, 0, 0"] + GOOD[4:],
+     "column 'time' (time_s) is repeated at line 5: 2.0 s then 2.0 s"),
     ("reset", GOOD[:5] + ["0.5, 1, 1.0, 3.3, 0, 0"] + GOOD[6:],
      "decreasing (a time reset?) at line 7: 4.0 s then 0.5 s"),
     ("text", GOOD[:3] + ["3, 1, abc, 3.3, 0, 0"], "'current' line 5: 'abc' is not a number"),
@@ -272,6 +273,23 @@ def test_bad_plett_input(tmp_path, case, rows, expected) -> None:
     with pytest.raises(DataError) as err:
         read_record(p)
     assert str(p) in str(err.value) and expected in str(err.value)
+
+
+def test_a_line_logged_twice_is_left_out_with_a_note(tmp_path) -> None:
+    """A data line that repeats the one before it exactly (a logger that wrote a sample twice,
+    as the Panasonic files' last sample) is left out with a note naming its line, in every
+    CSV format; the lines of later errors still name the file's lines where it was the last."""
+    twice = read_record(_plett(tmp_path, GOOD[:4] + [GOOD[3]] + GOOD[4:], "twice.csv"))
+    assert len(twice) == len(GOOD) and np.all(np.diff(twice.time_s) > 0)
+    assert ("left out 1 data line(s) that repeat the line before them exactly (the same sample "
+            "logged twice), first line 6") in twice.meta.notes
+    assert twice.meta.first_line is None          # the rows after it are one line further on
+    last = _plett(tmp_path, GOOD + [GOOD[-1], GOOD[-1]], "last.csv")
+    generic = read_record(last, columns={"time": "time", "current": "current",
+                                         "voltage": "voltage"})
+    assert len(generic) == len(GOOD) and generic.meta.first_line == 2
+    assert any("left out 2 data line(s)" in n and "first line 12" in n
+               for n in generic.meta.notes)
 
 
 def test_errors_quote_the_files_own_times_and_lines(tmp_path) -> None:
@@ -540,8 +558,8 @@ def _write_eclab(path, rec, decimal: str = ".", repeat_row: int | None = None,
                  q_mah[k], 25.0 + 0.001 * k, 0.0, 0]
         rows.append("\t".join(repr(float(c)) if isinstance(c, float) else str(c)
                               for c in cells) + "\t")
-        if k == repeat_row:
-            rows.append(rows[-1])
+        if k == repeat_row:     # EC-Lab's row where the technique changes: one time, new mode
+            rows.append("\t".join(["2", *rows[-1].split("\t")[1:]]))
         if k == eis_after:
             for j, freq in enumerate((1e4, 1e2, 1.0)):
                 eis = [3, 0, 0, t[k] + 1e-3 * j, freq, 0.0, 3.0, 5.0, q_mah[k], 25.0, 0.0, 0]

@@ -283,6 +283,35 @@ def test_a_counted_soc_beyond_0_to_1_names_where_and_the_charge_moved(tmp_path) 
     assert record_to_segments(rec, 1.0, 1.0, 2.85)     # the right capacity reads as before
 
 
+def _discharge_csv(path, amps: float, seconds: float = 3600.0):
+    """A generic CSV of a constant current (file units) for `seconds`, read as A and s."""
+    rows = [f"{k},{amps if k else 0.0},{3.3 - 1e-5 * k}" for k in range(0, int(seconds) + 1, 10)]
+    path.write_text("time,current,voltage\n" + "\n".join(rows) + "\n")
+    return read_record(path, columns={"time": "time", "current": "current", "voltage": "voltage"})
+
+
+def test_a_count_that_no_start_soc_fits_names_the_units_and_one_that_only_charges_the_sign(
+        tmp_path) -> None:
+    """A current in mA read as A (or a time in ms read as s) moves more charge than the cell
+    holds, which no start SoC fits: the error asks for the units too. A discharge logged with
+    the opposite sign counts up from full: the error names --discharge-positive. A start SoC
+    that is merely wrong gets neither."""
+    from lmncell.data.soc import reference_soc
+
+    milli = _discharge_csv(tmp_path / "mA.csv", -1000.0)
+    with pytest.raises(DataError, match=r"no start SoC fits a span of 997\.2 Ah in a cell of 2\.85 "
+                                        r"Ah.*the units of the current \(--current-unit A\|mA\)"):
+        reference_soc(milli, 1.0, 2.85)
+    flipped = _discharge_csv(tmp_path / "flipped.csv", 1.0)
+    with pytest.raises(DataError, match=r"the record charges only \(a file that counts discharge "
+                                        r"as positive: --discharge-positive"):
+        reference_soc(flipped, 1.0, 2.85)
+    with pytest.raises(DataError) as err:
+        reference_soc(_discharge_csv(tmp_path / "half.csv", -1.0), 0.2, 2.85)
+    assert "check the start SoC" in str(err.value)
+    assert "units" not in str(err.value) and "--discharge-positive" not in str(err.value)
+
+
 def test_a_sample_time_far_finer_than_the_log_is_refused_for_training_naming_the_file() -> None:
     """A 1 s log trained at 0.05 s would be learnt as its interpolation (a 1 ms sample time on
     the 10 Hz Panasonic log ran out of memory); ten model steps per logged sample are taken (a

@@ -239,12 +239,13 @@ def _json_kind(path: Path) -> str:
 class CsvColumns(dict):
     """A CSV file's columns by header name (float arrays), and the file line of the first data
     row where the data rows follow each other without blank lines (else None); text: the
-    cells as written of the columns asked for (keep_text), and lines: each data row's file
-    line."""
+    cells as written of the columns asked for (keep_text), lines: each data row's file
+    line, and notes: what was left out (a data line that repeats the one before it)."""
 
     first_line: int | None = None
     text: dict[str, list[str]]
     lines: list[int]
+    notes: list[str]
 
 
 def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
@@ -273,11 +274,11 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     numbered = numbered[:1] + numbered[2:] if units_row else numbered
     if len(numbered) < 2:
         raise DataError(f"{path}: the file has a header but no data rows")
-    line_of = [k for k, _ in numbered[1:]]
-    rows = list(csv.reader([ln for _, ln in numbered[1:]], delimiter=sep,
-                           skipinitialspace=True))
+    data, notes = _without_repeated_lines(numbered[1:])
+    line_of = [k for k, _ in data]
+    rows = list(csv.reader([ln for _, ln in data], delimiter=sep, skipinitialspace=True))
     out = CsvColumns()
-    out.text, out.lines = {}, line_of
+    out.text, out.lines, out.notes = {}, line_of, notes
     for j, name in enumerate(header):
         if name in keep_text:
             out.text[name] = [row[j].strip() if j < len(row) else "" for row in rows]
@@ -299,6 +300,24 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
     if line_of[-1] - line_of[0] == len(line_of) - 1:
         out.first_line = line_of[0]
     return out
+
+
+def _without_repeated_lines(numbered: list[tuple[int, str]]
+                            ) -> tuple[list[tuple[int, str]], list[str]]:
+    """The data lines (file line, text) without those that repeat the line before them
+    character for character (a logger that wrote one sample twice: same time, same values),
+    and a note saying how many were left out and where the first was."""
+    kept = numbered[:1]
+    repeated = []
+    for line, text in numbered[1:]:
+        if text.strip() == kept[-1][1].strip():
+            repeated.append(line)
+        else:
+            kept.append((line, text))
+    if not repeated:
+        return numbered, []
+    return kept, [f"left out {len(repeated)} data line(s) that repeat the line before them "
+                  f"exactly (the same sample logged twice), first line {repeated[0]}"]
 
 
 def _check_marks(path: Path, sep: str, decimal: str) -> None:
@@ -374,7 +393,8 @@ def read_plett(path: Path) -> Record:
                                   cols["chgAh"] - cols["disAh"])
     return Record(t, cur, cols["voltage"],
                   _meta(path, "plett", "current negated (file: discharge > 0)", cols["time"],
-                        segment_starts=_segment_starts_from_gaps(t, cur, ah), notes=notes,
+                        segment_starts=_segment_starts_from_gaps(t, cur, ah),
+                        notes=[*cols.notes, *notes],
                         **_csv_meta(cols, cols["time"], time_s="time", current_a="current",
                                     voltage_v="voltage", charge_ah="chgAh − disAh")),
                   charge_ah=ah)
@@ -391,7 +411,7 @@ def read_arbin(path: Path) -> Record:
     return Record(t - t[0], cols["Current(A)"], cols["Voltage(V)"],
                   _meta(path, "arbin", "none (file: charge > 0)", t,
                         segment_starts=_segment_starts_from_gaps(t, cols["Current(A)"], ah),
-                        notes=notes,
+                        notes=[*cols.notes, *notes],
                         **_csv_meta(cols, t, time_s="Test_Time(s)", current_a="Current(A)",
                                     voltage_v="Voltage(V)",
                                     charge_ah="Charge_Capacity(Ah) − Discharge_Capacity(Ah)")),
@@ -565,7 +585,7 @@ def read_bdf(path: Path) -> Record:
                  file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
                                "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
                                "charge_ah": BDF_NET_AH, "temperature_c": BDF_T1},
-                 first_line=cols.first_line, notes=notes)
+                 first_line=cols.first_line, notes=[*cols.notes, *notes])
     ambient = None
     if BDF_AMBIENT in cols:         # the chamber's: beside the cell's the thermal model's
         ambient, more = _held_readings(cols, BDF_AMBIENT, path)   # ambient, alone the
@@ -602,6 +622,7 @@ def read_biologic(path: Path) -> Record:
     if not keep.any():
         raise DataError(f"{path}: no cycling rows ({notes[0]}); expected time, voltage and "
                         "current samples of a charge or discharge")
+    notes = [*cols.notes, *notes]
     t = cols[BIOLOGIC_TIME][keep]
     amps = cols[current][keep] * BIOLOGIC_CURRENTS[current]
     net_ah = None
@@ -731,6 +752,7 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     cols, header_line, units = _generic_columns(path, columns, sep, decimal)
     t, notes = _generic_times(cols, columns["time"], path, decimal)
     text_time = bool(notes)      # a note from _generic_times: the times are text
+    notes = [*cols.notes, *notes]
     for col in sorted(_temperature_columns(columns)):
         cols[col], held = _held_readings(cols, col, path)
         notes += held

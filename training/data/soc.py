@@ -9,7 +9,7 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-from lmncell.data.records import DataError, Record, soc_outside
+from lmncell.data.records import SOC_SLACK, DataError, Record, soc_outside
 
 REST_CURRENT_A = 0.02
 SLOW_TEST_MAX_C_RATE = 0.2   # an OCV test's loaded samples run at C/5 or slower (median)
@@ -96,13 +96,29 @@ def reference_soc(rec: Record, soc0: float, capacity_ah: float) -> np.ndarray:
     k = int(outside[0])
     where = (f"line {rec.meta.first_line + k}" if rec.meta.first_line is not None
              else f"sample {k}")
+    discharged, charged = max(0.0, -float(charge_ah.min())), max(0.0, float(charge_ah.max()))
     raise DataError(
         f"{rec.meta.source}: counted from SoC {soc0:g} with a capacity of {capacity_ah:g} Ah, the "
         f"SoC reaches {soc[k]:.3f} at {float(rec.time_s[k]):g} s ({where}); expected 0…1. From "
-        f"its start the record discharges up to {max(0.0, -float(charge_ah.min())):.4g} Ah and "
-        f"charges up to {max(0.0, float(charge_ah.max())):.4g} Ah: check the start SoC "
-        "(--soc0, soc0=) and the capacity (the model's, or --capacity, capacity_ah= when "
-        "training)")
+        f"its start the record discharges up to {discharged:.4g} Ah and charges up to "
+        f"{charged:.4g} Ah: " + _what_to_check(discharged, charged, capacity_ah))
+
+
+def _what_to_check(discharged_ah: float, charged_ah: float, capacity_ah: float) -> str:
+    """What reference_soc's error asks to check: the start SoC and the capacity; the sign of
+    the current where the record charges (nearly) only; the units where its net charge spans
+    more than the capacity (no start SoC fits)."""
+    check = ("check the start SoC (--soc0, soc0=) and the capacity (the model's, or --capacity, "
+             "capacity_ah= when training)")
+    if discharged_ah < 0.05 * charged_ah:
+        check += (", and the sign of the current: the record charges only (a file that counts "
+                  "discharge as positive: --discharge-positive, discharge_positive=True)")
+    span_ah = discharged_ah + charged_ah
+    if span_ah <= capacity_ah * (1.0 + 2.0 * SOC_SLACK):
+        return check
+    return (f"no start SoC fits a span of {span_ah:.4g} Ah in a cell of {capacity_ah:g} Ah; "
+            f"{check}, and the units of the current (--current-unit A|mA) and of the time "
+            "(--time-unit s|ms|min|h)")
 
 
 def starts_full(rec: Record, v_full: float, tol_v: float = 0.08, rest_s: float = 10.0) -> bool:
