@@ -407,6 +407,30 @@ def test_a_current_profile_drives_the_fmu_as_the_cycle_that_gave_it(native_fmu, 
     assert plot.stat().st_size > 10_000
 
 
+def test_a_table_of_breakpoints_drives_the_fmu_as_its_even_steps(native_fmu, tmp_path) -> None:
+    """A current profile written as breakpoints (uneven times; a time given twice steps there;
+    the last row ends it; the column named just `current`) runs as the same currents written
+    out at even steps; times that fall are refused by line."""
+    from lmncell.scenarios.drive import run_profile
+    from lmncell.scenarios.traces import load_current_profile
+
+    table = tmp_path / "pulses.csv"
+    table.write_text("time,current\n0,-3\n20,-3\n20,0\n50,1.5\n57.5,0\n90,0\n")
+    prof = load_current_profile(table)
+    assert prof.step_s == pytest.approx(2.5) and prof.time_s[-1] == pytest.approx(87.5)
+    even = tmp_path / "even.csv"
+    amps = [-3.0] * 8 + [0.0] * 12 + [1.5] * 3 + [0.0] * 13
+    even.write_text("time_s,current_a\n" + "".join(f"{2.5 * k},{a}\n" for k, a in enumerate(amps)))
+    assert np.array_equal(prof.current_a, amps)
+    ran, expected = run_profile(native_fmu, table, soc0=0.7), run_profile(native_fmu, even, soc0=0.7)
+    assert np.array_equal(ran.voltage_v, expected.voltage_v) and ran.time_s[-1] == 90.0
+    back = tmp_path / "back.csv"
+    back.write_text("time_s,current_a\n0,-3\n20,-3\n19,0\n")
+    with pytest.raises(DataError, match=r"back.csv: column 'time_s' at line 4: 20 s then 19 s; "
+                                        r"expected times that do not fall"):
+        load_current_profile(back)
+
+
 def test_a_charge_profile_stops_at_the_charge_cut_off_or_full(native_fmu, tmp_path,
                                                                capsys) -> None:
     """A 1C charge stops after the first step above the charge cut-off (by default the highest

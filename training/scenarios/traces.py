@@ -43,6 +43,7 @@ class TraceFormat:
     required: tuple[str, ...]
     limits: dict[str, tuple[float, float, str]]
     expected: str
+    breakpoints: bool = False   # its times may be uneven or repeat (held_on_even_steps)
 
 
 SPEED_TRACE = TraceFormat(
@@ -60,11 +61,14 @@ SPEED_TRACE = TraceFormat(
 
 CURRENT_PROFILE = TraceFormat(
     "current profile",
-    {"time": TIME_COLUMNS, "current": {"current_a": (1.0, "A"), "current_ma": (1e-3, "mA")}},
+    {"time": TIME_COLUMNS, "current": {"current_a": (1.0, "A"), "current": (1.0, "A"),
+                                       "current_ma": (1e-3, "mA")}},
     ("time", "current"),
     {},
     "a CSV with a header: a time column (time_s) and a cell current column (current_a or "
-    "current_ma; > 0 charges); a unit may also stand in brackets: 'Current [mA]'")
+    "current_ma; > 0 charges); a unit may also stand in brackets: 'Current [mA]'",
+    breakpoints=True)
+MAX_PROFILE_STEPS = 5_000_000   # an uneven profile's even steps (held_on_even_steps) at most
 
 
 @dataclass(frozen=True)
@@ -106,8 +110,9 @@ class SpeedTrace(Trace):
 
 @dataclass(frozen=True, eq=False)
 class CurrentProfile(Trace):
-    """A cell current profile: current (A, > 0 charges) at its times, each value held over
-    its step; named by the file's name."""
+    """A cell current profile: current (A, > 0 charges) at its times (even steps; a file of
+    breakpoints is put on them by held_on_even_steps), each value held over its step; named by
+    the file's name."""
 
     current_a: np.ndarray
 
@@ -155,7 +160,38 @@ def load_current_profile(path: str | Path | CurrentProfile,
                         f"{CURRENT_PROFILE.expected}")
     values = read_trace(Path(path), CURRENT_PROFILE)
     sign = -1.0 if discharge_positive else 1.0
-    return CurrentProfile(Path(path).name, values["time"], sign * values["current"])
+    time_s, current_a = held_on_even_steps(values["time"], sign * values["current"], path)
+    return CurrentProfile(Path(path).name, time_s, current_a)
+
+
+def held_on_even_steps(time_s: np.ndarray, values: np.ndarray, path: str | Path
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """A profile given at uneven times (a table of breakpoints: each row's value held from its
+    time until the next row's; of rows with one time the last holds, the others last no
+    time; the last row ends the profile) as the same steps on an even grid whose step
+    divides every interval (to 1 µs; halved where it would be the whole profile), each grid
+    value held over its step as an even profile's samples are. Even times are returned as
+    they are. DataError where the intervals share no step of at least the profile's length /
+    MAX_PROFILE_STEPS."""
+    step = np.diff(time_s)
+    even = float(np.median(step))
+    if even > 0 and np.all(np.abs(step - even) <= 1e-6 * even):
+        return time_s, values
+    micro = np.round(step * 1e6).astype(np.int64)
+    offsets = np.concatenate([[0], np.cumsum(micro)])
+    grid = int(np.gcd.reduce(micro[micro > 0]))
+    if grid == offsets[-1]:                   # one interval: two steps of half of it
+        offsets, grid = 2 * offsets, grid
+    count = int(offsets[-1] // grid)
+    span_s = float(time_s[-1] - time_s[0])
+    if count > MAX_PROFILE_STEPS:
+        raise DataError(f"{path}: its times, {span_s:g} s from first to last row, share no "
+                        f"step longer than {span_s / count:g} s ({count} steps; at most "
+                        f"{MAX_PROFILE_STEPS} taken); expected times on a coarser grid, e.g. "
+                        "rounded to 1 ms")
+    starts = np.arange(count, dtype=np.int64) * grid
+    row = np.searchsorted(offsets, starts, side="right") - 1     # the last row at or before
+    return time_s[0] + starts * (span_s / offsets[-1]), values[row]
 
 
 def _folder(path: str | Path) -> str:
@@ -231,6 +267,29 @@ def trace_key(name: str) -> str:
     return f"{base}_{UNIT_KEYS.get(unit, unit)}"
 
 
+def _check_times(t: np.ndarray, where: str, lines: list[int], breakpoints: bool) -> None:
+    """DataError (where: the file and column) where times fall, or, unless the trace is a
+    table of breakpoints (which may repeat a time, not all of them one), do not rise in even
+    steps."""
+    step = np.diff(t)
+    even = float(np.median(step))
+    falling = np.flatnonzero(~(step >= 0) if breakpoints else ~(step > 0))
+    if falling.size:
+        k = int(falling[0])
+        raise DataError(f"{where} at line {lines[k + 1]}: {t[k]:g} s then {t[k + 1]:g} s; "
+                        "expected times " + ("that do not fall" if breakpoints else
+                                             "rising in even steps"))
+    if breakpoints:
+        if not t[-1] > t[0]:
+            raise DataError(f"{where} holds {t[0]:g} s on every row; expected times that rise")
+        return
+    uneven = np.flatnonzero(~(np.abs(step - even) <= 1e-6 * even))
+    if uneven.size:
+        k = int(uneven[0])
+        raise DataError(f"{where} at line {lines[k + 1]}: {t[k]:g} s then {t[k + 1]:g} s; "
+                        f"expected times rising in even steps (most steps are {even:g} s)")
+
+
 def _check_values(values: dict[str, np.ndarray], columns: dict[str, TraceColumn],
                   lines: list[int], path: Path, fmt: TraceFormat) -> None:
     """DataError naming the column, line and value where a trace is not finite, its time does
@@ -244,15 +303,7 @@ def _check_values(values: dict[str, np.ndarray], columns: dict[str, TraceColumn]
             raise DataError(f"{path}: column '{col.name}' at line {lines[bad[0]]}: "
                             f"{values[quantity][bad[0]] / col.factor:g}; expected a finite "
                             "number")
-    step = np.diff(t)
-    even = float(np.median(step))
-    falling = np.flatnonzero(~(step > 0))
-    uneven = falling if falling.size else np.flatnonzero(~(np.abs(step - even) <= 1e-6 * even))
-    if uneven.size:
-        k = int(uneven[0])
-        raise DataError(f"{path}: column '{columns['time'].name}' at line {lines[k + 1]}: "
-                        f"{t[k]:g} s then {t[k + 1]:g} s; expected times rising in even steps"
-                        + ("" if falling.size else f" (most steps are {even:g} s)"))
+    _check_times(t, f"{path}: column '{columns['time'].name}'", lines, fmt.breakpoints)
     for quantity, (low, high, note) in fmt.limits.items():
         if quantity not in values:
             continue
