@@ -180,8 +180,8 @@ def held_on_even_steps(time_s: np.ndarray, values: np.ndarray, path: str | Path
     micro = np.round(step * 1e6).astype(np.int64)
     offsets = np.concatenate([[0], np.cumsum(micro)])
     grid = int(np.gcd.reduce(micro[micro > 0]))
-    if grid == offsets[-1]:                   # one interval: two steps of half of it
-        offsets, grid = 2 * offsets, grid
+    if grid == offsets[-1]:      # one interval: counted in half µs, the grid is half of it
+        offsets = 2 * offsets
     count = int(offsets[-1] // grid)
     span_s = float(time_s[-1] - time_s[0])
     if count > MAX_PROFILE_STEPS:
