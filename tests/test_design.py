@@ -110,6 +110,10 @@ def test_bad_design_inputs() -> None:
      "--voltage-min 3.6 V and --voltage-max 2 V leave no voltage window"),
     ({"voltage_min_v": 2.0, "voltage_max_v": 3.0}, {}, {},
      r"predicted voltage 3\.2\d\d … 3\.3\d\d V leaves the limits 2 … 3 V"),
+    # a swing far too fast for the duration: the message named only the limits
+    ({"voltage_min_v": 2.8}, {}, {"duration_s": 300.0},
+     r"even the mean current that moves the SoC through the profile \(up to 16\.6 A, 7\.2 C, "
+     r"in sequences of 300 s\) leaves them; expected a longer --duration \(now 300 s\)"),
     # a sequence shorter than the hold: 'needs inf A on average'
     ({}, {"hold_s": 10.0}, {"sequence_s": 5.0, "duration_s": 600.0},
      "--sequence 5 s holds fewer than two levels of the cycler's hold time --hold 10 s"),

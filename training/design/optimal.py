@@ -447,17 +447,22 @@ def check_sampling(cyc: CyclerSpec, spec: DesignSpec) -> None:
                         f"{MAX_PROGRAMME_SAMPLES * ts:g} s (or a longer --sample-time)")
 
 
-def check_voltages(prog_voltage_v: np.ndarray, cell: CellSpec) -> None:
+def check_voltages(prog_voltage_v: np.ndarray, cell: CellSpec, spec: DesignSpec,
+                   largest_mean_a: float) -> None:
     """DataError where the programme's predicted voltage leaves the cell's limits: no current
     moves the SoC through the profile within them (the design fell back to each sequence's
-    mean current, which leaves them too)."""
+    mean current, which leaves them too); largest_mean_a: the largest |mean current| of a
+    sequence (A), which the message names with what lowers it."""
     lo, hi = float(prog_voltage_v.min()), float(prog_voltage_v.max())
     if lo < cell.voltage_min_v or hi > cell.voltage_max_v:
         raise DataError(f"the programme's predicted voltage {lo:.3f} … {hi:.3f} V leaves the "
                         f"limits {cell.voltage_min_v:g} … {cell.voltage_max_v:g} V "
                         "(--voltage-min, --voltage-max): even the mean current that moves the "
-                        "SoC through the profile leaves them; expected limits around the "
-                        "cell's OCV over the profile's SoC (with --model: the model's)")
+                        f"SoC through the profile (up to {largest_mean_a:.3g} A, "
+                        f"{largest_mean_a / cell.capacity_ah:.2g} C, in sequences of "
+                        f"{spec.sequence_s:g} s) leaves them; expected a longer --duration "
+                        f"(now {spec.duration_s:g} s) or a smaller SoC swing, or limits around "
+                        "the cell's OCV over the profile's SoC (with --model: the model's)")
 
 
 def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
@@ -496,7 +501,8 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
     for leg_end, target in zip(ends, spec.soc_profile[1:], strict=True):
         k_end = starts[leg_end] + parts[leg_end].current_a.size - 1
         points.append((float(time_s[k_end]), float(target)))
-    check_voltages(u, cell)
+    check_voltages(u, cell, spec, float(np.max(np.abs(steps))) * cell.capacity_ah * 3600.0
+                   / spec.sequence_s)
     settings = {"cell": dataclasses.asdict(cell), "cycler": dataclasses.asdict(cyc),
                 "design": dataclasses.asdict(spec), "max_current_a": i_max}
     return Programme(time_s, cur, u, socs, starts, points, lds, settings)
