@@ -278,7 +278,8 @@ def test_a_counted_soc_beyond_0_to_1_names_where_and_the_charge_moved(tmp_path) 
     rec = read_record(PAN_HWFET)
     with pytest.raises(DataError, match=r"counted from SoC 1 with a capacity of 0\.1 Ah, the SoC "
                                         r"reaches -0\.05\d at \d+\.?\d* s \(.*\); expected 0…1\. "
-                                        r"From its start the record discharges up to 2\.\d+ Ah"):
+                                        r"From its start the record discharges up to 2\.\d+ Ah"
+                                        r".*, and whether the record is of this cell$"):
         record_to_segments(rec, 1.0, 1.0, 0.1)
     assert record_to_segments(rec, 1.0, 1.0, 2.85)     # the right capacity reads as before
 

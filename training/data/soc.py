@@ -101,24 +101,28 @@ def reference_soc(rec: Record, soc0: float, capacity_ah: float) -> np.ndarray:
         f"{rec.meta.source}: counted from SoC {soc0:g} with a capacity of {capacity_ah:g} Ah, the "
         f"SoC reaches {soc[k]:.3f} at {float(rec.time_s[k]):g} s ({where}); expected 0…1. From "
         f"its start the record discharges up to {discharged:.4g} Ah and charges up to "
-        f"{charged:.4g} Ah: " + _what_to_check(discharged, charged, capacity_ah))
+        f"{charged:.4g} Ah: " + _what_to_check(discharged, charged, capacity_ah,
+                                                rec.meta.fmt == "generic"))
 
 
-def _what_to_check(discharged_ah: float, charged_ah: float, capacity_ah: float) -> str:
+def _what_to_check(discharged_ah: float, charged_ah: float, capacity_ah: float,
+                   own_columns: bool) -> str:
     """What reference_soc's error asks to check: the start SoC and the capacity; the sign of
-    the current where the record charges (nearly) only; the units where its net charge spans
-    more than the capacity (no start SoC fits)."""
+    the current where the record charges (nearly) only; where its net charge spans more than
+    the capacity (no start SoC fits) the units of a CSV read by its named columns (own_columns)
+    or whether a record of a known format is this cell's."""
     check = ("check the start SoC (--soc0, soc0=) and the capacity (the model's, or --capacity, "
              "capacity_ah= when training)")
-    if discharged_ah < 0.05 * charged_ah:
+    if discharged_ah < 0.05 * charged_ah and own_columns:
         check += (", and the sign of the current: the record charges only (a file that counts "
                   "discharge as positive: --discharge-positive, discharge_positive=True)")
     span_ah = discharged_ah + charged_ah
     if span_ah <= capacity_ah * (1.0 + 2.0 * SOC_SLACK):
         return check
     return (f"no start SoC fits a span of {span_ah:.4g} Ah in a cell of {capacity_ah:g} Ah; "
-            f"{check}, and the units of the current (--current-unit A|mA) and of the time "
-            "(--time-unit s|ms|min|h)")
+            f"{check}, and " + ("the units of the current (--current-unit A|mA) and of the "
+                                "time (--time-unit s|ms|min|h)" if own_columns else
+                                "whether the record is of this cell"))
 
 
 def starts_full(rec: Record, v_full: float, tol_v: float = 0.08, rest_s: float = 10.0) -> bool:
