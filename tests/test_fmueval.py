@@ -200,5 +200,39 @@ def test_rows_and_captions_say_which_temperature_drove_the_run(quick_model, nati
                                       as_json=True, progress=lambda _m: None)
     assert rows[0]["temperature_input"] == fmu_rows[0]["temperature_input"] == "chamber"
     assert len(titles) == 2 and all("the chamber temperature 25 °C (the record has no cell "
-                                    "temperature)" in t for t in titles)
+                                    "temperature; the thermal model computing the cell's where "
+                                    "the model has one)" in t for t in titles)
     assert "LMN RMSE whole record" in titles[0] and "in free run from SoC 1" in titles[0]
+
+
+def test_a_record_without_a_cell_temperature_is_driven_as_the_fmu_takes_its_input_by_default(
+        quick_model, native_fmu, tmp_path) -> None:
+    """A record without a measured cell temperature (a CSV of current and voltage only) is
+    driven with 25 °C as the ambient, the model's thermal model warming the cell as the FMU
+    does with its default temperature_is_cell = false: the same voltages as --ambient, in the
+    pipeline and the FMU. Before, 25 °C was taken as the cell's own temperature, a cell that
+    never warms (on this model's US06 run the cell reaches 3 K above it)."""
+    from lmncell.evaluation.evaluate import evaluate_records
+    from lmncell.runtime.step import simulate
+
+    model = load_model(quick_model)
+    assert model.thermal is not None
+    us06 = read_record(PAN_US06)
+    path = tmp_path / "us06_no_temperature.csv"
+    path.write_text("t,i,u\n" + "".join(f"{t},{i},{u}\n" for t, i, u in zip(
+        us06.time_s, us06.current_a, us06.voltage_v, strict=True)))
+    columns = {"time": "t", "current": "i", "voltage": "u"}
+    rec = read_record(path, columns=columns)
+    assert rec.temperature_c is None and rec.meta.segment_starts == [0]
+    runs = [evaluate_records(model, [(rec, 1.0)], ambient=ambient) for ambient in (False, True)]
+    (trace, *_), rows = runs[0]
+    assert np.array_equal(trace.voltage["lmn"], runs[1][0][0].voltage["lmn"])
+    assert rows[0]["temperature_input"] == "none"
+    assert trace.cell_temperature_c is not None and trace.cell_temperature_c.max() > 27.0
+    cold = simulate(model, trace.segment.current_a, np.full(len(trace.segment), 25.0),
+                    trace.segment.soc0)
+    assert np.sqrt(np.mean((cold.voltage_v - trace.voltage["lmn"]) ** 2)) > 1e-3
+    fmu = [evaluate_fmu(native_fmu, [path], 1.0, ambient, read_options={"columns": columns},
+                        progress=lambda _m: None)[1][0]["fmu"]["rmse_mv"]
+           for ambient in (False, True)]
+    assert fmu[0] == fmu[1] == pytest.approx(rows[0]["lmn"]["rmse_mv"], abs=1e-6)

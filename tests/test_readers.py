@@ -880,23 +880,27 @@ def _own_csv_with_counter(path, rec, counter_ah, counter_name="Q [mAh]", scale=1
 
 
 def test_a_csv_charge_counter_keeps_a_gappy_log_in_one_segment(tmp_path, capsys) -> None:
-    """A 10 Hz drive cycle whose log has gaps of a few seconds under load: without a charge
-    counter the generic reader cannot tell whether charge was lost there and splits it (five
-    segments); with the tester's net counter mapped as charge=COL it is one segment, as the
-    .mat file with its Ah counter is, and the SoC reference counts by the counter. The header
-    proposes the column, in mAh from its name."""
+    """A 10 Hz drive cycle whose log lost 4 s under a load of 2.2 A: without a charge counter
+    the generic reader cannot tell whether charge was lost there and splits it (two
+    segments; the log's own 2-s pauses between schedule steps at −0.07 A, which cannot move
+    1 mAh, split nothing); with the tester's net counter mapped as charge=COL it is one
+    segment, as the .mat file with its Ah counter is, and the SoC reference counts by the
+    counter. The header proposes the column, in mAh from its name."""
     from lmncell.data.soc import charge_throughput_ah
 
     from tests.conftest import PAN_HWFET
 
-    rec = read_record(PAN_HWFET)
-    assert rec.meta.segment_starts == [0] and rec.charge_ah is not None
+    whole = read_record(PAN_HWFET)
+    assert whole.meta.segment_starts == [0] and whole.charge_ah is not None
+    keep = np.r_[0:6290, 6330:len(whole)]          # 4 s at −2.18 ± 0.10 A not logged
+    rec = dataclasses.replace(whole, **{k: getattr(whole, k)[keep] for k in (
+        "time_s", "current_a", "voltage_v", "temperature_c", "charge_ah", "ambient_c")})
     path = tmp_path / "own.csv"
     mapping = _own_csv_with_counter(path, rec, rec.charge_ah)
     without = {k: v for k, v in mapping.items() if k != "charge"}
     split = read_record(path, columns=without, sep=";", decimal=",")
-    assert len(split.segments()) == 5
-    assert ("split at 4 gap(s) in time: without the tester's charge counter the reader cannot "
+    assert len(split.segments()) == 2 and split.meta.segment_starts[1] == 6290
+    assert ("split at 1 gap(s) in time: without the tester's charge counter the reader cannot "
             "tell whether a gap under load (or one of 10 min or more at rest) lost charge; the "
             "column 'Q [mAh]' looks like one (charge=Q [mAh])") in split.meta.notes
     own = read_record(path, columns=mapping, sep=";", decimal=",")

@@ -83,6 +83,15 @@ def ambient_of(seg: Segment) -> np.ndarray:
     return np.asarray(seg.temperatures(), dtype=float)
 
 
+def drives_ambient(seg: Segment, ambient: bool) -> bool:
+    """Whether a segment is driven by its ambient temperature, the model's thermal model (where
+    it has one) computing the cell's, as an FMU takes its `temperature` input by default: asked
+    for (ambient: --ambient), or the record has no measured cell temperature, so that its
+    chamber temperature (else 25 °C) is the ambient. Given as the cell's own, a model with a
+    thermal model would see a cell that never warms (US06 at 25 °C: 18.7 against 5.2 mV)."""
+    return ambient or seg.temperature_kind != "measured"
+
+
 def temperature_input(seg: Segment, ambient: bool) -> str:
     """What temperature drove a segment's evaluation, for its row: "ambient" (--ambient),
     "cell" (its measured cell temperature), "chamber" (its chamber set point: the record has no
@@ -100,9 +109,12 @@ def temperature_words(seg: Segment, ambient: bool) -> str:
                 "where the model has one")
     if kind == "chamber":
         chamber = present(seg.temperature_c, "the chamber temperature")
-        return (f"the chamber temperature {float(np.median(chamber)):g} °C (the "
-                "record has no cell temperature)")
-    return "the measured cell temperature" if kind == "cell" else "25 °C (no temperature given)"
+        return (f"the chamber temperature {float(np.median(chamber)):g} °C (the record has "
+                "no cell temperature; the thermal model computing the cell's where the model "
+                "has one)")
+    return ("the measured cell temperature" if kind == "cell" else
+            "25 °C as the ambient (no temperature given; the thermal model computing the "
+            "cell's where the model has one)")
 
 
 def read_records(paths: Sequence[str | Path], soc0: float | Sequence[float] | None = None,
@@ -160,7 +172,7 @@ def evaluate_records(model: LmnModel, records: Sequence[tuple[Record, float]],
                                       current_delay_s=model.current_delay_s):
             check_range(model, seg)
             cell = None
-            if ambient:
+            if drives_ambient(seg, ambient):
                 amb = ambient_of(seg)
                 sim, cell = simulate_ambient(model, seg.current_a, amb, seg.soc0, cap,
                                              initial_hysteresis(seg.soc0))

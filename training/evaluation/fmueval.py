@@ -25,6 +25,7 @@ from lmncell.evaluation.evaluate import (
     Trace,
     ambient_of,
     check_ambient_known,
+    drives_ambient,
     model_ocv,
     print_rows,
     read_records,
@@ -354,12 +355,14 @@ def drive_at_samples(info: FmuInfo, unzipped: str, part: Record, seg: Segment,
     """The FMU's outputs at the end of each model step of the segment from start_step on: the
     FMU stepped through the record's own samples (and every model step end), each step holding
     the record's mean current and temperature over it, from soc0 (default the segment's start
-    SoC). With ambient the temperature is the segment's ambient and temperature_is_cell false
-    (the FMU's thermal model), else the measured cell temperature and temperature_is_cell true.
+    SoC). With ambient, or without a measured cell temperature (drives_ambient), the
+    temperature is the segment's ambient and temperature_is_cell false (the FMU's thermal
+    model), else the measured cell temperature and temperature_is_cell true.
     With an observer (1 EKF, 2 fuzzy, 3 IMM) the FMU also gets the measured voltage and soc0 is
     its start estimate. The FMU applies its model's current delay itself, so its voltage is the
     pipeline's (evaluate MODEL.json)."""
     n, ts = len(seg), info.step_s
+    ambient = drives_ambient(seg, ambient)
     temperature = ambient_at_samples(part, seg) if ambient else part.temperature_or_chamber()
     if temperature is None:
         temperature = np.full(len(part), DEFAULT_TEMPERATURE_C)
@@ -444,6 +447,7 @@ def drive_at_model_steps(info: FmuInfo, unzipped: str, seg: Segment, ambient: bo
     current delay the FMU then has only (δ·i(k−1) + (Ts − δ)·i(k))/Ts, not what the current
     did within the step."""
     n, ts = len(seg), info.step_s
+    ambient = drives_ambient(seg, ambient)
     temperature = ambient_of(seg) if ambient else seg.temperatures()
     inputs = np.column_stack([seg.current_a, temperature]).tolist()
     out = np.empty((n, 4))
