@@ -107,7 +107,14 @@ def test_files_that_are_not_data_give_clear_errors(tmp_path, capsys) -> None:
     assert main(["inspect", str(binary)]) == 2
     assert "scope.csv: not a text file" in capsys.readouterr().err
     assert main(["inspect", str(tmp_path)]) == 2
-    assert "is a directory" in capsys.readouterr().err
+    assert (f"{tmp_path}: is a directory; expected a data file (give the files inside it: "
+            f"{tmp_path}/*.csv (1 file))") in capsys.readouterr().err
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "b.mat").write_bytes(b"x")
+    (tmp_path / "c.mat").write_bytes(b"x")
+    assert main(["inspect", str(tmp_path)]) == 2
+    assert (f"(give the files inside it: {tmp_path}/*.mat (2 files), {tmp_path}/*.csv (1 file); "
+            "its folders: runs/)") in capsys.readouterr().err
     assert main(["inspect", str(tmp_path / "absent.csv")]) == 2
     assert "absent.csv: no such file" in capsys.readouterr().err
     if os.geteuid() != 0:                       # root reads files whatever their mode

@@ -139,8 +139,7 @@ def check_readable(path: str | Path) -> Path:
     """The path, if it names a readable, non-empty file; DataError naming the problem if not."""
     path = Path(path)
     if path.is_dir():
-        raise DataError(f"{path}: is a directory; expected a data file (give the files inside "
-                        "it, e.g. DIR/*.csv)")
+        raise DataError(f"{path}: is a directory; expected a data file ({_folder_contents(path)})")
     if not path.exists():
         raise DataError(f"{path}: no such file")
     if not path.is_file():
@@ -153,6 +152,25 @@ def check_readable(path: str | Path) -> Path:
     if path.stat().st_size == 0:
         raise DataError(f"{path}: the file is empty")
     return path
+
+
+def _folder_contents(folder: Path) -> str:
+    """What a folder given as a data file holds, as the files to give instead: a shell pattern
+    per kind of file ('give the files inside it: DIR/*.mat (4 files)') and its subfolders."""
+    counts: dict[str, int] = {}
+    subfolders = []
+    for f in sorted(folder.iterdir()):
+        if f.name.startswith("."):
+            continue
+        if f.is_dir():
+            subfolders.append(f"{f.name}/")
+        elif f.is_file():
+            kind = "".join(f.suffixes[-2:]) if f.suffix == ".gz" else f.suffix
+            counts[kind] = counts.get(kind, 0) + 1
+    files = ", ".join(f"{folder}/*{kind} ({n} file{'s' if n > 1 else ''})"
+                      for kind, n in sorted(counts.items(), key=lambda kv: (-kv[1], kv[0])))
+    inside = f"give the files inside it: {files}" if files else "it holds no file"
+    return inside + (f"; its folders: {', '.join(subfolders)}" if subfolders else "")
 
 
 def _mat_path(path: Path) -> bool:
