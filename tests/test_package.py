@@ -234,6 +234,9 @@ def test_api_simulate_from_the_ambient_is_the_fmus_default(quick_model) -> None:
         assert engine.voltage_v == pytest.approx(sim.voltage_v[k], abs=1e-9), k
         assert engine.cell_temperature_c == pytest.approx(sim.cell_temperature_c[k], abs=1e-9)
     assert sim.cell_temperature_c.max() > 26.0              # the cell warmed above the ambient
+    plain = lmncell.simulate(model, current, soc0=0.9)      # as the FMU with its start values
+    assert np.array_equal(plain.voltage_v, sim.voltage_v)
+    assert np.array_equal(plain.cell_temperature_c, sim.cell_temperature_c)
     with pytest.raises(lmncell.api.DataError, match="temperature_c .* and ambient_c given"):
         lmncell.simulate(model, current, temperature_c=25.0, ambient_c=20.0)
     with pytest.raises(lmncell.api.DataError, match=r"ambient_c must lie within .*an ambient"):

@@ -3,7 +3,7 @@
     import lmncell
     rec = lmncell.read_record("cell.csv", columns={"time": "t", "current": "I", "voltage": "U"})
     model = lmncell.train(["cycle1.mat", "cycle2.mat"], "cell.json", capacity_ah=2.85)
-    sim = lmncell.simulate(model, current_a, soc0=1.0)          # sim.voltage_v, sim.soc
+    sim = lmncell.simulate(model, current_a, soc0=1.0)          # 25 °C ambient: sim.voltage_v
     rows = lmncell.evaluate(model, ["cycle3.mat"])              # whole record and 20–80 % SoC
     lmncell.build_fmu("cell.json", "cell.fmu")                  # native=True: C, no Python
 
@@ -28,6 +28,7 @@ from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.step import SimResult, simulate_ambient
 from lmncell.runtime.step import simulate as _simulate_runtime
+from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_model",
            "read_record", "simulate", "sweep", "train"]
@@ -108,11 +109,12 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     """Free-run simulation of a current profile sampled at the model's sample time
     (model.sample_time_s; each value held over one step, > 0 charges).
 
-    temperature_c: cell temperature per step or one value (°C; default 25 °C), as the FMU with
+    temperature_c: cell temperature per step or one value (°C), as the FMU with
     temperature_is_cell = true takes it; or instead ambient_c: the ambient temperature per
     step or one value (°C), from which the model's thermal model computes the cell temperature
     (the FMU's default; returned as `cell_temperature_c`; a model without a thermal model takes
-    the ambient as the cell temperature). soc0: the SoC before the first step. Returns arrays
+    the ambient as the cell temperature). Neither given: an ambient of 25 °C, as the FMU with
+    its start values. soc0: the SoC before the first step. Returns arrays
     `voltage_v` (V, the mean over each step) and `soc` (after each step), plus the network
     output `y` and the local models' `validity`. A model
     with a current delay δ (model.current_delay_s) takes each step's current δ late, as its FMU
@@ -130,13 +132,13 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
                         "of them")
     taken = np.array(held_delayed_currents(current.tolist(), model.sample_time_s,
                                            model.current_delay_s))
+    if temperature_c is None and ambient_c is None:
+        ambient_c = DEFAULT_TEMPERATURE_C             # the FMU's start values
     if ambient_c is not None:
         ambient = _temperature_profile(ambient_c, current.size, "ambient_c")
         sim, temp = simulate_ambient(model, taken, ambient, float(soc0), capacity_ah)
     else:
-        temp = None
-        if temperature_c is not None:
-            temp = _temperature_profile(temperature_c, current.size)
+        temp = _temperature_profile(temperature_c, current.size)
         sim = _simulate_runtime(model, taken, temp, float(soc0), capacity_ah)
     warn_outside_training(model, "simulate", current, temp, sim.soc)
     return sim

@@ -26,6 +26,7 @@ from lmncell.design.optimal import (
 from lmncell.progress import Progress
 from lmncell.report.jsontext import json_text
 from lmncell.runtime.model import LmnModel, write_text_whole
+from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
 
 
 def default_virtual_cell() -> str:
@@ -105,7 +106,8 @@ def model_resistance_scale(model: LmnModel, cell: CellSpec, profile: list[float]
     for soc0 in socs:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")       # a pulse may leave the trained region
-            v = simulate(model, current, None, float(soc0), capacity_ah=cell.capacity_ah)
+            v = simulate(model, current, DEFAULT_TEMPERATURE_C, float(soc0),
+                         capacity_ah=cell.capacity_ah)
         u, soc, _ = predict(cell, current, model.sample_time_s, float(soc0),
                             np.zeros(len(cell.rc)))
         own = v.voltage_v - cell.ocv(soc)
@@ -145,8 +147,8 @@ def model_voltage(model: LmnModel, current_a: np.ndarray, sample_time_s: float, 
     steps = math.floor(current_a.size * sample_time_s / ts + 1e-9)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")          # the pulses may leave the trained current
-        return simulate(model, step_means(current_a, sample_time_s, ts, steps), None, soc0,
-                        capacity_ah=capacity_ah).voltage_v
+        return simulate(model, step_means(current_a, sample_time_s, ts, steps),
+                        DEFAULT_TEMPERATURE_C, soc0, capacity_ah=capacity_ah).voltage_v
 
 
 def _fit_to_model(prog: Programme, model: LmnModel, cell: CellSpec, cyc: CyclerSpec,
