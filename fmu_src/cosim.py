@@ -357,7 +357,7 @@ class CellCosim:
             self._restore(state)
         except (KeyError, IndexError, TypeError, ValueError, AttributeError) as exc:
             self._restore(saved)
-            raise ValueError(f"FMU state: {state_fault(exc)}") from exc
+            raise ValueError(state_fault(exc)) from exc
 
     def _restore(self, state: dict) -> None:
         """set_state's work, which may stop half-way on a bad state."""
