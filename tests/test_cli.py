@@ -674,3 +674,18 @@ def test_a_figure_is_written_whole_and_closed_even_where_writing_fails(tmp_path,
         save_figure(fig, path)
     assert failed.value.filename == str(path) and not plt.fignum_exists(fig.number)
     assert path.read_bytes() == before and [p.name for p in tmp_path.iterdir()] == ["a.png"]
+
+
+@pytest.mark.parametrize("extra, message", [
+    (["--soc0-est", "0.5"], "--soc0-est without --observer: they set up a SoC observer's run"),
+    (["--start-soc", "0.6"], "--start-soc without --observer"),
+    (["--observer", "ekf"], "--observer needs --soc0-est"),
+    (["--observer", "ekf", "--soc0-est", "0.5", "--ambient"],
+     "--ambient with --observer: the observer runs on the measured cell temperature"),
+])
+def test_observer_options_out_of_place_are_refused(quick_model, capsys, extra, message) -> None:
+    """An observer's options given without --observer were ignored: the voltage was judged
+    and the start guess silently dropped."""
+    assert main(["evaluate", str(quick_model), str(PAN_US06), "--soc0", "1", *extra]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err

@@ -461,6 +461,17 @@ def test_bad_config_file(tmp_path) -> None:
     p.write_text("[train\n")
     with pytest.raises(ConfigError, match="c.toml: cannot read"):
         load_config(p)
+    # settings in another table, or beside [train], were silently left out (the defaults ran)
+    p.write_text("[training]\nmax_local_models = 4\n")
+    with pytest.raises(ConfigError, match=r"c.toml: table\(s\) \[training\] and no \[train\] "
+                                          r"table; expected the settings in a \[train\] table"):
+        load_config(p)
+    p.write_text("max_local_models = 4\n[train]\nmax_pole = 0.99\n")
+    with pytest.raises(ConfigError, match=r"\['max_local_models'\] beside or instead of the "
+                                          r"\[train\] table"):
+        load_config(p)
+    p.write_text("max_local_models = 4\n")                 # the top level alone: taken
+    assert load_config(p).max_local_models == 4
 
 
 def test_ocv_from_slow_tests_is_used_and_kept(tmp_path) -> None:

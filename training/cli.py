@@ -258,6 +258,12 @@ def cmd_evaluate(a: argparse.Namespace) -> int:
                                 a.plot, a.json, read_options=read_options(a),
                                 through_hidden_pauses=a.through_hidden_pauses)
         return 0
+    observer_only = [flag for flag, value in (("--soc0-est", a.soc0_est),
+                                              ("--start-soc", a.start_soc)) if value is not None]
+    if observer_only:
+        raise ConfigError(f"{', '.join(observer_only)} without --observer: they set up a SoC "
+                          "observer's run (its start guess, where it starts); give --observer "
+                          "ekf|fuzzy|imm to judge one, or leave them out to judge the voltage")
     if a.model.lower().endswith(".fmu"):
         from lmncell.evaluation.fmueval import evaluate_fmu_files
 

@@ -550,7 +550,18 @@ def _toml_table(path: Path) -> dict:
         doc = tomllib.loads(path.read_text(encoding="utf-8"))
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read the TOML configuration ({exc})") from exc
-    return doc.get("train", doc)
+    if "train" not in doc:
+        tables = sorted(f"[{k}]" for k, v in doc.items() if isinstance(v, dict))
+        if tables:
+            raise ConfigError(f"{path}: table(s) {', '.join(tables)} and no [train] table; "
+                              "expected the settings in a [train] table (or at the top level)")
+        return doc
+    beside = sorted(k for k in doc if k != "train")
+    if beside or not isinstance(doc["train"], dict):
+        raise ConfigError(f"{path}: {beside or ['train = ' + repr(doc['train'])]} beside or "
+                          "instead of the [train] table; expected every setting inside [train] "
+                          "(or all of them at the top level, without [train])")
+    return doc["train"]
 
 
 def config_from_settings(values: dict, source: str = "configuration") -> TrainConfig:
