@@ -197,10 +197,15 @@ def test_step_means_keep_the_cycles_energy_at_any_step() -> None:
 def test_coarse_steps_drive_the_same_charge_and_a_step_longer_than_the_cycle_is_refused(
         native_fmu, capsys) -> None:
     fine = run_cycle(native_fmu, "udds", step_s=1.0).figures
-    for h in (100.0, 1369.0):
+    assert fine["unrun_s"] == 0.0
+    for h, unrun in ((100.0, 70.0), (1369.0, 1.0)):
         coarse = run_cycle(native_fmu, "udds", step_s=h).figures
         assert coarse["soc_end"] == pytest.approx(fine["soc_end"], abs=1e-3), h   # was 0.014 off
         assert coarse["distance_km"] == pytest.approx(fine["distance_km"], rel=0.03), h
+        assert coarse["unrun_s"] == pytest.approx(unrun)    # the end no whole step covers
+    assert main(["simulate", str(native_fmu), "--cycle", "udds", "--step", "100"]) == 0
+    assert ("note: the last 70 s of the cycle, shorter than one communication step of 100 s, "
+            "were not run (--step sets it)") in capsys.readouterr().out
     assert main(["simulate", str(native_fmu), "--cycle", "udds", "--step", "1400"]) == 2
     assert ("communication step 1400 s: longer than the UDDS cycle (1370 s); expected at most "
             "1370 s") in capsys.readouterr().err

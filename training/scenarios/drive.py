@@ -311,6 +311,13 @@ def step_count(span_s: float, h: float) -> int:
     return math.floor(span_s / h + 1e-9)
 
 
+def unrun_s(span_s: float, h: float, n: int) -> float:
+    """The end of a run's span_s (s) that its n whole steps of h (s) leave unrun (s; 0 where
+    they cover it to round-off): a step that does not divide the cycles drops what is left."""
+    left = span_s - n * h
+    return float(left) if left > 1e-9 * span_s else 0.0
+
+
 def whole_steps(h: float, span_s: float, what: str) -> int:
     """The number of whole steps of h (s) over span_s (s) (step_count); DataError where there
     are none or more than MAX_CYCLE_STEPS. what: the run as messages name it ("the UDDS
@@ -452,7 +459,7 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
     speed = speed[:out["time"].size]
     cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop, first)
     figures = {"cycle": trace.name, "repetitions": repeat, "step_s": h,
-               "duration_s": cell["duration_s"],
+               "duration_s": cell["duration_s"], "unrun_s": unrun_s(power.size * dt, h, n),
                "distance_km": float(np.sum(speed) * h / 1000.0),
                "cell_energy_wh": cell["cell_energy_wh"],
                "pack_energy_kwh": cell["cell_energy_wh"] * vehicle.n_series
@@ -484,6 +491,7 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
                                   temperature_c, cutoff, charge_cutoff)
     figures = {"profile": prof.name, "repetitions": repeat,
                **_cell_figures(out, h, soc0, temperature_c, cutoff, stop, first),
+               "unrun_s": unrun_s(current.size * dt, h, n),
                "charge_cutoff_v": charge_cutoff}
     cell_t = out["cell_t"] if figures["cell_temperature_max_c"] is not None else None
     return CycleResult(out["time"], None, out["current"], out["voltage"], out["soc"],
@@ -568,6 +576,11 @@ def simulate_cycle_cli(a) -> int:
         print(_run_line(f))
         if f["stop"]:
             print(_stop_line(res))
+    if f["unrun_s"] and not f["stop"]:
+        print(f"note: the last {f['unrun_s']:g} s of the "
+              + ("profile" if a.current else "cycle") + f"{'s' if a.repeat > 1 else ''}, "
+              f"shorter than one communication step of {f['step_s']:g} s, were not run "
+              "(--step sets it)", file=notes)
     if f["out_of_range_steps"]:
         first = f["out_of_range_first"]
         print(f"warning: {f['out_of_range_steps']} step(s) left the model's trained range "
