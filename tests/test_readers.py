@@ -65,6 +65,18 @@ def test_arbin_and_panasonic_formats() -> None:
     assert any("repeated time stamp" in n for n in rec.meta.notes)
 
 
+def test_reader_options_for_a_file_their_reader_does_not_take_are_named() -> None:
+    """A column mapping given for a Panasonic .mat file sent it to the CSV reader, which said
+    "not a text file ... expected a CSV text file, a MATLAB .mat file"; reader options without
+    a mapping select no reader."""
+    with pytest.raises(DataError, match=r"US06_Pan18650PF.mat: a Panasonic .mat file, which its "
+                                        r"own reader reads; the column mapping"):
+        read_record(PAN_US06, columns={"time": "t", "current": "i", "voltage": "u"})
+    with pytest.raises(DataError, match=r"reader options \['current_unit'\] need a column "
+                                        r"mapping"):
+        read_record(PAN_US06, current_unit="mA")
+
+
 def test_hppc_gaps_become_segments() -> None:
     rec = read_record(DATA / "panasonic_18650pf/25degC/hppc/"
                       "03-11-17_08.47_25degC_5Pulse_HPPC_Pan18650PF.mat")

@@ -1221,6 +1221,10 @@ def read_record(path: str | Path, fmt: str | None = None, **generic_kw) -> Recor
                         "quantities to the file's column names, e.g. {'time': 'Time [s]', "
                         "'current': 'I [A]', 'voltage': 'U [V]'}")
     if fmt is None and generic_kw.get("columns"):
+        if _mat_path(path):
+            raise DataError(f"{path}: a Panasonic .mat file, which its own reader reads; the "
+                            "column mapping (--columns / columns=...) and the other reader "
+                            "options are for a CSV: leave them out for this file")
         fmt = "generic"
     if fmt != "generic" and generic_kw:
         raise DataError(f"{path}: reader options {sorted(generic_kw)} need a column mapping "
