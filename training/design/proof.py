@@ -78,20 +78,20 @@ def ocv_test_record(vc: VirtualCellLike, capacity_ah: float, folder: Path) -> Pa
     """A slow full → empty → full test run on the virtual cell, written as a BDF file;
     DataError where its discharge delivers a capacity other than capacity_ah (Ah)."""
     from lmncell.data.readers import write_bdf
+    from lmncell.data.soc import ocv_from_round_trip
 
     t, cur, u = vc.ocv_test(OCV_TEST_C_RATE)
-    empty = int(np.argmin(u))
-    dis = np.minimum(cur[:empty + 1], 0.0)
-    delivered = float(-np.sum(0.5 * (dis[1:] + dis[:-1]) * np.diff(t[:empty + 1])) / 3600.0)
+    test = Record(t, cur, u, RecordMeta("virtual cell C/20 OCV test", "virtual",
+                                        "current > 0 charges", float(t[1] - t[0])))
+    delivered = ocv_from_round_trip(test).capacity_ah    # as training reads a round trip
     if abs(delivered / capacity_ah - 1.0) > CAPACITY_TOLERANCE:
         raise DataError(f"--capacity {capacity_ah:g} Ah: the virtual cell ({vc.describe()}) "
                         f"delivers {delivered:.3f} Ah in its C/20 discharge from full to "
-                        f"{u[empty]:.2f} V, more than {100 * CAPACITY_TOLERANCE:g} % apart; "
-                        "the proof designs on the virtual cell: give --capacity "
+                        f"{float(u.min()):.2f} V, more than {100 * CAPACITY_TOLERANCE:g} % "
+                        "apart; the proof designs on the virtual cell: give --capacity "
                         f"{delivered:.2f}")
     path = Path(folder) / "virtual_ocv_test.bdf.csv"
-    write_bdf(Record(t, cur, u, RecordMeta("virtual cell C/20 OCV test", "virtual",
-                                           "current > 0 charges", float(t[1] - t[0]))), path)
+    write_bdf(test, path)
     return path
 
 
