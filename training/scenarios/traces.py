@@ -174,8 +174,7 @@ def held_on_even_steps(time_s: np.ndarray, values: np.ndarray, path: str | Path
     they are. DataError where the intervals share no step of at least the profile's length /
     MAX_PROFILE_STEPS."""
     step = np.diff(time_s)
-    even = float(np.median(step))
-    if even > 0 and np.all(np.abs(step - even) <= 1e-6 * even):
+    if not uneven_steps(step).size:
         return time_s, values
     micro = np.round(step * 1e6).astype(np.int64)
     offsets = np.concatenate([[0], np.cumsum(micro)])
@@ -267,6 +266,15 @@ def trace_key(name: str) -> str:
     return f"{base}_{UNIT_KEYS.get(unit, unit)}"
 
 
+def uneven_steps(step: np.ndarray) -> np.ndarray:
+    """Indices of the time steps (s) that differ from their median by more than 1e-6 of it (all
+    of them where the median is not > 0): empty for a trace in even steps."""
+    even = float(np.median(step))
+    if not even > 0:
+        return np.arange(step.size)
+    return np.flatnonzero(~(np.abs(step - even) <= 1e-6 * even))
+
+
 def _check_times(t: np.ndarray, where: str, lines: list[int], breakpoints: bool) -> None:
     """DataError (where: the file and column) where times fall, or, unless the trace is a
     table of breakpoints (which may repeat a time, not all of them one), do not rise in even
@@ -283,7 +291,7 @@ def _check_times(t: np.ndarray, where: str, lines: list[int], breakpoints: bool)
         if not t[-1] > t[0]:
             raise DataError(f"{where} holds {t[0]:g} s on every row; expected times that rise")
         return
-    uneven = np.flatnonzero(~(np.abs(step - even) <= 1e-6 * even))
+    uneven = uneven_steps(step)
     if uneven.size:
         k = int(uneven[0])
         raise DataError(f"{where} at line {lines[k + 1]}: {t[k]:g} s then {t[k + 1]:g} s; "
