@@ -75,7 +75,7 @@ def find_gaps(time_s: np.ndarray, factor: float = 20.0, current_a: np.ndarray | 
     A step longer than factor × the median step is a gap unless the data show that nothing was
     lost: the tester's charge counter moved as the held current explains (within tol_ah), or, with
     no counter, the step is shorter than long_s and the cell rested on both sides (a slower
-    logging rate during a rest) or the current on either side would move less than tol_ah over
+    logging rate during a rest) or the current on each side would move less than tol_ah over
     it (the Panasonic drive cycles' 2-s pauses between schedule steps at −0.07 A: 0.04 mAh).
     """
     dt = np.diff(time_s)
@@ -88,7 +88,7 @@ def find_gaps(time_s: np.ndarray, factor: float = 20.0, current_a: np.ndarray | 
     if charge_ah is not None:
         lost = np.abs(np.diff(charge_ah)[cand] - held_ah) > tol_ah + 0.02 * np.abs(held_ah)
     else:
-        either = np.maximum(np.abs(current_a[cand]), np.abs(current_a[cand + 1]))
-        quiet = (either < 0.02) | (either * dt[cand] / 3600.0 < tol_ah)
+        larger = np.maximum(np.abs(current_a[cand]), np.abs(current_a[cand + 1]))
+        quiet = (larger < 0.02) | (larger * dt[cand] / 3600.0 < tol_ah)
         lost = ~quiet | (dt[cand] > long_s)
     return cand[lost] + 1
