@@ -1092,3 +1092,66 @@ def test_an_arbin_file_whose_capacities_restart_at_each_cycle_keeps_one_charge_c
     assert original.charge_ah[-1] < -2.0
     assert any("restarts from 0 1 time(s)" in n for n in rec.meta.notes), rec.meta.notes
     assert not any("restarts" in n for n in original.meta.notes)
+
+
+def _arbin_with_temperatures(tmp_path, spaces: bool, channels: dict[str, np.ndarray],
+                             name: str = "A123_OCV_P25_S1.csv"):
+    """The A123 C/30 Arbin export with the given temperature columns added (blank where a
+    value is NaN), its names written with spaces (MITS Pro's newer export) or as they are."""
+    with gzip.open(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz", "rt") as fh:
+        lines = fh.read().splitlines()
+    header = lines[0]
+    if spaces:
+        header = re.sub(r"_(?=[A-Z])", " ", header).replace("(", " (")
+    rows = [",".join([header, *channels])]
+    for k, line in enumerate(lines[1:]):
+        rows.append(",".join([line, *("" if np.isnan(v[k]) else f"{v[k]:.2f}"
+                                      for v in channels.values())]))
+    path = tmp_path / name
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def test_an_arbin_export_gives_its_cell_temperature_in_either_spelling(tmp_path) -> None:
+    """The Arbin reader knew only the names with underscores and left every temperature column
+    out without a word: a MITS Pro export with spaces ("Test Time (s)") was "unknown format",
+    and a thermocouple on auxiliary channel 1 never reached the model (no thermal model, the
+    chamber's temperature from the file name instead). Now either spelling is Arbin, channel 1
+    is the cell's temperature (a channel read every few rows holds its readings), and the
+    other channels are named as not read."""
+    n = len(read_record(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"))
+    cell = 25.0 + np.linspace(0.0, 3.0, n)
+    cell[1::2] = np.nan                                 # read every other row
+    chamber = np.full(n, 24.5)
+    records = []
+    for spaces, (one, two) in ((True, ("Aux_Temperature_1 (C)", "Aux_Temperature_2 (C)")),
+                               (False, ("Aux_Temperature(°C)_1", "Aux_Temperature(°C)_2"))):
+        folder = tmp_path / ("spaces" if spaces else "underscores")
+        folder.mkdir()
+        path = _arbin_with_temperatures(folder, spaces, {two: chamber, one: cell})
+        assert detect_format(path) == "arbin"
+        rec = read_record(path)
+        assert rec.meta.file_columns["temperature_c"] == one
+        assert any(f"['{two}'] not read" in note for note in rec.meta.notes), rec.meta.notes
+        assert any("blank between readings" in note for note in rec.meta.notes)
+        records.append(rec)
+    held = np.round(cell[np.arange(n) // 2 * 2], 2)
+    for rec in records:
+        np.testing.assert_array_equal(rec.temperature_c, held)
+    np.testing.assert_array_equal(records[0].voltage_v, records[1].voltage_v)
+    np.testing.assert_array_equal(records[0].charge_ah, records[1].charge_ah)
+    assert "Test Time (s)" in records[0].meta.file_columns["time_s"]
+
+
+def test_an_arbin_channel_that_reads_zero_throughout_is_not_a_cell_temperature(
+        tmp_path) -> None:
+    n = len(read_record(DATA / "a123_plett/ocv/A123_OCV_P25_S1.csv.gz"))
+    rec = read_record(_arbin_with_temperatures(tmp_path, False,
+                                               {"Aux_Temperature_1(C)": np.zeros(n)}))
+    assert rec.temperature_c is None
+    assert any("reads 0 throughout" in note for note in rec.meta.notes), rec.meta.notes
+    far = read_record(_arbin_with_temperatures(tmp_path, False,
+                                               {"Aux_Temperature_1(F)": np.full(n, 77.0)},
+                                               name="f.csv"))
+    assert far.temperature_c is None
+    assert any("unit is not °C" in note for note in far.meta.notes), far.meta.notes

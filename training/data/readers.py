@@ -31,6 +31,12 @@ FORMATS = ("plett", "arbin", "panasonic", "bdf", "biologic", "generic")
 PLETT_COLUMNS = ("time", "step", "current", "voltage", "chgAh", "disAh")
 ARBIN_COLUMNS = ("Test_Time(s)", "Current(A)", "Voltage(V)", "Charge_Capacity(Ah)",
                  "Discharge_Capacity(Ah)")
+# Arbin MITS Pro writes these names with underscores ("Test_Time(s)") or, in newer exports, with
+# spaces ("Test Time (s)"); either is matched (_arbin_key). Its auxiliary temperature channels
+# are "Aux_Temperature_1(C)", "Aux_Temperature_1 (C)", "Aux_Temperature(°C)_1", …: channel 1 is
+# read as the cell's temperature
+ARBIN_TEMPERATURE = re.compile(r"(aux)?temperature(\d*)\(([^)]*)\)(\d*)")
+ARBIN_CELSIUS = ("c", "°c", "°", "degc", "℃")
 BDF_TIME, BDF_VOLTAGE, BDF_CURRENT = "Test Time / s", "Voltage / V", "Current / A"
 BDF_AMBIENT, BDF_T1 = "Ambient Temperature / degC", "Temperature T1 / degC"
 BDF_NET_AH, BDF_SOC = "Net Capacity / Ah", "State of Charge / 1"
@@ -194,7 +200,7 @@ def _format_of(path: Path) -> str:
     cols = [c.strip() for c in header.split(",")]
     if cols[: len(PLETT_COLUMNS)] == list(PLETT_COLUMNS):
         return "plett"
-    if all(c in cols for c in ARBIN_COLUMNS):
+    if _arbin_names(cols) is not None:
         return "arbin"
     if all(c in cols for c in (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)):
         return "bdf"
@@ -419,21 +425,81 @@ def read_plett(path: Path) -> Record:
 
 
 def read_arbin(path: Path) -> Record:
-    """Arbin CSV export (``Test_Time(s)``, ``Current(A)``, …); discharge < 0 already."""
-    cols = _read_csv_columns(path)
-    _require(path, cols, ARBIN_COLUMNS)
-    t = cols["Test_Time(s)"]
-    ah, notes = _stitched_counter(      # Arbin's capacities restart at each cycle
-        "Charge_Capacity(Ah) − Discharge_Capacity(Ah)", t, cols["Current(A)"],
-        cols["Charge_Capacity(Ah)"] - cols["Discharge_Capacity(Ah)"])
-    return Record(t - t[0], cols["Current(A)"], cols["Voltage(V)"],
-                  _meta(path, "arbin", "none (file: charge > 0)", t,
-                        segment_starts=_segment_starts_from_gaps(t, cols["Current(A)"], ah),
-                        notes=[*cols.notes, *notes],
-                        **_csv_meta(cols, t, time_s="Test_Time(s)", current_a="Current(A)",
-                                    voltage_v="Voltage(V)",
-                                    charge_ah="Charge_Capacity(Ah) − Discharge_Capacity(Ah)")),
+    """Arbin CSV export (``Test_Time(s)``, ``Current(A)``, …, or the same names with spaces,
+    ``Test Time (s)``); discharge < 0 already. Auxiliary temperature channel 1 (or the only
+    temperature column) is the cell's temperature; a channel read every few rows, blank
+    between readings, holds each reading until the next (noted), as the BDF reader's does."""
+    header = [c.strip() for c in next(csv.reader([read_text(path, first_line=True)]))]
+    names = _arbin_names(header)
+    if names is None:
+        raise DataError(f"{path}: missing Arbin column(s); expected {list(ARBIN_COLUMNS)} (or "
+                        f"the same names with spaces), found {header}")
+    temp_column, notes = _arbin_temperature(header)
+    text = {temp_column} if temp_column else set()
+    cols = _read_csv_columns(path, required=set(names.values()), keep_text=text,
+                             blank_ok=text)
+    t, cur = cols[names["Test_Time(s)"]], cols[names["Current(A)"]]
+    temp = None
+    if temp_column is not None and not np.any(cols[temp_column][~np.isnan(cols[temp_column])]):
+        notes.append(f"column '{temp_column}' reads 0 throughout (no sensor on the channel?): "
+                     "not read as the cell's temperature")
+        temp_column = None
+    if temp_column is not None:
+        temp, more = _held_readings(cols, temp_column, path)
+        notes += more
+    ah, more = _stitched_counter(      # Arbin's capacities restart at each cycle
+        f"{names['Charge_Capacity(Ah)']} − {names['Discharge_Capacity(Ah)']}", t, cur,
+        cols[names["Charge_Capacity(Ah)"]] - cols[names["Discharge_Capacity(Ah)"]])
+    meta = _meta(path, "arbin", "none (file: charge > 0)", t,
+                 segment_starts=_segment_starts_from_gaps(t, cur, ah),
+                 notes=[*cols.notes, *notes, *more],
+                 **_csv_meta(cols, t, time_s=names["Test_Time(s)"], current_a=names["Current(A)"],
+                             voltage_v=names["Voltage(V)"],
+                             charge_ah=f"{names['Charge_Capacity(Ah)']} − "
+                                       f"{names['Discharge_Capacity(Ah)']}"))
+    if temp_column is not None:
+        meta.file_columns["temperature_c"] = temp_column
+    return Record(t - t[0], cur, cols[names["Voltage(V)"]], meta, temperature_c=temp,
                   charge_ah=ah)
+
+
+def _arbin_key(name: str) -> str:
+    """An Arbin column name without spaces and underscores, in lower case: "Test Time (s)" and
+    "Test_Time(s)" give one key."""
+    return re.sub(r"[\s_]", "", name).lower()
+
+
+def _arbin_names(header: list[str]) -> dict[str, str] | None:
+    """The file's name for each of ARBIN_COLUMNS (in either spelling), or None where one is
+    missing."""
+    by_key = {_arbin_key(name): name for name in header}
+    found = {column: by_key.get(_arbin_key(column)) for column in ARBIN_COLUMNS}
+    return None if None in found.values() else {k: v for k, v in found.items() if v}
+
+
+def _arbin_temperature(header: list[str]) -> tuple[str | None, list[str]]:
+    """The column of an Arbin export read as the cell's temperature (auxiliary channel 1, else
+    the only temperature column in °C), and notes naming the temperature columns not read."""
+    celsius, other = [], []
+    for name in header:
+        m = ARBIN_TEMPERATURE.fullmatch(_arbin_key(name))
+        if m is not None:
+            (celsius if m.group(3) in ARBIN_CELSIUS else other).append(
+                (name, m.group(2) or m.group(4)))
+    first = [name for name, channel in celsius if channel == "1"]
+    chosen = first[0] if first else celsius[0][0] if len(celsius) == 1 else None
+    left = [name for name, _ in celsius if name != chosen]
+    notes = []
+    if left:
+        notes.append(f"temperature column(s) {left} not read"
+                     + (f": the cell's temperature is '{chosen}' (auxiliary channel 1)"
+                        if chosen else ": none is auxiliary channel 1, so none is taken as the "
+                        "cell's; name it with --columns …,temperature=COL"))
+    if other:
+        notes.append(f"temperature column(s) {[name for name, _ in other]} not read: their "
+                     "unit is not °C (name one with --columns …,temperature=COL and "
+                     "--temperature-unit)")
+    return chosen, notes
 
 
 def chamber_set_point(logged_c: np.ndarray) -> float:

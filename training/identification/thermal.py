@@ -50,8 +50,9 @@ def _no_thermal_reason(segs: list[Segment]) -> str:
                       if s.temperature_kind == "measured" and s.ambient_c is None})
     if unknown:
         reason += (f"; {', '.join(unknown[:3])}{' …' if len(unknown) > 3 else ''} log a cell "
-                   "temperature and no chamber temperature beside it (your own CSV: map the "
-                   "chamber's column as ambient=COL)")
+                   "temperature and no chamber temperature beside it (give it in the file name, "
+                   "such as …_25degC…; or, in your own CSV, map the chamber's column as "
+                   "ambient=COL)")
     return reason
 
 
