@@ -1155,3 +1155,54 @@ def test_an_arbin_channel_that_reads_zero_throughout_is_not_a_cell_temperature(
                                                name="f.csv"))
     assert far.temperature_c is None
     assert any("unit is not °C" in note for note in far.meta.notes), far.meta.notes
+
+
+def _maccor_csv(tmp_path, states: tuple[str, str, str] = ("C", "D", "R"),
+                name: str = "maccor.csv") -> tuple:
+    """The A123 25 °C record as a Maccor-like export: the current's magnitude in Amps and its
+    direction in State (charge, discharge, rest as the words given)."""
+    rec = read_record(A123_S1)
+    i = np.round(rec.current_a, 4)
+    state = np.where(i > 0, states[0], np.where(i < 0, states[1], states[2]))
+    rows = ["Rec#,Cyc#,Step,Test (Sec),Step (Sec),Amp-hr,Watt-hr,Amps,Volts,State,ES"]
+    rows += [f"{k + 1},0,1,{t:.3f},0,0,0,{abs(c):.4f},{v:.4f},{s},0"
+             for k, (t, c, v, s) in enumerate(zip(rec.time_s, i, rec.voltage_v, state,
+                                                  strict=True))]
+    path = tmp_path / name
+    path.write_text("\n".join(rows) + "\n")
+    return path, i
+
+
+MACCOR = {"time": "Test (Sec)", "current": "Amps", "voltage": "Volts"}
+
+
+@pytest.mark.parametrize("states", [("C", "D", "R"), ("CCCV_Chg", "CC_DChg", "Rest"),
+                                    ("CHA", "DCH", "PAU")])
+def test_a_current_logged_as_its_magnitude_is_signed_by_its_state_column(tmp_path,
+                                                                          states) -> None:
+    """Maccor logs the current's magnitude (Amps) and its direction in State. Read by its
+    named columns, every discharge was a charge: the record charged 8.7 Ah into a 2.3-Ah cell,
+    said nothing while reading, and training's error then asked for --discharge-positive,
+    which would have made every charge a discharge. Now state=COL signs the current (Maccor's,
+    Neware's and Digatron's words), and a current that never goes below 0 while the voltage
+    falls at its rises is warned of."""
+    path, signed = _maccor_csv(tmp_path, states)
+    rec = read_record(path, columns={**MACCOR, "state": "State"})
+    np.testing.assert_array_equal(rec.current_a, signed)
+    assert "signed by the column 'State'" in rec.meta.sign_note
+    assert rec.current_a.min() < -5 and rec.current_a.max() > 5
+    with pytest.warns(DataWarning, match=r"never goes below 0 .* state=COL"):
+        read_record(path, columns=MACCOR)
+
+
+def test_a_state_column_is_refused_where_its_words_or_the_options_do_not_fit(tmp_path) -> None:
+    path, _ = _maccor_csv(tmp_path, ("C", "D", "X"))
+    with pytest.raises(DataError, match=r"column 'State' line 2: 'X' names no charge, "
+                                        r"discharge or rest; expected a state such as C, D, R"):
+        read_record(path, columns={**MACCOR, "state": "State"})
+    good, _ = _maccor_csv(tmp_path, name="good.csv")
+    with pytest.raises(DataError, match=r"--discharge-positive .* with the state column 'State'"):
+        read_record(good, columns={**MACCOR, "state": "State"}, discharge_positive=True)
+    with pytest.raises(DataError, match=r"perhaps: --columns 'time=Test \(Sec\),current=Amps,"
+                                        r"voltage=Volts,state=State'"):
+        read_record(good)

@@ -165,15 +165,15 @@ def soc_list_argument(text: str) -> list[float]:
 
 
 def _columns(text: str) -> dict[str, str]:
-    """time=COL,current=COL,voltage=COL[,temperature=COL][,ambient=COL][,charge=COL] →
-    {quantity: column name}."""
+    """time=COL,current=COL,voltage=COL[,temperature=COL][,ambient=COL][,charge=COL]
+    [,state=COL] → {quantity: column name}."""
     out: dict[str, str] = {}
     for part in text.split(","):
         key, sep, col = part.partition("=")
         if not sep or not key.strip() or not col.strip():
             raise argparse.ArgumentTypeError(
                 f"{text!r}: expected time=COL,current=COL,voltage=COL[,temperature=COL]"
-                f"[,ambient=COL][,charge=COL] "
+                f"[,ambient=COL][,charge=COL][,state=COL] "
                 f"(item {part!r} is not QUANTITY=COLUMN)")
         out[key.strip()] = col.strip()
     return out
@@ -423,12 +423,14 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
                              "Arbin, Panasonic .mat, BDF, BioLogic .mpt — are recognised "
                              "without these)")
     g.add_argument("--columns", type=_columns, metavar="time=COL,current=COL,voltage=COL"
-                   "[,temperature=COL][,ambient=COL][,charge=COL]", help="the file's column "
-                   "names for time (s), current, voltage (V) and optionally cell temperature "
-                   "and the ambient (chamber) temperature beside it (°C; with both, training "
-                   "identifies a thermal model), and the tester's net charge counter (Ah, "
-                   "running through the record: a gap in time then splits the record only "
-                   "where charge was lost, and the SoC reference counts by it)")
+                   "[,temperature=COL][,ambient=COL][,charge=COL][,state=COL]",
+                   help="the file's column names for time (s), current, voltage (V) and "
+                   "optionally cell temperature and the ambient (chamber) temperature beside "
+                   "it (°C; with both, training identifies a thermal model), the tester's net "
+                   "charge counter (Ah, running through the record: a gap in time then splits "
+                   "the record only where charge was lost, and the SoC reference counts by "
+                   "it), and a column that gives the direction of a current logged as its "
+                   "magnitude (Maccor's State C, D, R; Neware's CC_Chg, CC_DChg, Rest)")
     g.add_argument("--discharge-positive", action="store_true", help="the file counts "
                    "discharge current as positive (LMNCell: current > 0 charges)")
     g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "

@@ -1,7 +1,7 @@
 """Which columns of an unknown table's header look like time, current, voltage, temperature, the
-ambient beside it and a net charge counter: the reader's options that would read it, proposed in
-the unknown-format error. Only proposed, never applied: the sign of the current and the columns
-are the user's to confirm."""
+ambient beside it, a net charge counter and the current's direction: the reader's options that
+would read it, proposed in the unknown-format error. Only proposed, never applied: the sign of
+the current and the columns are the user's to confirm."""
 
 from __future__ import annotations
 
@@ -21,6 +21,8 @@ CELL_WORDS = ("cell", "battery", "surface", "case", "t1")   # a cell's, not the 
 AMBIENT_WORDS = ("ambient", "amb", "chamber", "environment", "env", "room", "air")
 # a net charge counter's names (a cycler's per-step "Capacity" or separate charge and discharge
 # counters are not proposed); "Q" only with a charge unit, such as 'Q [mAh]'
+# a column of the current's direction beside its magnitude (Maccor's "State": C, D, R)
+STATE_NAMES = {"state", "md"}
 NET_CHARGE_NAMES = {"ah", "net ah", "q qo", "(q qo)", "ahaccu", "ah accu", "net charge",
                     "net capacity", "charge counter"}
 
@@ -47,8 +49,8 @@ def suggested_options(header: str, first_row: str | None) -> str | None:
 def _picks(names: list[str]) -> dict[str, str] | None:
     """{quantity: column name} for time, current, voltage (each the only candidate, else None),
     temperature (where one column, or one cell temperature among several, names it),
-    ambient (beside that, one chamber temperature: AMBIENT_WORDS) and charge (one net charge
-    counter: is_net_charge)."""
+    ambient (beside that, one chamber temperature: AMBIENT_WORDS), charge (one net charge
+    counter: is_net_charge) and state (one column of the current's direction: STATE_NAMES)."""
     bases = {name: _base(name) for name in names}
     picks: dict[str, str] = {}
     for what, exact, word in (("time", TIME_NAMES, "time"), ("current", CURRENT_NAMES, "current"),
@@ -74,6 +76,9 @@ def _picks(names: list[str]) -> dict[str, str] | None:
     charges = [n for n in names if n not in picks.values() and is_net_charge(n)]
     if len(charges) == 1:
         picks["charge"] = charges[0]
+    states = [n for n, b in bases.items() if b in STATE_NAMES]
+    if len(states) == 1:
+        picks["state"] = states[0]
     return picks
 
 

@@ -214,7 +214,7 @@ def _format_of(path: Path) -> str:
     raise DataError(f"{path}: unknown format; header {header[:120]!r} matches none of "
                     f"{list(FORMATS[:5])}. Name your columns: on the command line "
                     "--columns time=COL,current=COL,voltage=COL[,temperature=COL]"
-                    "[,ambient=COL][,charge=COL] (with "
+                    "[,ambient=COL][,charge=COL][,state=COL] (with "
                     "--delimiter, --decimal, --current-unit, --time-unit, --voltage-unit, "
                     "--temperature-unit, --charge-unit, --discharge-positive as needed); "
                     "in Python read_record(path, columns={...})"
@@ -480,7 +480,8 @@ def _arbin_names(header: list[str]) -> dict[str, str] | None:
 def _arbin_temperature(header: list[str]) -> tuple[str | None, list[str]]:
     """The column of an Arbin export read as the cell's temperature (auxiliary channel 1, else
     the only temperature column in °C), and notes naming the temperature columns not read."""
-    celsius, other = [], []
+    celsius: list[tuple[str, str]] = []
+    other: list[tuple[str, str]] = []
     for name in header:
         m = ARBIN_TEMPERATURE.fullmatch(_arbin_key(name))
         if m is not None:
@@ -769,9 +770,15 @@ def _first_present(path: Path, names: list[str], choices: tuple[str, ...], what:
     return found
 
 
-GENERIC_KEYS = ("time", "current", "voltage", "temperature", "ambient", "charge")
+GENERIC_KEYS = ("time", "current", "voltage", "temperature", "ambient", "charge", "state")
 UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_c",
-               "ambient": "_c", "charge": "_ah"}
+               "ambient": "_c", "charge": "_ah", "state": ""}
+# A state column gives the direction of a current logged as its magnitude (Maccor's State C, D,
+# R; Neware's CC_Chg, CC_DChg, Rest; Digatron's CHA, DCH, PAU): a cell's words (lower case,
+# "_" and "-" as spaces) name a charge, a discharge or a rest (its current kept as logged)
+DISCHARGE_WORDS = {"d", "dchg", "dischg", "dis", "dch", "discharge", "discharging", "dc"}
+CHARGE_WORDS = {"c", "chg", "chrg", "cha", "ch", "charge", "charging"}
+REST_WORDS = {"r", "rest", "pau", "pause", "relax", "relaxation", "ocv", "o", "idle"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 CHARGE_UNITS = {"Ah": 1.0, "mAh": 1e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
@@ -801,6 +808,7 @@ UNIT_WORDS = {        # how a units row or a column name may write them (lower c
     "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "k": "K"},
 }
 UNIT_WORDS["ambient"] = UNIT_WORDS["temperature"]
+UNIT_WORDS["state"] = {}
 UNIT_WORDS["charge"] = {"ah": "Ah", "a.h": "Ah", "a h": "Ah", "mah": "mAh", "ma.h": "mAh",
                         "ma h": "mAh"}
 COUNTER_CHECK_AH = 0.002   # Ah: a charge counter's step beyond what the current moves that can
@@ -813,12 +821,14 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                  voltage_unit: str | None = None, temperature_unit: str | None = None,
                  charge_unit: str | None = None) -> Record:
     """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']
-    [, 'ambient'][, 'charge']} of LMNCell's quantities to the file's column names (time in s,
+    [, 'ambient'][, 'charge'][, 'state']} of LMNCell's quantities to the file's column names
+    (time in s,
     or as text that TIME_TEXT_EXPECTED describes; voltage in V, temperatures in °C): 'temperature'
     the cell's, 'ambient' the chamber's beside it (Record.ambient_c, the thermal model's ambient;
     mapped alone, it is the record's temperature); 'charge' the tester's net charge counter
     (Ah, running through the record: it decides whether a gap in time lost charge, and the
-    SoC reference counts by it; _checked_counter).
+    SoC reference counts by it; _checked_counter); 'state' a column of words that give the
+    direction of a current logged as its magnitude (_state_signs: charge, discharge or rest).
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
     time column, one of TIME_UNITS (default s); voltage_unit: "V" or "mV"; temperature_unit:
@@ -851,6 +861,8 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
     sign = -1.0 if discharge_positive else 1.0
     cur = cols[columns["current"]] * current_scale * sign
     note = "current negated (file: discharge > 0)" if discharge_positive else "none"
+    if "state" in columns:
+        cur, note = _signed_by_state(path, cols, columns, cur, discharge_positive)
     temp, ambient = (cols[columns[k]] + TEMPERATURE_UNITS[given[k] or "degC"]
                      if k in columns else None for k in ("temperature", "ambient"))
     volts = cols[columns["voltage"]] * VOLTAGE_UNITS[given["voltage"] or "V"]
@@ -869,6 +881,43 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                   charge_ah=net_ah)
 
 
+def _signed_by_state(path: Path, cols: CsvColumns, columns: Mapping[str, str],
+                     current_a: np.ndarray, discharge_positive: bool
+                     ) -> tuple[np.ndarray, str]:
+    """The current signed by the state column (its magnitude, > 0 on a charge row, < 0 on a
+    discharge row, as logged on a rest row) and the sign note; --discharge-positive beside it
+    is refused (the state gives the sign)."""
+    state = columns["state"]
+    if discharge_positive:
+        raise DataError(f"{path}: --discharge-positive (discharge_positive=True) with the state "
+                        f"column '{state}', which gives the sign of the current; expected one "
+                        "or the other")
+    signs = _state_signs(path, state, cols.text[state], cols.lines)
+    return (np.where(signs == 0, current_a, signs * np.abs(current_a)),
+            f"current signed by the column '{state}' (charge > 0, discharge < 0)")
+
+
+def _state_signs(path: Path, column: str, cells: list[str], lines: list[int]) -> np.ndarray:
+    """+1 for each cell of a state column that names a charge (CHARGE_WORDS), −1 for a
+    discharge (DISCHARGE_WORDS, looked for first: Neware's "CC_DChg" holds "cc"), 0 for a
+    rest (REST_WORDS); a DataError names the first cell that is none of them, with its line."""
+    signs = np.empty(len(cells))
+    for k, cell in enumerate(cells):
+        words = set(re.sub(r"[_\-]", " ", cell.lower()).split())
+        if words & DISCHARGE_WORDS:
+            signs[k] = -1.0
+        elif words & CHARGE_WORDS:
+            signs[k] = 1.0
+        elif words & REST_WORDS:
+            signs[k] = 0.0
+        else:
+            raise DataError(f"{path}: column '{column}' line {lines[k]}: {cell!r} names no "
+                            "charge, discharge or rest; expected a state such as C, D, R "
+                            "(Maccor), CC_Chg, CC_DChg, Rest (Neware) or CHA, DCH, PAU "
+                            "(Digatron)")
+    return signs
+
+
 def _temperature_columns(columns: Mapping[str, str]) -> set[str]:
     """The file's column names mapped to the cell's and the chamber's temperature."""
     return {columns[k] for k in ("temperature", "ambient") if k in columns}
@@ -879,14 +928,15 @@ def _generic_columns(path: Path, columns: Mapping[str, str], sep: str, decimal: 
     """read_generic's columns as read (file units, the time column and the temperature columns
     kept as text where they are), the line that names them and the units row under it (None
     where there is none); a DataError names a mapped column that the file lacks."""
-    numeric = set(columns.values()) - {columns["time"]}
+    numeric = set(columns.values()) - {columns["time"], columns.get("state")}
     _check_marks(path, sep, decimal)
     lines = read_text(path).splitlines()
     header_line = _line_naming(lines, set(columns.values()), sep)
     units = _units_row(lines, header_line, numeric, sep, decimal)
     temp_cols = _temperature_columns(columns)
     cols = _read_csv_columns(path, sep=sep, decimal=decimal, required=numeric,
-                             keep_text={columns["time"], *temp_cols},
+                             keep_text={columns["time"], *temp_cols,
+                                        *([columns["state"]] if "state" in columns else [])},
                              header_line=header_line, lines=lines, units_row=units is not None,
                              blank_ok=temp_cols)
     _require(path, cols, tuple(columns.values()), sep)
@@ -1030,12 +1080,12 @@ def _held_readings(cols: CsvColumns, name: str, path: Path) -> tuple[np.ndarray,
 def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str | None]
                    ) -> None:
     """DataError unless the column mapping names time, current and voltage (and at most
-    temperature, ambient and charge besides) and every unit given is one of UNITS."""
+    temperature, ambient, charge and state besides) and every unit given is one of UNITS."""
     for key in ("time", "current", "voltage"):
         if key not in columns:
             raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
-                            "expected time, current and voltage (temperature, ambient and charge "
-                            "optional)")
+                            "expected time, current and voltage (temperature, ambient, charge and "
+                            "state optional)")
     unknown = sorted(set(columns) - set(GENERIC_KEYS))
     if unknown:
         raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
@@ -1254,13 +1304,20 @@ def check_plausibility(rec: Record) -> None:
                       "(--current-unit mA, current_unit='mA')", DataWarning, stacklevel=3)
     di, dv = np.diff(rec.current_a), np.diff(rec.voltage_v)
     steps = np.abs(di) > 0.2 * max(imax, 1e-9)
-    if steps.sum() >= 5:
-        agree = float(np.mean(np.sign(di[steps]) == np.sign(dv[steps])))
-        if agree < 0.2:
-            warnings.warn(f"{src}: the voltage falls when the current rises in "
-                          f"{100 * (1 - agree):.0f} % of current steps; the sign looks "
-                          "inverted (expected current > 0 to charge)", DataWarning,
-                          stacklevel=3)
+    if steps.sum() < 5:
+        return
+    agree = float(np.mean(np.sign(di[steps]) == np.sign(dv[steps])))
+    if agree < 0.2:
+        warnings.warn(f"{src}: the voltage falls when the current rises in "
+                      f"{100 * (1 - agree):.0f} % of current steps; the sign looks "
+                      "inverted (expected current > 0 to charge)", DataWarning,
+                      stacklevel=3)
+    elif agree < 0.8 and float(np.min(rec.current_a)) > -REST_CURRENT_A:
+        warnings.warn(f"{src}: the current never goes below 0 (discharge), yet the voltage "
+                      f"falls in {100 * (1 - agree):.0f} % of the steps where it rises: a "
+                      "current logged as its magnitude, with its direction in another column? "
+                      "Map that column as state=COL (Maccor's State: C, D, R); a record that "
+                      "only discharges: --discharge-positive", DataWarning, stacklevel=3)
 
 
 # read_generic's options, which read_record passes on

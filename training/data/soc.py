@@ -115,7 +115,9 @@ def _what_to_check(discharged_ah: float, charged_ah: float, capacity_ah: float,
              "capacity_ah= when training)")
     if discharged_ah < 0.05 * charged_ah and own_columns:
         check += (", and the sign of the current: the record charges only (a file that counts "
-                  "discharge as positive: --discharge-positive, discharge_positive=True)")
+                  "discharge as positive: --discharge-positive, discharge_positive=True; one "
+                  "that logs the current's magnitude and its direction in another column: "
+                  "--columns …,state=COL)")
     span_ah = discharged_ah + charged_ah
     if span_ah <= capacity_ah * (1.0 + 2.0 * SOC_SLACK):
         return check
