@@ -436,6 +436,27 @@ def test_a_table_of_breakpoints_drives_the_fmu_as_its_even_steps(native_fmu, tmp
         load_current_profile(back)
 
 
+def test_a_profile_from_a_spreadsheet_with_a_decimal_comma_reads_as_written(tmp_path) -> None:
+    """A profile saved by a spreadsheet where the decimal mark is a comma (';' between the
+    fields, "-2,5" in them) was refused cell by cell ("'-2,5'; expected a number"); a file
+    delimited by ';' or tabs now reads a decimal comma, and one delimited by commas still
+    refuses it."""
+    from lmncell.scenarios.traces import load_current_profile, load_cycle
+
+    for sep in (";", "\t"):
+        comma = tmp_path / f"comma{len(sep)}.csv"
+        comma.write_text(f"time_s{sep}current_a\n0{sep}-2,5\n0,5{sep}1,25\n1{sep}0\n")
+        prof = load_current_profile(comma)
+        assert np.array_equal(prof.current_a, [-2.5, 1.25, 0.0]) and prof.step_s == 0.5
+    speed = tmp_path / "speed.csv"
+    speed.write_text("time_s;speed_kmh\n0;0\n1;3,6\n2;7,2\n")
+    assert np.allclose(load_cycle(speed).speed_mps, [0.0, 1.0, 2.0])
+    quoted = tmp_path / "quoted.csv"
+    quoted.write_text('time_s,current_a\n0,"-2,5"\n1,0\n')
+    with pytest.raises(DataError, match=r"column 'current_a' at line 2: '-2,5'; expected a number"):
+        load_current_profile(quoted)
+
+
 def test_a_charge_profile_stops_at_the_charge_cut_off_or_full(native_fmu, tmp_path,
                                                                capsys) -> None:
     """A 1C charge stops after the first step above the charge cut-off (by default the highest

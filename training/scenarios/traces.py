@@ -199,15 +199,20 @@ def _folder(path: str | Path) -> str:
 
 def read_trace(path: Path, fmt: TraceFormat) -> dict[str, np.ndarray]:
     """A trace file's quantities in SI units (fmt: which columns, limits); DataError naming
-    the file, column, line and value where it is not such a file."""
-    rows = _rows(path, fmt)
+    the file, column, line and value where it is not such a file. In a file delimited by ';'
+    or tabs (a spreadsheet's export where the decimal mark is a comma) a decimal comma is read
+    as the decimal mark."""
+    from lmncell.data.readers import _number
+
+    rows, delimiter = _rows(path, fmt)
+    decimal = "." if delimiter == "," else ","
     columns = _columns(rows[0][1], path, fmt)
     values = {q: np.empty(len(rows) - 1) for q in columns}
     for j, (line, row) in enumerate(rows[1:]):
         for quantity, col in columns.items():
             cell = row[col.index].strip() if col.index < len(row) else ""
             try:
-                values[quantity][j] = float(cell) * col.factor
+                values[quantity][j] = _number(cell, decimal) * col.factor
             except ValueError:
                 raise DataError(f"{path}: column '{col.name}' at line {line}: {cell!r}; expected "
                                 "a number") from None
@@ -216,8 +221,9 @@ def read_trace(path: Path, fmt: TraceFormat) -> dict[str, np.ndarray]:
     return values
 
 
-def _rows(path: Path, fmt: TraceFormat) -> list[tuple[int, list[str]]]:
-    """The file's non-blank rows with their line numbers (from 1), the header first."""
+def _rows(path: Path, fmt: TraceFormat) -> tuple[list[tuple[int, list[str]]], str]:
+    """The file's non-blank rows with their line numbers (from 1), the header first, and the
+    delimiter (DELIMITERS: the first that the header holds)."""
     from lmncell.data.readers import read_text
 
     try:
@@ -230,7 +236,7 @@ def _rows(path: Path, fmt: TraceFormat) -> list[tuple[int, list[str]]]:
                         f"{fmt.expected}") from exc
     if not rows:
         raise DataError(f"{path}: empty; expected {fmt.expected}")
-    return rows
+    return rows, delimiter
 
 
 def _columns(header: list[str], path: Path, fmt: TraceFormat) -> dict[str, TraceColumn]:
