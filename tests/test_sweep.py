@@ -280,7 +280,9 @@ def test_a_pack_stops_where_its_weakest_cell_is_empty(quick_model) -> None:
     (("air_density_kg_m3 = 1.2", "air_density_kg_m3 = -1.2"),
      "'air_density_kg_m3' = -1.2; expected > 0"),
     (("regen_efficiency = 0.70", "regen_efficiency = 1.5"),
-     "'regen_efficiency' = 1.5; expected 0 < η ≤ 1"),
+     "'regen_efficiency' = 1.5; expected 0 ≤ η ≤ 1 (0: no regenerative braking)"),
+    (("drivetrain_efficiency = 0.90", "drivetrain_efficiency = 0"),
+     "'drivetrain_efficiency' = 0; expected 0 < η ≤ 1"),
 ])
 def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None:
     """A string mass raised a TypeError traceback, a string coefficient a numpy one, and a
@@ -297,6 +299,28 @@ def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None
         load_vehicle(path)
     assert str(err.value).startswith(f"{path}: ") and message in str(err.value)
     assert load_vehicle(None).n_series == 100
+
+
+def test_a_vehicle_without_regenerative_braking_is_driven(tmp_path) -> None:
+    """regen_efficiency = 0, a car that brakes by friction alone, was refused as "expected
+    0 < η ≤ 1"; it now runs, and its pack never charges: the same power as a regen limit of
+    0 W, the auxiliaries' at the least."""
+    from importlib import resources
+
+    from lmncell.scenarios.drive import load_vehicle, pack_power
+    from lmncell.scenarios.traces import load_cycle
+
+    text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
+    paths = []
+    for old, new in (("regen_efficiency = 0.70", "regen_efficiency = 0"),
+                     ("regen_power_limit_w = 40000.0", "regen_power_limit_w = 0.0")):
+        paths.append(tmp_path / f"{len(paths)}.toml")
+        paths[-1].write_text(text.replace(old, new, 1))
+    cycle = load_cycle("us06")
+    none, limited, default = (pack_power(load_vehicle(p), cycle.speed_mps, cycle.grade,
+                                         cycle.step_s) for p in (*paths, None))
+    aux = load_vehicle(None).auxiliary_power_w
+    assert np.array_equal(none, limited) and none.min() == aux > default.min()
 
 
 def _write_us06_as(path, header: str, delimiter: str = ",", factor: float = 1.0) -> None:

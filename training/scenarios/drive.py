@@ -69,8 +69,8 @@ VEHICLE_RANGES = (
     ("rotational_inertia_factor", lambda v: v >= 1, "≥ 1 (rotating parts add to the mass)"),
     *((key, lambda v: v >= 0, "≥ 0") for key in (
         "rolling_resistance", "regen_power_limit_w", "auxiliary_power_w")),
-    *((key, lambda v: 0 < v <= 1, "0 < η ≤ 1") for key in (
-        "drivetrain_efficiency", "regen_efficiency")),
+    ("drivetrain_efficiency", lambda v: 0 < v <= 1, "0 < η ≤ 1"),
+    ("regen_efficiency", lambda v: 0 <= v <= 1, "0 ≤ η ≤ 1 (0: no regenerative braking)"),
 )
 
 
