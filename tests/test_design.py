@@ -265,6 +265,36 @@ def test_spacefill_sequences_hold_evenly_spaced_levels() -> None:
                          progress=lambda _m: None)
 
 
+def test_long_holds_still_excite_and_a_sequence_without_room_is_refused() -> None:
+    """With holds of 500 s (a slow RC and a 5000-s sequence) every spread of the 0.05 grid
+    moved the SoC out of its window, and the sequence held its mean current alone: a
+    programme without excitation, written without a word. The spread now halves below the
+    grid, and a programme in which no sequence has room is refused."""
+    cell = CellSpec(capacity_ah=2.3, rc=[(0.001, 10.0), (0.01, 3000.0)])
+    cyc = CyclerSpec(hold_s=10.0)
+    spec = DesignSpec([0.8, 0.2], duration_s=5000, sequence_s=5000)
+    said: list[str] = []
+    d = design_programme(cell, cyc, spec, progress=said.append)
+    hold = round(d.settings["cycler"]["hold_s"])
+    assert hold == 500
+    levels = d.current_a[::hold]
+    assert np.unique(levels).size == 10 and not any("one current" in m for m in said)
+    assert d.soc.min() >= 0.2 - spec.soc_margin and d.soc.max() <= 0.8 + spec.soc_margin
+    tight = dataclasses.replace(spec, soc_margin=0.0, soc_profile=[0.5, 0.5])
+    with pytest.raises(DataError, match=r"no sequence has room for excitation: .* levels held "
+                                        r"500 s each .* SoC range 0.5 … 0.5 \(± 0\)"):
+        design_programme(cell, cyc, tight, progress=said.append)
+    assert "(one current throughout: no excitation fits the limits)" in said[-1]
+
+
+def test_design_says_where_the_duration_is_not_whole_sequences(tmp_path, capsys) -> None:
+    out = tmp_path / "P.csv"
+    assert main(["design", "--capacity", "2.3", "--soc-profile", "0.8,0.6", "--duration",
+                 "1000", "--sequence", "300", "--out", str(out)]) == 0
+    assert ("(spacefill, lmn information; --duration 1000 s rounded to whole sequences: "
+            "900 s)") in capsys.readouterr().out
+
+
 def test_design_proof_json_on_the_builtin_cell(tmp_path, capsys) -> None:
     out = tmp_path / "P.csv"
     assert main(["design", "--capacity", "2.3", "--soc-profile", "0.8,0.2,0.8", "--duration",

@@ -223,9 +223,13 @@ def run_design(a: argparse.Namespace) -> int:
     check_sampling(cyc, spec)        # before a virtual cell is characterised
 
     def design(c: CellSpec):
-        say(f"designing {sequence_count(spec)} sequence(s) of "
+        n_seq = sequence_count(spec)
+        rounded = ("" if n_seq * spec.sequence_s == spec.duration_s else
+                   f"; --duration {spec.duration_s:g} s rounded to whole sequences: "
+                   f"{n_seq * spec.sequence_s:g} s")
+        say(f"designing {n_seq} sequence(s) of "
             f"{spec.sequence_s:.0f} s through SoC {spec.soc_profile} ({spec.method}, "
-            f"{spec.information} information) …")
+            f"{spec.information} information{rounded}) …")
         return design_programme(c, cyc, spec, progress=say)
 
     result = model_v = None

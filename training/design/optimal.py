@@ -325,7 +325,7 @@ def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0:
         return bool(u.min() >= lo_v and u.max() <= hi_v and soc.min() >= soc_lo
                     and soc.max() <= soc_hi)
 
-    spread = next((f for f in np.linspace(1.0, 0.0, 21) if feasible(levels(start, f))), 0.0)
+    spread = _largest_spread(lambda f: feasible(levels(start, f)))
     order = start.copy()
     best = log_det_information(cell, _expand(levels(order, spread), per), ts, i_max,
                                spec.information)
@@ -346,6 +346,26 @@ def _spacefill_sequence(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec, soc0:
     cur = _expand(levels(order, spread), per)
     u, soc, _ = predict(cell, cur, ts, soc0, v0)
     return Sequence(cur, u, soc, best, True)
+
+
+SPREAD_GRID = np.linspace(1.0, 0.0, 21)[:-1]   # the spreads tried first, 1 … 0.05
+SPREAD_HALVINGS = 10        # below the grid's least, halved this many times (to 5e-5)
+
+
+def _largest_spread(feasible) -> float:
+    """The largest spread (share of the band around the mean current) of SPREAD_GRID that
+    feasible(spread) accepts; below its least, that share halved until one is accepted (long
+    holds, whose levels move the SoC out of its window at any coarser spread: without it such a
+    sequence held its mean current alone); 0 where none is."""
+    for spread in (*SPREAD_GRID, *(SPREAD_GRID[-1] * 0.5 ** np.arange(1, SPREAD_HALVINGS + 1))):
+        if feasible(float(spread)):
+            return float(spread)
+    return 0.0
+
+
+def holds_one_current(current_a: np.ndarray) -> bool:
+    """Whether a sequence's current is one level throughout (no excitation)."""
+    return bool(np.ptp(current_a) <= 1e-9 * max(1.0, float(np.max(np.abs(current_a)))))
 
 
 def exact_charge(levels: np.ndarray, target_sum: float, i_max: float) -> np.ndarray:
@@ -490,7 +510,9 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
         t0 += seq.current_a.size
         lds.append(seq.log_det)
         progress(f"  sequence {k + 1}/{n_seq}: ΔSoC {dsoc:+.4f} → SoC {soc:.4f}, log det "
-                 f"{seq.log_det:.2f}{'' if seq.success else ' (SLSQP stopped early)'}")
+                 f"{seq.log_det:.2f}{'' if seq.success else ' (SLSQP stopped early)'}"
+                 + (" (one current throughout: no excitation fits the limits)"
+                    if holds_one_current(seq.current_a) else ""))
     cur = np.concatenate([p.current_a for p in parts])
     n = cur.size
     time_s = cyc.sample_time_s * np.arange(1, n + 1)
@@ -503,9 +525,21 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
         points.append((float(time_s[k_end]), float(target)))
     check_voltages(u, cell, spec, float(np.max(np.abs(steps))) * cell.capacity_ah * 3600.0
                    / spec.sequence_s)
+    _check_excitation(parts, cyc, spec)
     settings = {"cell": dataclasses.asdict(cell), "cycler": dataclasses.asdict(cyc),
                 "design": dataclasses.asdict(spec), "max_current_a": i_max}
     return Programme(time_s, cur, u, socs, starts, points, lds, settings)
+
+
+def _check_excitation(parts: list[Sequence], cyc: CyclerSpec, spec: DesignSpec) -> None:
+    """DataError where every sequence holds one current: no level around its mean keeps the
+    voltage and the SoC inside the limits (the SoC within the profile's range ± the margin)."""
+    if all(holds_one_current(p.current_a) for p in parts):
+        raise DataError(f"no sequence has room for excitation: around each one's mean current, "
+                        f"levels held {cyc.hold_s:g} s each leave the voltage limits or the SoC "
+                        f"range {min(spec.soc_profile):g} … {max(spec.soc_profile):g} "
+                        f"(± {spec.soc_margin:g}); expected shorter holds (a shorter --sequence: "
+                        "a level is held at most a tenth of it) or wider voltage limits")
 
 
 SHRINK_STEP = 0.2        # a sequence's spread around its mean shrinks by this share at a time
