@@ -771,6 +771,11 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
     assert suggested_options("Time,Current,Voltage,Tcell,Tamb", None) == (
         "--columns time=Time,current=Current,voltage=Voltage,temperature=Tcell,ambient=Tamb")
     assert "ambient" not in suggested_options("Time,Current,Voltage,Temp1,Temp2", None)
+    # Neware: "Time" is the step's clock, "Total Time" the test's (two time columns proposed
+    # nothing before)
+    assert suggested_options("DataPoint,Cycle Index,Step Index,Step Type,Time,Total Time,"
+                             "Current(A),Voltage(V),Capacity(Ah),T1(℃)", None) == (
+        "--columns 'time=Total Time,current=Current(A),voltage=Voltage(V),temperature=T1(℃)'")
     for header in ("a,b,c\n1,2,3\n", "Time,Current,U1,U2\n0,1,3,3\n"):
         path.write_text(header)
         with pytest.raises(DataError, match="unknown format") as info:

@@ -13,6 +13,9 @@ DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
 TIME_NAMES = {"time", "t", "test time", "total time", "elapsed time", "run time",
               "relative time", "time s", "testtime", "seconds",
               "test"}                                  # Maccor's "Test (Sec)"
+# the clocks that run through a whole test, preferred over a plain "Time" beside them (Neware's
+# "Time" is the step's, its "Total Time" the test's)
+RUNNING_TIME_NAMES = {"test time", "total time", "elapsed time", "run time", "testtime", "test"}
 CURRENT_NAMES = {"current", "i", "curr", "cell current", "battery current", "amps", "amp",
                  "current a", "i a"}
 VOLTAGE_NAMES = {"voltage", "u", "v", "volt", "volts", "cell voltage", "battery voltage",
@@ -60,6 +63,8 @@ def _picks(names: list[str]) -> dict[str, str] | None:
                      and not ({"step", "cycle", "date", "limit", "set"} & set(b.split()))])
         if len(found) > 1:                             # 'time' before 't', 'voltage' before 'v'
             found = [n for n in found if len(bases[n]) > 1]
+        if len(found) > 1 and what == "time":          # the test's clock before a step's
+            found = [n for n in found if bases[n] in RUNNING_TIME_NAMES] or found
         if len(found) != 1:
             return None
         picks[what] = found[0]

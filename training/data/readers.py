@@ -805,7 +805,7 @@ UNIT_WORDS = {        # how a units row or a column name may write them (lower c
     "time": {"s": "s", "sec": "s", "ms": "ms", "min": "min", "h": "h", "hr": "h"},
     "current": {"a": "A", "ma": "mA"},
     "voltage": {"v": "V", "mv": "mV"},
-    "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "k": "K"},
+    "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "℃": "degC", "k": "K"},
 }
 UNIT_WORDS["ambient"] = UNIT_WORDS["temperature"]
 UNIT_WORDS["state"] = {}
