@@ -776,6 +776,15 @@ def test_an_unknown_header_gets_the_options_that_read_it(tmp_path, capsys) -> No
     assert suggested_options("DataPoint,Cycle Index,Step Index,Step Type,Time,Total Time,"
                              "Current(A),Voltage(V),Capacity(Ah),T1(℃)", None) == (
         "--columns 'time=Total Time,current=Current(A),voltage=Voltage(V),temperature=T1(℃)'")
+    # BaSyTec: "~Time[h]" is the test's clock, "Time" the time of day (proposed before), and
+    # its numeric State is no direction (a Maccor State or Md of words is)
+    assert suggested_options(
+        "~Time[h];DataSet;Date;Time;Line;U[V];I[A];Ah[Ah];T1[°C];State",
+        "0,0000;1;01.01.2024;10:00:00;1;3,5;0,0;0,0;25,0;0") == (
+        "--columns 'time=~Time[h],current=I[A],voltage=U[V],temperature=T1[°C],charge=Ah[Ah]' "
+        "--delimiter ';' --decimal ,")
+    assert suggested_options("Rec,TestTime,StepTime,Current [A],Voltage [V],Md,Temp 1",
+                             "1,0,0,0,3.3,R,25").endswith("temperature=Temp 1,state=Md'")
     for header in ("a,b,c\n1,2,3\n", "Time,Current,U1,U2\n0,1,3,3\n"):
         path.write_text(header)
         with pytest.raises(DataError, match="unknown format") as info:

@@ -12,10 +12,12 @@ DELIMITERS = ((",", None), (";", "';'"), ("\t", "tab"))   # (delimiter, its --de
 DECIMAL_COMMA = re.compile(r"^[+-]?\d+,\d+$")
 TIME_NAMES = {"time", "t", "test time", "total time", "elapsed time", "run time",
               "relative time", "time s", "testtime", "seconds",
-              "test"}                                  # Maccor's "Test (Sec)"
+              "test",                                  # Maccor's "Test (Sec)"
+              "~time"}                                 # BaSyTec's "~Time[h]"
 # the clocks that run through a whole test, preferred over a plain "Time" beside them (Neware's
 # "Time" is the step's, its "Total Time" the test's)
-RUNNING_TIME_NAMES = {"test time", "total time", "elapsed time", "run time", "testtime", "test"}
+RUNNING_TIME_NAMES = {"test time", "total time", "elapsed time", "run time", "testtime", "test",
+                      "~time"}                        # BaSyTec's "~Time[h]" beside its clock "Time"
 CURRENT_NAMES = {"current", "i", "curr", "cell current", "battery current", "amps", "amp",
                  "current a", "i a"}
 VOLTAGE_NAMES = {"voltage", "u", "v", "volt", "volts", "cell voltage", "battery voltage",
@@ -37,23 +39,32 @@ def suggested_options(header: str, first_row: str | None) -> str | None:
     or not the only candidate."""
     sep, shown = max(DELIMITERS, key=lambda d: header.count(d[0]))
     names = [n.strip().strip('"').strip() for n in header.split(sep)]
+    cells = [] if first_row is None else [c.strip().strip('"') for c in first_row.split(sep)]
     picks = _picks(names)
     if picks is None or any("," in n or "=" in n for n in picks.values()):
         return None                                   # not expressible as --columns
+    if "state" in picks and not _is_word(dict(zip(names, cells, strict=False)).get(
+            picks["state"], "")):                     # a numeric state (BaSyTec's) is no direction
+        del picks["state"]
     options = ["--columns " + shlex.quote(",".join(f"{k}={v}" for k, v in picks.items()))]
     if shown is not None:
         options.append(f"--delimiter {shown}")
-    cells = [] if first_row is None else [c.strip().strip('"') for c in first_row.split(sep)]
     if sep != "," and any(DECIMAL_COMMA.match(c) for c in cells):
         options.append("--decimal ,")
     return " ".join(options)
+
+
+def _is_word(cell: str) -> bool:
+    """Whether a cell is a word such as a state column's C, D, R or CC_DChg (not a number)."""
+    return bool(re.fullmatch(r"[A-Za-z][A-Za-z _\-]*", cell.strip()))
 
 
 def _picks(names: list[str]) -> dict[str, str] | None:
     """{quantity: column name} for time, current, voltage (each the only candidate, else None),
     temperature (where one column, or one cell temperature among several, names it),
     ambient (beside that, one chamber temperature: AMBIENT_WORDS), charge (one net charge
-    counter: is_net_charge) and state (one column of the current's direction: STATE_NAMES)."""
+    counter: is_net_charge) and state (one column of the current's direction: STATE_NAMES;
+    suggested_options keeps it only where the first data row holds a word there)."""
     bases = {name: _base(name) for name in names}
     picks: dict[str, str] = {}
     for what, exact, word in (("time", TIME_NAMES, "time"), ("current", CURRENT_NAMES, "current"),
