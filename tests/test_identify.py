@@ -1499,3 +1499,29 @@ def test_without_an_ocv_test_a_full_start_far_below_the_others_gets_a_note() -> 
     check_full_starts([full, low], [1.0, 0.9], load_config(None), said.append)   # given
     check_full_starts([full, low], [None, 0.9], load_config(None), said.append)  # one given
     assert said == []
+
+
+def test_a_training_record_given_twice_is_refused(tmp_path) -> None:
+    """A file given twice (by one path or two) or a copy of it under another name trained
+    silently, counted twice in the fit and in its own validation."""
+    import shutil
+
+    from lmncell.data.records import DataError
+    from lmncell.identification.train import train_files
+
+    from tests.conftest import A123_S1
+
+    out = tmp_path / "m.json"
+    (tmp_path / "dyn").mkdir()
+    shutil.copy(A123_S1, tmp_path / "dyn" / A123_S1.name)
+    twice = tmp_path / "dyn" / ".." / "dyn" / A123_S1.name
+    with pytest.raises(DataError, match=r"given twice \(also as .*\); expected each training "
+                                        r"file once"):
+        train_files([tmp_path / "dyn" / A123_S1.name, twice], out, capacity_ah=2.2, soc0=1.0,
+                    progress=lambda _m: None)
+    with pytest.raises(DataError, match=r"copy.csv.gz: the same samples \(time, current, "
+                                        r"voltage\) as .*A123_DYN_50_P25_s1.csv.gz; expected "
+                                        r"each record once"):
+        train_files([A123_S1, shutil.copy(A123_S1, tmp_path / "copy.csv.gz")], out,
+                    capacity_ah=2.2, soc0=1.0, progress=lambda _m: None)
+    assert not out.exists()

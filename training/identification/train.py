@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
 import math
 import platform
 import time
@@ -84,10 +85,12 @@ def read_training_records(paths: list[str | Path], cfg: TrainConfig,
     if cfg.record_weights and len(cfg.record_weights) != len(paths):
         raise DataError(f"setting 'record_weights' has {len(cfg.record_weights)} value(s) for "
                         f"{len(paths)} data file(s): expected one weight per file, in order")
+    _check_paths_once(paths)
     records = []
     for p in paths:
         progress(f"reading {p}")
         records.append(read_record(p, **(read_options or {})))
+    _check_records_once(records)
     peak = max(float(np.max(np.abs(r.current_a))) for r in records)
     if not peak > cfg.rest_current_a:
         raise DataError(f"no training record carries a current above the rest current "
@@ -95,6 +98,31 @@ def read_training_records(paths: list[str | Path], cfg: TrainConfig,
                         "the cell's response to current needs one; expected the current column "
                         "in A (check the column, and --current-unit for mA)")
     return records
+
+
+def _check_paths_once(paths: list[str | Path]) -> None:
+    """DataError where one file is given twice (the same file by any path)."""
+    seen: dict[Path, str | Path] = {}
+    for p in paths:
+        key = Path(p).resolve()
+        if key in seen:
+            raise DataError(f"{p}: given twice (also as {seen[key]}); expected each training "
+                            "file once (a record given twice counts twice in the fit and in its "
+                            "validation)")
+        seen[key] = p
+
+
+def _check_records_once(records: list[Record]) -> None:
+    """DataError where two files hold the same measurements (a copy under another name)."""
+    seen: dict[str, Record] = {}
+    for rec in records:
+        digest = hashlib.sha256(b"".join(np.ascontiguousarray(a).tobytes() for a in (
+            rec.time_s, rec.current_a, rec.voltage_v))).hexdigest()
+        if digest in seen:
+            raise DataError(f"{rec.meta.source}: the same samples (time, current, voltage) as "
+                            f"{seen[digest].meta.source}; expected each record once (a copy "
+                            "counts twice in the fit and in its validation)")
+        seen[digest] = rec
 
 
 FULL_START_SPREAD_V = 0.08   # records taken as full whose rested start voltages lie further
