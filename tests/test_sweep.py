@@ -475,6 +475,10 @@ def test_a_profile_from_a_spreadsheet_with_a_decimal_comma_reads_as_written(tmp_
     speed = tmp_path / "speed.csv"
     speed.write_text("time_s;speed_kmh\n0;0\n1;3,6\n2;7,2\n")
     assert np.allclose(load_cycle(speed).speed_mps, [0.0, 1.0, 2.0])
+    cycler = tmp_path / "cycler.csv"                 # a cycler's names: I [A], I/mA
+    for name, scale in (("I [A]", 1.0), ("I/mA", 1000.0)):
+        cycler.write_text(f"Time [s];{name}\n0;{-2.5 * scale:g}\n1;0\n".replace(".", ","))
+        assert np.array_equal(load_current_profile(cycler).current_a, [-2.5, 0.0])
     quoted = tmp_path / "quoted.csv"
     quoted.write_text('time_s,current_a\n0,"-2,5"\n1,0\n')
     with pytest.raises(DataError, match=r"column 'current_a' at line 2: '-2,5'; expected a number"):

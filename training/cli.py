@@ -601,7 +601,8 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     load.add_argument("--current", metavar="FILE.csv",
                       help="a cell current profile instead of a drive cycle: a CSV file with a "
                       "time column (time_s) and a current column (current_a or current_ma, or "
-                      "'Current [mA]'; > 0 charges unless --discharge-positive); at even "
+                      "'Current [mA]', 'I [A]'; > 0 charges unless --discharge-positive); at "
+                      "even "
                       "steps, or a table of breakpoints: each row's current held until the "
                       "next row's time (a repeated time: a step there), the last row its end")
     s.add_argument("--discharge-positive", action="store_true",

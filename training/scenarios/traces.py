@@ -62,11 +62,12 @@ SPEED_TRACE = TraceFormat(
 CURRENT_PROFILE = TraceFormat(
     "current profile",
     {"time": TIME_COLUMNS, "current": {"current_a": (1.0, "A"), "current": (1.0, "A"),
-                                       "current_ma": (1e-3, "mA")}},
+                                       "current_ma": (1e-3, "mA"), "i_a": (1.0, "A"),
+                                       "i_ma": (1e-3, "mA")}},
     ("time", "current"),
     {},
     "a CSV with a header: a time column (time_s) and a cell current column (current_a or "
-    "current_ma; > 0 charges); a unit may also stand in brackets: 'Current [mA]'",
+    "current_ma; > 0 charges); a unit may also stand in brackets: 'Current [mA]', 'I [A]'",
     breakpoints=True)
 MAX_PROFILE_STEPS = 5_000_000   # an uneven profile's even steps (held_on_even_steps) at most
 
