@@ -368,6 +368,8 @@ def test_the_core_rise_is_taken_where_the_cells_warm_up_inside_records() -> None
     ({"soc_reference_sigma": -0.01}, "'soc_reference_sigma'"),
     ({"model_error_sigma_v": 0.0}, "'model_error_sigma_v'"),
     ({"no_such_setting": 1}, "unknown setting"),
+    ({"max_local_model": 4}, r"unknown setting\(s\) \['max_local_model'\] \('max_local_model': "
+                             r"did you mean 'max_local_models'\?\)"),
     ({"current_delay_s": 1.0}, "'current_delay_s'"),
     ({"current_delay_s": -0.1}, "'current_delay_s'"),
     ({"current_delay_s": "on"}, "'current_delay_s'"),

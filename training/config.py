@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import itertools
 import math
 import os
@@ -573,7 +574,10 @@ def config_from_settings(values: dict, source: str = "configuration") -> TrainCo
     names = {f.name for f in dataclasses.fields(TrainConfig)}
     unknown = sorted(set(values) - names)
     if unknown:
-        raise ConfigError(f"{source}: unknown setting(s) {unknown}; known: {sorted(names)}")
+        near = {k: difflib.get_close_matches(k, names, n=1) for k in unknown}
+        meant = "; ".join(f"{k!r}: did you mean {m[0]!r}?" for k, m in near.items() if m)
+        raise ConfigError(f"{source}: unknown setting(s) {unknown}"
+                          + (f" ({meant})" if meant else "") + f"; known: {sorted(names)}")
     return TrainConfig(**values).check()
 
 
