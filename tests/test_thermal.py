@@ -106,7 +106,8 @@ def test_no_thermal_model_without_a_measured_rise() -> None:
     fitted, info = fit_thermal(_ocv_model(), [flat, dataclasses.replace(seg, ambient_c=None)])
     assert fitted is None and "rises" in info["reason"]
     assert info["reason"].endswith("; synthetic log a cell temperature and no chamber "
-                                   "temperature beside it (your own CSV: map the chamber's "
+                                   "temperature beside it (give it in the file name, such "
+                                   "as …_25degC…; or, in your own CSV, map the chamber's "
                                    "column as ambient=COL)")
     assert "beside it" not in fit_thermal(_ocv_model(), [flat])[1]["reason"]
 
