@@ -106,13 +106,43 @@ def test_bdf_round_trip_is_identical(tmp_path) -> None:
     assert back.meta.chamber_temp_c == rec.meta.chamber_temp_c == 25.0
 
 
+def test_a_bdf_file_headed_by_machine_readable_names_reads_as_its_labels(tmp_path) -> None:
+    """The Battery Data Format heads a column with its quantity's preferred label ("Test Time /
+    s") or its machine-readable name ("test_time_second"), which the Battery Data Alliance's
+    reference files use; such a file was "unknown format". T1's label is now "Surface
+    Temperature T1 / degC"; files with the earlier "Temperature T1 / degC" still read."""
+    rec = read_record(PAN_US06).slice(0, 300)
+    rec.ambient_c = np.full(len(rec), 24.8)
+    path = write_bdf(rec, tmp_path / "r.bdf.csv")
+    text = path.read_text()
+    labels = text.split("\n", 1)[0]
+    assert labels == ("Test Time / s,Voltage / V,Current / A,Surface Temperature T1 / degC,"
+                      "Ambient Temperature / degC,Net Capacity / Ah")
+    machine = ("test_time_second,voltage_volt,current_ampere,temperature_t1_celsius,"
+               "ambient_temperature_celsius,net_capacity_ah")
+    earlier = labels.replace("Surface Temperature T1", "Temperature T1")
+    for k, header in enumerate((machine, earlier)):
+        other = tmp_path / f"{k}.bdf.csv"
+        other.write_text(text.replace(labels, header, 1))
+        assert detect_format(other) == "bdf"
+        back = read_record(other)
+        for name in ("time_s", "current_a", "voltage_v", "temperature_c", "ambient_c",
+                     "charge_ah"):
+            assert np.array_equal(getattr(back, name), getattr(read_record(path), name)), name
+        assert back.meta.file_columns["time_s"] == header.split(",")[0]
+    (tmp_path / "m.bdf.csv").write_text("test_time_second,voltage_volt\n0,3.3\n1,3.3\n")
+    with pytest.raises(DataError, match=r"missing column\(s\) \['Current / A'\] \(or the "
+                                        r"machine-readable name\(s\) \['current_ampere'\]\)"):
+        read_record(tmp_path / "m.bdf.csv", fmt="bdf")
+
+
 def test_a_bdf_temperature_read_every_few_rows_holds_each_reading(tmp_path) -> None:
     """A BDF file whose thermocouple is read every few rows, blank between readings, was
     refused as NaN; it is read as the generic reader reads such a column (a literal NaN is
     still refused)."""
     path = write_bdf(read_record(PAN_US06).slice(0, 300), tmp_path / "r.bdf.csv")
     lines = path.read_text().splitlines()
-    j = lines[0].split(",").index("Temperature T1 / degC")
+    j = lines[0].split(",").index("Surface Temperature T1 / degC")
 
     def blank(k: int, cell: str = "", column: int = j) -> None:
         cells = lines[k].split(",")

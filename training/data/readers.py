@@ -38,8 +38,16 @@ ARBIN_COLUMNS = ("Test_Time(s)", "Current(A)", "Voltage(V)", "Charge_Capacity(Ah
 ARBIN_TEMPERATURE = re.compile(r"(aux)?temperature(\d*)\(([^)]*)\)(\d*)")
 ARBIN_CELSIUS = ("c", "°c", "°", "degc", "℃")
 BDF_TIME, BDF_VOLTAGE, BDF_CURRENT = "Test Time / s", "Voltage / V", "Current / A"
-BDF_AMBIENT, BDF_T1 = "Ambient Temperature / degC", "Temperature T1 / degC"
+BDF_AMBIENT, BDF_T1 = "Ambient Temperature / degC", "Surface Temperature T1 / degC"
 BDF_NET_AH, BDF_SOC = "Net Capacity / Ah", "State of Charge / 1"
+# A BDF column is headed by its quantity's preferred label (above, as write_bdf writes them) or
+# by its machine-readable name (as the Battery Data Alliance's reference files are); T1's
+# earlier label "Temperature T1 / degC" is read too
+BDF_ALIASES = {BDF_TIME: ("test_time_second",), BDF_VOLTAGE: ("voltage_volt",),
+               BDF_CURRENT: ("current_ampere",), BDF_AMBIENT: ("ambient_temperature_celsius",),
+               BDF_T1: ("temperature_t1_celsius", "Temperature T1 / degC"),
+               BDF_NET_AH: ("net_capacity_ah",), BDF_SOC: ()}
+BDF_REQUIRED = (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)
 # BioLogic EC-Lab / BT-Lab ASCII export (.mpt): a first line naming the software, then
 # "Nb header lines : N" (N counts every line up to and including the column names), then
 # tab-separated rows with the decimal mark of the exporting PC's locale; I > 0 is oxidation at
@@ -202,7 +210,7 @@ def _format_of(path: Path) -> str:
         return "plett"
     if _arbin_names(cols) is not None:
         return "arbin"
-    if all(c in cols for c in (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT)):
+    if all(q in _bdf_names(cols) for q in BDF_REQUIRED):
         return "bdf"
     if header.startswith(("{", "[{", "[[")) or header == "[":      # JSON, not a table
         raise DataError(f"{path}: {_json_kind(path)}, not a measurement record; "
@@ -369,8 +377,8 @@ def _csv_meta(cols: CsvColumns, file_times: np.ndarray, /, **names: str) -> dict
             "time_origin_s": float(file_times[0])}
 
 
-_NUMERIC_REQUIRED = {"time", "current", "voltage", "chgAh", "disAh", *ARBIN_COLUMNS, BDF_TIME,
-                     BDF_VOLTAGE, BDF_CURRENT}
+_NUMERIC_REQUIRED = {"time", "current", "voltage", "chgAh", "disAh", *ARBIN_COLUMNS,
+                     *BDF_REQUIRED}
 
 
 def _require(path: Path, cols: Mapping[str, np.ndarray], names: tuple[str, ...],
@@ -652,33 +660,53 @@ def _hidden_pauses(meas: np.ndarray, path: Path, t: np.ndarray, keep: np.ndarray
 
 
 def read_bdf(path: Path) -> Record:
-    """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …). A
-    temperature column read every few rows, blank between readings, holds each reading until
-    the next (noted), as the generic reader's does. The cell's temperature is ``Temperature
-    T1 / degC``; ``Ambient Temperature / degC`` is the record's ambient (Record.ambient_c:
-    beside T1 the thermal model's, per step where it varies; alone the record's temperature)."""
-    cols = _read_csv_columns(path, keep_text={BDF_T1, BDF_AMBIENT})
-    _require(path, cols, (BDF_TIME, BDF_VOLTAGE, BDF_CURRENT))
-    t = cols[BDF_TIME]
-    temp, notes = _held_readings(cols, BDF_T1, path) if BDF_T1 in cols else (None, [])
-    net_ah = cols.get(BDF_NET_AH)
-    if net_ah is not None:
-        net_ah, more = _stitched_counter(BDF_NET_AH, t, cols[BDF_CURRENT], net_ah)
+    """Battery Data Format CSV (``Test Time / s``, ``Voltage / V``, ``Current / A``, …, or the
+    machine-readable names ``test_time_second``, ``voltage_volt``, ``current_ampere``, …:
+    BDF_ALIASES). A temperature column read every few rows, blank between readings, holds each
+    reading until the next (noted), as the generic reader's does. The cell's temperature is
+    T1 (``Surface Temperature T1 / degC``); ``Ambient Temperature / degC`` is the record's
+    ambient (Record.ambient_c: beside T1 the thermal model's, per step where it varies; alone
+    the record's temperature)."""
+    header = [c.strip() for c in next(csv.reader([read_text(path, first_line=True)]))]
+    names = _bdf_names(header)
+    missing = [q for q in BDF_REQUIRED if q not in names]
+    if missing:
+        raise DataError(f"{path}: missing column(s) {missing} (or the machine-readable "
+                        f"name(s) {[BDF_ALIASES[q][0] for q in missing]}); found {header}")
+    time_c, volt_c, cur_c = (names[q] for q in BDF_REQUIRED)
+    t1_c, ambient_c, net_c, soc_c = (names.get(q) for q in (BDF_T1, BDF_AMBIENT, BDF_NET_AH,
+                                                             BDF_SOC))
+    cols = _read_csv_columns(path, required={time_c, volt_c, cur_c},
+                             keep_text={c for c in (t1_c, ambient_c) if c})
+    t = cols[time_c]
+    temp, notes = _held_readings(cols, t1_c, path) if t1_c else (None, [])
+    net_ah = cols[net_c] if net_c else None
+    if net_c:
+        net_ah, more = _stitched_counter(net_c, t, cols[cur_c], cols[net_c])
         notes += more
+    file_columns = {"time_s": time_c, "current_a": cur_c, "voltage_v": volt_c,
+                    **{field: c for field, c in (("soc_ref", soc_c), ("charge_ah", net_c),
+                                                 ("temperature_c", t1_c)) if c}}
     meta = _meta(path, "bdf", "none (BDF: charge > 0)", t,
-                 segment_starts=_segment_starts_from_gaps(t, cols[BDF_CURRENT], net_ah),
-                 file_columns={"time_s": BDF_TIME, "current_a": BDF_CURRENT,
-                               "voltage_v": BDF_VOLTAGE, "soc_ref": BDF_SOC,
-                               "charge_ah": BDF_NET_AH, "temperature_c": BDF_T1},
-                 first_line=cols.first_line, notes=[*cols.notes, *notes])
+                 segment_starts=_segment_starts_from_gaps(t, cols[cur_c], net_ah),
+                 file_columns=file_columns, first_line=cols.first_line,
+                 notes=[*cols.notes, *notes])
     ambient = None
-    if BDF_AMBIENT in cols:         # the chamber's: beside the cell's the thermal model's
-        ambient, more = _held_readings(cols, BDF_AMBIENT, path)   # ambient, alone the
+    if ambient_c:                   # the chamber's: beside the cell's the thermal model's
+        ambient, more = _held_readings(cols, ambient_c, path)     # ambient, alone the
         meta.notes.extend(more)                                   # record's temperature
         meta.chamber_temp_c = chamber_set_point(ambient)
-        meta.file_columns["ambient_c"] = BDF_AMBIENT
-    return Record(t.copy(), cols[BDF_CURRENT], cols[BDF_VOLTAGE], meta, temperature_c=temp,
-                  soc_ref=cols.get(BDF_SOC), charge_ah=net_ah, ambient_c=ambient)
+        meta.file_columns["ambient_c"] = ambient_c
+    return Record(t.copy(), cols[cur_c], cols[volt_c], meta, temperature_c=temp,
+                  soc_ref=cols[soc_c] if soc_c else None, charge_ah=net_ah, ambient_c=ambient)
+
+
+def _bdf_names(header: list[str]) -> dict[str, str]:
+    """{preferred label: the file's name for it} for each BDF quantity of BDF_ALIASES whose
+    label or machine-readable name is in the header (the label first)."""
+    present = set(header)
+    return {label: name for label, aliases in BDF_ALIASES.items()
+            for name in [next((n for n in (label, *aliases) if n in present), None)] if name}
 
 
 def read_biologic(path: Path) -> Record:
