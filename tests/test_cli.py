@@ -365,7 +365,7 @@ def test_start_soc_per_file(tmp_path, capsys) -> None:
     with pytest.raises(DataError, match="soc0 = 1.5"):
         start_socs([1.0, 1.5], 2)
     out = tmp_path / "m.json"
-    assert main(["train", str(PAN_US06), str(PAN_US06), "--out", str(out), "--capacity",
+    assert main(["train", str(PAN_US06), str(PAN_HWFET), "--out", str(out), "--capacity",
                  "2.85", "--soc0", "1,1,0"]) == 2
     err = capsys.readouterr().err
     assert "soc0: 3 start SoC values for 2 data file(s)" in err
