@@ -1250,3 +1250,21 @@ def test_a_state_column_is_refused_where_its_words_or_the_options_do_not_fit(tmp
     with pytest.raises(DataError, match=r"perhaps: --columns 'time=Test \(Sec\),current=Amps,"
                                         r"voltage=Volts,state=State'"):
         read_record(good)
+
+
+def test_a_column_mapping_with_keys_of_its_own_is_refused_with_the_keys_meant(tmp_path) -> None:
+    """A mapping key written as many write it (i=, temp=, Status=) was refused with the list of
+    keys only, and after the missing 'current' first; now the unknown keys are named first,
+    each with the key it stands for where it is a common way of writing one."""
+    path = tmp_path / "own.csv"
+    path.write_text("t,I,U,T1,State\n0,0,3.3,25,R\n1,-1,3.2,25,D\n")
+    with pytest.raises(DataError, match=r"the column mapping names \['Status', 'i', 'temp'\]; "
+                                        r"expected keys among \[.*\] \(Status= is state=; i= is "
+                                        r"current=; temp= is temperature=\?\)"):
+        read_record(path, columns={"time": "t", "i": "I", "voltage": "U", "temp": "T1",
+                                   "Status": "State"})
+    with pytest.raises(DataError, match=r"the column mapping names \['x'\]; expected keys "
+                                        r"among \[[^]]*\]$"):
+        read_record(path, columns={"time": "t", "current": "I", "voltage": "U", "x": "T1"})
+    with pytest.raises(DataError, match=r"the column mapping lacks 'current'"):
+        read_record(path, columns={"time": "t", "voltage": "U"})

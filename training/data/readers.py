@@ -807,6 +807,13 @@ UNIT_SUFFIX = {"time": "_s", "current": "_a", "voltage": "_v", "temperature": "_
 DISCHARGE_WORDS = {"d", "dchg", "dischg", "dis", "dch", "discharge", "discharging", "dc"}
 CHARGE_WORDS = {"c", "chg", "chrg", "cha", "ch", "charge", "charging"}
 REST_WORDS = {"r", "rest", "pau", "pause", "relax", "relaxation", "ocv", "o", "idle"}
+KEY_SYNONYMS = {       # how a column-mapping key is often written for one of GENERIC_KEYS
+    "t": "time", "test_time": "time", "i": "current", "amps": "current", "v": "voltage",
+    "u": "voltage", "volts": "voltage", "temp": "temperature", "t1": "temperature",
+    "cell_temperature": "temperature", "chamber": "ambient", "amb": "ambient",
+    "ambient_temperature": "ambient", "q": "charge", "ah": "charge", "capacity": "charge",
+    "net_charge": "charge", "direction": "state", "status": "state", "mode": "state",
+    "md": "state"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 CHARGE_UNITS = {"Ah": 1.0, "mAh": 1e-3}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
@@ -1109,15 +1116,17 @@ def _check_mapping(path: Path, columns: Mapping[str, str], units: dict[str, str 
                    ) -> None:
     """DataError unless the column mapping names time, current and voltage (and at most
     temperature, ambient, charge and state besides) and every unit given is one of UNITS."""
+    unknown = sorted(set(columns) - set(GENERIC_KEYS))
+    if unknown:
+        meant = "; ".join(f"{k}= is {KEY_SYNONYMS[k.lower()]}=" for k in unknown
+                          if k.lower() in KEY_SYNONYMS)
+        raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
+                        f"{list(GENERIC_KEYS)}" + (f" ({meant}?)" if meant else ""))
     for key in ("time", "current", "voltage"):
         if key not in columns:
             raise DataError(f"{path}: the column mapping lacks '{key}' (got {dict(columns)}); "
                             "expected time, current and voltage (temperature, ambient, charge and "
                             "state optional)")
-    unknown = sorted(set(columns) - set(GENERIC_KEYS))
-    if unknown:
-        raise DataError(f"{path}: the column mapping names {unknown}; expected keys among "
-                        f"{list(GENERIC_KEYS)}")
     for what, unit in units.items():
         if unit is not None and unit not in UNITS[what]:
             raise DataError(f"{path}: {what} unit {unit!r}; expected one of "
