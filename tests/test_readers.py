@@ -271,7 +271,7 @@ def test_a_time_unit_is_refused_for_text_times_and_where_unknown(tmp_path) -> No
                                         "text that carries its own unit"):
         read_record(p, columns=GENERIC, time_unit="ms")
     with pytest.raises(DataError, match=re.escape("time unit 'days'; expected one of ['s', "
-                                                  "'ms', 'min', 'h']")):
+                                                  "'ms', 'min', 'h', 'd']")):
         read_record(p, columns=GENERIC, time_unit="days")
 
 
@@ -1268,3 +1268,22 @@ def test_a_column_mapping_with_keys_of_its_own_is_refused_with_the_keys_meant(tm
         read_record(path, columns={"time": "t", "current": "I", "voltage": "U", "x": "T1"})
     with pytest.raises(DataError, match=r"the column mapping lacks 'current'"):
         read_record(path, columns={"time": "t", "voltage": "U"})
+
+
+def test_a_time_column_in_days_is_warned_of_and_read_with_its_unit(tmp_path) -> None:
+    """A time column of a spreadsheet's date numbers (days) was read in s without a word: a
+    10-h record of 11.6-µs steps, which training then refused as too short. A median step
+    below 1 ms is now warned of, and --time-unit d (time_unit="d") reads it."""
+    path = tmp_path / "days.csv"
+    t = np.arange(600.0)
+    path.write_text("Time,Current,Voltage\n" + "".join(
+        f"{45000 + s / 86400:.10f},{-1.0 if s % 120 < 60 else 0.0},{3.3 - 0.01 * (s % 120 < 60)}\n"
+        for s in t))
+    mapping = {"time": "Time", "current": "Current", "voltage": "Voltage"}
+    with pytest.warns(DataWarning, match=r"the time steps by 1.16e-05 s \(median\); .* "
+                                         r"\(--time-unit min\|h\|d, time_unit=\)"):
+        read_record(path, columns=mapping)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DataWarning)
+        rec = read_record(path, columns=mapping, time_unit="d")
+    np.testing.assert_allclose(rec.time_s, t, atol=2e-5)

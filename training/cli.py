@@ -436,7 +436,7 @@ def _add_reader_options(s: argparse.ArgumentParser) -> None:
     g.add_argument("--current-unit", choices=["A", "mA"], help="unit of the current column "
                    "(default: the file's, from the column name, e.g. 'I [mA]', or a units row "
                    "under the names; else A)")
-    g.add_argument("--time-unit", choices=["s", "ms", "min", "h"], help="unit of a numeric "
+    g.add_argument("--time-unit", choices=["s", "ms", "min", "h", "d"], help="unit of a numeric "
                    "time column (default: the file's, from the column name or a units row; else s)")
     g.add_argument("--voltage-unit", choices=["V", "mV"], help="unit of the voltage column "
                    "(default: the file's, from the column name or a units row; else V)")

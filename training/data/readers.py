@@ -60,6 +60,7 @@ BIOLOGIC_CHARGES = {"(Q-Qo)/mA.h": 1e-3, "(Q-Qo)/A.h": 1.0, "(Q-Qo)/C": 1.0 / 36
 BIOLOGIC_TEMPERATURES = ("Temperature/°C", "<Temperature>/°C", "T/°C")
 BIOLOGIC_FREQUENCY = "freq/Hz"     # > 0 on the rows of an impedance measurement (EIS)
 MAX_PREAMBLE_LINES = 1000  # how far the generic reader looks for the line of the column names
+MIN_LOG_STEP_S = 1e-3  # a median time step below this is taken as a time in the wrong unit
 GAP_FACTOR = 20.0       # a time step this many times the median step starts a new segment
 PAUSE_MIN_S = 60.0      # a wall-clock jump this much beyond the Time column marks a hidden pause
 
@@ -816,7 +817,7 @@ KEY_SYNONYMS = {       # how a column-mapping key is often written for one of GE
     "md": "state"}
 CURRENT_UNITS = {"A": 1.0, "mA": 1e-3}
 CHARGE_UNITS = {"Ah": 1.0, "mAh": 1e-3}
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "min": 60.0, "h": 3600.0, "d": 86400.0}
 VOLTAGE_UNITS = {"V": 1.0, "mV": 1e-3}
 TEMPERATURE_UNITS = {"degC": 0.0, "K": -273.15}      # the offset to °C
 UNITS = {"time": TIME_UNITS, "current": CURRENT_UNITS, "voltage": VOLTAGE_UNITS,
@@ -837,7 +838,8 @@ def split_unit(name: str) -> tuple[str, str]:
         return name, ""
     return name[:found.start()].rstrip(), next(g for g in found.groups() if g)
 UNIT_WORDS = {        # how a units row or a column name may write them (lower case)
-    "time": {"s": "s", "sec": "s", "ms": "ms", "min": "min", "h": "h", "hr": "h"},
+    "time": {"s": "s", "sec": "s", "ms": "ms", "min": "min", "h": "h", "hr": "h", "d": "d",
+             "day": "d", "days": "d"},
     "current": {"a": "A", "ma": "mA"},
     "voltage": {"v": "V", "mv": "mV"},
     "temperature": {"°c": "degC", "degc": "degC", "c": "degC", "℃": "degC", "k": "K"},
@@ -1335,6 +1337,12 @@ def check_plausibility(rec: Record) -> None:
     if vmax > 100:
         warnings.warn(f"{src}: voltage reaches {vmax:.0f}; values look like mV, expected V "
                       "for a single cell", DataWarning, stacklevel=3)
+    step = rec.meta.sample_time_s
+    if step < MIN_LOG_STEP_S:
+        warnings.warn(f"{src}: the time steps by {step:.3g} s (median); a cycler logs every "
+                      f"{MIN_LOG_STEP_S:g} s or slower: is the time column in min, h or days "
+                      "(a spreadsheet's date numbers)? (--time-unit min|h|d, time_unit=)",
+                      DataWarning, stacklevel=3)
     imax = float(np.max(np.abs(rec.current_a)))
     if imax > 500:
         warnings.warn(f"{src}: current reaches {imax:.0f}; values look like mA, expected A "

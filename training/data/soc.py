@@ -123,7 +123,7 @@ def _what_to_check(discharged_ah: float, charged_ah: float, capacity_ah: float,
         return check
     return (f"no start SoC fits a span of {span_ah:.4g} Ah in a cell of {capacity_ah:g} Ah; "
             f"{check}, and " + ("the units of the current (--current-unit A|mA) and of the "
-                                "time (--time-unit s|ms|min|h)" if own_columns else
+                                "time (--time-unit s|ms|min|h|d)" if own_columns else
                                 "whether the record is of this cell"))
 
 
