@@ -1194,6 +1194,11 @@ def test_an_arbin_channel_that_reads_zero_throughout_is_not_a_cell_temperature(
                                                {"Aux_Temperature_1(C)": np.zeros(n)}))
     assert rec.temperature_c is None
     assert any("reads 0 throughout" in note for note in rec.meta.notes), rec.meta.notes
+    blank = read_record(_arbin_with_temperatures(tmp_path, False,
+                                                 {"Aux_Temperature_1(C)": np.full(n, np.nan)},
+                                                 name="blank.csv"))
+    assert blank.temperature_c is None
+    assert any("'Aux_Temperature_1(C)' has no reading" in note for note in blank.meta.notes)
     far = read_record(_arbin_with_temperatures(tmp_path, False,
                                                {"Aux_Temperature_1(F)": np.full(n, 77.0)},
                                                name="f.csv"))

@@ -449,9 +449,11 @@ def read_arbin(path: Path) -> Record:
                              blank_ok=text)
     t, cur = cols[names["Test_Time(s)"]], cols[names["Current(A)"]]
     temp = None
-    if temp_column is not None and not np.any(cols[temp_column][~np.isnan(cols[temp_column])]):
-        notes.append(f"column '{temp_column}' reads 0 throughout (no sensor on the channel?): "
-                     "not read as the cell's temperature")
+    readings = cols[temp_column][~np.isnan(cols[temp_column])] if temp_column else None
+    if readings is not None and not np.any(readings):
+        notes.append(f"column '{temp_column}' "
+                     + ("reads 0 throughout" if readings.size else "has no reading")
+                     + " (no sensor on the channel?): not read as the cell's temperature")
         temp_column = None
     if temp_column is not None:
         temp, more = _held_readings(cols, temp_column, path)
