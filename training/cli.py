@@ -602,9 +602,9 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                       help="a cell current profile instead of a drive cycle: a CSV file with a "
                       "time column (time_s) and a current column (current_a or current_ma, or "
                       "'Current [mA]', 'I [A]'; > 0 charges unless --discharge-positive); at "
-                      "even "
-                      "steps, or a table of breakpoints: each row's current held until the "
-                      "next row's time (a repeated time: a step there), the last row its end")
+                      "even steps, or a table of breakpoints: each row's current held until "
+                      "the next row's time (a repeated time: a step there), the last row its "
+                      "end")
     s.add_argument("--discharge-positive", action="store_true",
                    help="the --current profile counts discharge as positive")
     s.add_argument("--charge-cutoff", type=_cutoff, metavar="V", help="with --current: the "

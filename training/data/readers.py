@@ -861,13 +861,13 @@ def read_generic(path: Path, columns: Mapping[str, str], discharge_positive: boo
                  charge_unit: str | None = None) -> Record:
     """CSV with an explicit mapping {'time': …, 'current': …, 'voltage': …[, 'temperature']
     [, 'ambient'][, 'charge'][, 'state']} of LMNCell's quantities to the file's column names
-    (time in s,
-    or as text that TIME_TEXT_EXPECTED describes; voltage in V, temperatures in °C): 'temperature'
-    the cell's, 'ambient' the chamber's beside it (Record.ambient_c, the thermal model's ambient;
-    mapped alone, it is the record's temperature); 'charge' the tester's net charge counter
-    (Ah, running through the record: it decides whether a gap in time lost charge, and the
-    SoC reference counts by it; _checked_counter); 'state' a column of words that give the
-    direction of a current logged as its magnitude (_state_signs: charge, discharge or rest).
+    (time in s, or as text that TIME_TEXT_EXPECTED describes; voltage in V, temperatures in °C):
+    'temperature' the cell's, 'ambient' the chamber's beside it (Record.ambient_c, the thermal
+    model's ambient; mapped alone, it is the record's temperature); 'charge' the tester's net
+    charge counter (Ah, running through the record: it decides whether a gap in time lost
+    charge, and the SoC reference counts by it; _checked_counter); 'state' a column of words
+    that give the direction of a current logged as its magnitude (_state_signs: charge,
+    discharge or rest).
 
     current_unit: "A" or "mA" (or current_scale, a factor to A); time_unit: that of a numeric
     time column, one of TIME_UNITS (default s); voltage_unit: "V" or "mV"; temperature_unit:

@@ -24,6 +24,7 @@ vs 2.00 mV), with 30 s for all programmes it wins all three profiles (1.67/2.04/
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -352,7 +353,7 @@ SPREAD_GRID = np.linspace(1.0, 0.0, 21)[:-1]   # the spreads tried first, 1 … 
 SPREAD_HALVINGS = 10        # below the grid's least, halved this many times (to 5e-5)
 
 
-def _largest_spread(feasible) -> float:
+def _largest_spread(feasible: Callable[[float], bool]) -> float:
     """The largest spread (share of the band around the mean current) of SPREAD_GRID that
     feasible(spread) accepts; below its least, that share halved until one is accepted (long
     holds, whose levels move the SoC out of its window at any coarser spread: without it such a
