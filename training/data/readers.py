@@ -319,7 +319,7 @@ def _read_csv_columns(path: Path, sep: str = ",", decimal: str = ".",
         for r, row in enumerate(rows):
             try:
                 cell = row[j].strip()
-                col[r] = _number(cell, decimal)
+                col[r] = decimal_number(cell, decimal)
             except (ValueError, IndexError):
                 if j >= len(row):
                     raise DataError(f"{path}: line {line_of[r]} has {len(row)} fields, "
@@ -1247,14 +1247,14 @@ def _with_file_units(path: Path, given: dict[str, str | None],
     return out, taken
 
 
-def _number(cell: str, decimal: str) -> float:
+def decimal_number(cell: str, decimal: str) -> float:
     """A cell's number with the decimal mark given ("." or ","); ValueError where it is none."""
     return float(cell.replace(",", ".") if decimal == "," else cell)
 
 
 def _is_number(cell: str, decimal: str) -> bool:
     try:
-        _number(cell.strip(), decimal)
+        decimal_number(cell.strip(), decimal)
     except ValueError:
         return False
     return True

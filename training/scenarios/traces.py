@@ -203,7 +203,7 @@ def read_trace(path: Path, fmt: TraceFormat) -> dict[str, np.ndarray]:
     the file, column, line and value where it is not such a file. In a file delimited by ';'
     or tabs (a spreadsheet's export where the decimal mark is a comma) a decimal comma is read
     as the decimal mark."""
-    from lmncell.data.readers import _number
+    from lmncell.data.readers import decimal_number
 
     rows, delimiter = _rows(path, fmt)
     decimal = "." if delimiter == "," else ","
@@ -213,7 +213,7 @@ def read_trace(path: Path, fmt: TraceFormat) -> dict[str, np.ndarray]:
         for quantity, col in columns.items():
             cell = row[col.index].strip() if col.index < len(row) else ""
             try:
-                values[quantity][j] = _number(cell, decimal) * col.factor
+                values[quantity][j] = decimal_number(cell, decimal) * col.factor
             except ValueError:
                 raise DataError(f"{path}: column '{col.name}' at line {line}: {cell!r}; expected "
                                 "a number") from None
