@@ -1527,3 +1527,20 @@ def test_a_training_record_given_twice_is_refused(tmp_path) -> None:
         train_files([A123_S1, shutil.copy(A123_S1, tmp_path / "copy.csv.gz")], out,
                     capacity_ah=2.2, soc0=1.0, progress=lambda _m: None)
     assert not out.exists()
+
+
+def test_a_config_files_ocv_tests_are_found_beside_it(tmp_path, monkeypatch) -> None:
+    """ocv_tests = ["c30.csv"] in a TOML file in another folder was looked for in the working
+    folder ("no such file"); a relative path in the file is now taken from the file's folder,
+    and one found only from the working folder, or absolute, stays as written."""
+    from lmncell.config import given_settings
+
+    (tmp_path / "cfg").mkdir()
+    (tmp_path / "cfg" / "c30.csv").write_text("x")
+    (tmp_path / "here.csv").write_text("x")
+    config = tmp_path / "cfg" / "t.toml"
+    config.write_text(f'[train]\nocv_tests = ["c30.csv", "here.csv", "{tmp_path / "a.csv"}"]\n')
+    monkeypatch.chdir(tmp_path)
+    assert given_settings(config)["ocv_tests"] == [str(tmp_path / "cfg" / "c30.csv"),
+                                                   "here.csv", str(tmp_path / "a.csv")]
+    assert given_settings(config, ocv_tests=["x.csv"])["ocv_tests"] == ["x.csv"]

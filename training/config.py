@@ -534,9 +534,22 @@ def given_settings(path: str | Path | None = None, **overrides) -> dict:
     that are not None; the file is read once here."""
     values: dict = {}
     if path is not None:
-        values.update(_toml_table(Path(path)))
+        values.update(_with_paths_from(Path(path), _toml_table(Path(path))))
     values.update({k: v for k, v in overrides.items() if v is not None})
     return values
+
+
+def _with_paths_from(path: Path, table: dict) -> dict:
+    """A TOML file's settings with its relative ocv_tests paths taken from the file's folder
+    (as a file that names its neighbours means them), except one found only from the working
+    folder, which stays as written."""
+    tests = table.get("ocv_tests")
+    if not (isinstance(tests, list) and all(isinstance(t, str) for t in tests)):
+        return table
+    beside = [t if Path(t).is_absolute() or (Path(t).exists()
+                                             and not (path.parent / t).exists())
+              else str(path.parent / t) for t in tests]
+    return {**table, "ocv_tests": beside}
 
 
 def sample_time_given(values: dict) -> bool:
