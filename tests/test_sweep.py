@@ -301,6 +301,20 @@ def test_a_vehicle_file_is_checked_key_by_key(tmp_path, change, message) -> None
     assert load_vehicle(None).n_series == 100
 
 
+def test_a_vehicle_file_without_a_name_takes_the_files(tmp_path) -> None:
+    """A vehicle file without `name` was refused as "missing key(s) ['name']"; the name is
+    optional, and the file's name stands for it."""
+    from importlib import resources
+
+    from lmncell.scenarios.drive import load_vehicle
+
+    text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
+    path = tmp_path / "my_car.toml"
+    path.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("name")))
+    assert load_vehicle(path).name == "my_car"
+    assert load_vehicle(None).name == "compact EV (default)"
+
+
 def test_a_vehicle_without_regenerative_braking_is_driven(tmp_path) -> None:
     """regen_efficiency = 0, a car that brakes by friction alone, was refused as "expected
     0 < η ≤ 1"; it now runs, and its pack never charges: the same power as a regen limit of

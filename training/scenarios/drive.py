@@ -99,7 +99,8 @@ def _check_vehicle_values(values: dict, where: str) -> None:
 
 
 def load_vehicle(path: str | Path | None = None) -> Vehicle:
-    """A vehicle TOML file ([vehicle] and [pack] tables); None gives the default compact EV."""
+    """A vehicle TOML file ([vehicle] and [pack] tables; the vehicle's name, where not given,
+    the file's); None gives the default compact EV."""
     if path is None:
         text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
         where = "compact_ev.toml"
@@ -117,7 +118,7 @@ def load_vehicle(path: str | Path | None = None) -> Vehicle:
     if missing:
         raise DataError(f"{where}: no {' or '.join(f'[{t}]' for t in missing)} table; expected "
                         "[vehicle] and [pack] tables as in the shipped compact_ev.toml")
-    values = {**doc["vehicle"], **doc["pack"]}
+    values = {"name": Path(where).stem, **doc["vehicle"], **doc["pack"]}   # name: optional
     _check_vehicle_values(values, where)
     veh = Vehicle(**values)
     for key, ok, expected in VEHICLE_RANGES:
