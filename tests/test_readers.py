@@ -450,6 +450,22 @@ def test_binary_files_given_as_data_are_named(tmp_path) -> None:
                           ("v73.mat", "a MATLAB v7.3 (HDF5) file, which is not read here")):
         with pytest.raises(DataError, match=re.escape(f"{name}: ") + ".*" + re.escape(message)):
             read_record(tmp_path / name)
+    # cyclers' own binary files name the export to make (they spoke of a NUL byte)
+    (tmp_path / "run.mpr").write_bytes(b"BIO-LOGIC MODULAR FILE\x1a" + b" " * 25 + bytes(64))
+    (tmp_path / "run.nda").write_bytes(b"NEWARE" + bytes(64))
+    (tmp_path / "run.res").write_bytes(b"\x00\x01\x00\x00Standard Jet DB\x00" + bytes(64))
+    with zipfile.ZipFile(tmp_path / "run.ndax", "w") as z:
+        z.writestr("data.ndc", bytes(64))
+    for name, message in (("run.mpr", "a BioLogic EC-Lab binary file (.mpr: export it as text, "
+                                      ".mpt, in EC-Lab)"),
+                          ("run.nda", "a Neware .nda file (export it as CSV in Neware's BTSDA)"),
+                          ("run.res", "such as an Arbin .res file (export it as CSV in Arbin's "
+                                      "MITS Pro)"),
+                          ("run.ndax", "a Neware .ndax archive (export it as CSV in Neware's "
+                                       "BTSDA)")):
+        with pytest.raises(DataError, match=re.escape(f"{name}: not a text file (") + ".*"
+                           + re.escape(message)):
+            read_record(tmp_path / name)
 
 
 def test_gzip_csv_reads(tmp_path) -> None:

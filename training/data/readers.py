@@ -97,7 +97,16 @@ BINARY_KINDS = (       # what a binary file given as data is, by its first bytes
                                            "workbook (.xls: save its sheet as CSV)"),
     (b"\x89HDF\r\n\x1a\n", "an HDF5 file (a MATLAB v7.3 .mat file: save it with "
                            "save(..., '-v7'))"),
+    # cyclers' own binary files: their software exports the text that the readers take
+    (b"BIO-LOGIC MODULAR FILE", "a BioLogic EC-Lab binary file (.mpr: export it as text, "
+                                ".mpt, in EC-Lab)"),
+    (b"NEWARE", "a Neware .nda file (export it as CSV in Neware's BTSDA)"),
+    (b"\x00\x01\x00\x00Standard Jet DB", "a Microsoft Access database, such as an Arbin .res "
+                                        "file (export it as CSV in Arbin's MITS Pro)"),
+    (b"\x00\x01\x00\x00Standard ACE DB", "a Microsoft Access database, such as an Arbin .res "
+                                        "file (export it as CSV in Arbin's MITS Pro)"),
 )
+ZIP_KINDS = {".ndax": "a Neware .ndax archive (export it as CSV in Neware's BTSDA)"}
 HEAD_BYTES = 1 << 20    # how much of a file detect_format decodes for its first line
 
 
@@ -138,6 +147,8 @@ def read_text(path: Path, first_line: bool = False, head: bool = False) -> str:
     if encoding is None:
         where = raw.find(b"\x00")
         what = next((kind for magic, kind in BINARY_KINDS if raw.startswith(magic)), None)
+        if raw.startswith(b"PK\x03\x04"):                  # a ZIP archive: which, by its name
+            what = ZIP_KINDS.get(Path(str(path).removesuffix(".gz")).suffix.lower(), what)
         what = what or (f"a NUL byte at offset {where}" if where >= 0 else
                         "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
         raise DataError(f"{path}: not a text file ({what}); {TEXT_EXPECTED}")
