@@ -55,6 +55,12 @@ def test_chamber_temperature_of_the_25c_scripts() -> None:
                                "A123_OCV_P45_S4.csv.gz", "A123_DYN_10_N25_s2.csv",
                                "03-27-17_09.06_10degC_HWFET_Pan18650PF.mat")] == [
         25.0, -15.0, 25.0, 25.0, 10.0]
+    # the Panasonic files below 0 °C are named n10degC, n20degC (read as +10, +20 °C before:
+    # a CSV of them evaluated at the wrong ambient); an n that ends a word is no sign
+    assert [named(n) for n in ("06-07-17_08.39 n10degC_US06_Pan18650PF.mat",
+                               "n20degC_Cycle_1_Pan18650PF.csv", "p0degC_NN_Pan18650PF.csv",
+                               "x_-10degC.csv", "run10degC.csv")] == [
+        -10.0, -20.0, 0.0, -10.0, 10.0]
 
 
 def test_arbin_and_panasonic_formats() -> None:

@@ -78,15 +78,19 @@ PLETT_25C_SCRIPT = re.compile(r"^A123_(?:DYN_\d+_[NP]\d{2}_s[23]|OCV_[NP]\d{2}_S
 
 def chamber_temp_from_name(path: str | Path) -> float | None:
     """Chamber temperature (°C) from a file name: A123 ``_N25_``/``_P45_`` (25 °C for the
-    scripts that Plett's procedure runs at 25 °C, PLETT_25C_SCRIPT) or ``25degC``."""
+    scripts that Plett's procedure runs at 25 °C, PLETT_25C_SCRIPT), or ``25degC``, ``-10degC``
+    and the Panasonic files' ``n10degC`` (−10 °C) and ``p0degC`` (an ``n`` or ``p`` that
+    ends a word, as in ``run10degC``, is no sign)."""
     name = Path(path).name
     if PLETT_25C_SCRIPT.match(name):
         return 25.0
     m = re.search(r"_([NP])(\d{2})(?:_|\.)", name)
     if m:
         return (-1.0 if m.group(1) == "N" else 1.0) * float(m.group(2))
-    m = re.search(r"(-?\d+)\s*deg\s*C", name, flags=re.IGNORECASE)
-    return float(m.group(1)) if m else None
+    m = re.search(r"(?:(?<![a-z])([np]))?(-?\d+)\s*deg\s*C", name, flags=re.IGNORECASE)
+    if m is None:
+        return None
+    return -float(m.group(2)) if (m.group(1) or "").lower() == "n" else float(m.group(2))
 
 
 TEXT_EXPECTED = "expected a CSV text file, a MATLAB .mat file or either gzip-compressed (.gz)"
