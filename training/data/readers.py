@@ -94,8 +94,9 @@ def chamber_temp_from_name(path: str | Path) -> float | None:
 
 
 TEXT_EXPECTED = "expected a CSV text file, a MATLAB .mat file or either gzip-compressed (.gz)"
+ZIP_MAGIC = b"PK\x03\x04"
 BINARY_KINDS = (       # what a binary file given as data is, by its first bytes
-    (b"PK\x03\x04", "a ZIP archive, such as an Excel workbook (.xlsx: save its sheet as CSV) "
+    (ZIP_MAGIC, "a ZIP archive, such as an Excel workbook (.xlsx: save its sheet as CSV) "
                      "or an FMU"),
     (b"\xd0\xcf\x11\xe0\xa1\xb1\x1a\xe1", "an OLE compound file, such as an Excel 97–2003 "
                                            "workbook (.xls: save its sheet as CSV)"),
@@ -151,7 +152,7 @@ def read_text(path: Path, first_line: bool = False, head: bool = False) -> str:
     if encoding is None:
         where = raw.find(b"\x00")
         what = next((kind for magic, kind in BINARY_KINDS if raw.startswith(magic)), None)
-        if raw.startswith(b"PK\x03\x04"):                  # a ZIP archive: which, by its name
+        if raw.startswith(ZIP_MAGIC):                       # a ZIP archive: which, by its name
             what = ZIP_KINDS.get(Path(str(path).removesuffix(".gz")).suffix.lower(), what)
         what = what or (f"a NUL byte at offset {where}" if where >= 0 else
                         "bytes that are neither UTF-8, UTF-16 nor Windows-1252")
@@ -453,7 +454,7 @@ def read_arbin(path: Path) -> Record:
     ``Test Time (s)``); discharge < 0 already. Auxiliary temperature channel 1 (or the only
     temperature column) is the cell's temperature; a channel read every few rows, blank
     between readings, holds each reading until the next (noted), as the BDF reader's does."""
-    header = [c.strip() for c in next(csv.reader([read_text(path, first_line=True)]))]
+    header = _header_names(path)
     names = _arbin_names(header)
     if names is None:
         raise DataError(f"{path}: missing Arbin column(s); expected {list(ARBIN_COLUMNS)} (or "
@@ -487,6 +488,11 @@ def read_arbin(path: Path) -> Record:
         meta.file_columns["temperature_c"] = temp_column
     return Record(t - t[0], cur, cols[names["Voltage(V)"]], meta, temperature_c=temp,
                   charge_ah=ah)
+
+
+def _header_names(path: Path) -> list[str]:
+    """The column names on a comma-separated file's first line, stripped."""
+    return [c.strip() for c in next(csv.reader([read_text(path, first_line=True)]))]
 
 
 def _arbin_key(name: str) -> str:
@@ -685,7 +691,7 @@ def read_bdf(path: Path) -> Record:
     T1 (``Surface Temperature T1 / degC``); ``Ambient Temperature / degC`` is the record's
     ambient (Record.ambient_c: beside T1 the thermal model's, per step where it varies; alone
     the record's temperature)."""
-    header = [c.strip() for c in next(csv.reader([read_text(path, first_line=True)]))]
+    header = _header_names(path)
     names = _bdf_names(header)
     missing = [q for q in BDF_REQUIRED if q not in names]
     if missing:
@@ -698,7 +704,7 @@ def read_bdf(path: Path) -> Record:
                              keep_text={c for c in (t1_c, ambient_c) if c})
     t = cols[time_c]
     temp, notes = _held_readings(cols, t1_c, path) if t1_c else (None, [])
-    net_ah = cols[net_c] if net_c else None
+    net_ah = None
     if net_c:
         net_ah, more = _stitched_counter(net_c, t, cols[cur_c], cols[net_c])
         notes += more
@@ -723,8 +729,12 @@ def _bdf_names(header: list[str]) -> dict[str, str]:
     """{preferred label: the file's name for it} for each BDF quantity of BDF_ALIASES whose
     label or machine-readable name is in the header (the label first)."""
     present = set(header)
-    return {label: name for label, aliases in BDF_ALIASES.items()
-            for name in [next((n for n in (label, *aliases) if n in present), None)] if name}
+    names: dict[str, str] = {}
+    for label, aliases in BDF_ALIASES.items():
+        found = next((n for n in (label, *aliases) if n in present), None)
+        if found is not None:
+            names[label] = found
+    return names
 
 
 def read_biologic(path: Path) -> Record:

@@ -499,7 +499,7 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
              f"{spec.sequence_s / MIN_LEVELS_PER_SEQUENCE:g} s)")
     steps, counts = allocate(spec.soc_profile, n_seq)
     soc, v = spec.soc_profile[0], np.zeros(len(cell.rc))
-    parts, starts, lds, t0 = [], [], [], 0
+    parts, starts, lds, idle, t0 = [], [], [], [], 0
     for k, dsoc in enumerate(steps):
         mean = dsoc * cell.capacity_ah * 3600.0 / spec.sequence_s
         band = amplitude_band(spec, i_max, k, mean)
@@ -510,10 +510,11 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
         starts.append(t0)
         t0 += seq.current_a.size
         lds.append(seq.log_det)
+        idle.append(holds_one_current(seq.current_a))
         progress(f"  sequence {k + 1}/{n_seq}: ΔSoC {dsoc:+.4f} → SoC {soc:.4f}, log det "
                  f"{seq.log_det:.2f}{'' if seq.success else ' (SLSQP stopped early)'}"
                  + (" (one current throughout: no excitation fits the limits)"
-                    if holds_one_current(seq.current_a) else ""))
+                    if idle[-1] else ""))
     cur = np.concatenate([p.current_a for p in parts])
     n = cur.size
     time_s = cyc.sample_time_s * np.arange(1, n + 1)
@@ -526,16 +527,17 @@ def design_programme(cell: CellSpec, cyc: CyclerSpec, spec: DesignSpec,
         points.append((float(time_s[k_end]), float(target)))
     check_voltages(u, cell, spec, float(np.max(np.abs(steps))) * cell.capacity_ah * 3600.0
                    / spec.sequence_s)
-    _check_excitation(parts, cyc, spec)
+    _check_excitation(idle, cyc, spec)
     settings = {"cell": dataclasses.asdict(cell), "cycler": dataclasses.asdict(cyc),
                 "design": dataclasses.asdict(spec), "max_current_a": i_max}
     return Programme(time_s, cur, u, socs, starts, points, lds, settings)
 
 
-def _check_excitation(parts: list[Sequence], cyc: CyclerSpec, spec: DesignSpec) -> None:
-    """DataError where every sequence holds one current: no level around its mean keeps the
-    voltage and the SoC inside the limits (the SoC within the profile's range ± the margin)."""
-    if all(holds_one_current(p.current_a) for p in parts):
+def _check_excitation(idle: list[bool], cyc: CyclerSpec, spec: DesignSpec) -> None:
+    """DataError where every sequence holds one current (idle: holds_one_current of each): no
+    level around its mean keeps the voltage and the SoC inside the limits (the SoC within the
+    profile's range ± the margin)."""
+    if all(idle):
         raise DataError(f"no sequence has room for excitation: around each one's mean current, "
                         f"levels held {cyc.hold_s:g} s each leave the voltage limits or the SoC "
                         f"range {min(spec.soc_profile):g} … {max(spec.soc_profile):g} "
