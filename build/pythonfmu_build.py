@@ -155,13 +155,19 @@ WRAPPERS = {
 }
 
 
+def _file_name(entry: dict) -> str:
+    """A training file's name in a model file's metadata ("name"; model files written before
+    December 2026 give its "path")."""
+    return entry.get("name") or Path(entry.get("path", "?")).name
+
+
 def documentation_html(model: LmnModel, model_path: Path, flavour: str = "pythonfmu",
                        wrapper: str = STOCK) -> str:
     """documentation/index.html: cell, data, sample time, accuracy and limits of the model;
     flavour "pythonfmu" or "native" says what the importer needs (and for pythonfmu, which
     wrapper the linux64 binary is)."""
     tr = model.extra.get("training", {})
-    files = "".join(f"<li>{html.escape(Path(f['path']).name)} <small>sha256 {f['sha256'][:16]}…"
+    files = "".join(f"<li>{html.escape(_file_name(f))} <small>sha256 {f['sha256'][:16]}…"
                     "</small></li>" for f in tr.get("files", []))
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v[0]:.4g} … {v[1]:.4g}</td></tr>"
                    for k, v in model.limits.items())

@@ -89,7 +89,9 @@ Keys (units in the names, current > 0 charges, SoC 0…1):
   thermal.py, ``resistance_k_per_w`` R (K/W), ``time_constant_s`` τ (s), ``offset_k`` (rested
   cell above ambient, K). With it, the FMU's ``temperature`` input is the ambient temperature
   and the model computes the cell temperature (unless ``temperature_is_cell`` is set).
-- ``baselines`` (optional) and ``training`` (metadata: files with hashes, settings, metrics);
+- ``baselines`` (optional) and ``training`` (metadata: the record files ``files`` and OCV tests
+  ``ocv_test_files`` by ``name``, without their folder, with their ``sha256``, settings,
+  metrics; no wall-clock time, so that the same data and settings give the same file);
   ``description`` (optional, a string as the cell's name: the FMU's description).
 
 Any other key, at the top or in an object above (KNOWN_KEYS), is refused with its name: a

@@ -39,6 +39,9 @@ def test_fmpy_validate_reports_no_problem(quick_fmu) -> None:
     assert 'canGetAndSetFMUstate="true"' in xml and 'canSerializeFMUstate="true"' in xml
     assert "documentation/index.html" in names and "resources/model.json" in names
     assert any(n.startswith("resources/lmncell_rt_") for n in names)
+    with zipfile.ZipFile(quick_fmu) as z:
+        doc = z.read("documentation/index.html").decode()
+    assert f"<li>{PAN_HWFET.name} <small>sha256" in doc        # a training record, no folder
 
 
 def test_fmu_equals_pipeline_on_a_real_record(quick_model, quick_fmu) -> None:

@@ -41,6 +41,10 @@ def test_demo_writes_report_figures_and_summary(demo) -> None:
     assert summary["fmu_max_dv_v"] < 1e-9
     whole, window = summary["validation_rmse_mv"], summary["validation_window_rmse_mv"]
     assert set(whole) == set(window) and all(whole[k] >= window[k] for k in whole)
+    # the model file, baselines and all, holds no wall-clock time and no folder of the data
+    model_text = (demo / "a123_lmn.json").read_text(encoding="utf-8")
+    assert '"baselines"' in model_text and "seconds" not in model_text
+    assert str(ROOT) not in model_text and "A123_DYN_50_P45_s1.csv" in model_text
 
 
 def test_readme_figures_are_the_demo_figures(demo) -> None:

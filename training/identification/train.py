@@ -319,16 +319,35 @@ def _noise_doc(segs: list[Segment], sims: list[np.ndarray], residual_v: float, i
 
 def _training_doc(paths: list[str | Path], cap: float, cfg: TrainConfig, result: TrainResult,
                   train_metrics: list[dict], thermal_info: dict) -> dict:
-    """The model file's record of its training: software, files with their SHA-256, capacity,
-    settings, the growth curve, the choices made and the training errors."""
-    return {
+    """The model file's record of its training: software, the record files and OCV tests by
+    name with their SHA-256, capacity, settings, the growth curve, the choices made and the
+    training errors. No folder and no wall-clock time: the model file travels inside the FMU,
+    and the same data and settings give the same file, bit for bit, wherever the data lie."""
+    settings = cfg.to_dict()
+    settings["ocv_tests"] = [Path(p).name for p in cfg.ocv_tests]
+    return _without_timings({
         "software": f"lmncell {__version__} (python {platform.python_version()}, numpy "
                     f"{np.__version__})",
-        "files": [{"path": str(p), "sha256": file_sha256(p)} for p in paths],
-        "capacity_ah": cap, "settings": cfg.to_dict(), "curve": result.curve,
+        "files": _named_files(paths), "ocv_test_files": _named_files(cfg.ocv_tests),
+        "capacity_ah": cap, "settings": settings, "curve": result.curve,
         "chosen_local_models": result.chosen_m, "info": result.info,
         "train_metrics": train_metrics, "thermal": thermal_info,
-    }
+    })
+
+
+def _named_files(paths: Sequence[str | Path]) -> list[dict]:
+    """Each file's name (without its folder) and SHA-256, for the model file's metadata."""
+    return [{"name": Path(p).name, "sha256": file_sha256(p)} for p in paths]
+
+
+def _without_timings(doc: Any) -> Any:
+    """doc (nested dicts and lists) without its wall-clock times, the "seconds" keys at any
+    depth: they differ from run to run, and the model file must not."""
+    if isinstance(doc, dict):
+        return {k: _without_timings(v) for k, v in doc.items() if k != "seconds"}
+    if isinstance(doc, list):
+        return [_without_timings(v) for v in doc]
+    return doc
 
 
 def _train_summary(model: LmnModel, train_metrics: list[dict], info: dict, seconds: float,
@@ -466,7 +485,7 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     }
     model.extra["observers"] = {"fuzzy": offline_fuzzy_design(model)}
     if baseline_docs:
-        model.extra["baselines"] = baseline_docs
+        model.extra["baselines"] = _without_timings(baseline_docs)
     check_trained_model(model, segs, cfg)
     save_model(model, out)
     summary = _train_summary(model, train_metrics, result.info, seconds, baseline_docs)
