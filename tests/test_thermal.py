@@ -99,6 +99,20 @@ def test_parameters_on_a_bound_are_named() -> None:
         "resistance_k_per_w", "offset_k"]
 
 
+def test_an_undetermined_thermal_model_names_what_would_determine_it() -> None:
+    # without an OCV test the heat i·(u − OCV) takes the OCV estimated from the records: one
+    # Panasonic US06 record so gave R 2.3 K/W and offset +5 K (at its bound), 8.9 K/W and
+    # -0.7 K with the C/20 test
+    from lmncell.identification.train import _thermal_text
+
+    info = {"rmse_k": 0.8, "segments": ["us06"], "at_bound": ["offset_k"]}
+    estimated = _thermal_text(TRUE, info, ocv_measured=False)
+    assert "not determined by these records: offset_k" in estimated
+    assert "--ocv-tests" in estimated and "warm up and cool down" not in estimated
+    assert "warm up and cool down" in _thermal_text(TRUE, info, ocv_measured=True)
+    assert "bound" not in _thermal_text(TRUE, {**info, "at_bound": []}, ocv_measured=False)
+
+
 def test_no_thermal_model_without_a_measured_rise() -> None:
     rng = np.random.default_rng(1)
     seg = _synthetic_segment(rng, 3000, 25.0, 25.6)

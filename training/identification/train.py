@@ -294,16 +294,26 @@ def training_segments(records: list[Record], cfg: TrainConfig, capacity_ah: floa
     return segs
 
 
-def _thermal_text(thermal: ThermalModel | None, info: dict) -> str:
-    """The progress line's account of the thermal model (or why there is none)."""
+def _thermal_text(thermal: ThermalModel | None, info: dict, ocv_measured: bool) -> str:
+    """The progress line's account of the thermal model (or why there is none); ocv_measured:
+    the model's OCV comes from slow OCV tests (else training estimated it from the records)."""
     if thermal is None:
         return f"off ({info['reason']})"
     return (f"R = {thermal.resistance_k_per_w:.2f} K/W, τ = {thermal.time_constant_s:.0f}"
             f" s, rested {thermal.offset_k:+.2f} K above ambient; cell temperature RMSE "
             f"{info['rmse_k']:.2f} K on {len(info['segments'])} segment(s)"
             + (f"; at the bound of the search range, so not determined by these records: "
-               f"{', '.join(info['at_bound'])} (records that warm up and cool down "
-               "determine R and τ)" if info.get("at_bound") else ""))
+               f"{', '.join(info['at_bound'])} ({_undetermined_advice(ocv_measured)})"
+               if info.get("at_bound") else ""))
+
+
+def _undetermined_advice(ocv_measured: bool) -> str:
+    """What determines a thermal model that the records left at a bound of its search."""
+    if ocv_measured:
+        return "records that warm up and cool down determine R and τ"
+    return ("the heat i·(u − OCV) takes the OCV that training estimated from the records, "
+            "which records without rests leave undetermined; with a slow OCV test "
+            "(--ocv-tests, ocv_tests = [...]) it is the cell's own")
 
 
 def _noise_doc(segs: list[Segment], sims: list[np.ndarray], residual_v: float, info: dict,
@@ -473,7 +483,8 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
     cap, delay, segs, result = _identify(records, cfg, capacity_ah, soc0, progress)
     model = result.model
     model.current_delay_s = delay
-    train_metrics, thermal_info = _complete_model(model, records, segs, result.info, progress)
+    train_metrics, thermal_info = _complete_model(model, records, segs, result.info,
+                                                  bool(cfg.ocv_tests), progress)
     baseline_docs = {}
     if baselines:
         baseline_docs = fit_baselines(segs, cfg, cap, model, result.info.get("hysteresis_gamma"),
@@ -497,11 +508,12 @@ def train_files(paths: list[str | Path], out: str | Path, capacity_ah: float | N
 
 
 def _complete_model(model: LmnModel, records: list[Record], segs: list[Segment], info: dict,
-                    progress: Progress) -> tuple[list[dict], dict]:
+                    ocv_measured: bool, progress: Progress) -> tuple[list[dict], dict]:
     """Complete the identified model from its training segments: the ranges it was trained on
     (limits), the cell's name and voltage range, the thermal model (fitted where the records
     have a cell temperature beside a known ambient) and the noise document of the observers.
-    Returns each segment's free-run metrics and the thermal fit's information."""
+    ocv_measured: the OCV comes from slow tests. Returns each segment's free-run metrics and
+    the thermal fit's information."""
     model.limits = _limits(segs, model)
     model.cell = {"name": _cell_name(records), "voltage_min_v": model.limits["voltage_v"][0],
                   "voltage_max_v": model.limits["voltage_v"][1]}
@@ -509,7 +521,7 @@ def _complete_model(model: LmnModel, records: list[Record], segs: list[Segment],
     train_metrics = [{"segment": s.name, **record_metrics(s.voltage_v, v, s.soc_ref)}
                      for s, v in zip(segs, sims, strict=True)]
     model.thermal, thermal_info = fit_thermal(model, segs)
-    progress("thermal model: " + _thermal_text(model.thermal, thermal_info))
+    progress("thermal model: " + _thermal_text(model.thermal, thermal_info, ocv_measured))
     model.noise = _noise_doc(segs, sims, 1e-3 * pooled(train_metrics), info,
                              model.sample_time_s)
     return train_metrics, thermal_info
