@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import copy
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -463,8 +464,27 @@ def test_the_filter_chain_gains_sub_second_elements_at_short_sample_times() -> N
 def test_bad_config_file(tmp_path) -> None:
     p = tmp_path / "c.toml"
     p.write_text("[train]\nmax_local_models = 'many'\n")
-    with pytest.raises((ConfigError, TypeError)):
+    # a bad value names the file it came from; one given as an argument overrides it
+    with pytest.raises(ConfigError, match=f"^{re.escape(str(p))}: setting 'max_local_models' "
+                                          "= 'many': expected 'auto' or an integer"):
         load_config(p)
+    assert load_config(p, max_local_models=3).max_local_models == 3
+    with pytest.raises(ConfigError, match="^setting 'oe_max_iterations' = -1"):
+        load_config(p, max_local_models=3, oe_max_iterations=-1)
+    with pytest.raises(ConfigError, match=r"^configuration: unknown setting\(s\) \['typo'\]"):
+        load_config(p, max_local_models=3, typo=1)
+    # a byte-order mark (Windows editors) is skipped; bytes that are not UTF-8 and a JSON
+    # file are named as such (UnicodeDecodeError was a traceback)
+    p.write_bytes(b"\xef\xbb\xbfmax_local_models = 4\n")
+    assert load_config(p).max_local_models == 4
+    p.write_bytes(b"max_local_models = 4 # \xe9\n")
+    with pytest.raises(ConfigError, match="c.toml: cannot read the TOML configuration "
+                                          "\\('utf-8' codec"):
+        load_config(p)
+    model = tmp_path / "m.json"
+    model.write_text('{"format": "lmncell-model"}')
+    with pytest.raises(ConfigError, match="a JSON file \\(such as a model file\\) is not one"):
+        load_config(model)
     p.write_text("[train\n")
     with pytest.raises(ConfigError, match="c.toml: cannot read"):
         load_config(p)

@@ -313,6 +313,12 @@ def test_a_vehicle_file_without_a_name_takes_the_files(tmp_path) -> None:
     path.write_text("\n".join(ln for ln in text.splitlines() if not ln.startswith("name")))
     assert load_vehicle(path).name == "my_car"
     assert load_vehicle(None).name == "compact EV (default)"
+    # a byte-order mark (Windows editors) is skipped; other bytes than UTF-8 are named
+    path.write_bytes(b"\xef\xbb\xbf" + text.encode())
+    assert load_vehicle(path).mass_kg == load_vehicle(None).mass_kg
+    path.write_bytes(text.encode() + b"\n# caf\xe9\n")
+    with pytest.raises(DataError, match="my_car.toml: cannot read the vehicle file \\(not UTF-8"):
+        load_vehicle(path)
 
 
 def test_a_vehicle_without_regenerative_braking_is_driven(tmp_path) -> None:

@@ -51,7 +51,19 @@ REAL_SETTINGS = ("sample_time_s", "depletion_power", "validation_fraction", "out
 
 
 class ConfigError(ValueError):
-    """A training setting that cannot be used; the message names the setting."""
+    """A training setting that cannot be used; the message names the setting (`setting`, where
+    one setting is at fault)."""
+
+    def __init__(self, message: str, setting: str | None = None) -> None:
+        super().__init__(message)
+        self.setting = setting
+
+
+class GivenSettings(dict):
+    """The settings given (given_settings), with `origins`: the configuration file each
+    setting was read from (settings given as arguments or with --set have none)."""
+
+    origins: dict[str, str]
 
 
 def output_file_problem(path: str | Path) -> str | None:
@@ -325,7 +337,7 @@ class TrainConfig:
         return self
 
     def _bad(self, name: str, why: str) -> ConfigError:
-        return ConfigError(f"setting '{name}' = {getattr(self, name)!r}: {why}")
+        return ConfigError(f"setting '{name}' = {getattr(self, name)!r}: {why}", name)
 
     def _check_kinds(self) -> None:
         """The settings that are a plain switch, count or number: true/false, an integer in
@@ -529,13 +541,17 @@ def parse_setting(text: str) -> tuple[str, object]:
         return key, value.strip()
 
 
-def given_settings(path: str | Path | None = None, **overrides) -> dict:
+def given_settings(path: str | Path | None = None, **overrides) -> GivenSettings:
     """The settings given: a TOML file's [train] table (or its top level), then the overrides
     that are not None; the file is read once here."""
-    values: dict = {}
+    values = GivenSettings()
     if path is not None:
         values.update(_with_paths_from(Path(path), _toml_table(Path(path))))
-    values.update({k: v for k, v in overrides.items() if v is not None})
+    values.origins = {k: str(path) for k in values}
+    given = {k: v for k, v in overrides.items() if v is not None}
+    values.update(given)
+    for key in given:
+        values.origins.pop(key, None)
     return values
 
 
@@ -559,11 +575,20 @@ def sample_time_given(values: dict) -> bool:
 
 
 def _toml_table(path: Path) -> dict:
-    """The [train] table (or the top level) of a TOML configuration file."""
+    """The [train] table (or the top level) of a TOML configuration file (UTF-8; a byte-order
+    mark, which Windows editors write, is skipped)."""
     try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+        text = path.read_text(encoding="utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
         raise ConfigError(f"{path}: cannot read the TOML configuration ({exc})") from exc
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        json_like = path.suffix.lower() == ".json" or text.lstrip().startswith("{")
+        raise ConfigError(f"{path}: cannot read the TOML configuration ({exc})"
+                          + ("; a JSON file (such as a model file) is not one: expected "
+                             "TOML lines such as max_local_models = 8" if json_like else "")
+                          ) from exc
     if "train" not in doc:
         tables = sorted(f"[{k}]" for k, v in doc.items() if isinstance(v, dict))
         if tables:
@@ -582,6 +607,7 @@ def config_from_settings(values: dict, source: str = "configuration") -> TrainCo
     """The checked TrainConfig of the settings given (given_settings; source names them in
     errors): defaults where a setting is not given; sample_time_s "auto" is left at its
     default (training takes it from the records where sample_time_given says so)."""
+    origins = getattr(values, "origins", {})
     values = {k: v for k, v in values.items()
               if not (k == "sample_time_s" and v == "auto")}
     names = {f.name for f in dataclasses.fields(TrainConfig)}
@@ -589,9 +615,16 @@ def config_from_settings(values: dict, source: str = "configuration") -> TrainCo
     if unknown:
         near = {k: difflib.get_close_matches(k, names, n=1) for k in unknown}
         meant = "; ".join(f"{k!r}: did you mean {m[0]!r}?" for k, m in near.items() if m)
-        raise ConfigError(f"{source}: unknown setting(s) {unknown}"
+        files = {origins.get(k, "configuration") for k in unknown}
+        raise ConfigError(f"{files.pop() if len(files) == 1 else source}: "
+                          f"unknown setting(s) {unknown}"
                           + (f" ({meant})" if meant else "") + f"; known: {sorted(names)}")
-    return TrainConfig(**values).check()
+    try:
+        return TrainConfig(**values).check()
+    except ConfigError as exc:
+        if exc.setting in origins:
+            raise ConfigError(f"{origins[exc.setting]}: {exc}", exc.setting) from None
+        raise
 
 
 def load_config(path: str | Path | None = None, **overrides) -> TrainConfig:

@@ -100,16 +100,19 @@ def _check_vehicle_values(values: dict, where: str) -> None:
 
 def load_vehicle(path: str | Path | None = None) -> Vehicle:
     """A vehicle TOML file ([vehicle] and [pack] tables; the vehicle's name, where not given,
-    the file's); None gives the default compact EV."""
+    the file's; UTF-8, a byte-order mark skipped); None gives the default compact EV."""
     if path is None:
         text = resources.files("lmncell.scenarios").joinpath("vehicles/compact_ev.toml").read_text()
         where = "compact_ev.toml"
     else:
         where = str(path)
         try:
-            text = Path(path).read_text(encoding="utf-8")
+            text = Path(path).read_text(encoding="utf-8-sig")
         except OSError as exc:
             raise DataError(f"{path}: cannot read the vehicle file ({exc.strerror})") from exc
+        except UnicodeDecodeError as exc:
+            raise DataError(f"{path}: cannot read the vehicle file (not UTF-8 text: {exc})"
+                            ) from exc
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
