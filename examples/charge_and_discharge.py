@@ -69,11 +69,16 @@ def plot_fold(held: str, traces: dict[str, list[Trace]], out: Path) -> Path:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=capacity_argument)
-    ap.add_argument("dyn_dir", type=Path)
-    ap.add_argument("--temperatures", default="N15,N05,P05,P25,P45")
-    ap.add_argument("--hold-out", default="P05,P25")
-    ap.add_argument("--plot", type=output_folder_argument, metavar="DIR")
+    ap.add_argument("capacity_ah", type=capacity_argument, help="the cell's capacity (Ah)")
+    ap.add_argument("dyn_dir", type=Path,
+                    help="the folder of Plett's A123 dynamic tests (A123_DYN_*_s1/s3.csv[.gz])")
+    ap.add_argument("--temperatures", default="N15,N05,P05,P25,P45",
+                    help="comma list of the test temperatures in the file names to train on "
+                    "(default: N15,N05,P05,P25,P45)")
+    ap.add_argument("--hold-out", default="P05,P25",
+                    help="comma list of those held out, one fold each (default: P05,P25)")
+    ap.add_argument("--plot", type=output_folder_argument, metavar="DIR",
+                    help="write each fold's held-out charge record with both models here")
     a = ap.parse_args()
     temps = a.temperatures.split(",")
     plot_dir = Path(a.plot) if a.plot else None

@@ -103,11 +103,16 @@ def mean_ocv(ocv_tests: list[str], capacity_ah: float) -> tuple[np.ndarray, np.n
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=capacity_argument)
-    ap.add_argument("s1_files", nargs="+", type=Path)
-    ap.add_argument("--ocv-tests", nargs="*", default=[])
+    ap.add_argument("capacity_ah", type=capacity_argument, help="the cell's capacity (Ah)")
+    ap.add_argument("s1_files", nargs="+", type=Path,
+                    help="Plett's A123 s1 records, each with its s2 beside it")
+    ap.add_argument("--ocv-tests", nargs="*", default=[],
+                    help="slow OCV tests: also print the OCV's slope and what the SoC error "
+                    "costs at rest (mV)")
     ap.add_argument("--rest-s", type=number_argument(float, lambda v: v >= 0, "s ≥ 0"),
-                    default=300.0)
+                    default=300.0, metavar="S",
+                    help="read the voltage S seconds after s1's last loaded sample (default: "
+                    "300)")
     a = ap.parse_args()
     ocv = mean_ocv(a.ocv_tests, a.capacity_ah) if a.ocv_tests else None
     ends = [end_of_test(f, a.capacity_ah, a.rest_s) for f in a.s1_files]

@@ -114,13 +114,16 @@ def _arguments() -> argparse.Namespace:
     ap.add_argument("capacity_ah", type=capacity_or_auto_argument,
                     help="Ah, or 'auto': each fold's training estimates it (with --ocv-tests "
                          "by the free-run error, lmncell.identification.train.fit_capacity)")
-    ap.add_argument("records", nargs="+", type=input_file_argument)
+    ap.add_argument("records", nargs="+", type=input_file_argument,
+                    help="cycler records (any format lmncell reads); each is held out in turn")
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
                     help="start SoC: one for every record or one per record, in order")
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                     help="a training setting, e.g. 'partition=[\"soc\",\"current\"]'")
-    ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument)
-    ap.add_argument("--no-baselines", action="store_true")
+    ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument,
+                    help="slow OCV tests for every fold's training (as train --ocv-tests)")
+    ap.add_argument("--no-baselines", action="store_true",
+                    help="leave out the ARX and 2RC baselines (faster)")
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
                     help="hold out only records whose name contains PATTERN, or one of a "
                     "comma list")

@@ -104,17 +104,25 @@ def main() -> None:
 def _arguments() -> argparse.Namespace:
     """The command line, checked."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("capacity_ah", type=capacity_argument)
-    ap.add_argument("records", nargs="+", type=input_file_argument)
-    ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument)
-    ap.add_argument("--hold-out", default="", metavar="PATTERN")
+    ap.add_argument("capacity_ah", type=capacity_argument, help="the cell's capacity (Ah)")
+    ap.add_argument("records", nargs="+", type=input_file_argument,
+                    help="cycler records (any format lmncell reads); each is held out in turn")
+    ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument,
+                    help="slow OCV tests for every fold's training (as train --ocv-tests)")
+    ap.add_argument("--hold-out", default="", metavar="PATTERN",
+                    help="hold out only records whose name contains PATTERN, or one of a "
+                    "comma list")
     ap.add_argument("--together", action="store_true",
                     help="hold out the records of each --hold-out pattern at once")
-    ap.add_argument("--start-soc", type=soc_argument, default=0.6)
-    ap.add_argument("--soc0-est", type=soc_argument, default=0.3)
+    ap.add_argument("--start-soc", type=soc_argument, default=0.6,
+                    help="start the observers where the reference SoC first reaches this "
+                    "(default: 0.6)")
+    ap.add_argument("--soc0-est", type=soc_argument, default=0.3,
+                    help="the observers' wrong start guess (default: 0.3)")
     ap.add_argument("--soc0", type=soc_list_argument, default=[1.0],
                     help="start SoC: one for every record or one per record, in order")
-    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a training setting, e.g. 'partition=[\"soc\",\"current\"]'")
     ap.add_argument("--through-hidden-pauses", action="store_true",
                     help=THROUGH_PAUSES_HELP)
     ap.add_argument("--plot", type=figure_file_argument, metavar="FILE.png",

@@ -384,6 +384,25 @@ def test_every_example_without_its_arguments_prints_its_usage(script: Path) -> N
     assert out.stderr.startswith("usage: ") and "Traceback" not in out.stderr
 
 
+@pytest.mark.parametrize("script", EXAMPLES, ids=[p.name for p in EXAMPLES])
+def test_every_example_argument_says_what_it_is(script: Path, monkeypatch) -> None:
+    """`-h` explains every argument (four examples listed bare names such as capacity_ah)."""
+    import argparse
+    import runpy
+
+    actions: list[argparse.Action] = []
+
+    def capture(parser: argparse.ArgumentParser, *_args, **_kw):
+        actions.extend(parser._actions)
+        raise SystemExit(0)
+
+    monkeypatch.setattr(argparse.ArgumentParser, "parse_args", capture)
+    monkeypatch.setattr(sys, "argv", [str(script)])
+    with pytest.raises(SystemExit):
+        runpy.run_path(str(script), run_name="__main__")
+    assert actions and [a.dest for a in actions if not a.help] == []
+
+
 THIS_FILE = str(Path(__file__).resolve())    # an existing file, for the record arguments
 
 
