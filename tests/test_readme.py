@@ -47,6 +47,17 @@ def test_demo_writes_report_figures_and_summary(demo) -> None:
     assert str(ROOT) not in model_text and "A123_DYN_50_P45_s1.csv" in model_text
 
 
+def test_the_reports_local_models_are_what_explain_prints(demo, capsys) -> None:
+    """The report's table of local models is `lmncell explain` at the reference temperature
+    (it said plain `lmncell explain MODEL`, which states each at its own centre: 15 °C)."""
+    html = (demo / "report.html").read_text(encoding="utf-8")
+    assert "lmncell explain MODEL --temperature 25</code> prints the same" in html
+    assert main(["explain", str(demo / "a123_lmn.json"), "--temperature", "25", "--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    for row in rows:
+        assert f"<td>{row['r0_mohm']:.1f}</td><td>{row['r_static_mohm']:.1f}</td>" in html
+
+
 def test_readme_figures_are_the_demo_figures(demo) -> None:
     """The README's figures block is what `python -m lmncell.report.readme` renders from this
     code's demo (numbers within 2 % or 0.05: last digits may differ between BLAS builds)."""

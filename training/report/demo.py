@@ -214,7 +214,10 @@ def _local_model_table(rep: Report, model: LmnModel) -> None:
                 ("r_depletion_fast_at_soc_mohm", "R_d2 at its SoC / mΩ", ".2f"),
                 ("ocv_offset_mv", "OCV offset / mV", ".1f")]
     cols += [c for c in optional if c[0] in table[0]]
-    rep.table(table, cols, "Local models (`lmncell explain MODEL` prints the same): operating "
+    ref = f"{model.reference_temperature_c:g}"
+    rep.table(table, cols, f"Local models (`lmncell explain MODEL --temperature {ref}` prints "
+                           "the same; without --temperature it states each at its own "
+                           "temperature centre): operating "
                            "point (validity-weighted centre), instantaneous resistance R0, "
                            "static resistance (R0 plus all RC elements), the RC elements at the "
                            "model's fixed time constants (the filters of the structure), the "
@@ -223,7 +226,7 @@ def _local_model_table(rep: Report, model: LmnModel) -> None:
                            f"model has under {100 * MIN_VALIDITY_SHOWN:g} % validity there, and at "
                            "its own SoC, which a steady current sees there beside R static) "
                            "and the local OCV offset, at the "
-                           "reference temperature (25 °C)"
+                           f"reference temperature ({ref} °C)"
               + (" (resistances × the Arrhenius factor elsewhere)" if model.arrhenius_k else "")
               + ". " + ("Identified as RC ladders: every R, R_d and the hysteresis voltage are "
                         "constrained ≥ 0 (setting local_model_form). " if ladder else "")
