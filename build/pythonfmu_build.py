@@ -167,8 +167,10 @@ def documentation_html(model: LmnModel, model_path: Path, flavour: str = "python
     flavour "pythonfmu" or "native" says what the importer needs (and for pythonfmu, which
     wrapper the linux64 binary is)."""
     tr = model.extra.get("training", {})
-    files = "".join(f"<li>{html.escape(_file_name(f))} <small>sha256 {f['sha256'][:16]}…"
-                    "</small></li>" for f in tr.get("files", []))
+    files = "".join(f"<li>{html.escape(_file_name(f))}{note} <small>sha256 "
+                    f"{f['sha256'][:16]}…</small></li>"
+                    for key, note in (("files", ""), ("ocv_test_files", " (slow OCV test)"))
+                    for f in tr.get(key, []))
     rows = "".join(f"<tr><td>{html.escape(k)}</td><td>{v[0]:.4g} … {v[1]:.4g}</td></tr>"
                    for k, v in model.limits.items())
     acc = _accuracy_rows(tr.get("train_metrics", []))

@@ -42,6 +42,7 @@ def test_fmpy_validate_reports_no_problem(quick_fmu) -> None:
     with zipfile.ZipFile(quick_fmu) as z:
         doc = z.read("documentation/index.html").decode()
     assert f"<li>{PAN_HWFET.name} <small>sha256" in doc        # a training record, no folder
+    assert "slow OCV test" not in doc                         # none given
 
 
 def test_fmu_equals_pipeline_on_a_real_record(quick_model, quick_fmu) -> None:

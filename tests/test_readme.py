@@ -45,6 +45,9 @@ def test_demo_writes_report_figures_and_summary(demo) -> None:
     model_text = (demo / "a123_lmn.json").read_text(encoding="utf-8")
     assert '"baselines"' in model_text and "seconds" not in model_text
     assert str(ROOT) not in model_text and "A123_DYN_50_P45_s1.csv" in model_text
+    with zipfile.ZipFile(demo / "A123_LMNCell.fmu") as z:
+        doc = z.read("documentation/index.html").decode()
+    assert "<li>A123_OCV_P25_S1.csv.gz (slow OCV test) <small>sha256" in doc
 
 
 def test_the_reports_local_models_are_what_explain_prints(demo, capsys) -> None:
