@@ -529,7 +529,8 @@ def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | No
     where the platform has several (darwin64)."""
     if importlib.util.find_spec("ziglang") is None:
         raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
-                               "installed: pip install ziglang (or lmncell[cross])")
+                               "installed: pip install ziglang (or pip install -e '.[cross]' in "
+                               "the LMNCell clone)")
     slices = []
     for target in ZIG_TARGETS[platform]:
         thin = out.parent / target / out.name   # the binary's own name: macOS signs it so

@@ -548,3 +548,15 @@ def test_model_check_warns_where_the_model_leaves_its_limits(quick_model) -> Non
     assert gentle.startswith("the model itself runs the programme at ") and "warning" not in gentle
     hard = voltage_check(model_voltage(model, np.full(600, -14.25), 1.0, 0.2, 2.85), cell)
     assert f"; warning: outside the limits {low:.3f} … {high:.3f} V even where" in hard
+
+
+def test_without_pybamm_the_message_says_how_to_install_it(monkeypatch) -> None:
+    """It said `pip install 'lmncell[sim]'`, which asks PyPI for a package that is not there."""
+    import sys
+
+    from lmncell.design.pybamm_cell import require_pybamm
+
+    monkeypatch.setitem(sys.modules, "pybamm", None)            # import pybamm: ImportError
+    with pytest.raises(DataError, match=r"needs PyBaMM: pip install -e '\.\[sim\]' in the "
+                                        r"LMNCell clone \(or use --virtual-cell builtin\)"):
+        require_pybamm()

@@ -123,6 +123,23 @@ def test_parquet_without_an_engine_is_refused_before_the_run(tmp_path, monkeypat
     assert check_table_path(tmp_path / "r.csv") == tmp_path / "r.csv"
 
 
+def test_a_sweep_without_the_sweep_extra_says_how_to_install_it(native_fmu, tmp_path,
+                                                                 capsys, monkeypatch) -> None:
+    """A plain `pip install -e .` has no Dask and no pandas: `lmncell sweep` ended in a
+    ModuleNotFoundError traceback."""
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name in ("pandas", "dask") else real(name, *a))
+    assert main(["sweep", str(native_fmu), "--out", str(tmp_path / "r.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "not installed: dask, pandas; expected the sweep extra: pip install -e '.[sweep]'" in err
+    assert "Traceback" not in err and not (tmp_path / "r.csv").exists()
+    with pytest.raises(DataError, match="not installed: dask, pandas"):
+        sweep(native_fmu, scenarios(["wltc"], [25.0], [0.9]))
+
+
 def test_cli_writes_table_and_plots(native_fmu, tmp_path, capsys) -> None:
     import pandas as pd
 

@@ -380,11 +380,13 @@ def cmd_sweep(a: argparse.Namespace) -> int:
         check_sweep,
         check_table_path,
         plot_sweep,
+        require_sweep_extra,
         scenarios,
         sweep,
         write_table,
     )
 
+    require_sweep_extra()
     check_table_path(a.out)
     cases = scenarios(a.cycles, a.ambient, a.soc0, a.vehicle or [None], a.repeat,
                       a.pack, a.spread, a.seed, a.cells, a.cutoff)

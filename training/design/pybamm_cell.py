@@ -1,7 +1,8 @@
 """A physics-based virtual cell for judging experiment designs: PyBaMM's DFN (or SPMe) with the
 Prada2013 A123 26650 LFP parameters (Prada et al., J. Electrochem. Soc. 160 (2013) A616), the
 kind of cell the shipped A123 data come from. Needs the optional `sim` extra (`pip install
-lmncell[sim]`); `lmncell.design.virtual_cell` is the built-in stand-in without it.
+-e '.[sim]'` in the LMNCell clone); `lmncell.design.virtual_cell` is the built-in stand-in
+without it.
 
 Parameters changed from Prada2013 (PARAMETER_CHANGES, printed with every result):
 - "Negative particle diffusivity [m2.s-1]" 3e-15 → 3e-13. With Prada's value (fitted at low
@@ -43,8 +44,8 @@ def require_pybamm():
     try:
         import pybamm
     except ImportError as exc:
-        raise DataError("--virtual-cell pybamm needs PyBaMM: pip install 'lmncell[sim]' "
-                        "(or use --virtual-cell builtin)") from exc
+        raise DataError("--virtual-cell pybamm needs PyBaMM: pip install -e '.[sim]' in the "
+                        "LMNCell clone (or use --virtual-cell builtin)") from exc
     pybamm.set_logging_level("ERROR")
     return pybamm
 

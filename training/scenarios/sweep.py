@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.util
 import io
 import itertools
 import json
@@ -299,12 +300,26 @@ def check_steps(cases: list[Scenario], fmu_step_s: float, model_step_s: float) -
                             f"at most {math.floor(MAX_CYCLE_STEPS * h / cycle_s)} repeats")
 
 
+SWEEP_MODULES = ("dask", "distributed", "pandas")   # the `sweep` extra's (pyproject.toml)
+
+
+def require_sweep_extra() -> None:
+    """Nothing, or DataError naming the modules of the `sweep` extra that are not installed
+    (a plain `pip install -e .` leaves them out) and how to install them."""
+    missing = [m for m in SWEEP_MODULES if importlib.util.find_spec(m) is None]
+    if missing:
+        raise DataError(f"sweep runs on Dask and writes a pandas table; not installed: "
+                        f"{', '.join(missing)}; expected the sweep extra: pip install -e "
+                        "'.[sweep]' in the LMNCell clone")
+
+
 def sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = None,
           scheduler: str | None = None, progress: bool = True, client=None):
     """Run the scenarios on Dask and return the table (pandas DataFrame), one row per
     scenario in the given order. workers: LocalCluster processes (default: the cores);
     scheduler: the address of a running Dask scheduler instead (then workers is ignored);
     client: a dask.distributed Client to use as it is (then both are ignored)."""
+    require_sweep_extra()
     import pandas as pd
     from dask.distributed import Client, LocalCluster
     from dask.distributed import progress as dask_progress
@@ -343,8 +358,6 @@ def check_table_path(path: str | Path) -> Path:
     """The table's path, checked before a sweep runs (whose results would otherwise be lost
     when they are written): DataError unless it ends in .csv, or in .parquet with a Parquet
     engine (PARQUET_ENGINES) installed."""
-    import importlib.util
-
     path = Path(path)
     if path.suffix not in (".csv", ".parquet"):
         raise DataError(f"{path}: --out must end in .csv or .parquet")
