@@ -689,3 +689,22 @@ def test_observer_options_out_of_place_are_refused(quick_model, capsys, extra, m
     assert main(["evaluate", str(quick_model), str(PAN_US06), "--soc0", "1", *extra]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+def test_output_that_is_not_utf8_is_escaped_not_a_traceback(quick_model) -> None:
+    """Output redirected to a file on Windows is cp1252, which has no Ω or τ (ASCII here, which
+    has neither them nor ° and …): explain, a command's --help and an error ended in a
+    UnicodeEncodeError traceback."""
+    import os
+    import subprocess
+    import sys
+
+    env = {**os.environ, "PYTHONIOENCODING": "ascii"}
+    for args, status in ((["explain", str(quick_model)], 0), (["train", "--help"], 0),
+                         (["explain", str(quick_model), "--temperature", "−5"], 2)):
+        out = subprocess.run([sys.executable, "-m", "lmncell.cli", *args], capture_output=True,
+                             env=env, timeout=120)
+        assert out.returncode == status and b"Traceback" not in out.stderr, out.stderr
+        assert out.stdout.isascii() and out.stderr.isascii()
+        if args[0] == "explain" and status == 0:
+            assert b"resistances in m\\u03a9" in out.stdout

@@ -739,11 +739,22 @@ def user_warnings_as(prog: str) -> Iterator[None]:
         yield
 
 
+def tolerant_output() -> None:
+    """Let stdout and stderr write what their encoding cannot hold (γ, τ, Ω, σ in the messages)
+    as backslash escapes, not fail with UnicodeEncodeError: output redirected to a file on
+    Windows, or PYTHONIOENCODING=ascii, is not UTF-8."""
+    for stream in (sys.stdout, sys.stderr):
+        encoding = (getattr(stream, "encoding", None) or "").lower().replace("-", "")
+        if encoding.replace("_", "") != "utf8" and hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
+
+
 def run_script(main_function: Callable[[], None], script: str) -> None:
     """Run an example script's main(): a user's mistake (USER_ERRORS) ends it with the message
     on stderr and exit status 2, as on the command line, not with a traceback; its warnings are
     printed as the command line's are (user_warnings_as)."""
     name = Path(script).name
+    tolerant_output()
     try:
         with user_warnings_as(name):
             main_function()
@@ -775,6 +786,7 @@ def out_of_memory(exc: MemoryError) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
+    tolerant_output()
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

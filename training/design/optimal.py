@@ -642,7 +642,7 @@ def write_programme(prog: Programme, out: Path) -> list[Path]:
 
     out = Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    with replaced_whole(out) as part, open(part, "w") as fh:   # no half programme for a cycler
+    with replaced_whole(out) as part, open(part, "w", encoding="utf-8") as fh:   # no half programme
         fh.write("time_s,current_a\n")
         t_start = np.concatenate([[0.0], prog.time_s[:-1]])
         for t, i in zip(t_start, prog.current_a, strict=True):

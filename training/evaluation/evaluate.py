@@ -348,7 +348,7 @@ def write_trace(trace: Trace, path: str | Path, name: str = "lmn") -> Path:
     voltage of the trace's model called name, and its SoC."""
     path = Path(path)
     seg = trace.segment
-    with replaced_whole(path) as part, open(part, "w", newline="") as fh:
+    with replaced_whole(path) as part, open(part, "w", newline="", encoding="utf-8") as fh:
         wr = csv.writer(fh)
         wr.writerow(["time_s", "current_a", "voltage_measured_v", "voltage_model_v", "soc"])
         for row in zip(seg.time_s, seg.current_a, seg.voltage_v, trace.voltage[name],

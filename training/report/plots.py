@@ -193,7 +193,7 @@ def write_local_model_table(model: LmnModel, path: Path) -> Path:
     from lmncell.evaluation.interpret import local_model_table
 
     rows = local_model_table(model)
-    with replaced_whole(path) as part, open(part, "w", newline="") as fh:
+    with replaced_whole(path) as part, open(part, "w", newline="", encoding="utf-8") as fh:
         wr = csv.DictWriter(fh, fieldnames=list(rows[0]))
         wr.writeheader()
         for r in rows:
