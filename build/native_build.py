@@ -19,7 +19,7 @@ import subprocess
 import sys
 import tempfile
 import zipfile
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -521,16 +521,20 @@ def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) ->
         raise NativeBuildError(f"gcc failed ({' '.join(cmd)}):\n{res.stderr}")
 
 
-def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | None = None
-                  ) -> None:
+def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | None = None,
+                  progress: Callable[[str], None] | None = None) -> None:
     """The binary of a platform of ZIG_TARGETS, cross-compiled with zig (the ziglang package:
     `pip install ziglang`; its first build for a target also builds that target's C library
-    into zig's cache, which takes longer); one per target, joined into a universal binary
-    where the platform has several (darwin64)."""
+    into zig's cache, which takes longer: progress, where given, is told before it starts);
+    one per target, joined into a universal binary where the platform has several
+    (darwin64)."""
     if importlib.util.find_spec("ziglang") is None:
         raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
                                "installed: pip install ziglang (or pip install -e '.[cross]' in "
                                "the LMNCell clone)")
+    if progress:
+        progress(f"compiling the {platform} binary with zig (its first build for a target "
+                 "also builds that target's C library: a few minutes)")
     slices = []
     for target in ZIG_TARGETS[platform]:
         thin = out.parent / target / out.name   # the binary's own name: macOS signs it so
@@ -587,10 +591,12 @@ def check_platforms(platforms: Sequence[str]) -> list[str]:
 
 
 def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = False,
-                     platforms: Sequence[str] = ("linux64",)) -> Path:
+                     platforms: Sequence[str] = ("linux64",),
+                     progress: Callable[[str], None] | None = None) -> Path:
     """Generate, compile and zip the native FMU of a model file, with a binary for each of
     platforms (PLATFORMS: linux64 with gcc, win64 and darwin64 cross-compiled with zig);
-    returns its path.
+    returns its path. progress, where given, is told of each cross-compilation before it
+    starts (compile_cross: zig's first build for a target takes minutes).
 
     trivial: leave the model step out (a benchmark floor with the same FMI surface)."""
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
@@ -616,7 +622,7 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
             if platform == "linux64":
                 compile_linux64(src, binary, extra)
             else:
-                compile_cross(platform, src, binary, extra)
+                compile_cross(platform, src, binary, extra, progress)
             binaries.append((f"binaries/{platform}/{binary.name}", binary.read_bytes()))
         members = [("modelDescription.xml", model_description(model, guid, version).encode()),
                    *binaries,

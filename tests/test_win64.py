@@ -84,6 +84,22 @@ def test_without_zig_a_win64_build_says_what_to_install(quick_model, tmp_path, m
     assert "pip install ziglang" in capsys.readouterr().err
 
 
+def test_a_cross_compilation_says_first_that_it_can_take_minutes(tmp_path, monkeypatch) -> None:
+    """zig's first build for a target builds its C library (minutes): `build-fmu --native
+    --platforms linux64,win64` was silent all that while."""
+    from lmncell.fmu import native_build
+    from lmncell.fmu.interface import NativeBuildError
+
+    said: list[str] = []
+    monkeypatch.setattr(native_build.subprocess, "run",
+                        lambda cmd, **_kw: subprocess.CompletedProcess(cmd, 1, "", "stub"))
+    with pytest.raises(NativeBuildError, match="zig cc failed"):
+        native_build.compile_cross("win64", tmp_path, tmp_path / "LMNCell.dll",
+                                   progress=said.append)
+    assert said == ["compiling the win64 binary with zig (its first build for a target also "
+                    "builds that target's C library: a few minutes)"]
+
+
 @pytest.fixture(scope="module")
 def hosts(both_fmu, tmp_path_factory) -> tuple[Path, str]:
     """A folder with the FMU unzipped (fmu/), host.c built for Linux (host) and for Windows

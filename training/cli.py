@@ -309,7 +309,7 @@ def cmd_build_fmu(a: argparse.Namespace) -> int:
             from lmncell.fmu.native_build import build_native_fmu
 
             path = build_native_fmu(model, a.out, platforms=a.platforms if a.platforms is not None
-                                    else ["linux64"])
+                                    else ["linux64"], progress=lambda m: print(m, flush=True))
         else:
             from lmncell.fmu.pythonfmu_build import build_fmu, native_host_hint
 
