@@ -386,7 +386,7 @@ def patched_binary(guid: str, model_identifier: str) -> dict[str, bytes]:
             paths = compile_wrapper(guid, Path(tmp), model_identifier)
         except WrapperBuildError as exc:
             warnings.warn(f"the pythonfmu FMU keeps {STOCK} (ordinary call errors are logged and "
-                          f"ignored, see the README): {exc}", RuntimeWarning, stacklevel=3)
+                          f"ignored, see the README): {exc}", UserWarning, stacklevel=3)
             return {}
         return {f"binaries/linux64/{p.name}": p.read_bytes() for p in paths}
 

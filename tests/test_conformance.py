@@ -122,7 +122,7 @@ def stock_fmu(quick_model, tmp_path_factory):
     which = shutil.which
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(pb.shutil, "which", lambda name: None if name in ("g++", "c++") else which(name))
-        with pytest.warns(RuntimeWarning, match="no C\\+\\+ compiler"):
+        with pytest.warns(UserWarning, match="no C\\+\\+ compiler"):   # printed as the CLI's
             return pb.build_fmu(quick_model, tmp_path_factory.mktemp("stock") / "stock.fmu")
 
 
@@ -137,6 +137,21 @@ def test_without_a_cxx_compiler_the_fmu_keeps_pythonfmus_wrapper(stock_fmu) -> N
     res = _run(stock_fmu, "ordinary_errors")
     assert res["soc0_after"] == 0.8 and res["steps_after"] == 0 and res["finite"]
     assert max(res["unknown_get"]) < ERROR and res["bad_param_exit"] < ERROR
+
+
+def test_without_compilers_build_fmu_warns_as_the_command_line_does(quick_model, tmp_path,
+                                                                    monkeypatch, capsys) -> None:
+    """A machine without gcc and g++ (a fresh one may have none): the warning that the FMU
+    keeps pythonfmu's wrapper is the command line's, without Python's file, line and source."""
+    from lmncell.cli import main
+    from lmncell.fmu import pythonfmu_build as pb
+
+    monkeypatch.setattr(pb.shutil, "which", lambda name: None)
+    assert main(["build-fmu", str(quick_model), "--out", str(tmp_path / "c.fmu")]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith("lmncell build-fmu: warning: the pythonfmu FMU keeps PythonFMU")
+    assert "no C++ compiler (g++ or c++) and no C compiler (gcc or cc) found" in err
+    assert "pythonfmu_build.py" not in err
 
 
 def test_pythonfmus_own_wrapper_survives_damaged_fmu_states(stock_fmu) -> None:
