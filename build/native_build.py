@@ -508,17 +508,37 @@ def _soc_weights(m: LmnModel) -> list[float]:
     return [a[k] for _, a in m.raw_node_weights()] + [0.0]
 
 
+ZIG_LINUX64_TARGET = "x86_64-linux-gnu.2.17"   # zig's linux64 target: glibc 2.17, as gcc's
+NO_COMPILER_ADVICE = "install gcc and g++, or pip install ziglang (a C and C++ compiler from pip)"
+
+
+def compiler(language: str) -> list[str] | None:
+    """The command that compiles `language` ("c" or "c++") into linux64 libraries here: gcc
+    or cc (g++ or c++) where installed; else zig's (the ziglang package, in the dev and cross
+    extras), so that a machine with Python and pip alone builds both FMUs, its binaries
+    stripped (no build id: byte-identical builds); None without either."""
+    for name in ("gcc", "cc") if language == "c" else ("g++", "c++"):
+        found = shutil.which(name)
+        if found:
+            return [found]
+    if importlib.util.find_spec("ziglang") is None:
+        return None
+    return [sys.executable, "-m", "ziglang", "cc" if language == "c" else "c++", "-target",
+            ZIG_LINUX64_TARGET, "-s"]
+
+
 def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) -> None:
-    gcc = shutil.which("gcc") or shutil.which("cc")
-    if gcc is None:
-        raise NativeBuildError("no C compiler (gcc) found: install gcc to build the native FMU")
-    cmd = [gcc, "-std=c99", "-O3", "-fPIC", "-shared", "-Wall", "-Wno-unused-function",
+    cc = compiler("c")
+    if cc is None:
+        raise NativeBuildError(f"no C compiler found: {NO_COMPILER_ADVICE}, to build the "
+                               "native FMU")
+    cmd = [*cc, "-std=c99", "-O3", "-fPIC", "-shared", "-Wall", "-Wno-unused-function",
            "-DLMNCELL_GLIBC_BASELINE", *(extra or []),
            "-fvisibility=default", f"-I{fmi_headers()}", f"-I{src_dir}",
            str(src_dir / "lmncell.c"), "-o", str(out), "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
-        raise NativeBuildError(f"gcc failed ({' '.join(cmd)}):\n{res.stderr}")
+        raise NativeBuildError(f"the C compiler failed ({' '.join(cmd)}):\n{res.stderr}")
 
 
 def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | None = None,
@@ -594,7 +614,8 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
                      platforms: Sequence[str] = ("linux64",),
                      progress: Callable[[str], None] | None = None) -> Path:
     """Generate, compile and zip the native FMU of a model file, with a binary for each of
-    platforms (PLATFORMS: linux64 with gcc, win64 and darwin64 cross-compiled with zig);
+    platforms (PLATFORMS: linux64 with gcc, or zig where gcc is missing (compiler); win64 and
+    darwin64 cross-compiled with zig);
     returns its path. progress, where given, is told of each cross-compilation before it
     starts (compile_cross: zig's first build for a target takes minutes).
 
@@ -602,6 +623,11 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
 
     chosen = check_platforms(platforms)
+    cross = [p for p in chosen if p != "linux64"]
+    if cross and importlib.util.find_spec("ziglang") is None:
+        raise NativeBuildError(f"a {cross[0]} binary is cross-compiled with zig, which is not "
+                               "installed: pip install ziglang (or pip install -e '.[cross]' in "
+                               "the LMNCell clone)")
     model_file, archive = Path(model_path), fmu_path(out)
     model = load_model(model_file)
     when = build_time()

@@ -108,9 +108,10 @@ def quick_fmu(quick_model, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def native_fmu(quick_model, tmp_path_factory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
-    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.fmu.native_build import build_native_fmu, compiler
+
+    if compiler("c") is None:
+        pytest.skip("no gcc and no ziglang: the native FMU cannot be compiled here")
 
     return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
 

@@ -117,11 +117,12 @@ def test_source_date_epoch_makes_the_pythonfmu_build_reproducible(quick_model, t
 @pytest.fixture(scope="module")
 def stock_fmu(quick_model, tmp_path_factory):
     """The pythonfmu FMU built where no C++ compiler is found: it keeps pythonfmu's wrapper."""
+    from lmncell.fmu import native_build
     from lmncell.fmu import pythonfmu_build as pb
 
-    which = shutil.which
+    found = native_build.compiler
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(pb.shutil, "which", lambda name: None if name in ("g++", "c++") else which(name))
+        mp.setattr(native_build, "compiler", lambda lang: None if lang == "c++" else found(lang))
         with pytest.warns(UserWarning, match="no C\\+\\+ compiler"):   # printed as the CLI's
             return pb.build_fmu(quick_model, tmp_path_factory.mktemp("stock") / "stock.fmu")
 
@@ -144,13 +145,14 @@ def test_without_compilers_build_fmu_warns_as_the_command_line_does(quick_model,
     """A machine without gcc and g++ (a fresh one may have none): the warning that the FMU
     keeps pythonfmu's wrapper is the command line's, without Python's file, line and source."""
     from lmncell.cli import main
-    from lmncell.fmu import pythonfmu_build as pb
+    from lmncell.fmu import native_build
 
-    monkeypatch.setattr(pb.shutil, "which", lambda name: None)
+    monkeypatch.setattr(native_build, "compiler", lambda _lang: None)   # no gcc, no ziglang
     assert main(["build-fmu", str(quick_model), "--out", str(tmp_path / "c.fmu")]) == 0
     err = capsys.readouterr().err
     assert err.startswith("lmncell build-fmu: warning: the pythonfmu FMU keeps PythonFMU")
-    assert "no C++ compiler (g++ or c++) and no C compiler (gcc or cc) found" in err
+    assert ("no C++ compiler (g++ or c++) and no C compiler (gcc or cc) found: install gcc and "
+            "g++, or pip install ziglang") in err
     assert "pythonfmu_build.py" not in err
 
 

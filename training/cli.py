@@ -574,7 +574,8 @@ def _add_build_fmu_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--out", required=True, type=fmu_file_argument, metavar="CELL.fmu",
                    help="FMU to write")
     s.add_argument("--native", action="store_true", help="generated C, no Python needed by the "
-                   "importer (linux64 binary built here with gcc, sources included)")
+                   "importer (linux64 binary built here with gcc, or zig where gcc is missing; "
+                   "sources included)")
     s.add_argument("--platforms", type=_name_list, metavar="linux64,win64,darwin64",
                    help="with --native: the binaries to put in (default linux64; win64 and "
                    "darwin64, a universal binary for Intel and Apple silicon Macs, are "

@@ -286,8 +286,8 @@ def _counter_current_figures(model: LmnModel, record: Record) -> tuple[float, di
 
 
 def _fmu_section(rep: Report, model_path: Path, record: Path, out: Path) -> tuple[Path, dict]:
-    """Build the pythonfmu FMU (and the native one where gcc exists), check both against the
-    pipeline on the unseen record; returns the pythonfmu FMU and its check."""
+    """Build the pythonfmu FMU (and the native one where a C compiler exists), check both
+    against the pipeline on the unseen record; returns the pythonfmu FMU and its check."""
     _say("building the FMU …")
     from lmncell.fmu.pythonfmu_build import build_fmu
 
@@ -407,7 +407,7 @@ def _native(model_path: Path, out: Path, record: Path) -> str:
     """Build the native FMU where a C compiler exists and check it against the pipeline."""
     from lmncell.fmu.native_build import NativeBuildError, build_native_fmu
 
-    _say("building the native FMU (generated C, gcc) …")
+    _say("building the native FMU (generated C) …")
     try:
         fmu = build_native_fmu(model_path, out / "A123_LMNCell_native.fmu")
     except NativeBuildError as exc:
