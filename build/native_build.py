@@ -541,6 +541,14 @@ def compile_linux64(src_dir: Path, out: Path, extra: list[str] | None = None) ->
         raise NativeBuildError(f"the C compiler failed ({' '.join(cmd)}):\n{res.stderr}")
 
 
+def require_zig(platform: str) -> None:
+    """Nothing, or NativeBuildError saying how to install zig, which cross-compiles platform."""
+    if importlib.util.find_spec("ziglang") is None:
+        raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
+                               "installed: pip install ziglang (or pip install -e '.[cross]' in "
+                               "the LMNCell clone)")
+
+
 def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | None = None,
                   progress: Callable[[str], None] | None = None) -> None:
     """The binary of a platform of ZIG_TARGETS, cross-compiled with zig (the ziglang package:
@@ -548,10 +556,7 @@ def compile_cross(platform: str, src_dir: Path, out: Path, extra: list[str] | No
     into zig's cache, which takes longer: progress, where given, is told before it starts);
     one per target, joined into a universal binary where the platform has several
     (darwin64)."""
-    if importlib.util.find_spec("ziglang") is None:
-        raise NativeBuildError(f"a {platform} binary is cross-compiled with zig, which is not "
-                               "installed: pip install ziglang (or pip install -e '.[cross]' in "
-                               "the LMNCell clone)")
+    require_zig(platform)
     if progress:
         progress(f"compiling the {platform} binary with zig (its first build for a target "
                  "also builds that target's C library: a few minutes)")
@@ -623,11 +628,9 @@ def build_native_fmu(model_path: str | Path, out: str | Path, trivial: bool = Fa
     from lmncell.fmu.pythonfmu_build import documentation_html, model_hash
 
     chosen = check_platforms(platforms)
-    cross = [p for p in chosen if p != "linux64"]
-    if cross and importlib.util.find_spec("ziglang") is None:
-        raise NativeBuildError(f"a {cross[0]} binary is cross-compiled with zig, which is not "
-                               "installed: pip install ziglang (or pip install -e '.[cross]' in "
-                               "the LMNCell clone)")
+    for platform in chosen:
+        if platform != "linux64":
+            require_zig(platform)           # before any binary is compiled
     model_file, archive = Path(model_path), fmu_path(out)
     model = load_model(model_file)
     when = build_time()
