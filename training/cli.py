@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import codecs
 import os
 import sys
 import warnings
@@ -745,9 +746,16 @@ def tolerant_output() -> None:
     as backslash escapes, not fail with UnicodeEncodeError: output redirected to a file on
     Windows, or PYTHONIOENCODING=ascii, is not UTF-8."""
     for stream in (sys.stdout, sys.stderr):
-        encoding = (getattr(stream, "encoding", None) or "").lower().replace("-", "")
-        if encoding.replace("_", "") != "utf8" and hasattr(stream, "reconfigure"):
+        if hasattr(stream, "reconfigure") and _codec(stream.encoding) != "utf-8":
             stream.reconfigure(errors="backslashreplace")
+
+
+def _codec(encoding: str | None) -> str | None:
+    """The codec's canonical name ("utf-8" for "UTF8", "u8", …), None where it has none."""
+    try:
+        return codecs.lookup(encoding or "").name
+    except LookupError:
+        return None
 
 
 def run_script(main_function: Callable[[], None], script: str) -> None:

@@ -544,14 +544,10 @@ def parse_setting(text: str) -> tuple[str, object]:
 def given_settings(path: str | Path | None = None, **overrides) -> GivenSettings:
     """The settings given: a TOML file's [train] table (or its top level), then the overrides
     that are not None; the file is read once here."""
-    values = GivenSettings()
-    if path is not None:
-        values.update(_with_paths_from(Path(path), _toml_table(Path(path))))
-    values.origins = {k: str(path) for k in values}
+    from_file = {} if path is None else _with_paths_from(Path(path), _toml_table(Path(path)))
     given = {k: v for k, v in overrides.items() if v is not None}
-    values.update(given)
-    for key in given:
-        values.origins.pop(key, None)
+    values = GivenSettings({**from_file, **given})
+    values.origins = {k: str(path) for k in from_file if k not in given}
     return values
 
 
