@@ -433,3 +433,23 @@ def test_the_leave_one_out_examples_refuse_bad_arguments_before_training(
                          capture_output=True, text=True, timeout=120)
     assert out.returncode == 2, out.stderr
     assert expected in out.stderr and "Traceback" not in out.stderr
+
+
+def test_the_oldest_constraints_pin_the_declared_floors() -> None:
+    """tests/oldest-constraints.txt pins exactly the floors (>=) of pyproject.toml's dependencies,
+    so that installing with it checks the oldest releases pip may choose on a user's machine."""
+    from packaging.requirements import Requirement
+    from packaging.version import Version
+
+    root = Path(__file__).resolve().parent.parent
+    declared = [Requirement(r) for r in
+                tomllib.loads((root / "pyproject.toml").read_text())["project"]["dependencies"]]
+    floors = {r.name: Version(s.version) for r in declared for s in r.specifier
+              if s.operator == ">="}
+    lines = (root / "tests" / "oldest-constraints.txt").read_text().splitlines()
+    pins = {}
+    for line in lines:
+        if line.strip() and not line.startswith("#"):
+            name, version = line.split("==")
+            pins[name.strip()] = Version(version)
+    assert floors and pins == floors
