@@ -424,3 +424,32 @@ def test_an_fmu_name_without_the_fmu_extension_is_refused(quick_model, tmp_path,
     with pytest.raises(ValueError, match=r"cell\.zip: an FMU's file name must end in \.fmu"):
         lmncell.build_fmu(quick_model, tmp_path / "cell.zip", native=native)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_older_host_python_is_told_what_to_do(quick_fmu, tmp_path, monkeypatch) -> None:
+    """The FMU's slave module checks the host's Python before it imports the runtime: on one
+    older than the runtime needs, an ImportError that pythonfmu's wrapper logs, naming both
+    versions and the ways out, not an error from inside the runtime (seen on Python 3.9:
+    "cannot import name 'TypeGuard' from 'typing'")."""
+    import runpy
+
+    with zipfile.ZipFile(quick_fmu) as z:
+        module = z.read("resources/slavemodule.txt").decode().strip()
+        (tmp_path / "slave.py").write_bytes(z.read(f"resources/{module}.py"))
+    monkeypatch.setattr(sys, "version_info", (3, 9, 18, "final", 0))
+    with pytest.raises(ImportError, match=r"runs its model on Python 3\.10 or later; this host's "
+                       r"Python is .*lmncell build-fmu --native"):
+        runpy.run_path(str(tmp_path / "slave.py"))
+
+
+def test_the_runtime_is_written_for_the_oldest_host_python() -> None:
+    """What runs inside the pythonfmu FMU parses as the grammar of the oldest Python the FMU
+    admits (MIN_HOST_PYTHON)."""
+    import ast
+
+    from lmncell.fmu.pythonfmu_build import MIN_HOST_PYTHON, RUNTIME_DIR
+
+    sources = sorted(RUNTIME_DIR.glob("*.py"))
+    assert sources
+    for source in sources:
+        ast.parse(source.read_text(encoding="utf-8"), str(source), feature_version=MIN_HOST_PYTHON)
