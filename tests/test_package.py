@@ -453,3 +453,39 @@ def test_the_oldest_constraints_pin_the_declared_floors() -> None:
             name, version = line.split("==")
             pins[name.strip()] = Version(version)
     assert floors and pins == floors
+
+
+def test_a_wheel_ships_the_data_and_finds_them(tmp_path, monkeypatch) -> None:
+    """`pip install .` (not -e) or a wheel: the drive cycles that `lmncell simulate --cycle`
+    and the sweep read, and the demo's measurements, travel in the package (lmncell/datasets,
+    with their README, licences and citation), and data_dir() finds them there. Before, such an
+    install looked for site-packages/data and `simulate --cycle us06` failed."""
+    import importlib.util
+    import zipfile
+
+    root = Path(__file__).resolve().parent.parent
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=root, capture_output=True,
+                             check=True).stdout.decode().split("\0")
+    if not tracked or not tracked[0]:
+        pytest.skip("not a git clone: the tracked files are unknown")
+    src = tmp_path / "src"
+    for name in filter(None, tracked):
+        (src / name).parent.mkdir(parents=True, exist_ok=True)
+        (src / name).write_bytes((root / name).read_bytes())
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "-w",
+                    str(tmp_path / "wheel"), str(src)], check=True, capture_output=True,
+                   timeout=600)
+    (wheel,) = (tmp_path / "wheel").glob("lmncell-*.whl")
+    with zipfile.ZipFile(wheel) as z:
+        shipped = set(z.namelist())
+        z.extractall(tmp_path / "site")
+    data = sorted(n[len("data/"):] for n in tracked if n.startswith("data/"))
+    assert data and {f"lmncell/datasets/{n}" for n in data} <= shipped
+    traces = tmp_path / "site" / "lmncell" / "scenarios" / "traces.py"
+    spec = importlib.util.spec_from_file_location("installed_traces", traces)
+    assert spec and spec.loader
+    module = importlib.util.module_from_spec(spec)
+    monkeypatch.setitem(sys.modules, "installed_traces", module)   # for its dataclasses
+    spec.loader.exec_module(module)
+    assert module.data_dir() == tmp_path / "site" / "lmncell" / "datasets"
+    assert (module.data_dir() / "drive_cycles" / module.CYCLES["us06"]).is_file()

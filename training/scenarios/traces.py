@@ -28,8 +28,12 @@ UNIT_KEYS = {"km/h": "kmh", "m/s": "mps", "mi/h": "mph", "sec": "s"}   # a name'
 
 
 def data_dir() -> Path:
-    """The shipped data folder (repository `data/`, beside the package's source folder)."""
-    return Path(__file__).resolve().parents[2] / "data"
+    """The shipped data folder: the installed package's copy of the clone's `data/`,
+    `lmncell/datasets` (`pip install .` or a wheel), else `data/` itself beside the package's
+    source folder (an editable install)."""
+    package = Path(__file__).resolve().parents[1]
+    installed = package / "datasets"
+    return installed if installed.is_dir() else package.parent / "data"
 
 
 @dataclass(frozen=True)
