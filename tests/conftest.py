@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -78,6 +77,15 @@ def import_or_skip(name: str, reason: str):
         pytest.skip(f"{reason}: {type(exc).__name__}: {exc}")
 
 
+def c_compiler_or_skip() -> None:
+    """Skip the test where no C compiler builds the native FMU here (neither gcc nor ziglang:
+    lmncell.fmu.native_build.compiler)."""
+    from lmncell.fmu.native_build import compiler
+
+    if compiler("c") is None:
+        pytest.skip("no gcc and no ziglang: the native FMU cannot be compiled here")
+
+
 def shared_or_skip(rel: str = "") -> Path:
     path = SHARED / rel
     if not path.exists():
@@ -108,11 +116,9 @@ def quick_fmu(quick_model, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def native_fmu(quick_model, tmp_path_factory) -> Path:
-    from lmncell.fmu.native_build import build_native_fmu, compiler
+    from lmncell.fmu.native_build import build_native_fmu
 
-    if compiler("c") is None:
-        pytest.skip("no gcc and no ziglang: the native FMU cannot be compiled here")
-
+    c_compiler_or_skip()
     return build_native_fmu(quick_model, tmp_path_factory.mktemp("native") / "cell.fmu")
 
 
@@ -137,8 +143,7 @@ def fast_depletion_model(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def fast_depletion_native_fmu(fast_depletion_model, tmp_path_factory) -> Path:
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     from lmncell.fmu.native_build import build_native_fmu
 
     return build_native_fmu(fast_depletion_model, tmp_path_factory.mktemp("d2fmu") / "d2.fmu")

@@ -94,11 +94,10 @@ def cross_built_fmu(model: Path, folder: Path, platform: str) -> Path:
     """The model's native FMU with linux64 and `platform` binaries (the latter cross-compiled
     with zig), in folder; skip without a C compiler (gcc, or zig)."""
     import lmncell
-    from lmncell.fmu.native_build import compiler
 
-    if compiler("c") is None:
-        pytest.skip("no gcc and no ziglang: the native FMU cannot be compiled here")
+    from tests.conftest import c_compiler_or_skip
 
+    c_compiler_or_skip()
     return lmncell.build_fmu(model, folder / "cell.fmu", native=True,
                              platforms=("linux64", platform))
 

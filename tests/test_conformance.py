@@ -20,7 +20,7 @@ import pytest
 from fmpy import read_model_description
 
 from tests.conformance_sequences import MODES
-from tests.conftest import ROOT
+from tests.conftest import ROOT, c_compiler_or_skip
 from tests.fmu_helpers import fmu_reports
 
 WARNING, ERROR, DISCARD = 1, 3, 2
@@ -206,8 +206,7 @@ def test_the_patched_wrapper_is_only_built_for_linux64(monkeypatch, tmp_path) ->
 def temperature_terms_fmus(tmp_path_factory) -> list[Path]:
     """Both FMUs of a small model with quadratic temperature terms (forced; the shipped records
     lie near 25 °C), where the voltage at an absurd temperature is not finite."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     from lmncell.api import build_fmu
     from lmncell.identification.train import train_files
 

@@ -24,7 +24,7 @@ from lmncell.runtime.model import load_model
 from lmncell.runtime.observers import SocObserver
 from lmncell.runtime.step import CellStepper, simulate_ambient
 
-from tests.conftest import A123_S1, PAN_US06, import_or_skip
+from tests.conftest import A123_S1, PAN_US06, c_compiler_or_skip, import_or_skip
 from tests.fmu_helpers import (
     HOST_C,
     THREADS_C,
@@ -218,8 +218,7 @@ def test_native_observers_beyond_the_trained_temperatures_equal_the_runtime(
 
 def test_native_ekf_with_hysteresis_equals_the_runtime(a123_model, tmp_path) -> None:
     # the EKF's state then carries h as well as SoC and the low-pass states
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     from lmncell.fmu.native_build import build_native_fmu
 
     model = load_model(a123_model)
@@ -454,8 +453,7 @@ def test_native_equals_pipeline_with_temperature_terms(tmp_path, hysteresis,
     # a model with quadratic temperature terms (forced: the shipped records are all near 25 °C;
     # the cell warms by several kelvin under load, so dT varies along the record); with
     # hysteresis, its terms in dA, and the EKF's gradient through them
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     from lmncell.fmu.native_build import build_native_fmu
     from lmncell.identification.train import train_files
 
@@ -591,8 +589,7 @@ def test_fuzzed_call_sequences_find_nothing(request, tmp_path, model_fixture) ->
     among them, so that the check on the outputs was reached."""
     from lmncell.fmu.native_build import build_native_fmu, fmi_headers
 
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     clang = _libfuzzer_clang(tmp_path)
     if clang is None:
         pytest.skip("no clang with libFuzzer (apt install clang libclang-rt-dev)")
@@ -627,8 +624,7 @@ def test_native_ekf_with_the_filtered_current_in_the_partition_equals_the_runtim
         tmp_path) -> None:
     # the low-pass states then move the validities too: their columns of H are central
     # differences of the whole network, not the blended regressor coefficients
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     from lmncell.fmu.native_build import build_native_fmu
     from lmncell.identification.train import train_files
 
@@ -661,8 +657,7 @@ def test_native_over_uneven_steps_equals_the_runtime(quick_model, native_fmu, tm
     model = load_model(quick_model)
     assert model.current_delay_s > 0
     if not delay:
-        if shutil.which("gcc") is None:
-            pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+        c_compiler_or_skip()
         model = dataclasses.replace(model, current_delay_s=0.0)
         native_fmu = build_native_fmu(save_model(model, tmp_path / "plain.json"),
                                       tmp_path / "plain.fmu")
@@ -693,8 +688,7 @@ def test_native_step_end_within_rounding_equals_the_runtime(quick_model, tmp_pat
 
     from tests.test_fmu import ROUNDING_POINTS_S
 
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     model = dataclasses.replace(load_model(quick_model), sample_time_s=0.1, current_delay_s=0.0)
     fmu = build_native_fmu(save_model(model, tmp_path / "fast.json"), tmp_path / "fast.fmu")
     cosim, whole = CellCosim(model, Parameters(0.9, 2.85)), CellCosim(model, Parameters(0.9, 2.85))
@@ -720,8 +714,7 @@ def test_out_of_range_when_the_model_voltage_leaves_its_trained_range(quick_mode
     """Current, SoC and temperature inside their trained ranges, the model's voltage beyond
     its own by more than 0.1 V: both FMUs raise out_of_range, log one warning naming the
     voltage, and drop the flag when the voltage is back."""
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     from lmncell.fmu.native_build import build_native_fmu
     from lmncell.fmu.pythonfmu_build import build_fmu
 
@@ -769,8 +762,7 @@ def test_native_temperature_forms_equal_the_runtime(quick_model, tmp_path, form,
     from lmncell.fmu.native_build import build_native_fmu
     from lmncell.runtime.model import save_model
 
-    if shutil.which("gcc") is None:
-        pytest.skip("gcc is not installed: the native FMU cannot be compiled here")
+    c_compiler_or_skip()
     plain = load_model(quick_model)
     assert plain.tau_activation_k is not None
     with_form, without_form = TEMPERATURE_FORMS[form]
