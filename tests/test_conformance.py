@@ -492,7 +492,7 @@ def test_documentation_says_what_each_flavour_needs(quick_fmu, native_fmu) -> No
         with zipfile.ZipFile(path) as z:
             return z.read("documentation/index.html").decode()
 
-    assert "with numpy and pythonfmu on the importing side" in doc(quick_fmu)
+    assert "with numpy on the importing side" in doc(quick_fmu)
     assert "LMNCELL_LIBPYTHON" in doc(quick_fmu)
     assert "no Python needed" in doc(native_fmu) and "PythonFMU" not in doc(native_fmu)
     for path in (quick_fmu, native_fmu):       # the limits beyond which both refuse a step

@@ -442,6 +442,58 @@ def test_an_older_host_python_is_told_what_to_do(quick_fmu, tmp_path, monkeypatc
         runpy.run_path(str(tmp_path / "slave.py"))
 
 
+HOST_WITHOUT_PYTHONFMU = """
+import importlib.abc, importlib.machinery, importlib.util, os, sys
+import numpy as np
+from fmpy import simulate_fmu
+
+INSTALLED = os.path.dirname(importlib.util.find_spec("pythonfmu").origin)
+
+
+class InstalledPythonfmuRefused(importlib.abc.MetaPathFinder):
+    \"\"\"The host's own pythonfmu cannot be imported; a copy elsewhere (the FMU's) can.\"\"\"
+    def find_spec(self, name, path, target=None):
+        if name.partition(".")[0] != "pythonfmu":
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        if spec is not None and (spec.origin or "").startswith(INSTALLED):
+            raise ImportError(f"{name}: the host's pythonfmu ({INSTALLED}) is refused")
+        return spec
+
+
+sys.meta_path.insert(0, InstalledPythonfmuRefused())
+current = np.array([(0.0, -2.0), (60.0, -2.0)], dtype=[("time", "f8"), ("current", "f8")])
+res = simulate_fmu(sys.argv[1], stop_time=60.0, output_interval=1.0, input=current,
+                   start_values={"soc0": 0.9})
+print(repr(float(res["voltage"][-1])))
+"""
+
+
+def test_a_python_host_needs_numpy_but_not_pythonfmu(quick_fmu, tmp_path) -> None:
+    """pythonfmu's Python part travels in the FMU's resources, so a Python host whose own
+    pythonfmu cannot be imported runs it and gets the same voltage; the same FMU without that
+    copy fails there, so the host's copy is what the refusal keeps out."""
+    from fmpy import simulate_fmu
+
+    current = np.array([(0.0, -2.0), (60.0, -2.0)], dtype=[("time", "f8"), ("current", "f8")])
+    want = simulate_fmu(str(quick_fmu), stop_time=60.0, output_interval=1.0, input=current,
+                        start_values={"soc0": 0.9})["voltage"][-1]
+    script = tmp_path / "host.py"
+    script.write_text(HOST_WITHOUT_PYTHONFMU)
+    run = subprocess.run([sys.executable, str(script), str(quick_fmu)], capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode == 0, run.stderr[-2000:]
+    assert float(run.stdout.split()[-1]) == want
+    bare = tmp_path / "bare.fmu"
+    with zipfile.ZipFile(quick_fmu) as zin, zipfile.ZipFile(bare, "w") as zout:
+        for item in zin.infolist():
+            if not item.filename.startswith("resources/pythonfmu/"):
+                zout.writestr(item, zin.read(item))
+    run = subprocess.run([sys.executable, str(script), str(bare)], capture_output=True,
+                         text=True, timeout=300)
+    assert run.returncode != 0 and "the host's pythonfmu" in run.stdout + run.stderr
+
+
 def test_the_runtime_is_written_for_the_oldest_host_python() -> None:
     """What runs inside the pythonfmu FMU parses as the grammar of the oldest Python the FMU
     admits (MIN_HOST_PYTHON)."""

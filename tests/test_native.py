@@ -320,7 +320,11 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     building Python into a C host without one, so the FMU runs a drive cycle there as the
     pipeline does, and valgrind (where installed) finds nothing in the FMU or at the host's
     exit. With no Python to load, fmi2Instantiate logs what to set and returns NULL."""
-    from lmncell.fmu.pythonfmu_build import native_host_environment, native_host_hint
+    from lmncell.fmu.pythonfmu_build import (
+        MIN_HOST_PYTHON_TEXT,
+        native_host_environment,
+        native_host_hint,
+    )
 
     env = native_host_environment()
     if env is None:
@@ -349,6 +353,7 @@ def test_pythonfmu_fmu_runs_in_a_c_host(host, quick_fmu, us06, tmp_path) -> None
     assert missing.returncode == 2 and "instantiate failed" in missing.stderr
     assert re.search(r"LOG \[host\] 3 \w+: LMNCELL_LIBPYTHON=\S+ cannot be loaded.*native FMU",
                      missing.stdout)
+    assert f"needs Python {MIN_HOST_PYTHON_TEXT} or later with numpy:" in missing.stdout
     # a message with '%' in it (here the resource path, %25 decoded) reaches the host's logger
     # as text, as does the refusal of a location that is not a percent-encoded URI
     odd = _run_host(host, quick_fmu, cur, tmp_path, 1.0,

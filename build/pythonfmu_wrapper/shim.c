@@ -38,6 +38,9 @@
 #ifndef LMNCELL_INNER
 #define LMNCELL_INNER "LMNCell_python.so"
 #endif
+#ifndef LMNCELL_MIN_PYTHON /* the oldest Python the FMU's runtime runs on (MIN_HOST_PYTHON) */
+#define LMNCELL_MIN_PYTHON "3.10"
+#endif
 
 #define FMI2_FUNCTIONS(X) \
     X(SetDebugLogging) X(Instantiate) X(FreeInstance) X(SetupExperiment) \
@@ -100,8 +103,8 @@ static int ensure_python(void) {
         }
     }
     if (n < sizeof why)
-        snprintf(why + n, sizeof why - n, ": this host has no Python. The FMU needs Python 3 with "
-                 "numpy and pythonfmu: set LMNCELL_LIBPYTHON to that Python's libpython3.x.so and "
+        snprintf(why + n, sizeof why - n, ": this host has no Python. The FMU needs Python " LMNCELL_MIN_PYTHON
+                 " or later with numpy: set LMNCELL_LIBPYTHON to that Python's libpython3.x.so and "
                  "PYTHONPATH to its site-packages, or use the native FMU (lmncell build-fmu "
                  "--native)");
     return 0;
