@@ -342,14 +342,22 @@ def exo_series(model: LmnModel, current_a: np.ndarray, temperature_c: np.ndarray
     return ExoSeries(X, model.normalise(Z), D, S)
 
 
-def fixed_point(model: LmnModel, soc0: float, temperature_c: float, h0: float) -> float:
-    """Output ŷ of the network at rest (zero current, filters settled) at SoC0."""
+def rest_inputs(model: LmnModel, soc0: float, temperature_c: float, h0: float
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The network's inputs at rest (zero current, filters settled) at SoC0: the exogenous
+    regressors (1, n_exo), the normalised partition inputs (1, n_z) and the direction (1,),
+    as LmnModel.blend takes them."""
     stepper = ExoStepper(model)
     s = stepper.initial_state(soc0, h0)
     x = np.zeros((1, model.n_exo))
     z = np.zeros((1, len(model.partition_variables)))
     stepper.features(s, 0.0, temperature_c, x[0], z[0])
-    A, b, _ = model.blend(x, model.normalise(z), np.array([s.direction]))
+    return x, model.normalise(z), np.array([s.direction])
+
+
+def fixed_point(model: LmnModel, soc0: float, temperature_c: float, h0: float) -> float:
+    """Output ŷ of the network at rest (zero current, filters settled) at SoC0."""
+    A, b, _ = model.blend(*rest_inputs(model, soc0, temperature_c, h0))
     denom = 1.0 - float(A.sum())
     return float(b[0]) / denom if abs(denom) > 1e-9 else 0.0
 

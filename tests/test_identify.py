@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from lmncell.config import ConfigError, load_config
-from lmncell.data.dataset import file_sha256, record_to_segments
+from lmncell.data.dataset import Segment, file_sha256, record_to_segments
 from lmncell.data.readers import read_record
 from lmncell.data.records import Record, RecordMeta
 from lmncell.identification.construction import validation_masks
@@ -1011,6 +1011,42 @@ def test_ocv_from_a_test_is_refined_for_records_at_several_temperatures() -> Non
     assert refines_ocv(start, one_level, load_config())          # no test: always estimated
     with pytest.raises(ConfigError, match="ocv_refinement"):
         load_config(ocv_refinement="yes")
+
+
+@pytest.mark.parametrize("output_lags", [0, 1])
+def test_refinement_jacobian_equals_finite_differences(output_lags: int) -> None:
+    """The refinement's Jacobian, written segment by segment into one array, equals central
+    differences of its residuals in every column (θ of the local models and the OCV knots) on
+    three records; with output feedback that includes the start value's dependence on θ (the
+    network at rest: a local offset moves ŷ0, and ŷ0 moves every feedback sample)."""
+    from lmncell.identification.refinement import _FreeRunProblem
+
+    start, segs, _, settings = _bumped_ocv_records((-5.0, 10.0, 25.0))
+    cfg = load_config(output_lags=output_lags, local_model_form="free", **settings)
+    model = skeleton(cfg, 3.0, start.ocv_soc, start.ocv_v, None, np.array([0.5]),
+                     np.array([0.5]))
+    cols = model.columns()
+    model.theta[0, cols.index("i(k)")] = 0.03
+    model.theta[0, cols.index("1")] = -0.01
+    if output_lags:
+        model.theta[0, cols.index("y(k-1)")] = 0.5
+    segs = [Segment(s.name, s.time_s[:600], s.current_a[:600], s.voltage_v[:600],
+                    s.temperature_c[:600], s.soc0, s.soc_ref[:600], s.weight[:600])
+            for s in segs]
+    prob = _FreeRunProblem(model, segs, build_design(model, segs, validation_masks(segs, cfg)),
+                           cfg)
+    assert prob.with_ocv and prob.na == output_lags
+    x = prob.start()
+    r, J = prob.evaluate(x)
+    assert np.array_equal(r, prob.residuals(x))
+    assert J.shape == (r.size, x.size)
+    for j in range(x.size):
+        h = 1e-6 * max(1.0, abs(x[j]))
+        up, down = x.copy(), x.copy()
+        up[j] += h
+        down[j] -= h
+        fd = (prob.residuals(up) - prob.residuals(down)) / (2 * h)
+        assert np.max(np.abs(fd - J[:, j])) <= 1e-6 * max(1.0, np.max(np.abs(J[:, j]))), j
 
 
 def test_refinement_in_knot_values_matches_least_squares_and_keeps_the_ocv_rising() -> None:

@@ -20,7 +20,7 @@ from lmncell.identification.ocvfit import SMOOTHNESS, hat_basis, second_differen
 from lmncell.identification.prefit import temperature_levels
 from lmncell.identification.tree import Design, _lags, freerun_rmse, stabilise
 from lmncell.runtime.model import LmnModel
-from lmncell.runtime.step import fixed_point, initial_hysteresis, recursion
+from lmncell.runtime.step import fixed_point, initial_hysteresis, recursion, rest_inputs
 from scipy.optimize import least_squares, lsq_linear
 
 Progress = Callable[[str], None]
@@ -34,17 +34,31 @@ class _Solution:
     status: int
 
 
-def _sensitivity(A: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """S(k) = G(k) + Σ_l A(k,l)·S(k−l), S(k<0) = 0: ∂ŷ/∂params through the feedback."""
+def _sensitivity(A: np.ndarray, G: np.ndarray, s_start: np.ndarray) -> np.ndarray:
+    """S(k) = G(k) + Σ_l A(k,l)·S(k−l), S(k<0) = s_start: ∂ŷ/∂params through the feedback,
+    from the start value's own ∂ŷ0/∂params (_start_sensitivity)."""
     n, na = A.shape
     S = np.empty_like(G)
     for k in range(n):
         row = G[k].copy()
         for l in range(1, na + 1):
-            if k - l >= 0:
-                row += A[k, l - 1] * S[k - l]
+            row += A[k, l - 1] * (S[k - l] if k - l >= 0 else s_start)
         S[k] = row
     return S
+
+
+def _start_sensitivity(m: LmnModel, soc0: float, temperature_c: float, h0: float,
+                       y0: float) -> np.ndarray:
+    """∂ŷ0/∂θ (M·p,) of the start value ŷ0 = fixed_point(m, …), the network at rest:
+    ŷ0 = Σ_l A0_l·ŷ0 + b0, so ∂ŷ0/∂θ_j = Φ0_j·[ŷ0 … ŷ0, x0] / (1 − Σ_l A0_l); 0 where
+    fixed_point takes ŷ0 = 0 (no fixed point)."""
+    x0, z0, direction = rest_inputs(m, soc0, temperature_c, h0)
+    A0, _, Phi0 = m.blend(x0, z0, direction)
+    denom = 1.0 - float(A0.sum())
+    if abs(denom) <= 1e-9:
+        return np.zeros(m.theta.size)
+    row = np.concatenate([np.full(m.output_lags, y0), x0[0]])
+    return (Phi0[0][:, None] * row[None, :]).ravel() / denom
 
 
 class _FreeRunProblem:
@@ -118,27 +132,42 @@ class _FreeRunProblem:
                                                else self.model.ocv_v)
 
     def evaluate(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Residuals and Jacobian at x (the last x's kept: least_squares asks for both)."""
+        """Residuals and Jacobian at x (the last x's kept: least_squares asks for both). The
+        Jacobian is written in place, segment by segment, into one array: it has a row per
+        sample and a column per parameter, the largest array of training."""
         key = x.tobytes()
         if key in self._cache:
             return self._cache[key]
-        theta, ocv_v = self.unpack(x)
-        m = copy.copy(self.model)
-        m.theta, m.ocv_v = theta, ocv_v.copy()
-        res, jac = [], []
-        for k in range(len(self.segs)):
-            r, J = self._segment_rows(m, k)
-            res.append(r)
-            jac.append(J)
-        out = (np.concatenate(res + self._penalty_values(theta, ocv_v)),
-               np.vstack([*jac, self.j_penalty]))
         self._cache.clear()
+        m = self._model_at(x)
+        n_x = self.M * self.p + self.K
+        jac = np.empty((self.n_res + self.j_penalty.shape[0], n_x))
+        res, start = [], 0
+        for k in range(len(self.segs)):
+            stop = start + self.w_all[k].size
+            res.append(self._segment_rows(m, k, jac[start:stop]))
+            start = stop
+        jac[start:] = self.j_penalty
+        out = (np.concatenate(res + self._penalty_values(m.theta, m.ocv_v)), jac)
         self._cache[key] = out
         return out
 
-    def _segment_rows(self, m: LmnModel, k: int) -> tuple[np.ndarray, np.ndarray]:
-        """Segment k's weighted free-run residuals (measured − model) and their Jacobian, the
-        sensitivities propagated through the output feedback."""
+    def residuals(self, x: np.ndarray) -> np.ndarray:
+        """The residuals of evaluate alone, without the Jacobian."""
+        m = self._model_at(x)
+        res = [self._free_run(m, k)[0] for k in range(len(self.segs))]
+        return np.concatenate(res + self._penalty_values(m.theta, m.ocv_v))
+
+    def _model_at(self, x: np.ndarray) -> LmnModel:
+        """The model with θ and the OCV knots of x."""
+        theta, ocv_v = self.unpack(x)
+        m = copy.copy(self.model)
+        m.theta, m.ocv_v = theta, ocv_v.copy()
+        return m
+
+    def _free_run(self, m: LmnModel, k: int) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+        """Segment k's weighted free-run residuals (measured − model), the relative output y,
+        its start value y0 and the feedback coefficients A (samples × na)."""
         seg, ex, Phi, sw = self.segs[k], self.design.exo[k], self.Phis[k], self.w_all[k]
         na, theta = self.na, m.theta
         A = Phi @ theta[:, :na]
@@ -149,13 +178,31 @@ class _FreeRunProblem:
         r = sw * (seg.voltage_v - u)
         if not np.isfinite(r).all():
             r = np.where(np.isfinite(r), r, 1e3)
-        ylag = _lags(np.concatenate([[y0], y]), na)[1:]    # y(k−l), y0 before the start
+        return r, y, y0, A
+
+    def _segment_rows(self, m: LmnModel, k: int, J: np.ndarray) -> np.ndarray:
+        """Segment k's weighted free-run residuals, its Jacobian written into J (samples × x),
+        the sensitivities propagated through the output feedback."""
+        r, y, y0, A = self._free_run(m, k)
+        ex, Phi, sw = self.design.exo[k], self.Phis[k], self.w_all[k]
+        n, M, p = y.size, self.M, self.p
+        if J.shape != (n, M * p + self.K):
+            raise ValueError(f"segment {k}: Jacobian rows {J.shape}, expected {n} samples")
+        ylag = _lags(np.concatenate([[y0], y]), self.na)[1:]    # y(k−l), y0 before the start
         Xs = np.hstack([ylag, ex.x])
-        G = (Phi[:, :, None] * Xs[:, None, :]).reshape(y.size, self.M * self.p)
-        J = -sw[:, None] * _sensitivity(A, G)
+        G = J[:, :M * p]
+        G3 = G.reshape(n, M, p)                   # a view: the columns split by local model
+        if not np.shares_memory(G3, J):
+            raise RuntimeError("the Jacobian's local-model block is not a view")
+        np.multiply(Phi[:, :, None], Xs[:, None, :], out=G3)
+        if self.na:
+            seg = self.segs[k]
+            G[:] = _sensitivity(A, G, _start_sensitivity(m, seg.soc0, self.t0s[k],
+                                                         self.h0s[k], y0))
+        G *= -sw[:, None]
         if self.with_ocv:
-            J = np.hstack([J, -sw[:, None] * (self.Bs[k] @ self.tri)])
-        return r, J
+            np.multiply(-sw[:, None], self.Bs[k] @ self.tri, out=J[:, M * p:])
+        return r
 
     def _penalty_values(self, theta: np.ndarray, ocv_v: np.ndarray) -> list[np.ndarray]:
         """The penalty rows at (θ, OCV), in _penalty_jacobian's order."""
@@ -234,7 +281,7 @@ def _solve_refinement(prob: _FreeRunProblem, x0: np.ndarray, r0: np.ndarray,
         else:
             sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
                                        _ladder_constraints(ladder, M, p, lower))
-        sol.cost = float(0.5 * np.sum(prob.evaluate(sol.x)[0] ** 2))
+        sol.cost = float(0.5 * np.sum(prob.residuals(sol.x) ** 2))
         return sol
     robust = {}
     if cfg.robust_loss == "huber":
