@@ -21,6 +21,7 @@ from lmncell.identification.refinement import (
     _offset_ridge,
     _robust_linear_solve,
     _solve_in_knot_values,
+    _times_to_knot_values,
     offset_ridge_of,
     refine_output_error,
     refines_ocv,
@@ -1049,6 +1050,21 @@ def test_refinement_jacobian_equals_finite_differences(output_lags: int) -> None
         assert np.max(np.abs(fd - J[:, j])) <= 1e-6 * max(1.0, np.max(np.abs(J[:, j]))), j
 
 
+def test_jacobian_to_knot_values_in_place_is_the_matrix_product_bit_for_bit() -> None:
+    """_times_to_knot_values overwrites J with J·to_x (θ columns kept, each OCV increment's
+    column less the next one's) and gives the matrix product's numbers exactly, so the
+    refinement's result does not depend on which of the two computed it."""
+    rng = np.random.default_rng(3)
+    n_theta, K = 7, 12
+    J = rng.normal(size=(500, n_theta + K)) * np.exp(rng.normal(size=(1, n_theta + K)))
+    to_x = np.eye(n_theta + K)
+    to_x[n_theta:, n_theta:] = np.eye(K) - np.eye(K, k=-1)
+    expected = J @ to_x
+    out = _times_to_knot_values(J, n_theta)
+    assert out is J
+    assert np.array_equal(out, expected)
+
+
 def test_refinement_in_knot_values_matches_least_squares_and_keeps_the_ocv_rising() -> None:
     """The linear refinement with OCV knots as values: where the best fit has a rising OCV it
     is the least-squares solution of the increments' problem; where it has not, the solution
@@ -1069,7 +1085,7 @@ def test_refinement_in_knot_values_matches_least_squares_and_keeps_the_ocv_risin
         x_true = np.concatenate([[0.1, -0.2, 0.05], np.r_[ocv0[0], np.diff(ocv0)]])
         x_true[n_theta + 5] -= bump
         b = J @ x_true + 1e-4 * rng.normal(size=n)
-        got = _solve_in_knot_values(J, b, n, cfg, None, n_theta, ocv0).x
+        got = _solve_in_knot_values(J.copy(), b, n, cfg, None, n_theta, ocv0).x  # overwrites J
         assert np.all(got[n_theta + 1:] >= -1e-9)
         ref = lsq_linear(J, b, bounds=(lower, np.full(lower.size, np.inf)), method="bvls").x
         assert np.sum((J @ got - b) ** 2) <= np.sum((J @ ref - b) ** 2) * (1 + 1e-6) + 1e-12

@@ -152,6 +152,13 @@ class _FreeRunProblem:
         self._cache[key] = out
         return out
 
+    def take(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """evaluate(x), the arrays handed over: the cache forgets them, so that the caller may
+        overwrite the Jacobian in place instead of copying it."""
+        out = self.evaluate(x)
+        self._cache.clear()
+        return out
+
     def residuals(self, x: np.ndarray) -> np.ndarray:
         """The residuals of evaluate alone, without the Jacobian."""
         m = self._model_at(x)
@@ -272,12 +279,12 @@ def _solve_refinement(prob: _FreeRunProblem, x0: np.ndarray, r0: np.ndarray,
     M, p, n_res = prob.M, prob.p, prob.n_res
     lower, upper = prob.lower(), np.full(x0.size, np.inf)
     if prob.na == 0:
-        r_0, J_0 = prob.evaluate(x0)
+        r_0, J_0 = prob.take(x0)
         ladder = prob.design.ladder
         if prob.with_ocv:
             on_theta = _ladder_constraints(ladder, M, p, np.full(x0.size, -np.inf))
-            sol = _solve_in_knot_values(J_0, J_0 @ x0 - r_0, n_res, cfg, on_theta, M * p,
-                                        prob.ocv0)
+            b_0 = J_0 @ x0 - r_0
+            sol = _solve_in_knot_values(J_0, b_0, n_res, cfg, on_theta, M * p, prob.ocv0)
         else:
             sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
                                        _ladder_constraints(ladder, M, p, lower))
@@ -371,14 +378,15 @@ def _solve_in_knot_values(J: np.ndarray, b: np.ndarray, n_res: int, cfg: TrainCo
     8.3 mV). In z = [θ, Δ] they are the local hat functions, and monotonicity becomes the rows
     Δ_k − Δ_(k−1) ≥ −(ocv0_k − ocv0_(k−1)). constraints: (G, h) of G·x ≥ h on θ alone (the
     RC ladder's rows, _ladder_constraints without bounded entries), or None. Returns the
-    solution in x."""
+    solution in x. J is overwritten with the Jacobian in z (J·to_x, in place: it is the largest
+    array of training, a row per sample)."""
     K = ocv0.size
     n = n_theta + K
     to_x = np.eye(n)                                 # x = to_x·z + shift
     to_x[n_theta:, n_theta:] = np.eye(K) - np.eye(K, k=-1)
     shift = np.concatenate([np.zeros(n_theta), to_x[n_theta:, n_theta:] @ ocv0])
-    Jz = J @ to_x
     bz = b - J @ shift
+    Jz = _times_to_knot_values(J, n_theta)
     mono = np.zeros((K - 1, n))                      # the OCV rises: increments ≥ 0
     mono[:, n_theta + 1:] += np.eye(K - 1)
     mono[:, n_theta:-1] -= np.eye(K - 1)
@@ -390,6 +398,14 @@ def _solve_in_knot_values(J: np.ndarray, b: np.ndarray, n_res: int, cfg: TrainCo
                                (np.vstack(rows), np.concatenate(bounds)))
     sol.x = to_x @ sol.x + shift
     return sol
+
+
+def _times_to_knot_values(J: np.ndarray, n_theta: int) -> np.ndarray:
+    """J·to_x of _solve_in_knot_values, in place: the OCV increments' columns k become
+    column k − column k+1 (the last one stays), the θ columns stay. Each entry is the one
+    rounded difference that the matrix product forms, so the result is the product's."""
+    J[:, n_theta:-1] -= J[:, n_theta + 1:]
+    return J
 
 
 def _downweighted(normal: tuple[np.ndarray, np.ndarray], J: np.ndarray, b: np.ndarray,
