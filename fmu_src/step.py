@@ -355,11 +355,15 @@ def rest_inputs(model: LmnModel, soc0: float, temperature_c: float, h0: float
     return x, model.normalise(z), np.array([s.direction])
 
 
+NO_FIXED_POINT_BELOW = 1e-9   # |1 − ΣA| below which the network at rest has no fixed point
+
+
 def fixed_point(model: LmnModel, soc0: float, temperature_c: float, h0: float) -> float:
-    """Output ŷ of the network at rest (zero current, filters settled) at SoC0."""
+    """Output ŷ of the network at rest (zero current, filters settled) at SoC0; 0 where it has
+    no fixed point (|1 − ΣA| ≤ NO_FIXED_POINT_BELOW)."""
     A, b, _ = model.blend(*rest_inputs(model, soc0, temperature_c, h0))
     denom = 1.0 - float(A.sum())
-    return float(b[0]) / denom if abs(denom) > 1e-9 else 0.0
+    return float(b[0]) / denom if abs(denom) > NO_FIXED_POINT_BELOW else 0.0
 
 
 def recursion(A: np.ndarray, b: np.ndarray, y_init: list[float]) -> np.ndarray:

@@ -20,7 +20,13 @@ from lmncell.identification.ocvfit import SMOOTHNESS, hat_basis, second_differen
 from lmncell.identification.prefit import temperature_levels
 from lmncell.identification.tree import Design, _lags, freerun_rmse, stabilise
 from lmncell.runtime.model import LmnModel
-from lmncell.runtime.step import fixed_point, initial_hysteresis, recursion, rest_inputs
+from lmncell.runtime.step import (
+    NO_FIXED_POINT_BELOW,
+    fixed_point,
+    initial_hysteresis,
+    recursion,
+    rest_inputs,
+)
 from scipy.optimize import least_squares, lsq_linear
 
 Progress = Callable[[str], None]
@@ -34,17 +40,14 @@ class _Solution:
     status: int
 
 
-def _sensitivity(A: np.ndarray, G: np.ndarray, s_start: np.ndarray) -> np.ndarray:
-    """S(k) = G(k) + Σ_l A(k,l)·S(k−l), S(k<0) = s_start: ∂ŷ/∂params through the feedback,
-    from the start value's own ∂ŷ0/∂params (_start_sensitivity)."""
+def _sensitivity(A: np.ndarray, G: np.ndarray, s_start: np.ndarray) -> None:
+    """G becomes S, in place: S(k) = G(k) + Σ_l A(k,l)·S(k−l), S(k<0) = s_start, ∂ŷ/∂params
+    through the feedback from the start value's own ∂ŷ0/∂params (_start_sensitivity). Row k
+    reads only rows before it, already turned into S."""
     n, na = A.shape
-    S = np.empty_like(G)
     for k in range(n):
-        row = G[k].copy()
         for l in range(1, na + 1):
-            row += A[k, l - 1] * (S[k - l] if k - l >= 0 else s_start)
-        S[k] = row
-    return S
+            G[k] += A[k, l - 1] * (G[k - l] if k - l >= 0 else s_start)
 
 
 def _start_sensitivity(m: LmnModel, soc0: float, temperature_c: float, h0: float,
@@ -55,7 +58,7 @@ def _start_sensitivity(m: LmnModel, soc0: float, temperature_c: float, h0: float
     x0, z0, direction = rest_inputs(m, soc0, temperature_c, h0)
     A0, _, Phi0 = m.blend(x0, z0, direction)
     denom = 1.0 - float(A0.sum())
-    if abs(denom) <= 1e-9:
+    if abs(denom) <= NO_FIXED_POINT_BELOW:
         return np.zeros(m.theta.size)
     row = np.concatenate([np.full(m.output_lags, y0), x0[0]])
     return (Phi0[0][:, None] * row[None, :]).ravel() / denom
@@ -204,8 +207,7 @@ class _FreeRunProblem:
         np.multiply(Phi[:, :, None], Xs[:, None, :], out=G3)
         if self.na:
             seg = self.segs[k]
-            G[:] = _sensitivity(A, G, _start_sensitivity(m, seg.soc0, self.t0s[k],
-                                                         self.h0s[k], y0))
+            _sensitivity(A, G, _start_sensitivity(m, seg.soc0, self.t0s[k], self.h0s[k], y0))
         G *= -sw[:, None]
         if self.with_ocv:
             np.multiply(-sw[:, None], self.Bs[k] @ self.tri, out=J[:, M * p:])
@@ -280,13 +282,13 @@ def _solve_refinement(prob: _FreeRunProblem, x0: np.ndarray, r0: np.ndarray,
     lower, upper = prob.lower(), np.full(x0.size, np.inf)
     if prob.na == 0:
         r_0, J_0 = prob.take(x0)
+        b_0 = J_0 @ x0 - r_0
         ladder = prob.design.ladder
         if prob.with_ocv:
             on_theta = _ladder_constraints(ladder, M, p, np.full(x0.size, -np.inf))
-            b_0 = J_0 @ x0 - r_0
             sol = _solve_in_knot_values(J_0, b_0, n_res, cfg, on_theta, M * p, prob.ocv0)
         else:
-            sol = _robust_linear_solve(J_0, J_0 @ x0 - r_0, n_res, (lower, upper), cfg,
+            sol = _robust_linear_solve(J_0, b_0, n_res, (lower, upper), cfg,
                                        _ladder_constraints(ladder, M, p, lower))
         sol.cost = float(0.5 * np.sum(prob.residuals(sol.x) ** 2))
         return sol
