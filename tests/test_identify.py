@@ -1065,6 +1065,29 @@ def test_jacobian_to_knot_values_in_place_is_the_matrix_product_bit_for_bit() ->
     assert np.array_equal(out, expected)
 
 
+@pytest.mark.parametrize("with_knots", [True, False])
+def test_prefit_design_matrix_is_every_segments_columns_stacked(with_knots) -> None:
+    """The pre-fit's regressors, written segment by segment into one array, equal each
+    segment's columns (OCV hat functions, current terms over SoC knots, hysteresis) stacked:
+    no cell of the array left unwritten, no segment or column out of place."""
+    from lmncell.identification.ocvfit import _current_columns, _design_matrix, hat_basis
+    rng = np.random.default_rng(3)
+    lengths = (50, 80, 7)
+    soc = [rng.uniform(0, 1, n) for n in lengths]
+    current = [rng.normal(0, 2, n) for n in lengths]
+    hyst = [rng.uniform(-1, 1, n) for n in lengths]
+    gain = [rng.uniform(0.5, 2, n) for n in lengths]
+    knots = np.linspace(0, 1, 6) if with_knots else None
+    taus = [2.0, 30.0]
+    X = _design_matrix(soc, current, hyst, gain, 1.0, taus, 3, knots)
+    expected = np.vstack([np.hstack(
+        ([hat_basis(s, knots)] if knots is not None else [])
+        + [_current_columns(s, i, gain, k, 1.0, taus, 3), h[:, None]])
+        for k, (s, i, h) in enumerate(zip(soc, current, hyst, strict=True))])
+    assert X.shape == expected.shape == (sum(lengths), (6 if with_knots else 0) + 3 * 3 + 1)
+    assert np.array_equal(X, expected)
+
+
 def test_refinement_in_knot_values_matches_least_squares_and_keeps_the_ocv_rising() -> None:
     """The linear refinement with OCV knots as values: where the best fit has a rising OCV it
     is the least-squares solution of the increments' problem; where it has not, the solution

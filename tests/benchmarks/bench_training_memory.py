@@ -7,8 +7,10 @@ to reach 30k, 100k, 300k and 1M samples (bench_identification.segments), trained
 default settings (train_lmn, load_config()). Each training runs in a fresh process, whose peak
 resident set size (ru_maxrss) is read when it ends; "before" is that process's peak after the
 imports and the data, so peak − before is what training itself took. Prints bytes per sample:
-memory grows linearly with the samples, the refinement's Jacobian (a row per sample, a column
-per parameter of all local models and the OCV knots) being the largest array.
+memory grows linearly with the samples. The largest arrays have a row per sample: the OCV
+pre-fit's regressors and the copies its bounded least squares makes (the peak here, without OCV
+tests), and the refinement's Jacobian (a column per parameter of all local models and the OCV
+knots).
 """
 
 from __future__ import annotations

@@ -68,15 +68,8 @@ def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.n
     if fixed_ocv_v is not None:
         return _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots,
                                    gain, np.asarray(fixed_ocv_v, dtype=float), r_knots)
-    rows, targets, ws = [], [], []
-    for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
-        cols = [hat_basis(s, knots), _current_columns(s, i, gain, k, ts, taus_s, r_knots)]
-        if hyst is not None:
-            cols.append(hyst[k][:, None])
-        rows.append(np.hstack(cols))
-        targets.append(u)
-        ws.append(w)
-    X, y, w = np.vstack(rows), np.concatenate(targets), np.concatenate(ws)
+    X = _design_matrix(soc, current, hyst, gain, ts, taus_s, r_knots, knots)
+    y, w = np.concatenate(voltage), np.concatenate(weight)
     sw = np.sqrt(w)
     A = X * sw[:, None]
     b = y * sw
@@ -112,7 +105,9 @@ def _monotone_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
     p = A.shape[1]
     T = np.eye(p)
     T[:n_knots, :n_knots] = np.tril(np.ones((n_knots, n_knots)))
-    M = np.vstack([A @ T, np.sqrt(lam) * D @ T])
+    M = np.empty((A.shape[0] + D.shape[0], p))   # [A·T; √lam·D·T], A·T written in place
+    np.matmul(A, T, out=M[:A.shape[0]])
+    M[A.shape[0]:] = np.sqrt(lam) * D @ T
     rhs = np.concatenate([b, np.zeros(D.shape[0])])
     # ‖M·x − rhs‖² = ‖R·x − Qᵀ·rhs‖² + const (M = Q·R): the bounded solver then works on p
     # rows instead of one per sample (BVLS refactors its matrix at every step)
@@ -134,17 +129,38 @@ def _current_columns(soc: np.ndarray, current: np.ndarray, gain: list[np.ndarray
     return (terms[:, :, None] * B[:, None, :]).reshape(len(current), -1)
 
 
-def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, gain,
-                        ocv_v: np.ndarray, r_knots: int = 1) -> OcvFit:
-    rows, targets, ws = [], [], []
-    for k, (s, i, u, w) in enumerate(zip(soc, current, voltage, weight, strict=True)):
+def _design_matrix(soc: list[np.ndarray], current: list[np.ndarray],
+                   hyst: list[np.ndarray] | None, gain: list[np.ndarray] | None, ts: float,
+                   taus_s: list[float], r_knots: int, knots: np.ndarray | None) -> np.ndarray:
+    """The pre-fit's regressors of all segments, one row per sample: the OCV hat functions
+    (where knots are given), the current columns and the hysteresis column (where given).
+    Written segment by segment into one array (not stacked from per-segment copies: at 300k
+    samples and 63 columns each copy is 150 MB)."""
+    n_rows = sum(len(i) for i in current)
+    X: np.ndarray | None = None
+    start = 0
+    for k, (s, i) in enumerate(zip(soc, current, strict=True)):
         cols = [_current_columns(s, i, gain, k, ts, taus_s, r_knots)]
+        if knots is not None:
+            cols.insert(0, hat_basis(s, knots))
         if hyst is not None:
             cols.append(hyst[k][:, None])
-        rows.append(np.hstack(cols))
-        targets.append(u - np.interp(s, knots, ocv_v))
-        ws.append(w)
-    X, y, w = np.vstack(rows), np.concatenate(targets), np.concatenate(ws)
+        block = np.hstack(cols)
+        if X is None:
+            X = np.empty((n_rows, block.shape[1]))
+        X[start:start + len(i)] = block
+        start += len(i)
+    if X is None:
+        raise ValueError("the pre-fit got no segments")
+    return X
+
+
+def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, gain,
+                        ocv_v: np.ndarray, r_knots: int = 1) -> OcvFit:
+    X = _design_matrix(soc, current, hyst, gain, ts, taus_s, r_knots, None)
+    y = np.concatenate([u - np.interp(s, knots, ocv_v)
+                        for s, u in zip(soc, voltage, strict=True)])
+    w = np.concatenate(weight)
     sw = np.sqrt(w)
     coef = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
     res = y - X @ coef
