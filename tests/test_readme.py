@@ -11,7 +11,7 @@ from xml.etree import ElementTree as ET
 
 import pytest
 from lmncell.cli import main
-from lmncell.report.readme import figures_block, numbers, render_figures
+from lmncell.report.readme import figures_block, numbers, power_of_ten_above, render_figures
 
 from tests.conftest import ROOT
 
@@ -72,6 +72,17 @@ def test_readme_figures_are_the_demo_figures(demo) -> None:
         assert a == pytest.approx(b, rel=0.02, abs=0.05), (
             f"README says {a}, the demo gives {b}: run `lmncell demo` and "
             "`python -m lmncell.report.readme lmncell-demo/summary.json README.md`")
+    bound = power_of_ten_above(summary["fmu_max_dv_v"])
+    assert f"reproduces the pipeline within {bound} V." in README.read_text(encoding="utf-8")
+
+
+def test_the_fmus_difference_is_quoted_as_a_bound_that_last_bits_do_not_move() -> None:
+    """One or two units in the last place at 3.3 V (4.4e-16, 8.9e-16 V: two machines' demo
+    runs) give the README the same sentence; a larger difference a larger bound."""
+    assert power_of_ten_above(4.4e-16) == power_of_ten_above(8.9e-16) == "1e-15"
+    assert power_of_ten_above(1.1e-15) == "1e-14"
+    assert power_of_ten_above(1e-12) == "1e-12"
+    assert power_of_ten_above(0.0) == "0"
 
 
 def test_readme_fmu_table_lists_the_fmu_variables(demo) -> None:
