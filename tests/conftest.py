@@ -18,11 +18,9 @@ A123_S1 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s1.csv.gz"
 A123_S2 = DATA / "a123_plett/dyn/A123_DYN_50_P25_s2.csv.gz"
 
 # Collected first, and with --no-loadscope-reorder (pyproject.toml) handed out first by
-# pytest-xdist, one to each worker: test_readme.py's module fixture runs the whole demo (about
-# 150 s), and test_win64.py's builds the win64 DLL (zig's first Windows build, about a minute
-# on a fresh machine); as files with few tests they were otherwise handed out last and kept one
-# worker busy alone at the end.
-FIRST_FILES = ("test_readme.py", "test_win64.py")
+# pytest-xdist: test_readme.py's module fixture runs the whole demo (about two minutes); as a
+# file with few tests it was otherwise handed out last and kept one worker busy alone at the end.
+FIRST_FILES = ("test_readme.py",)
 
 
 @pytest.fixture(autouse=True, scope="session")

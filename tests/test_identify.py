@@ -752,6 +752,30 @@ def test_arrhenius_energy_at_chamber_temperatures_is_chosen_with_the_temperature
         res.curve[-1]["validation_level_score_mv"], rel=1e-9)
 
 
+def test_the_arx_baseline_takes_the_lmns_choices_and_equals_an_arx_that_makes_its_own() -> None:
+    """train_arx gives the LMN's γ and E to a one-model network instead of choosing them again
+    (the E search trains one root model per candidate): on four chamber temperatures, where E
+    is chosen on the root model, the ARX equals the one-model network that chooses E and γ
+    itself, bit for bit, and it was trained with the LMN's E."""
+    import dataclasses
+
+    from lmncell.identification.construction import train_lmn
+    from lmncell.identification.train import train_arx
+    from lmncell.runtime.model import model_to_dict
+
+    from tests.conftest import chamber_cell_segments
+
+    segs = chamber_cell_segments(3000, 60.0, ocv_per_k=1e-4)
+    cfg = load_config(oe_refinement=False)
+    lmn = train_lmn(segs, cfg, 2.0)
+    assert lmn.info["arrhenius_root_freerun_rmse_mv"], "E was not chosen on the root model"
+    arx = train_arx(segs, cfg, 2.0, lmn.model, lmn.info["hysteresis_gamma"])
+    own = train_lmn(segs, dataclasses.replace(cfg, max_local_models=1, pre_partition="none"), 2.0)
+    assert arx.model.n_local_models == 1 and arx.model.arrhenius_k == lmn.model.arrhenius_k
+    assert not arx.info["arrhenius_root_freerun_rmse_mv"]          # no E search of its own
+    assert model_to_dict(arx.model) == model_to_dict(own.model)
+
+
 def test_arrhenius_energy_weighs_each_temperature_level_alike() -> None:
     """E with temperature terms is scored by the geometric mean of the root model's free-run
     RMSE per temperature level. Per-level RMSEs (mV) of the A123 −25/−15/5/25 °C root models

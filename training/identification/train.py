@@ -3,7 +3,6 @@ The library function behind `lmncell train` and `lmncell.train`."""
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import hashlib
 import math
@@ -624,6 +623,19 @@ def residual_std_by_soc(segs: list[Segment], model_v: list[np.ndarray],
             "std_v": [factor * max(rms, overall_v) for rms in by_soc["rms_v"]]}
 
 
+def train_arx(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnModel,
+              gamma: float | None) -> TrainResult:
+    """The ARX baseline: the LMN's settings with one local model and no pre-partition. It takes
+    the LMN's hysteresis γ and Arrhenius E rather than choosing them again: the LMN chose E on
+    its root model, which is the ARX's model, so the choice is the same without its root-model
+    trainings."""
+    arx_cfg = dataclasses.replace(
+        cfg, max_local_models=1, pre_partition="none",
+        hysteresis="off" if gamma is None else gamma,
+        temperature_scaling="off" if lmn.arrhenius_k is None else lmn.arrhenius_k)
+    return train_lmn(segs, arx_cfg, cap, lambda _m: None)
+
+
 def _cell_name(records: list[Record]) -> str:
     names = " ".join(r.name for r in records)
     if "A123" in names:
@@ -637,11 +649,8 @@ def fit_baselines(segs: list[Segment], cfg: TrainConfig, cap: float, lmn: LmnMod
                   gamma: float | None, progress: Progress) -> dict:
     """ARX (one local model) and 2RC ECMs (without and with hysteresis) on the same segments."""
     out: dict = {}
-    arx_cfg = copy.copy(cfg)
-    arx_cfg.max_local_models = 1
-    arx_cfg.pre_partition = "none"
     progress("baseline arx: one local linear model")
-    arx = train_lmn(segs, arx_cfg, cap, lambda _m: None)
+    arx = train_arx(segs, cfg, cap, lmn, gamma)
     out["arx"] = {"kind": "lmn", "model": model_to_dict(arx.model),
                   "fit": {"seconds": arx.info["seconds"]}}
     socs = [exo_series(lmn, s.current_a, s.temperature_c, s.soc0).soc for s in segs]
