@@ -1386,6 +1386,62 @@ def test_auto_hysteresis_is_kept_from_3_and_tried_from_1_per_cent_of_pre_fit_gai
                               said.append) == (30.0, None)
 
 
+def test_hysteresis_over_temperature_levels_is_tried_where_one_level_gains() -> None:
+    """Over several temperature levels γ is also scored by the level_score of the pre-fit's
+    RMSE per level: a cold level whose large error (60 mV) hysteresis hardly moves no longer
+    hides a 5 % gain at the warm levels (0.9 % pooled, below the 1 % to try it; 3.4 % by
+    level): γ is tried (kept only where both fall by 3 %), and one level gives the RMSE alone."""
+    from types import SimpleNamespace
+
+    from lmncell.identification.prefit import _choose_hysteresis, _Prefits, rmse_by_level
+
+    levels = [0, 1, 2, 2]                              # per segment; the two last one level
+
+    def prefit_with(warm_gain: float, cold_gain: float = 0.0):
+        def prefit(gamma, _e_k):
+            cold = 0.060 * (1 - (0.0 if gamma is None else cold_gain))
+            warm = 0.010 * (1 - (0.0 if gamma is None else warm_gain))
+            sq = np.array([[cold**2 * 4e4, 4e4], [warm**2 * 1e4, 1e4], [warm**2 * 5e3, 5e3],
+                           [warm**2 * 5e3, 5e3]])
+            return SimpleNamespace(rmse_v=float(np.sqrt(sq[:, 0].sum() / sq[:, 1].sum())),
+                                   segment_squares=sq)
+        return prefit
+
+    prefit = prefit_with(0.05)
+    assert rmse_by_level(prefit(None, None).segment_squares, levels) == pytest.approx(
+        [0.060, 0.010, 0.010])
+    assert np.isnan(rmse_by_level(np.array([[1.0, 0.0], [4e-6, 1.0]]), [0, 1])).tolist() == [
+        True, False]                                        # a level without weight: NaN
+    assert 1 - prefit(300.0, None).rmse_v / prefit(None, None).rmse_v < 0.01
+    auto, said = load_config(), []
+    assert _choose_hysteresis(auto, None, prefit, said.append) == (None, None)   # pooled only
+    pre = SimpleNamespace(levels=levels, n_levels=3)
+    name = _Prefits.score_name.fget(pre)
+    score = lambda fit: _Prefits.score(pre, fit)          # noqa: E731
+    assert score(prefit(None, None)) == pytest.approx((0.060 * 0.010 * 0.010) ** (1 / 3))
+    assert _choose_hysteresis(auto, None, prefit, said.append, score, name) == (None, 10.0)
+    assert "geometric mean of the 3 temperature levels' RMSE" in said[-1]
+    both = prefit_with(0.05, 0.04)                       # 3 % and more either way: kept
+    assert _choose_hysteresis(auto, None, both, said.append, score, name) == (10.0, None)
+    assert _Prefits.score(pre, SimpleNamespace(rmse_v=0.02, segment_squares=None)) == 0.02
+
+
+def test_the_pre_fits_segment_squares_make_up_its_rmse() -> None:
+    """fit_ocv's per-segment Σ w·res² and Σ w give its RMSE, with and without a fixed OCV."""
+    from lmncell.identification.ocvfit import fit_ocv
+
+    rng = np.random.default_rng(3)
+    socs = [np.linspace(1.0, 0.4, 500), np.linspace(0.9, 0.2, 700)]
+    cur = [rng.normal(0, 2, 500), rng.normal(0, 2, 700)]
+    volt = [3.3 + 0.5 * s + 0.02 * i + rng.normal(0, 1e-3, s.size) for s, i in zip(socs, cur, strict=True)]
+    w = [np.ones(500), np.linspace(0.5, 1.0, 700)]
+    for fixed in (None, 3.3 + 0.5 * np.linspace(0, 1, 11)):
+        fit = fit_ocv(socs, cur, volt, w, None, 1.0, [30.0], 11, fixed_ocv_v=fixed)
+        sq = fit.segment_squares
+        assert sq.shape == (2, 2) and sq[:, 1] == pytest.approx([500.0, 525.0])
+        assert np.sqrt(sq[:, 0].sum() / sq[:, 1].sum()) == pytest.approx(fit.rmse_v, rel=1e-12)
+
+
 @pytest.mark.parametrize("with_mv, without_mv, kept", [(4.10, 4.23, 300.0), (5.95, 5.45, None),
                                                        (5.0, 5.0, None)])
 def test_a_hysteresis_in_doubt_is_decided_by_the_validation_error(monkeypatch, with_mv,

@@ -9,6 +9,7 @@ with SoC) and chooses the hysteresis rate γ and the Arrhenius temperature gain.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from itertools import pairwise
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -53,6 +54,15 @@ class OcvFit:
     ocv_v: np.ndarray
     rmse_v: float
     coefficients: np.ndarray
+    # per segment Σ w·res² (V²) and Σ w, as tree.freerun_squares' rows
+    segment_squares: np.ndarray | None = None
+
+
+def _segment_squares(res: np.ndarray, w: np.ndarray, lengths: list[int]) -> np.ndarray:
+    """(S, 2): each segment's weighted squared residuals Σ w·res² (V²) and weight Σ w."""
+    bounds = np.cumsum([0, *lengths])
+    return np.array([[float(np.sum(w[a:b] * res[a:b] ** 2)), float(np.sum(w[a:b]))]
+                     for a, b in pairwise(bounds)])
 
 
 def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.ndarray],
@@ -85,7 +95,8 @@ def fit_ocv(soc: list[np.ndarray], current: list[np.ndarray], voltage: list[np.n
                          h_v)
     res = y - X @ coef
     rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))
-    return OcvFit(knots, coef[:n_knots].copy(), rmse, coef)
+    return OcvFit(knots, coef[:n_knots].copy(), rmse, coef,
+                  _segment_squares(res, w, [len(i) for i in current]))
 
 
 def _smooth_solve(A: np.ndarray, b: np.ndarray, D: np.ndarray, lam: float,
@@ -165,7 +176,8 @@ def _fit_with_fixed_ocv(soc, current, voltage, weight, hyst, ts, taus_s, knots, 
     coef = np.linalg.lstsq(X * sw[:, None], y * sw, rcond=None)[0]
     res = y - X @ coef
     rmse = float(np.sqrt(np.sum(w * res**2) / max(w.sum(), 1.0)))
-    return OcvFit(knots, ocv_v.copy(), rmse, coef)
+    return OcvFit(knots, ocv_v.copy(), rmse, coef,
+                  _segment_squares(res, w, [len(i) for i in current]))
 
 
 def _read_slow_tests(paths: list) -> list[Record]:
