@@ -221,7 +221,14 @@ class LmnCellSlave(Fmi2Slave):
                     f"{var.getter()!r})")
         return ""
 
+    def _check_readable(self, call: str) -> None:
+        """An error (see _error) where FMI 2.0 does not let the host read variables: before
+        fmi2EnterInitializationMode. Under pythonfmu's own wrapper the error is only logged and
+        the call still answers (the outputs the initialisation would give, all finite)."""
+        self._allowed(call, "initialization mode", "step mode", "terminated")
+
     def _get(self, vrs: list[int], kind: type, call: str, bad: object) -> list:
+        self._check_readable(call)
         out = []
         for vr in vrs:
             problem = self._problem(vr, kind, setting=False)
@@ -247,6 +254,8 @@ class LmnCellSlave(Fmi2Slave):
                 self.vars[vr].setter(value)
 
     def get_real(self, vrs: list[int]) -> list[float]:
+        if self._cosim is None:
+            self._check_readable("fmi2GetReal")
         try:
             return [float(get()) for get in map(self._real_getters.__getitem__, vrs)]
         except (KeyError, TypeError):   # a reference that is not a Real: the checked path
@@ -260,6 +269,7 @@ class LmnCellSlave(Fmi2Slave):
         return [bool(v) for v in self._get(vrs, Boolean, "fmi2GetBoolean", False)]
 
     def get_string(self, vrs: list[int]) -> list[str]:
+        self._check_readable("fmi2GetString")
         for vr in vrs:
             self._error(f"fmi2GetString: value reference {vr}: this FMU has no String")
         return ["" for _ in vrs]

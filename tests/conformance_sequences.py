@@ -138,6 +138,10 @@ def mode_rules(fmu: str) -> dict:
              "terminate": lambda s, vr: s.terminate(),
              "doStep": lambda s, vr: s.doStep(1.0, 1.0),
              "setReal current": lambda s, vr: s.setReal([vr["current"]], [-1.0]),
+             "getReal voltage": lambda s, vr: s.getReal([vr["voltage"]]),
+             "getInteger observer": lambda s, vr: s.getInteger([vr["observer"]]),
+             "getBoolean out_of_range": lambda s, vr: s.getBoolean([vr["out_of_range"]]),
+             "getString none": lambda s, vr: s.getString([]),
              "reset": lambda s, vr: s.reset()}
     out: dict = {}
     for mode in MODES:

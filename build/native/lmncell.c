@@ -1457,6 +1457,10 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
     }
 }
 
+/* the modes in which FMI 2.0 lets a co-simulation host read variables: not before
+   fmi2EnterInitializationMode (the Instantiated state) */
+#define GETTABLE (M_(MODE_INITIALIZATION) | M_(MODE_STEP) | M_(MODE_TERMINATED))
+
 /* 1 where the arrays of a get or set call are given (or n is 0), else log and 0: a NULL
    array with n > 0 is the host's mistake, refused with nothing read or set */
 static int arrays_given(Instance *in, const char *call, size_t n, const void *vr,
@@ -1478,7 +1482,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     Instance *in = (Instance *)c;
     size_t k;
     int ok;
-    if (!in || !arrays_given(in, "fmi2GetReal", n, vr, v, "read")) return fmi2Error;
+    if (!in || !in_mode(in, GETTABLE, "fmi2GetReal")
+        || !arrays_given(in, "fmi2GetReal", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
         v[k] = output_real(&in->s, vr[k], &ok);
         if (!ok) {
@@ -1493,7 +1498,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Integer v[]) {
     Instance *in = (Instance *)c;
     size_t k;
-    if (!in || !arrays_given(in, "fmi2GetInteger", n, vr, v, "read")) return fmi2Error;
+    if (!in || !in_mode(in, GETTABLE, "fmi2GetInteger")
+        || !arrays_given(in, "fmi2GetInteger", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] != VR_OBSERVER) {
             logf_(in, fmi2Error, "logStatusError", "fmi2GetInteger: no Integer variable with "
@@ -1508,7 +1514,8 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Boolean v[]) {
     Instance *in = (Instance *)c;
     size_t k;
-    if (!in || !arrays_given(in, "fmi2GetBoolean", n, vr, v, "read")) return fmi2Error;
+    if (!in || !in_mode(in, GETTABLE, "fmi2GetBoolean")
+        || !arrays_given(in, "fmi2GetBoolean", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
         if (vr[k] == VR_OUT_OF_RANGE) {
             v[k] = in->s.out_of_range ? fmi2True : fmi2False;
@@ -1524,7 +1531,8 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2String v[]) {
-    if (!c || !arrays_given((Instance *)c, "fmi2GetString", n, vr, v, "read")) return fmi2Error;
+    if (!c || !in_mode((Instance *)c, GETTABLE, "fmi2GetString")
+        || !arrays_given((Instance *)c, "fmi2GetString", n, vr, v, "read")) return fmi2Error;
     if (n) {
         logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2GetString: the FMU has no String "
               "variables");
