@@ -708,3 +708,17 @@ def test_output_that_is_not_utf8_is_escaped_not_a_traceback(quick_model) -> None
         assert out.stdout.isascii() and out.stderr.isascii()
         if args[0] == "explain" and status == 0:
             assert b"resistances in m\\u03a9" in out.stdout
+
+
+def test_train_says_where_ocv_tests_took_the_data_files(tmp_path, capsys) -> None:
+    """--ocv-tests before the data files takes them all (argparse): the error says so and how
+    to order the arguments, instead of argparse's bare "required: data"."""
+    out = str(tmp_path / "m.json")
+    assert main(["train", "--out", out, "--ocv-tests", "ocv.csv", str(A123_S1)]) == 2
+    err = capsys.readouterr().err
+    assert "lmncell train: error: no training data files: --ocv-tests took every file" in err
+    assert f"(ocv.csv, {A123_S1})" in err and "end its list with --" in err
+    assert main(["train", "--out", out]) == 2
+    assert "no training data files given" in capsys.readouterr().err
+    assert not Path(out).exists()
+

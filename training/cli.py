@@ -217,6 +217,8 @@ def cmd_inspect(a: argparse.Namespace) -> int:
 def cmd_train(a: argparse.Namespace) -> int:
     from lmncell.identification.train import train_files
 
+    if not a.data:
+        raise ConfigError(missing_data_message(a.ocv_tests))
     settings: dict[str, Any] = dict(parse_setting(s) for s in a.set)
     for key, value in (("max_local_models", a.max_local_models), ("ocv_tests", a.ocv_tests),
                        ("partition", a.partition.split(",") if a.partition else None)):
@@ -226,6 +228,17 @@ def cmd_train(a: argparse.Namespace) -> int:
     train_files(a.data, a.out, a.capacity, a.soc0, partition, a.baselines, a.config,
                 read_options=read_options(a), **settings)
     return 0
+
+
+def missing_data_message(ocv_tests: list[str] | None) -> str:
+    """What to say where `lmncell train` got no data files: where --ocv-tests came before
+    them, it took them all as OCV tests (argparse gives an option of several values every
+    name after it)."""
+    if ocv_tests and len(ocv_tests) > 1:
+        return (f"no training data files: --ocv-tests took every file after it as an OCV test "
+                f"({', '.join(ocv_tests)}); give the data files before --ocv-tests (lmncell "
+                "train DATA... --out MODEL.json --ocv-tests TEST...) or end its list with --")
+    return "no training data files given (lmncell train DATA... --out MODEL.json)"
 
 
 THROUGH_PAUSES_HELP = ("do not split records at pauses that only the wall clock shows (the "
@@ -488,7 +501,7 @@ def _add_inspect_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
 def _add_train_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     """The `lmncell train` subcommand."""
     s = sub.add_parser("train", help="identify an LMN from measurements", **fmt)
-    s.add_argument("data", nargs="+", help="training data files")
+    s.add_argument("data", nargs="*", help="training data files")
     s.add_argument("--out", required=True, type=output_file_argument, metavar="MODEL.json",
                    help="model file to write")
     s.add_argument("--capacity", type=capacity_argument, help="Ah from full to the cut-off at "
