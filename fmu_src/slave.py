@@ -25,6 +25,8 @@ from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
 UNREADABLE = "unreadable"   # key of the state that _fmu_state_from_bytes gives for bad bytes
+STOP_TOLERANCE = 1e-8   # how far (relative, at least 1 s times it) a step may end past a defined
+#                         stop time: the rounding of a host's communication grid (fmpy: 1e-9)
 
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never
@@ -104,6 +106,7 @@ class LmnCellSlave(Fmi2Slave):
         self.temperature_is_cell = False
         self._cosim: CellCosim | None = None
         self._time = 0.0
+        self._stop_time: float | None = None   # fmi2SetupExperiment's, where defined (s)
         self._terminated = False
         self._in_initialization = False
         self._register_variables(self._model.thermal is not None)
@@ -354,7 +357,13 @@ class LmnCellSlave(Fmi2Slave):
         if not math.isfinite(start_time):
             self._error(f"fmi2SetupExperiment: startTime {start_time:g} is not finite")
             return
+        if stop_time is not None and not (math.isfinite(stop_time) and stop_time >= start_time):
+            self._error(f"fmi2SetupExperiment: stopTime {stop_time:g} is not a finite time at "
+                        f"or after startTime {start_time:g} (stopTimeDefined is true); nothing "
+                        "was set")
+            return
         self._time = float(start_time)
+        self._stop_time = None if stop_time is None else float(stop_time)
 
     def terminate(self) -> None:
         if self._allowed("fmi2Terminate", "initialization mode", "step mode"):
@@ -368,6 +377,11 @@ class LmnCellSlave(Fmi2Slave):
             self._error(f"fmi2DoStep: currentCommunicationPoint {current_time:.17g} s is not the "
                         f"FMU's time {now:.17g} s (steps must follow on from each other)")
             return False
+        if self._past_stop(now, step_size):
+            self._error(f"fmi2DoStep: a step of {step_size:.17g} s from {now:.17g} s ends past "
+                        f"the stop time {self._stop_time:.17g} s given to fmi2SetupExperiment; "
+                        "the step was not taken")
+            return False
         try:
             was = cosim.out_of_range
             cosim.advance(step_size, self.current, self.temperature, self.voltage_measured)
@@ -378,6 +392,14 @@ class LmnCellSlave(Fmi2Slave):
         if cosim.out_of_range and not was:
             self.log(f"t = {now:.9g} s: {cosim.range_message}", Fmi2Status.warning)
         return True
+
+    def _past_stop(self, now: float, step_size: float) -> bool:
+        """True where a finite step from now (s) would end past the stop time the host defined
+        (beyond STOP_TOLERANCE of it, relative, at least 1 s times it): FMI 2.0 asks fmi2Error
+        there."""
+        stop = self._stop_time
+        return (stop is not None and math.isfinite(step_size)
+                and not now + step_size <= stop + STOP_TOLERANCE * max(1.0, abs(stop)))
 
     def _last_successful_time(self) -> float:
         """The FMU's time (s): the end of the last completed communication step, the start time

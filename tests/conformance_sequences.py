@@ -110,6 +110,37 @@ def state_machine(fmu: str) -> dict:
     return out
 
 
+def stop_time(fmu: str) -> dict:
+    """FMI 2.0: with stopTimeDefined, a step that would end past stopTime is fmi2Error (nothing
+    changed); steps up to it on a grid of 0.1 s (its rounding) are taken; a stop time that is
+    not finite or lies before the start is refused; fmi2Reset forgets it."""
+    out: dict = {}
+    slave, vr = _raw(fmu, False, "stop")
+    for bad in (-1.0, math.nan):
+        out[f"setup_stop_{bad}"] = _status(lambda b=bad: slave.setupExperiment(startTime=0.0,
+                                                                              stopTime=b))
+    out["setup"] = _status(lambda: slave.setupExperiment(startTime=0.0, stopTime=0.3))
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    slave.setReal([vr["current"]], [-2.0])
+    t = 0.0
+    out["grid"] = []
+    for _ in range(3):          # 0.1 + 0.1 + 0.1 = 0.30000000000000004 > 0.3
+        out["grid"].append(_status(lambda t=t: slave.doStep(t, 0.1)))
+        t += 0.1
+    before = slave.getReal([vr["voltage"], vr["soc"]])
+    out["past"] = _status(lambda: slave.doStep(t, 0.1))
+    out["unchanged"] = slave.getReal([vr["voltage"], vr["soc"]]) == before
+    slave.reset()
+    slave.setupExperiment(startTime=0.0)
+    slave.enterInitializationMode()
+    slave.exitInitializationMode()
+    out["after_reset"] = _status(lambda: slave.doStep(0.0, 5.0))
+    slave.terminate()
+    slave.freeInstance()
+    return out
+
+
 MODES = ("instantiated", "initialization mode", "step mode", "terminated")
 
 
@@ -912,7 +943,7 @@ def random_calls_stock(fmu: str) -> dict:
 
 
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_range_at_start,
-                                     state_machine, impossible_inputs,
+                                     state_machine, stop_time, impossible_inputs,
                                      logged_messages, debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,

@@ -266,6 +266,16 @@ def test_each_call_is_taken_only_in_its_modes(fmu) -> None:
     assert res["restore uninitialised"] == 0 and res["step after restore uninitialised"] == ERROR
 
 
+def test_no_step_ends_past_a_defined_stop_time(fmu) -> None:
+    """FMI 2.0 (fmi2SetupExperiment): "if the environment tries to compute past stopTime the
+    FMU has to return fmi2Error" (both FMUs ignored stopTime)."""
+    res = _run(fmu, "stop_time")
+    assert res["setup_stop_-1.0"] == res["setup_stop_nan"] == ERROR
+    assert res["setup"] == 0 and res["grid"] == [0, 0, 0]
+    assert res["past"] == ERROR and res["unchanged"]
+    assert res["after_reset"] == 0
+
+
 def test_physically_impossible_inputs_are_refused(fmu) -> None:
     res = _run(fmu, "impossible_inputs")
     assert res["huge_current"] == ERROR

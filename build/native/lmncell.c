@@ -132,6 +132,10 @@ typedef struct {
        voltage is the state's: the warning follows only a doStep whose last step was out) */
     int range_inputs;
     double range_i, range_t, range_soc;
+    /* fmi2SetupExperiment's stop time (s) where the host defined one: no step may end past
+       it (FMI 2.0 asks fmi2Error there); cleared by fmi2Reset */
+    int stop_defined;
+    double stop_time;
     /* the FMU states this instance handed out (fmi2GetFMUstate, fmi2DeSerializeFMUstate) and
        not yet freed: only these are taken back, and fmi2FreeInstance frees what is left */
     State **states;
@@ -1379,14 +1383,22 @@ static int in_mode(Instance *in, int allowed, const char *call) {
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean tolDef, fmi2Real tol, fmi2Real t0,
                                fmi2Boolean stopDef, fmi2Real t1) {
     Instance *in = (Instance *)c;
-    (void)tolDef; (void)tol; (void)stopDef; (void)t1;
+    (void)tolDef; (void)tol;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED), "fmi2SetupExperiment")) return fmi2Error;
     if (!isfinite(t0)) {
         logf_(in, fmi2Error, "logStatusError", "fmi2SetupExperiment: startTime %g is not finite",
               t0);
         return fmi2Error;
     }
+    if (stopDef && !(t1 >= t0 && isfinite(t1))) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2SetupExperiment: stopTime %g is not a "
+              "finite time at or after startTime %g (stopTimeDefined is true); nothing was set",
+              t1, t0);
+        return fmi2Error;
+    }
     in->s.time = t0;
+    in->stop_defined = stopDef ? 1 : 0;
+    in->stop_time = t1;
     return fmi2OK;
 }
 
@@ -1421,6 +1433,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
     if (!in) return fmi2Error;
     defaults(&in->s);
     in->mode = MODE_INSTANTIATED;
+    in->stop_defined = 0;
     return fmi2OK;
 }
 
@@ -1789,6 +1802,10 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
                                 "(maxOutputDerivativeOrder is 0)");
 }
 
+/* how far (relative, at least 1 s times this) a step may end past a defined stop time: the
+   rounding of a host's grid of communication points (fmpy's isclose takes 1e-9) */
+#define STOP_TOLERANCE 1e-8
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     Instance *in = (Instance *)c;
     (void)t; (void)noSetPrior;
@@ -1799,6 +1816,14 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSet
         logf_(in, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint %.17g s "
               "is not the FMU's time %.17g s (steps must follow on from each other)", t,
               in->s.time);
+        return fmi2Error;
+    }
+    if (in->stop_defined && isfinite(h) && !(in->s.time + h <= in->stop_time + STOP_TOLERANCE *
+                                             (fabs(in->stop_time) > 1.0 ? fabs(in->stop_time)
+                                                                         : 1.0))) {
+        logf_(in, fmi2Error, "logStatusError", "fmi2DoStep: a step of %.17g s from %.17g s "
+              "ends past the stop time %.17g s given to fmi2SetupExperiment; the step was not "
+              "taken", h, in->s.time, in->stop_time);
         return fmi2Error;
     }
 #ifdef LMNCELL_TRIVIAL
