@@ -41,6 +41,7 @@ from lmncell.runtime.cosim import (
     MIN_TEMPERATURE_C,
     OUT_OF_RANGE_DESCRIPTION,
     SOC_MARGIN,
+    STOP_TOLERANCE,
     TEMPERATURE_MARGIN_K,
     VOLTAGE_MARGIN_V,
 )
@@ -132,12 +133,14 @@ def model_header(model: LmnModel, guid: str) -> str:
 
 def _dimension_defines(m: LmnModel, n_slots: int) -> list[str]:
     """Sample time, capacity and the range of the 'capacity' parameter, the largest C-rate of
-    the current input, the model steps one communication step may span, delay, efficiencies
+    the current input, the model steps one communication step may span, how far one may end
+    past a defined stop time, delay, efficiencies
     and the sizes of every table (n_slots: the tree's, tree_plan)."""
     cols = m.columns()
     return [
         f"#define TS {m.sample_time_s!r}", f"#define CAPACITY_AH {m.capacity_ah!r}",
         f"#define MAX_STEPS_PER_CALL {float(MAX_STEPS_PER_CALL)!r}",
+        f"#define STOP_TOLERANCE {STOP_TOLERANCE!r}",
         f"#define MAX_C_RATE {MAX_C_RATE!r}",
         f"#define CAPACITY_MIN_AH {CAPACITY_RANGE_AH[0]!r}",
         f"#define CAPACITY_MAX_AH {CAPACITY_RANGE_AH[1]!r}",

@@ -41,6 +41,8 @@ MIN_TEMPERATURE_C, MAX_TEMPERATURE_C = CELL_TEMPERATURE_RANGE_C   # a `temperatu
 MAX_STEPS_PER_CALL = 10_000_000   # model steps one communication step may span (116 days at
 # Ts = 1 s, about 2.5 min of this engine): a longer step is refused, where it would hold the
 # host for hours, or for ever once Ts no longer changes the remaining time (h ≳ 1e16·Ts)
+STOP_TOLERANCE = 1e-8   # how far (relative, at least 1 s times it) a communication step may end
+# past the stop time a host defined in fmi2SetupExperiment: a grid's rounding (fmpy: 1e-9)
 ACCUMULATORS = 9   # get_state's "acc": the step's five, the current delay's three, the preview's
 #                   current
 

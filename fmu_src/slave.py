@@ -19,14 +19,19 @@ from typing import Any
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
-from .cosim import OUT_OF_RANGE_DESCRIPTION, CellCosim, InputError, Parameters, state_fault
+from .cosim import (
+    OUT_OF_RANGE_DESCRIPTION,
+    STOP_TOLERANCE,
+    CellCosim,
+    InputError,
+    Parameters,
+    state_fault,
+)
 from .model import ModelFileError, is_cell_capacity, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
 from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
 
 UNREADABLE = "unreadable"   # key of the state that _fmu_state_from_bytes gives for bad bytes
-STOP_TOLERANCE = 1e-8   # how far (relative, at least 1 s times it) a step may end past a defined
-#                         stop time: the rounding of a host's communication grid (fmpy: 1e-9)
 
 # pythonfmu 0.7.0's native wrapper (findClass) re-executes the slave module's source in the
 # module's namespace and then releases one reference to the module's __dict__ that it never

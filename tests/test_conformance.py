@@ -18,6 +18,7 @@ from xml.etree import ElementTree as ET
 import numpy as np
 import pytest
 from fmpy import read_model_description
+from lmncell.runtime.cosim import STOP_TOLERANCE
 
 from tests.conformance_sequences import MODES
 from tests.conftest import ROOT, c_compiler_or_skip
@@ -270,6 +271,8 @@ def test_no_step_ends_past_a_defined_stop_time(fmu) -> None:
     """FMI 2.0 (fmi2SetupExperiment): "if the environment tries to compute past stopTime the
     FMU has to return fmi2Error" (both FMUs ignored stopTime)."""
     res = _run(fmu, "stop_time")
+    readme = " ".join((ROOT / "README.md").read_text(encoding="utf-8").split())
+    assert f"by more than {STOP_TOLERANCE:.0e} of it".replace("e-0", "e-") in readme   # 1e-8
     assert res["setup_stop_-1.0"] == res["setup_stop_nan"] == ERROR
     assert res["setup"] == 0 and res["grid"] == [0, 0, 0]
     assert res["past"] == ERROR and res["unchanged"]

@@ -1802,10 +1802,6 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
                                 "(maxOutputDerivativeOrder is 0)");
 }
 
-/* how far (relative, at least 1 s times this) a step may end past a defined stop time: the
-   rounding of a host's grid of communication points (fmpy's isclose takes 1e-9) */
-#define STOP_TOLERANCE 1e-8
-
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     Instance *in = (Instance *)c;
     (void)t; (void)noSetPrior;
