@@ -1802,21 +1802,24 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
                                 "(maxOutputDerivativeOrder is 0)");
 }
 
+/* the scale (s) of a relative time tolerance at time t: |t|, at least 1 s */
+static double time_scale(double t) {
+    return fabs(t) > 1.0 ? fabs(t) : 1.0;
+}
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real t, fmi2Real h, fmi2Boolean noSetPrior) {
     Instance *in = (Instance *)c;
     (void)t; (void)noSetPrior;
     if (!in) return fmi2Error;
     if (!in_mode(in, M_(MODE_STEP), "fmi2DoStep")) return fmi2Error;
-    if (!isfinite(t) || fabs(t - in->s.time) > 1e-9 * (fabs(in->s.time) > 1.0 ? fabs(in->s.time)
-                                                                              : 1.0)) {
+    if (!isfinite(t) || fabs(t - in->s.time) > 1e-9 * time_scale(in->s.time)) {
         logf_(in, fmi2Error, "logStatusError", "fmi2DoStep: currentCommunicationPoint %.17g s "
               "is not the FMU's time %.17g s (steps must follow on from each other)", t,
               in->s.time);
         return fmi2Error;
     }
-    if (in->stop_defined && isfinite(h) && !(in->s.time + h <= in->stop_time + STOP_TOLERANCE *
-                                             (fabs(in->stop_time) > 1.0 ? fabs(in->stop_time)
-                                                                         : 1.0))) {
+    if (in->stop_defined && isfinite(h)
+        && !(in->s.time + h <= in->stop_time + STOP_TOLERANCE * time_scale(in->stop_time))) {
         logf_(in, fmi2Error, "logStatusError", "fmi2DoStep: a step of %.17g s from %.17g s "
               "ends past the stop time %.17g s given to fmi2SetupExperiment; the step was not "
               "taken", h, in->s.time, in->stop_time);
