@@ -9,6 +9,7 @@ import os
 import re
 import shutil
 import subprocess
+import sys
 import zipfile
 from pathlib import Path
 
@@ -24,7 +25,7 @@ from lmncell.runtime.model import load_model
 from lmncell.runtime.observers import SocObserver
 from lmncell.runtime.step import CellStepper, simulate_ambient
 
-from tests.conftest import A123_S1, PAN_US06, c_compiler_or_skip, import_or_skip
+from tests.conftest import A123_S1, PAN_US06, ROOT, c_compiler_or_skip, import_or_skip
 from tests.fmu_helpers import (
     HOST_C,
     THREADS_C,
@@ -435,8 +436,6 @@ def test_both_fmus_run_in_the_ecos_host(fmu, quick_model, tmp_path) -> None:
 
 
 def test_fmpy_compile_rebuilds_from_the_shipped_sources(native_fmu, quick_model, tmp_path) -> None:
-    import sys
-
     if shutil.which("cmake") is None:
         pytest.skip("cmake (pulled in by fmpy) is not on PATH")
     if shutil.which("cc") is None and shutil.which("gcc") is None:
@@ -780,3 +779,64 @@ def test_native_temperature_forms_equal_the_runtime(quick_model, tmp_path, form,
     other = save_model(dataclasses.replace(plain, **without_form), tmp_path / "other.json")
     assert compare_fmu_with_pipeline(other, fmu, PAN_US06, max_steps=2500,
                                      ambient=ambient)["max_dv_v"] > 1e-5
+
+
+SANITIZER_FLAGS = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined",
+                   "-fno-omit-frame-pointer", "-g", "-O1"]
+SANITIZED_SEQUENCES = ("random_calls", "ordinary_errors", "impossible_inputs", "null_pointers",
+                       "state_reuse", "damaged_states", "observers_at_full", "stop_time")
+
+
+def _sanitizer_runtimes() -> list[str]:
+    """gcc's AddressSanitizer and UndefinedBehaviorSanitizer runtimes (a Python host preloads
+    them to load an instrumented FMU), or a skip where gcc has none."""
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc is not installed: the sanitizer build needs it")
+    libs = [subprocess.run(["gcc", f"-print-file-name={name}"], capture_output=True,
+                           text=True).stdout.strip() for name in ("libasan.so", "libubsan.so")]
+    if not all(os.path.isabs(lib) and Path(lib).exists() for lib in libs):
+        pytest.skip(f"gcc has no sanitizer runtimes here ({libs})")
+    return libs
+
+
+def _sanitized_native_fmu(model: Path, out: Path, monkeypatch) -> Path:
+    """The native FMU of model compiled with AddressSanitizer and UBSan (gcc)."""
+    from lmncell.fmu import native_build as nb
+
+    plain = nb.compile_linux64
+    monkeypatch.setattr(nb, "compiler", lambda language: ["gcc"] if language == "c" else None)
+    monkeypatch.setattr(nb, "compile_linux64", lambda src, binary, extra=None: plain(
+        src, binary, [*(extra or []), *SANITIZER_FLAGS]))
+    fmu = nb.build_native_fmu(model, out)
+    with zipfile.ZipFile(fmu) as z:
+        binary = out.parent / "lmncell.so"
+        binary.write_bytes(z.read(next(n for n in z.namelist()
+                                       if n.startswith("binaries/linux64/"))))
+    symbols = subprocess.run(["nm", "-D", str(binary)], capture_output=True, text=True).stdout
+    assert "__asan_report" in symbols and "__ubsan_handle" in symbols, "not instrumented"
+    return fmu
+
+
+@pytest.mark.parametrize("model_fixture", ["quick_model", "fast_depletion_model"])
+def test_sanitizers_find_nothing_in_the_native_fmu(model_fixture, request, tmp_path,
+                                                   monkeypatch) -> None:
+    """The native FMU built with AddressSanitizer and UBSan (any out-of-bounds access, use after
+    free, signed overflow, misaligned or null access aborts the host): the conformance call
+    sequences (random calls, wrong calls, NULL pointers, damaged states, …) and a drive through
+    the US06 record, whose voltage still equals the pipeline's."""
+    libs = _sanitizer_runtimes()
+    model = request.getfixturevalue(model_fixture)
+    fmu = _sanitized_native_fmu(model, tmp_path / "asan.fmu", monkeypatch)
+    env = {**os.environ, "LD_PRELOAD": " ".join(libs),
+           "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=1",   # leaks: valgrind's test's
+           "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
+    drive = ("import json, sys; from lmncell.evaluation.fmucheck import "
+             "compare_fmu_with_pipeline as c; print(json.dumps(c(*sys.argv[1:4], max_steps=1500)['max_dv_v']))")
+    runs = [[sys.executable, "-m", "tests.conformance_sequences", str(fmu), s]
+            for s in SANITIZED_SEQUENCES]
+    runs.append([sys.executable, "-c", drive, str(model), str(fmu), str(PAN_US06)])
+    for cmd in runs:
+        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, f"{cmd[-1]}: the host died: {proc.stderr[-3000:]}"
+        assert "Sanitizer" not in proc.stderr and "runtime error" not in proc.stderr, proc.stderr
+    assert json.loads(proc.stdout.strip().splitlines()[-1]) < 1e-9     # V
