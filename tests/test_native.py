@@ -799,34 +799,55 @@ def _sanitizer_runtimes() -> list[str]:
     return libs
 
 
-def _sanitized_native_fmu(model: Path, out: Path, monkeypatch) -> Path:
-    """The native FMU of model compiled with AddressSanitizer and UBSan (gcc)."""
-    from lmncell.fmu import native_build as nb
-
-    plain = nb.compile_linux64
-    monkeypatch.setattr(nb, "compiler", lambda language: ["gcc"] if language == "c" else None)
-    monkeypatch.setattr(nb, "compile_linux64", lambda src, binary, extra=None: plain(
-        src, binary, [*(extra or []), *SANITIZER_FLAGS]))
-    fmu = nb.build_native_fmu(model, out)
+def _instrumented(fmu: Path, tmp_path: Path) -> bool:
+    """Whether every linux64 library of the FMU calls the two sanitizers' runtimes."""
     with zipfile.ZipFile(fmu) as z:
-        binary = out.parent / "lmncell.so"
-        binary.write_bytes(z.read(next(n for n in z.namelist()
-                                       if n.startswith("binaries/linux64/"))))
-    symbols = subprocess.run(["nm", "-D", str(binary)], capture_output=True, text=True).stdout
-    assert "__asan_report" in symbols and "__ubsan_handle" in symbols, "not instrumented"
+        names = [n for n in z.namelist() if n.startswith("binaries/linux64/")]
+        found = []
+        for name in names:
+            lib = tmp_path / Path(name).name
+            lib.write_bytes(z.read(name))
+            symbols = subprocess.run(["nm", "-D", str(lib)], capture_output=True,
+                                     text=True).stdout
+            found.append("__asan_report" in symbols and "__ubsan_handle" in symbols)
+    return bool(names) and all(found)
+
+
+def _sanitized_fmu(flavour: str, model: Path, out: Path, monkeypatch) -> Path:
+    """The FMU of model (native, or pythonfmu with LMNCell's wrapper) compiled with gcc's
+    AddressSanitizer and UBSan."""
+    from lmncell.fmu import native_build as nb
+    from lmncell.fmu import pythonfmu_build as pb
+
+    monkeypatch.setattr(nb, "compiler", lambda language: ["gcc" if language == "c" else "g++"])
+    if flavour == "native":
+        plain = nb.compile_linux64
+        monkeypatch.setattr(nb, "compile_linux64", lambda src, binary, extra=None: plain(
+            src, binary, [*(extra or []), *SANITIZER_FLAGS]))
+        fmu = nb.build_native_fmu(model, out)
+    else:
+        if shutil.which("g++") is None:
+            pytest.skip("g++ is not installed: the pythonfmu FMU's wrapper is C++")
+        compile_plain = pb._compile
+        monkeypatch.setattr(pb, "_compile", lambda cmd: compile_plain(
+            [*cmd[:cmd.index("-shared")], *SANITIZER_FLAGS, *cmd[cmd.index("-shared"):]]))
+        fmu = pb.build_fmu(model, out)
+    assert _instrumented(fmu, out.parent), "the FMU's binaries are not instrumented"
     return fmu
 
 
-@pytest.mark.parametrize("model_fixture", ["quick_model", "fast_depletion_model"])
-def test_sanitizers_find_nothing_in_the_native_fmu(model_fixture, request, tmp_path,
-                                                   monkeypatch) -> None:
-    """The native FMU built with AddressSanitizer and UBSan (any out-of-bounds access, use after
-    free, signed overflow, misaligned or null access aborts the host): the conformance call
-    sequences (random calls, wrong calls, NULL pointers, damaged states, …) and a drive through
-    the US06 record, whose voltage still equals the pipeline's."""
+@pytest.mark.parametrize(("flavour", "model_fixture"), [("native", "quick_model"),
+                                                        ("native", "fast_depletion_model"),
+                                                        ("pythonfmu", "quick_model")])
+def test_sanitizers_find_nothing_in_the_fmus(flavour, model_fixture, request, tmp_path,
+                                            monkeypatch) -> None:
+    """The FMU's binaries built with AddressSanitizer and UBSan (any out-of-bounds access, use
+    after free, signed overflow, misaligned or null access aborts the host): the conformance
+    call sequences (random calls, wrong calls, NULL pointers, damaged states, …) and a drive
+    through the US06 record, whose voltage still equals the pipeline's."""
     libs = _sanitizer_runtimes()
     model = request.getfixturevalue(model_fixture)
-    fmu = _sanitized_native_fmu(model, tmp_path / "asan.fmu", monkeypatch)
+    fmu = _sanitized_fmu(flavour, model, tmp_path / "asan.fmu", monkeypatch)
     env = {**os.environ, "LD_PRELOAD": " ".join(libs),
            "ASAN_OPTIONS": "detect_leaks=0:abort_on_error=1",   # leaks: valgrind's test's
            "UBSAN_OPTIONS": "print_stacktrace=1:halt_on_error=1"}
