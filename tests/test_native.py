@@ -506,6 +506,10 @@ def test_native_with_the_fast_depletion_regressor_equals_the_runtime(
     assert worst_v <= 1e-9 and worst_s <= 1e-9 and worst_sd <= 1e-9
 
 
+SANITIZER_FLAGS = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined",
+                   "-fno-omit-frame-pointer", "-g", "-O1"]
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("observer, fmu_fixture", [
     (0, "native_fmu"), (1, "native_fmu"), (2, "native_fmu"), (3, "native_fmu"),
@@ -522,7 +526,7 @@ def test_sanitizers_find_nothing_on_hostile_inputs(request, us06, tmp_path, obse
 
     if shutil.which("gcc") is None:
         pytest.skip("gcc is not installed")
-    san = ["-fsanitize=address,undefined", "-fno-omit-frame-pointer", "-g", "-O1"]
+    san = SANITIZER_FLAGS
     src = tmp_path / "src"
     with zipfile.ZipFile(native_fmu) as z:
         for name in z.namelist():
@@ -546,7 +550,7 @@ def test_sanitizers_find_nothing_on_hostile_inputs(request, us06, tmp_path, obse
         guid = re.search(r'guid="([^"]+)"', z.read("modelDescription.xml").decode()).group(1)
     (tmp_path / "c.txt").write_text("\n".join(map(str, cur)))
     (tmp_path / "v.txt").write_text("\n".join(map(str, volts)))
-    env = {**__import__("os").environ, "ASAN_OPTIONS": "detect_leaks=1:halt_on_error=1",
+    env = {**os.environ, "ASAN_OPTIONS": "detect_leaks=1:halt_on_error=1",
            "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1"}
     for soc0 in ("1.0", "0.0"):
         out = subprocess.run([str(exe), str(so), (tmp_path / "res").as_uri(), guid,
@@ -781,8 +785,6 @@ def test_native_temperature_forms_equal_the_runtime(quick_model, tmp_path, form,
                                      ambient=ambient)["max_dv_v"] > 1e-5
 
 
-SANITIZER_FLAGS = ["-fsanitize=address,undefined", "-fno-sanitize-recover=undefined",
-                   "-fno-omit-frame-pointer", "-g", "-O1"]
 SANITIZED_SEQUENCES = ("random_calls", "ordinary_errors", "impossible_inputs", "null_pointers",
                        "state_reuse", "damaged_states", "observers_at_full", "stop_time")
 
