@@ -859,13 +859,19 @@ def test_sanitizers_find_nothing_in_the_fmus(flavour, model_fixture, request, tm
     env = _sanitizer_environment()
     model = request.getfixturevalue(model_fixture)
     fmu = _sanitized_fmu(flavour, model, tmp_path / "asan.fmu", monkeypatch)
-    drive = ("import json, sys; from lmncell.evaluation.fmucheck import "
-             "compare_fmu_with_pipeline as c; print(json.dumps(c(*sys.argv[1:4], max_steps=1500)['max_dv_v']))")
-    runs = [[sys.executable, "-m", "tests.conformance_sequences", str(fmu), s]
-            for s in SANITIZED_SEQUENCES]
-    runs.append([sys.executable, "-c", drive, str(model), str(fmu), str(PAN_US06)])
-    for cmd in runs:
-        proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
-        assert proc.returncode == 0, f"{cmd[-1]}: the host died: {proc.stderr[-3000:]}"
-        assert "Sanitizer" not in proc.stderr and "runtime error" not in proc.stderr, proc.stderr
-    assert json.loads(proc.stdout.strip().splitlines()[-1]) < 1e-9     # V
+    for sequence in SANITIZED_SEQUENCES:
+        _run_sanitized([sys.executable, "-m", "tests.conformance_sequences", str(fmu), sequence],
+                       env)
+    drive = ("import json, sys; from lmncell.evaluation.fmucheck import compare_fmu_with_pipeline"
+             "; print(json.dumps(compare_fmu_with_pipeline(*sys.argv[1:4], max_steps=1500)"
+             "['max_dv_v']))")
+    out = _run_sanitized([sys.executable, "-c", drive, str(model), str(fmu), str(PAN_US06)], env)
+    assert json.loads(out.strip().splitlines()[-1]) < 1e-9     # V: the FMU equals the pipeline
+
+
+def _run_sanitized(cmd: list[str], env: dict[str, str]) -> str:
+    """cmd's standard output; fails where the host died or a sanitizer reported anything."""
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0, f"{cmd[-1]}: the host died: {proc.stderr[-3000:]}"
+    assert "Sanitizer" not in proc.stderr and "runtime error" not in proc.stderr, proc.stderr
+    return proc.stdout
