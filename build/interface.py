@@ -23,11 +23,13 @@ ZIP_EPOCH_S = 315532800   # 1980-01-01T00:00:00Z, the earliest date a zip member
 
 INITIAL_DEPENDENCIES: dict[str, tuple[str, ...]] = {
     # OCV(soc0) plus the network's rest output at soc0 and the starting cell temperature
-    "voltage": ("temperature", "soc0", "temperature_is_cell"),
+    "voltage": ("temperature", "soc0", "temperature_is_cell", "cell_temperature_start",
+                "use_cell_temperature_start"),
     "soc": ("soc0",),
     "soc_std": ("observer",),
     "out_of_range": (),
-    "cell_temperature": ("temperature", "temperature_is_cell"),
+    "cell_temperature": ("temperature", "temperature_is_cell", "cell_temperature_start",
+                         "use_cell_temperature_start"),
 }
 
 

@@ -68,7 +68,11 @@ from lmncell.runtime.observers import (
     state_columns,
 )
 from lmncell.runtime.step import core_rise_coefficient, filter_coefficients, tree_plan
-from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
+from lmncell.runtime.thermal import (
+    CELL_START_DESCRIPTION,
+    DEFAULT_TEMPERATURE_C,
+    USE_CELL_START_DESCRIPTION,
+)
 
 HERE = Path(__file__).resolve().parent
 C_SOURCE = HERE / "native" / "lmncell.c"
@@ -384,6 +388,10 @@ VARIABLES = [  # name, vr, causality, variability, type, unit, start, descriptio
      "ambient temperature, the cell temperature follows the model's thermal model"),
     ("cell_temperature", 11, "output", "continuous", "Real", "degC", None,
      "cell temperature at the end of the last completed model step (the next step's) [degC]"),
+    ("cell_temperature_start", 12, "parameter", "fixed", "Real", "degC",
+     f"{DEFAULT_TEMPERATURE_C:g}", CELL_START_DESCRIPTION),
+    ("use_cell_temperature_start", 13, "parameter", "fixed", "Boolean", None, "false",
+     USE_CELL_START_DESCRIPTION),
 ]
 
 

@@ -118,7 +118,8 @@ def _compile(cmd: list[str]) -> None:
 
 
 UNITS = {"current": "A", "voltage_measured": "V", "temperature": "degC", "voltage": "V",
-         "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1", "cell_temperature": "degC"}
+         "soc": "1", "soc0": "1", "capacity": "Ah", "soc_std": "1", "cell_temperature": "degC",
+         "cell_temperature_start": "degC"}
 UNIT_BASE = {"A": {"A": "1"}, "V": {"kg": "1", "m": "2", "s": "-3", "A": "-1"},
              "degC": {"K": "1", "offset": "273.15"}, "Ah": {"s": "1", "A": "1",
                                                              "factor": "3600"}, "1": {}}
@@ -259,7 +260,10 @@ def _temperature_input_text(model: LmnModel) -> str:
             f"lumped thermal model (R = {th.resistance_k_per_w:.3g} K/W, τ = "
             f"{th.time_constant_s:.0f} s), output <b>cell_temperature</b>. With the "
             "parameter <b>temperature_is_cell</b> = true it is the measured cell "
-            "temperature instead.")
+            "temperature instead. The cell starts rested at the first ambient, or at the "
+            "parameter <b>cell_temperature_start</b> (degC) where "
+            "<b>use_cell_temperature_start</b> = true (a cell warmer or colder than the air "
+            "it meets).")
 
 
 def _indent(elem: ET.Element) -> None:

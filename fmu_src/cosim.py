@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from .model import CAPACITY_RANGE_AH, LmnModel, is_cell_capacity
 from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
-from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
+from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, cell_start_fault
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
@@ -92,6 +92,7 @@ class Parameters:
     capacity_ah: float
     observer: int = 0
     temperature_is_cell: bool = False
+    cell_temperature_start_c: float | None = None   # None: rested at the first step's input
 
 
 def state_fault(exc: Exception) -> str:
@@ -117,8 +118,15 @@ class CellCosim:
         if p.observer not in OBSERVER_NAMES:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")
-        self.thermal = CellThermal(self.model, p.temperature_is_cell)
-        t_cell = self.thermal.rested(temperature_c)   # the first step's input sets the start
+        self.thermal = CellThermal(self.model, p.temperature_is_cell, p.cell_temperature_start_c)
+        if p.cell_temperature_start_c is None:
+            t_cell = self.thermal.rested(temperature_c)   # the first step's input sets it
+        else:
+            fault = cell_start_fault(p.cell_temperature_start_c, self.thermal.active,
+                                     p.temperature_is_cell)
+            if fault:
+                raise InputError(fault)
+            t_cell = p.cell_temperature_start_c
         self.observer: SocObserver | None = None
         if p.observer:
             self.observer = SocObserver(self.model, OBSERVER_NAMES[p.observer], p.soc0,
@@ -348,7 +356,7 @@ class CellCosim:
                 "flags": [self.out_of_range, self.range_message, self.steps],
                 "thermal": [self.thermal.temperature_c, self._start_temperature_c],
                 "params": [self.params.soc0, self.params.capacity_ah, self.params.observer,
-                           self.params.temperature_is_cell]}
+                           self.params.temperature_is_cell, self.params.cell_temperature_start_c]}
 
     def set_state(self, state: dict) -> None:
         """Restore a get_state() dict. One that cannot be restored (another shape, e.g. saved by
@@ -366,8 +374,9 @@ class CellCosim:
         acc = [float(x) for x in state["acc"]]
         if len(acc) != ACCUMULATORS:
             raise ValueError(f"'acc' holds {len(acc)} values, expected {ACCUMULATORS}")
-        soc0, cap, obs, is_cell = state["params"]
-        self.params = Parameters(float(soc0), float(cap), int(obs), bool(is_cell))
+        soc0, cap, obs, is_cell, start = state["params"]
+        self.params = Parameters(float(soc0), float(cap), int(obs), bool(is_cell),
+                                 None if start is None else float(start))
         self.reset()
         t_cell, t_last = state["thermal"]
         self.thermal.temperature_c = None if t_cell is None else float(t_cell)

@@ -29,7 +29,14 @@ from .cosim import (
 )
 from .model import ModelFileError, is_cell_capacity, load_model
 from .observers import OBSERVER_NAMES as OBSERVERS
-from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, TEMPERATURE_DESCRIPTION
+from .thermal import (
+    CELL_START_DESCRIPTION,
+    CELL_TEMPERATURE_RANGE_C,
+    DEFAULT_TEMPERATURE_C,
+    TEMPERATURE_DESCRIPTION,
+    USE_CELL_START_DESCRIPTION,
+    cell_start_fault,
+)
 
 UNREADABLE = "unreadable"   # key of the state that _fmu_state_from_bytes gives for bad bytes
 
@@ -109,6 +116,8 @@ class LmnCellSlave(Fmi2Slave):
         self.capacity = float(self._model.capacity_ah)
         self.observer = 0
         self.temperature_is_cell = False
+        self.cell_temperature_start = DEFAULT_TEMPERATURE_C
+        self.use_cell_temperature_start = False
         self._cosim: CellCosim | None = None
         self._time = 0.0
         self._stop_time: float | None = None   # fmi2SetupExperiment's, where defined (s)
@@ -172,6 +181,10 @@ class LmnCellSlave(Fmi2Slave):
                  getter=lambda: (self._cosim or self._initial_cosim()).cell_temperature_c,
                  description="cell temperature at the end of the last completed model step "
                              "(the next step's) [degC]"))
+        reg(Real("cell_temperature_start", causality=Fmi2Causality.parameter,
+                 variability=Fmi2Variability.fixed, description=CELL_START_DESCRIPTION))
+        reg(Boolean("use_cell_temperature_start", causality=Fmi2Causality.parameter,
+                    variability=Fmi2Variability.fixed, description=USE_CELL_START_DESCRIPTION))
 
     def _dedupe_sys_path(self) -> None:
         """The wrapper inserts the resources folder into sys.path at every instantiation: keep
@@ -197,9 +210,19 @@ class LmnCellSlave(Fmi2Slave):
         cap = float(self.capacity)
         cap = cap if is_cell_capacity(cap) else float(m.capacity_ah)
         observer = int(self.observer) if self.observer in OBSERVERS else 0
-        cosim = CellCosim(m, Parameters(soc0, cap, observer, bool(self.temperature_is_cell)))
+        is_cell = bool(self.temperature_is_cell)
+        start = self._cell_start()
+        if start is not None and cell_start_fault(start, m.thermal is not None and not is_cell,
+                                                  is_cell):
+            start = None          # refused by exitInitializationMode; until then as unset
+        cosim = CellCosim(m, Parameters(soc0, cap, observer, is_cell, start))
         cosim.reset(self._start_temperature())
         return cosim
+
+    def _cell_start(self) -> float | None:
+        """The cell's start temperature the parameters ask for (°C), or None: rested at the
+        first step's temperature input (use_cell_temperature_start false)."""
+        return float(self.cell_temperature_start) if self.use_cell_temperature_start else None
 
     def _start_temperature(self) -> float:
         """The temperature input the engine starts from (degC): as set, or
@@ -345,7 +368,8 @@ class LmnCellSlave(Fmi2Slave):
             self._cosim = CellCosim(self._model, Parameters(float(self.soc0),
                                                             float(self.capacity),
                                                             int(self.observer),
-                                                            bool(self.temperature_is_cell)))
+                                                            bool(self.temperature_is_cell),
+                                                            self._cell_start()))
             self._cosim.reset(self._start_temperature())
         except InputError as exc:
             self._cosim = None
@@ -416,7 +440,8 @@ class LmnCellSlave(Fmi2Slave):
     def _get_fmu_state(self) -> dict:
         return {"inputs": [self.current, self.voltage_measured, self.temperature],
                 "time": self._time,
-                "params": [self.soc0, self.capacity, self.observer, self.temperature_is_cell],
+                "params": [self.soc0, self.capacity, self.observer, self.temperature_is_cell,
+                           self.cell_temperature_start, self.use_cell_temperature_start],
                 "cosim": None if self._cosim is None else self._cosim.get_state()}
 
     def _set_fmu_state(self, state: dict) -> None:
@@ -429,7 +454,11 @@ class LmnCellSlave(Fmi2Slave):
         try:
             inputs = [float(x) for x in state["inputs"]]
             time = float(state["time"])
-            soc0, capacity, observer, is_cell = state["params"]
+            soc0, capacity, observer, is_cell, start, use_start = state["params"]
+            start = float(start)
+            if not isinstance(use_start, bool):
+                raise ValueError(f"use_cell_temperature_start {use_start!r}: expected true or "
+                                 "false")
             if len(inputs) != 3 or not math.isfinite(time):
                 raise ValueError(f"inputs {state['inputs']!r}, time {time!r}: expected three "
                                  "inputs and a finite time")
@@ -443,6 +472,7 @@ class LmnCellSlave(Fmi2Slave):
         self._time = time
         self.soc0, self.capacity, self.observer, self.temperature_is_cell = (
             soc0, capacity, observer, is_cell)
+        self.cell_temperature_start, self.use_cell_temperature_start = start, use_start
         # as the native FMU: step mode where the state is initialised, else instantiated
         self._terminated = self._in_initialization = False
 

@@ -28,6 +28,7 @@ import numpy as np
 from .model import DEPLETION_COLUMNS, LmnModel
 from .thermal import (
     DEFAULT_TEMPERATURE_C,
+    cell_start_fault,
     heat_w,
     next_temperature,
     rested_temperature,
@@ -802,12 +803,16 @@ class CellThermal:
     by the step's i·(u − OCV); otherwise the input is the cell temperature itself. Used by the
     FMU (cosim) and by simulate_ambient, so both step the same way."""
 
-    def __init__(self, model: LmnModel, temperature_is_cell: bool = False) -> None:
+    def __init__(self, model: LmnModel, temperature_is_cell: bool = False,
+                 start_c: float | None = None) -> None:
+        """start_c: the cell's temperature at the first step (°C), where the thermal model is
+        active; None: rested at the first step's input."""
         self.model = model
         self.active = model.thermal is not None and not temperature_is_cell
         self._coefficients = (step_coefficients(model.thermal, model.sample_time_s)
                               if model.thermal is not None else None)
-        self.temperature_c: float | None = None      # cell temperature at the step's start
+        self.temperature_c: float | None = (   # cell temperature at the step's start
+            start_c if self.active else None)
 
     def rested(self, input_c: float) -> float:
         """The temperature of a cell rested at the given `temperature` input (°C); nothing
@@ -844,15 +849,23 @@ class CellThermal:
 
 def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarray | float,
                      soc0: float, capacity_ah: float | None = None,
-                     h0: float | None = None) -> tuple[SimResult, np.ndarray]:
+                     h0: float | None = None, cell_temperature_start_c: float | None = None
+                     ) -> tuple[SimResult, np.ndarray]:
     """Free-run simulation driven by the ambient temperature: the cell temperature comes from
-    the model's thermal model (as in the FMU with temperature_is_cell = false). Returns the
-    simulation and the cell temperature used at each step (°C). Without a thermal model the
-    ambient temperature is taken as the cell temperature."""
+    the model's thermal model (as in the FMU with temperature_is_cell = false), starting at
+    cell_temperature_start_c (°C; None: rested at the first ambient, as the FMU without
+    use_cell_temperature_start). Returns the simulation and the cell temperature used at each
+    step (°C). Without a thermal model the ambient temperature is taken as the cell
+    temperature (and a start temperature is refused, as by the FMU)."""
     current = np.asarray(current_a, dtype=float)
     ambient = np.broadcast_to(np.asarray(ambient_c, dtype=float), current.shape)
-    thermal = CellThermal(model)
-    t_start = thermal.rested(float(ambient[0])) if current.size else DEFAULT_TEMPERATURE_C
+    thermal = CellThermal(model, start_c=cell_temperature_start_c)
+    fault = None if cell_temperature_start_c is None else cell_start_fault(
+        cell_temperature_start_c, thermal.active, False)
+    if fault:
+        raise ValueError(fault)
+    t_start = (thermal.rested(float(ambient[0])) if current.size else DEFAULT_TEMPERATURE_C
+               ) if cell_temperature_start_c is None else cell_temperature_start_c
     stepper = CellStepper(model, soc0, capacity_ah, t_start, h0)
     n = current.size
     u, soc, y = np.empty(n), np.empty(n), np.empty(n)

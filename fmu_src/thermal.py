@@ -33,6 +33,30 @@ DEFAULT_TEMPERATURE_C = 25.0   # the temperature (degC) taken where none is give
 
 TEMPERATURE_DESCRIPTION = ("ambient temperature (the model computes the cell temperature); the "
                            "measured cell temperature with temperature_is_cell = true [degC]")
+CELL_START_DESCRIPTION = ("the cell temperature at the start, where use_cell_temperature_start "
+                          "is true: a cell warmer or colder than the ambient it starts in "
+                          "[degC]")
+USE_CELL_START_DESCRIPTION = ("true: the cell starts at cell_temperature_start (needs the thermal "
+                              "model: temperature_is_cell false); false (default): rested at the "
+                              "first ambient temperature")
+
+
+def cell_start_fault(start_c: float, thermal_active: bool, temperature_is_cell: bool
+                     ) -> str | None:
+    """Why the FMU parameters use_cell_temperature_start = true and cell_temperature_start =
+    start_c (°C) cannot be taken, or None: they need the thermal model active (a model with
+    one, temperature_is_cell false) and a temperature within CELL_TEMPERATURE_RANGE_C. The
+    native FMU logs the same messages."""
+    if not thermal_active:
+        why = ("temperature_is_cell = true" if temperature_is_cell else
+               "this model has no thermal model")
+        return (f"parameter 'use_cell_temperature_start' = true: {why}, so the temperature "
+                "input is the cell temperature, from the first step on")
+    low, high = CELL_TEMPERATURE_RANGE_C
+    if not (math.isfinite(start_c) and low <= start_c <= high):
+        return (f"parameter 'cell_temperature_start' = {start_c:g}: expected a cell temperature "
+                f"within {low:g}...{high:g} degC")
+    return None
 
 
 def is_real_number(value: object) -> TypeGuard[float]:

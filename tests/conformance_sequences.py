@@ -271,6 +271,44 @@ def logged_messages(fmu: str) -> dict:
     return {"messages": messages, "statuses": statuses, "outputs": outputs}
 
 
+def cell_start_parameters(fmu: str) -> dict:
+    """use_cell_temperature_start / cell_temperature_start: a start temperature outside
+    −60…100 °C refused at exitInitializationMode (the FMU stays in Initialization Mode, its
+    outputs those of a rested start until then), one within read back as the cell temperature
+    in Initialization Mode and after it, the parameter fixed after initialisation, and a start
+    temperature with temperature_is_cell = true refused."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    out: dict = {"statuses": [], "cell_temperature": []}
+    with fmu_log("seq") as (name, callbacks, log):
+        slave, vr = _raw(fmu, True, name, callbacks)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.setBoolean([vr["use_cell_temperature_start"]], [True])
+        for start in (150.0, math.nan, 40.0):
+            slave.setReal([vr["cell_temperature_start"]], [start])
+            out["cell_temperature"].append(slave.getReal([vr["cell_temperature"]])[0])
+            out["statuses"].append(_status(slave.exitInitializationMode))
+        out["cell_temperature"].append(slave.getReal([vr["cell_temperature"]])[0])
+        slave.setReal([vr["current"]], [-2.0])
+        out["statuses"].append(_status(lambda: slave.doStep(0.0, 1.0)))
+        out["cell_temperature"].append(slave.getReal([vr["cell_temperature"]])[0])
+        out["statuses"].append(_status(lambda: slave.setReal([vr["cell_temperature_start"]],
+                                                             [30.0])))
+        out["read_back"] = [slave.getReal([vr["cell_temperature_start"]])[0],
+                            slave.getBoolean([vr["use_cell_temperature_start"]])[0]]
+        slave.freeInstance()
+        slave, vr = _raw(fmu, True, name, callbacks)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+        slave.setBoolean([vr["use_cell_temperature_start"], vr["temperature_is_cell"]],
+                         [True, True])
+        out["statuses"].append(_status(slave.exitInitializationMode))
+        slave.freeInstance()
+        out["messages"] = [entry.replace(name, "NAME") for entry in log]
+    return out
+
+
 def debug_logging_categories(fmu: str) -> dict:
     """fmi2SetDebugLogging with each kind of category list, each followed by a step outside
     the trained temperatures (a warning where warnings are on) and one back inside, then a
@@ -944,7 +982,8 @@ def random_calls_stock(fmu: str) -> dict:
 
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_range_at_start,
                                      state_machine, stop_time, impossible_inputs,
-                                     logged_messages, debug_logging_categories,
+                                     logged_messages, cell_start_parameters,
+                                     debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,
                                       null_pointers, status_inquiries, mode_rules,

@@ -63,9 +63,10 @@ def test_initial_unknowns_name_their_dependencies(fmu) -> None:
     deps = {names[int(u.get("index")) - 1]: {names[int(i) - 1] for i in
                                              u.get("dependencies").split()}
             for u in root.find("ModelStructure/InitialUnknowns")}
-    assert deps["voltage"] == {"soc0", "temperature", "temperature_is_cell"}
+    start = {"cell_temperature_start", "use_cell_temperature_start"}
+    assert deps["voltage"] == {"soc0", "temperature", "temperature_is_cell", *start}
     assert deps["soc"] == {"soc0"} and deps["soc_std"] == {"observer"}
-    assert deps["cell_temperature"] == {"temperature", "temperature_is_cell"}
+    assert deps["cell_temperature"] == {"temperature", "temperature_is_cell", *start}
     outputs = {names[int(u.get("index")) - 1] for u in root.find("ModelStructure/Outputs")}
     assert outputs == set(deps)
 
@@ -316,6 +317,28 @@ def test_both_fmus_log_the_same_messages(quick_fmu, native_fmu) -> None:
                 "fmi2DoStep is not allowed in terminated"]
     assert all(e in text for e in expected), text
     assert native["statuses"].count(0) == 4 and all(math.isfinite(x) for x in native["outputs"])
+
+
+def test_a_cell_start_temperature_is_checked_and_read_back_alike(quick_fmu, native_fmu) -> None:
+    """use_cell_temperature_start with cell_temperature_start 150 °C and NaN is refused at
+    exitInitializationMode (the outputs until then those of a rested start), 40 °C is the
+    cell temperature in Initialization Mode and after it, fixed once initialised, and refused
+    where the temperature input is the cell's (temperature_is_cell): both FMUs alike."""
+    py, native = (_run(f, "cell_start_parameters") for f in (quick_fmu, native_fmu))
+    for res in (py, native):   # the two word a fixed parameter's refusal each their own way
+        fixed = [m for m in res["messages"] if "is fixed after initialisation" in m]
+        assert len(fixed) == 1
+        res["messages"].remove(fixed[0])
+    assert py == native
+    assert native["statuses"] == [ERROR, ERROR, 0, 0, ERROR, ERROR]
+    rested, _, warm, after_init, after_step = native["cell_temperature"]
+    assert abs(rested - 25.0) < 2.0 and warm == after_init == 40.0 and after_step < 40.0
+    assert native["read_back"] == [40.0, True]
+    text = "\n".join(native["messages"])
+    assert ("parameter 'cell_temperature_start' = 150: expected a cell temperature within "
+            "-60...100 degC; not initialised" in text)
+    assert ("parameter 'use_cell_temperature_start' = true: temperature_is_cell = true, so "
+            "the temperature input is the cell temperature" in text)
 
 
 def test_debug_logging_follows_its_categories_and_refuses_null_ones(quick_fmu,

@@ -297,6 +297,26 @@ def test_api_sweep_takes_one_value_per_axis_on_its_own(native_fmu) -> None:
     assert len(one) == 1 and one[cols].equals(listed[cols])
 
 
+def test_api_simulate_starts_a_cell_warmer_than_its_ambient(quick_model) -> None:
+    """cell_temperature_start_c: the cell starts at it and cools towards its ambient, as the
+    FMU's engine with that start; the same figures with or without ambient_c's default."""
+    import lmncell
+    from lmncell.runtime.cosim import CellCosim, Parameters
+
+    model = lmncell.load_model(quick_model)
+    current = np.full(600, -2.0)
+    sim = lmncell.simulate(model, current, soc0=0.9, cell_temperature_start_c=40.0)
+    engine = CellCosim(model, Parameters(0.9, model.capacity_ah, cell_temperature_start_c=40.0))
+    engine.reset(25.0)
+    assert engine.cell_temperature_c == 40.0
+    for k, i in enumerate(current):
+        engine.advance(model.sample_time_s, float(i), 25.0)
+        assert engine.voltage_v == pytest.approx(sim.voltage_v[k], abs=1e-9), k
+    assert 25.0 < sim.cell_temperature_c[-1] < sim.cell_temperature_c[0] < 40.0
+    rested = lmncell.simulate(model, current, soc0=0.9, ambient_c=25.0)
+    assert np.max(np.abs(rested.voltage_v - sim.voltage_v)) > 1e-3
+
+
 def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -> None:
     import lmncell
     from lmncell.config import ConfigError
@@ -319,6 +339,10 @@ def test_api_refuses_a_model_file_it_could_not_write_before_training(tmp_path) -
     # numpy dropped the imaginary parts (a ComplexWarning), the load function's TypeError
     ({"current_a": np.full(5, -1.0 + 0.5j)}, "current_a holds complex numbers; expected real"),
     ({"model": None}, "simulate: model is None; expected an LmnModel or a model file's path"),
+    ({"cell_temperature_start_c": 150.0}, "cell_temperature_start_c = 150.0; expected a cell "
+                                          "temperature within -60…100 °C"),
+    ({"cell_temperature_start_c": 30.0, "temperature_c": 25.0},
+     "cell_temperature_start_c given with temperature_c"),
 ])
 def test_api_simulate_names_what_is_wrong_with_its_inputs(quick_model, kwargs, message) -> None:
     import lmncell

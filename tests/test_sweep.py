@@ -788,3 +788,29 @@ def test_a_value_named_twice_in_a_list_is_refused(lists, message) -> None:
     with pytest.raises(DataError, match=rf"sweep: {message}; expected each value once"):
         scenarios(*lists)
     assert len(scenarios(["wltc", "udds"], [25.0, 10.0], [0.9, 0.5])) == 8
+
+
+def test_simulate_starts_a_cell_colder_or_warmer_than_its_ambient(native_fmu, a123_model,
+                                                                   tmp_path, capsys) -> None:
+    """--cell-temperature-start: the cell starts there and tends towards its ambient (the
+    figures and the run line say so); refused by the FMU where the model has no thermal model,
+    with the FMU's own words."""
+    from lmncell.fmu.native_build import build_native_fmu
+
+    assert main(["simulate", str(native_fmu), "--cycle", "us06", "--ambient", "0",
+                 "--cell-temperature-start", "25", "--json"]) == 0
+    warm = json.loads(capsys.readouterr().out)
+    assert main(["simulate", str(native_fmu), "--cycle", "us06", "--ambient", "0",
+                 "--json"]) == 0
+    cold = json.loads(capsys.readouterr().out)
+    assert warm["cell_temperature_start_c"] == 25.0 and cold["cell_temperature_start_c"] is None
+    assert warm["cell_temperature_max_c"] > 20.0 > 5.0 > cold["cell_temperature_max_c"]
+    assert warm["cell_energy_wh"] != cold["cell_energy_wh"]
+    assert main(["simulate", str(native_fmu), "--cycle", "us06", "--cell-temperature-start",
+                 "30"]) == 0
+    assert "(from 30 °C at the start)" in capsys.readouterr().out
+    no_thermal = build_native_fmu(a123_model, tmp_path / "a123.fmu")
+    assert main(["simulate", str(no_thermal), "--cycle", "us06", "--cell-temperature-start",
+                 "30"]) == 2
+    assert ("the FMU refused its parameters: parameter 'use_cell_temperature_start' = true: "
+            "this model has no thermal model") in capsys.readouterr().err

@@ -167,6 +167,55 @@ def test_fmu_reproduces_the_pipeline(quick_model, quick_fmu, native_fmu, flavour
         assert np.ptp(res["fmu_cell_temperature_c"]) > 1.0   # it did heat up
 
 
+@pytest.mark.parametrize("flavour", ["pythonfmu", "native"])
+def test_a_cell_that_starts_warmer_than_its_ambient(quick_model, quick_fmu, native_fmu,
+                                                   flavour) -> None:
+    """use_cell_temperature_start: the cell starts at cell_temperature_start (40 °C in the US06
+    record's 25 °C chamber) and cools towards its ambient as it works; both FMUs equal the
+    pipeline (simulate_ambient with that start) within 1e-9 V and K, and the start shows in the
+    voltage against a cell that starts rested."""
+    fmu = quick_fmu if flavour == "pythonfmu" else native_fmu
+    warm = compare_fmu_with_pipeline(quick_model, fmu, PAN_US06, max_steps=2500, ambient=True,
+                                     cell_temperature_start_c=40.0)
+    rested = compare_fmu_with_pipeline(quick_model, fmu, PAN_US06, max_steps=2500, ambient=True)
+    assert warm["max_dv_v"] <= 1e-9 and warm["max_dtemperature_k"] <= 1e-9
+    cell = warm["fmu_cell_temperature_c"]
+    assert cell[0] < 40.0 and cell[0] > cell[-1] > rested["fmu_cell_temperature_c"][-1]
+    assert np.max(np.abs(warm["fmu_voltage_v"] - rested["fmu_voltage_v"])) > 1e-3
+
+
+def test_a_cell_start_temperature_needs_the_thermal_model(a123_model, tmp_path) -> None:
+    """A model without a thermal model takes the temperature input as the cell's from the first
+    step on: a start temperature is refused, by the runtime, the pipeline and the native FMU
+    alike, with the same words."""
+    import json
+    import subprocess
+    import sys
+
+    from lmncell.fmu.native_build import build_native_fmu
+    from lmncell.runtime.cosim import CellCosim, InputError, Parameters
+
+    from tests.conftest import ROOT, c_compiler_or_skip
+
+    model = load_model(a123_model)
+    assert model.thermal is None
+    words = ("parameter 'use_cell_temperature_start' = true: this model has no thermal model, "
+             "so the temperature input is the cell temperature, from the first step on")
+    with pytest.raises(InputError, match=words.replace("(", r"\(")):
+        CellCosim(model, Parameters(1.0, 2.2, cell_temperature_start_c=30.0))
+    with pytest.raises(ValueError, match="this model has no thermal model"):
+        simulate_ambient(model, np.zeros(3), 25.0, 1.0, cell_temperature_start_c=30.0)
+    c_compiler_or_skip()
+    fmu = build_native_fmu(a123_model, tmp_path / "a123.fmu")
+    proc = subprocess.run([sys.executable, "-m", "tests.conformance_sequences", str(fmu),
+                           "cell_start_parameters"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    res = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert res["statuses"][:3] == [3, 3, 3]     # fmi2Error whatever the start temperature
+    assert sum(words in m for m in res["messages"]) == 3
+
+
 def test_ambient_evaluation_of_a_held_out_record(quick_model) -> None:
     from lmncell.evaluation.evaluate import evaluate_model
 

@@ -28,7 +28,7 @@ from lmncell.runtime.cosim import held_delayed_currents
 from lmncell.runtime.model import LmnModel, load_model
 from lmncell.runtime.step import SimResult, simulate_ambient
 from lmncell.runtime.step import simulate as _simulate_runtime
-from lmncell.runtime.thermal import DEFAULT_TEMPERATURE_C
+from lmncell.runtime.thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
 
 __all__ = ["LmnModel", "Record", "SimResult", "build_fmu", "evaluate", "load_model",
            "read_record", "simulate", "sweep", "train"]
@@ -105,7 +105,8 @@ def _model(caller: str, model: Any) -> LmnModel:
 def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
              temperature_c: np.ndarray | float | None = None, soc0: float = 1.0,
              capacity_ah: float | None = None, *,
-             ambient_c: np.ndarray | float | None = None) -> SimResult:
+             ambient_c: np.ndarray | float | None = None,
+             cell_temperature_start_c: float | None = None) -> SimResult:
     """Free-run simulation of a current profile sampled at the model's sample time
     (model.sample_time_s; each value held over one step, > 0 charges).
 
@@ -114,7 +115,10 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     step or one value (°C), from which the model's thermal model computes the cell temperature
     (the FMU's default; returned as `cell_temperature_c`; a model without a thermal model takes
     the ambient as the cell temperature). Neither given: an ambient of 25 °C, as the FMU with
-    its start values. soc0: the SoC before the first step. Returns arrays
+    its start values. cell_temperature_start_c: with the ambient, the cell's temperature before
+    the first step (°C; the FMU's cell_temperature_start with use_cell_temperature_start =
+    true), for a cell warmer or colder than the air it starts in; None: rested at the first
+    ambient. soc0: the SoC before the first step. Returns arrays
     `voltage_v` (V, the mean over each step) and `soc` (after each step), plus the network
     output `y` and the local models' `validity`. A model
     with a current delay δ (model.current_delay_s) takes each step's current δ late, as its FMU
@@ -130,18 +134,42 @@ def simulate(model: LmnModel | str | Path, current_a: np.ndarray,
     if temperature_c is not None and ambient_c is not None:
         raise DataError("simulate: temperature_c (the cell's) and ambient_c given; expected one "
                         "of them")
+    if temperature_c is not None and cell_temperature_start_c is not None:
+        raise DataError("simulate: cell_temperature_start_c given with temperature_c (the "
+                        "cell's own from the first step on); expected it with ambient_c")
     taken = np.array(held_delayed_currents(current.tolist(), model.sample_time_s,
                                            model.current_delay_s))
     if temperature_c is None and ambient_c is None:
         ambient_c = DEFAULT_TEMPERATURE_C             # the FMU's start values
     if ambient_c is not None:
         ambient = _temperature_profile(ambient_c, current.size, "ambient_c")
-        sim, temp = simulate_ambient(model, taken, ambient, float(soc0), capacity_ah)
+        start = _cell_start(model, cell_temperature_start_c)
+        sim, temp = simulate_ambient(model, taken, ambient, float(soc0), capacity_ah,
+                                     cell_temperature_start_c=start)
     else:
         temp = _temperature_profile(temperature_c, current.size)
         sim = _simulate_runtime(model, taken, temp, float(soc0), capacity_ah)
     warn_outside_training(model, "simulate", current, temp, sim.soc)
     return sim
+
+
+def _cell_start(model: LmnModel, start_c: Any) -> float | None:
+    """simulate's cell_temperature_start_c as a float (°C), None where not given; DataError
+    where the model has no thermal model or it is no cell temperature."""
+    if start_c is None:
+        return None
+    if model.thermal is None:
+        raise DataError("simulate: cell_temperature_start_c given, but this model has no "
+                        "thermal model: it takes ambient_c as the cell temperature")
+    low, high = CELL_TEMPERATURE_RANGE_C
+    try:
+        start = float(start_c)
+    except (TypeError, ValueError):
+        start = math.nan
+    if not (math.isfinite(start) and low <= start <= high):
+        raise DataError(f"simulate: cell_temperature_start_c = {start_c!r:.60}; expected a cell "
+                        f"temperature within {low:g}…{high:g} °C")
+    return start
 
 
 def _positive(name: str, value: Any, unit: str) -> float:
@@ -179,7 +207,7 @@ def _temperature_profile(temperature_c: Any, steps: int,
                          name: str = "temperature_c") -> np.ndarray:
     """One temperature or one per step (°C) as an array of `steps`, within
     CELL_TEMPERATURE_RANGE_C, or DataError naming the argument `name`."""
-    from lmncell.data.records import CELL_TEMPERATURE_RANGE_C, is_cell_temperature
+    from lmncell.data.records import is_cell_temperature
 
     temp = _profile(name, temperature_c, "°C")
     if np.ndim(temperature_c) == 0:

@@ -634,6 +634,10 @@ def _add_simulate_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
     s.add_argument("--soc0", type=soc_argument, default=0.9, help="start SoC")
     s.add_argument("--ambient", type=_ambient, default=25.0, help="ambient temperature, "
                    "°C (the model computes the cell temperature where it has a thermal model)")
+    s.add_argument("--cell-temperature-start", type=_temperature, metavar="DEGC",
+                   help="the cell's temperature at the start, °C, where it is warmer or colder "
+                   "than the --ambient it meets (needs the model's thermal model; default: "
+                   "rested at the ambient)")
     s.add_argument("--step", type=_positive, help="communication step in s (default: model Ts); "
                    "a step longer than the cycle's or profile's samples holds their mean power or "
                    "current")

@@ -37,7 +37,7 @@ __asm__(".symver pow,pow@GLIBC_2.2.5");
 /* value references: the same as the pythonfmu FMU */
 enum { VR_CURRENT = 0, VR_VOLTAGE_MEASURED, VR_TEMPERATURE, VR_VOLTAGE, VR_SOC, VR_SOC_STD,
        VR_OUT_OF_RANGE, VR_SOC0, VR_CAPACITY, VR_OBSERVER, VR_TEMPERATURE_IS_CELL,
-       VR_CELL_TEMPERATURE };
+       VR_CELL_TEMPERATURE, VR_CELL_TEMPERATURE_START, VR_USE_CELL_TEMPERATURE_START };
 
 #define CHARGE 1
 #define DISCHARGE 2
@@ -69,6 +69,8 @@ typedef struct {
     /* inputs and parameters */
     double current, voltage_measured, temperature, soc0, capacity;
     int observer, temperature_is_cell;
+    double t_start;                            /* cell_temperature_start (degC) */
+    int use_t_start;                           /* use_cell_temperature_start */
     int initialized;
     double time;                               /* the FMU's time: where the next step starts */
     /* thermal state (step.CellThermal): cell temperature at the next step's start */
@@ -1096,6 +1098,32 @@ static void log_range(Instance *in, double t0) {
 /* ----- cell temperature (step.CellThermal, thermal.py) ---------------------------------------- */
 static int thermal_active(const State *s) { return HAS_THERMAL && !s->temperature_is_cell; }
 
+/* thermal.cell_start_fault: why use_cell_temperature_start = true cannot be taken (written
+   into msg), or 0 where it can */
+static int cell_start_fault(const State *s, char *msg, size_t size) {
+    if (!thermal_active(s)) {
+        snprintf(msg, size, "parameter 'use_cell_temperature_start' = true: %s, so the "
+                 "temperature input is the cell temperature, from the first step on",
+                 s->temperature_is_cell ? "temperature_is_cell = true"
+                                        : "this model has no thermal model");
+        return 1;
+    }
+    if (!(isfinite(s->t_start) && s->t_start >= MIN_TEMPERATURE_C
+          && s->t_start <= MAX_TEMPERATURE_C)) {
+        snprintf(msg, size, "parameter 'cell_temperature_start' = %g: expected a cell "
+                 "temperature within %g...%g degC", s->t_start, MIN_TEMPERATURE_C,
+                 MAX_TEMPERATURE_C);
+        return 1;
+    }
+    return 0;
+}
+
+/* the cell starts at cell_temperature_start (use_cell_temperature_start, taken) */
+static int starts_at_t_start(const State *s) {
+    char msg[256];
+    return s->use_t_start && !cell_start_fault(s, msg, sizeof msg);
+}
+
 static double cell_temperature(State *s, double input) {
     if (!thermal_active(s)) return input;
     if (!s->t_cell_set) {
@@ -1236,9 +1264,14 @@ static void init_state(State *s) {
     double t_in = isfinite(s->temperature) && s->temperature >= MIN_TEMPERATURE_C &&
                   s->temperature <= MAX_TEMPERATURE_C ? s->temperature : DEFAULT_TEMPERATURE_C;
     double soc0 = is_soc_fraction(s->soc0) ? s->soc0 : (s->soc0 > 1.0 ? 1.0 : 0.0);
-    s->t_cell_set = 0;
-    s->t_last_input = cell_temperature(s, t_in);
-    s->t_cell_set = 0;
+    if (starts_at_t_start(s)) {          /* a cell warmer or colder than its ambient */
+        s->t_cell = s->t_last_input = s->t_start;
+        s->t_cell_set = 1;
+    } else {                             /* rested at the first step's input */
+        s->t_cell_set = 0;
+        s->t_last_input = cell_temperature(s, t_in);
+        s->t_cell_set = 0;
+    }
     stepper_init(s, soc0, s->t_last_input);
     observer_init(s, soc0);
     s->covered = s->charge = s->temp_int = s->volt_int = s->volt_time = 0.0;
@@ -1252,6 +1285,7 @@ static void init_state(State *s) {
 
 static fmi2Status initialise(Instance *in) {
     State *s = &in->s;
+    char msg[256];
     if (!is_soc_fraction(s->soc0)) {
         logf_(in, fmi2Error, "logStatusError", "parameter 'soc0' = %g: expected a fraction "
               "within 0..1; not initialised, every step will be refused", s->soc0);
@@ -1268,6 +1302,11 @@ static fmi2Status initialise(Instance *in) {
               "2 fuzzy, 3 IMM; not initialised, every step will be refused", s->observer);
         return fmi2Error;
     }
+    if (s->use_t_start && cell_start_fault(s, msg, sizeof msg)) {
+        logf_(in, fmi2Error, "logStatusError", "%s; not initialised, every step will be "
+              "refused", msg);
+        return fmi2Error;
+    }
     init_state(s);
     return fmi2OK;
 }
@@ -1278,6 +1317,7 @@ static void defaults(State *s) {
     s->temperature = DEFAULT_TEMPERATURE_C;
     s->soc0 = 1.0;
     s->capacity = CAPACITY_AH;
+    s->t_start = DEFAULT_TEMPERATURE_C;
     s->voltage = RELATIVE_OCV ? ocv(1.0) : 0.0;
 }
 
@@ -1462,6 +1502,7 @@ static double output_real(const State *s0, fmi2ValueReference vr, int *ok) {
     }
     case VR_SOC0: return s->soc0;
     case VR_CAPACITY: return s->capacity;
+    case VR_CELL_TEMPERATURE_START: return s->t_start;
     case VR_CELL_TEMPERATURE:
         if (s->initialized && s->t_cell_set) return s->t_cell;
         if (s->initialized) return s->t_last_input;
@@ -1534,6 +1575,8 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
             v[k] = in->s.out_of_range ? fmi2True : fmi2False;
         } else if (vr[k] == VR_TEMPERATURE_IS_CELL) {
             v[k] = in->s.temperature_is_cell ? fmi2True : fmi2False;
+        } else if (vr[k] == VR_USE_CELL_TEMPERATURE_START) {
+            v[k] = in->s.use_t_start ? fmi2True : fmi2False;
         } else {
             logf_(in, fmi2Error, "logStatusError", "fmi2GetBoolean: no Boolean variable with "
                   "value reference %u", vr[k]);
@@ -1569,12 +1612,15 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
         case VR_TEMPERATURE: s->temperature = v[k]; break;
         case VR_SOC0:
         case VR_CAPACITY:
+        case VR_CELL_TEMPERATURE_START:
             if (s->initialized) {
                 logf_(in, fmi2Error, "logStatusError", "fmi2SetReal: parameter with value "
                       "reference %u is fixed after initialisation", vr[k]);
                 return fmi2Error;
             }
-            if (vr[k] == VR_SOC0) s->soc0 = v[k]; else s->capacity = v[k];
+            if (vr[k] == VR_SOC0) s->soc0 = v[k];
+            else if (vr[k] == VR_CAPACITY) s->capacity = v[k];
+            else s->t_start = v[k];
             break;
         default:
             logf_(in, fmi2Error, "logStatusError", "fmi2SetReal: value reference %u is not a "
@@ -1611,12 +1657,14 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
                         "fmi2SetBoolean") || !arrays_given(in, "fmi2SetBoolean", n, vr, v, "set"))
         return fmi2Error;
     for (k = 0; k < n; k++) {
-        if (vr[k] != VR_TEMPERATURE_IS_CELL || in->s.initialized) {
+        if ((vr[k] != VR_TEMPERATURE_IS_CELL && vr[k] != VR_USE_CELL_TEMPERATURE_START)
+            || in->s.initialized) {
             logf_(in, fmi2Error, "logStatusError", "fmi2SetBoolean: value reference %u is not a "
                   "settable Boolean now", vr[k]);
             return fmi2Error;
         }
-        in->s.temperature_is_cell = v[k] ? 1 : 0;
+        if (vr[k] == VR_TEMPERATURE_IS_CELL) in->s.temperature_is_cell = v[k] ? 1 : 0;
+        else in->s.use_t_start = v[k] ? 1 : 0;
     }
     return fmi2OK;
 }
@@ -1740,10 +1788,12 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate st, fmi2Byte b[],
    of the same shape, or bytes changed on the way) */
 static int state_plausible(const State *s) {
     if (!isfinite(s->time) || (s->temperature_is_cell != 0 && s->temperature_is_cell != 1)
-        || (s->initialized != 0 && s->initialized != 1))
+        || (s->initialized != 0 && s->initialized != 1)
+        || (s->use_t_start != 0 && s->use_t_start != 1))
         return 0;
     return !s->initialized || (is_observer(s->observer) && is_cell_capacity(s->capacity)
-                               && is_soc_fraction(s->soc0) && outputs_finite(s));
+                               && is_soc_fraction(s->soc0) && outputs_finite(s)
+                               && (!s->use_t_start || starts_at_t_start(s)));
 }
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte b[], size_t size,

@@ -7,8 +7,9 @@
  *         -DLMNCELL_FUZZ_GUID='"<guid>"' fuzz_calls.c <sources>/lmncell.c -lm
  *
  * The calls: inputs and parameters set to any value (NaN, ±inf, ±1e300 and the bytes' own
- * doubles among them), steps of any size from any communication point, the observer and
- * temperature_is_cell switches, set-up, initialisation, reset and terminate in any order,
+ * doubles among them), steps of any size from any communication point, the observer,
+ * temperature_is_cell and use_cell_temperature_start switches, set-up, initialisation, reset
+ * and terminate in any order,
  * FMU states saved, restored, freed, and serialised with some of their bytes overwritten
  * before they are read back (the magic number kept, so that the state is taken).
  * Invariants, each a crash that libFuzzer reports: no sanitizer finding, and after a doStep
@@ -28,7 +29,8 @@
 #endif
 
 enum { VR_VOLTAGE = 3, VR_SOC, VR_SOC_STD, VR_OUT_OF_RANGE, VR_OBSERVER = 9,
-       VR_TEMPERATURE_IS_CELL, VR_CELL_TEMPERATURE, N_VR };
+       VR_TEMPERATURE_IS_CELL, VR_CELL_TEMPERATURE, VR_CELL_TEMPERATURE_START,
+       VR_USE_CELL_TEMPERATURE_START, N_VR };
 enum { N_SLOTS = 3 };
 
 static long steps_made, steps_taken;
@@ -148,10 +150,12 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
             fmi2SetInteger(c, &obs, 1, &v);
             break;
         }
-        case 15: {
-            fmi2ValueReference cell = VR_TEMPERATURE_IS_CELL;
-            fmi2Boolean v = next_byte(&b) & 1;
-            fmi2SetBoolean(c, &cell, 1, &v);
+        case 15: {       /* temperature_is_cell or use_cell_temperature_start */
+            int byte = next_byte(&b);
+            fmi2ValueReference which = (byte & 2) ? VR_USE_CELL_TEMPERATURE_START
+                                                  : VR_TEMPERATURE_IS_CELL;
+            fmi2Boolean v = byte & 1;
+            fmi2SetBoolean(c, &which, 1, &v);
             break;
         }
         case 16: {

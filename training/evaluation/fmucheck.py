@@ -32,25 +32,31 @@ def fmu_input(seg: Segment, ts: float, temperature_c: np.ndarray | None = None) 
 
 
 def run_fmu_on_segment(fmu: str | Path, seg: Segment, ts: float, step_s: float | None = None,
-                       ambient: bool = False) -> np.ndarray:
+                       ambient: bool = False, cell_temperature_start_c: float | None = None
+                       ) -> np.ndarray:
     """fmpy result (time, voltage, soc, cell_temperature, out_of_range) of the FMU driven with
     the segment's current and its measured temperature as the cell temperature or (ambient) its
-    ambient."""
+    ambient, the cell then starting at cell_temperature_start_c (°C) where given."""
     from fmpy import simulate_fmu
 
     n = len(seg)
     signal = fmu_input(seg, ts, ambient_of(seg) if ambient else None)
+    start: dict[str, float | bool] = {"soc0": seg.soc0, "temperature_is_cell": not ambient}
+    if cell_temperature_start_c is not None:
+        start |= {"use_cell_temperature_start": True,
+                  "cell_temperature_start": cell_temperature_start_c}
     return simulate_fmu(str(fmu), start_time=0.0, stop_time=n * ts, step_size=step_s or ts,
-                        output_interval=ts, input=signal,
-                        start_values={"soc0": seg.soc0, "temperature_is_cell": not ambient},
+                        output_interval=ts, input=signal, start_values=start,
                         output=["voltage", "soc", "cell_temperature", "out_of_range"])
 
 
 def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: str | Path,
                               soc0: float | None = None, max_steps: int | None = None,
-                              ambient: bool = False) -> dict:
+                              ambient: bool = False,
+                              cell_temperature_start_c: float | None = None) -> dict:
     """Largest voltage and SoC differences between the FMU (through fmpy) and the pipeline on
-    a record's first segment; ambient: both driven by the ambient temperature only. The FMU
+    a record's first segment; ambient: both driven by the ambient temperature only, the cell
+    starting at cell_temperature_start_c (°C) where given. The FMU
     gets the segment's step means held over steps of Ts; a model with a current delay delays
     them itself, and the pipeline is given what it then takes (held_delayed_currents)."""
     model = load_model(model_path)
@@ -64,11 +70,12 @@ def compare_fmu_with_pipeline(model_path: str | Path, fmu: str | Path, record: s
         seg.current_a.tolist(), model.sample_time_s, model.current_delay_s)))
     if ambient:
         sim, cell = simulate_ambient(model, seg.current_a, ambient_of(seg), seg.soc0, None,
-                                     initial_hysteresis(seg.soc0))
+                                     initial_hysteresis(seg.soc0), cell_temperature_start_c)
     else:
         sim = simulate_segment(model, seg)
         cell = seg.temperatures()
-    res = run_fmu_on_segment(fmu, fmu_seg, model.sample_time_s, ambient=ambient)
+    res = run_fmu_on_segment(fmu, fmu_seg, model.sample_time_s, ambient=ambient,
+                             cell_temperature_start_c=cell_temperature_start_c)
     n = len(seg)
     v, s, t = res["voltage"][1:n + 1], res["soc"][1:n + 1], res["cell_temperature"][1:n + 1]
     return {"record": seg.name, "steps": n, "ambient": ambient,

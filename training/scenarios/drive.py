@@ -339,7 +339,8 @@ def whole_steps(h: float, span_s: float, what: str) -> int:
 
 def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: float,
                soc0: float, temperature_c: float, cutoff_v: float,
-               charge_cutoff_v: float = 0.0) -> tuple[dict[str, np.ndarray], str, str]:
+               charge_cutoff_v: float = 0.0, cell_temperature_start_c: float | None = None
+               ) -> tuple[dict[str, np.ndarray], str, str]:
     """Step the FMU (md: its model description, fmpy's) with fmpy through one load value per
     communication step h (s): the cell
     power (W, > 0 discharging; by_power, i = −P/u with u the previous step's voltage) or the
@@ -365,7 +366,8 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
                           modelIdentifier=md.coSimulation.modelIdentifier, instanceName=name)
         try:
             slave.instantiate(callbacks=callbacks, loggingOn=True)   # its warnings kept in log
-            u = _initialised(slave, vr, soc0, temperature_c)
+            u = _initialised(slave, vr, soc0, temperature_c, cell_temperature_start_c, log,
+                             FMICallException)
             for k in range(n):
                 t0 = k * h
                 i = -load[k] / u if by_power else float(load[k])
@@ -385,14 +387,29 @@ def _drive_fmu(fmu: str | Path, md: Any, load: np.ndarray, by_power: bool, h: fl
     return {key: values[:n] for key, values in out.items()}, stop, first
 
 
-def _initialised(slave: Any, vr: dict[str, int], soc0: float, temperature_c: float) -> float:
+def _initialised(slave: Any, vr: dict[str, int], soc0: float, temperature_c: float,
+                 cell_temperature_start_c: float | None, log: list[str],
+                 refused: type[Exception]) -> float:
     """Take the instantiated FMU through initialisation with the start SoC and temperature
-    (°C); returns its voltage (V) there."""
+    (°C; the cell starting at cell_temperature_start_c where given); returns its voltage (V)
+    there. DataError where the FMU has no such parameter (built by an earlier LMNCell) or
+    refuses the parameters, with what it logged."""
     slave.setupExperiment(startTime=0.0)
     slave.enterInitializationMode()
     slave.setReal([vr["soc0"]], [soc0])
     slave.setReal([vr["temperature"]], [temperature_c])
-    slave.exitInitializationMode()
+    if cell_temperature_start_c is not None:
+        if "use_cell_temperature_start" not in vr:
+            raise DataError("--cell-temperature-start: this FMU has no parameter "
+                            "use_cell_temperature_start (an earlier LMNCell built it); build "
+                            "it again from its model with lmncell build-fmu")
+        slave.setReal([vr["cell_temperature_start"]], [cell_temperature_start_c])
+        slave.setBoolean([vr["use_cell_temperature_start"]], [True])
+    try:
+        slave.exitInitializationMode()
+    except refused:
+        said = log[-1] if log else "nothing in its log"
+        raise DataError(f"the FMU refused its parameters: {said}") from None
     return slave.getReal([vr["voltage"]])[0]
 
 
@@ -439,13 +456,16 @@ def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature
 def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
               vehicle: Vehicle | None = None,
               repeat: int = 1, soc0: float = 0.9, step_s: float | None = None,
-              temperature_c: float = 25.0, cutoff_v: float | None = None) -> CycleResult:
+              temperature_c: float = 25.0, cutoff_v: float | None = None,
+              cell_temperature_start_c: float | None = None) -> CycleResult:
     """Drive the FMU through `repeat` copies of a cycle (a shipped cycle's name, a speed-trace
     file or a SpeedTrace: load_cycle) with fmpy; inputs held over each step (the cycle's mean
     power over a step longer than its samples, step_means; a step longer than the cycles is
     refused with a DataError).
     temperature_c is the ambient temperature (the model computes the cell temperature where it
-    has a thermal model). The run stops after the first step that leaves the cell empty
+    has a thermal model), cell_temperature_start_c (°C) the cell's at the start where given
+    (the FMU's use_cell_temperature_start; None: rested at the ambient). The run stops after
+    the first step that leaves the cell empty
     (empty_reason): cutoff_v in V, None for the FMU's own (shipped_cutoff_v), 0 for none (a
     SoC or a voltage below 0 still stops it); or over-full (full_reason: SoC above 1)."""
     vehicle = vehicle or load_vehicle()
@@ -459,9 +479,11 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
                                     f"{copies}the {trace.title} cycle")
     speed = step_means(np.tile(trace.speed_mps, repeat), dt, h, n)
     out, stop, first = _drive_fmu(fmu, md, step_means(cell_power, dt, h, n), True, h, soc0,
-                                  temperature_c, cutoff)
+                                  temperature_c, cutoff,
+                                  cell_temperature_start_c=cell_temperature_start_c)
     speed = speed[:out["time"].size]
     cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop, first)
+    cell["cell_temperature_start_c"] = cell_temperature_start_c
     figures = {"cycle": trace.name, "repetitions": repeat, "step_s": h,
                "duration_s": cell["duration_s"], "unrun_s": unrun_s(power.size * dt, h, n),
                "distance_km": float(np.sum(speed) * h / 1000.0),
@@ -476,7 +498,8 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
 def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: int = 1,
                 soc0: float = 0.9, step_s: float | None = None, temperature_c: float = 25.0,
                 cutoff_v: float | None = None, discharge_positive: bool = False,
-                charge_cutoff_v: float | None = None) -> CycleResult:
+                charge_cutoff_v: float | None = None,
+                cell_temperature_start_c: float | None = None) -> CycleResult:
     """Drive the FMU through `repeat` copies of a cell current profile (a CSV file or a
     CurrentProfile: load_current_profile) with fmpy, the current's mean over each
     communication step held over it; stops as run_cycle does, and also where the voltage
@@ -492,9 +515,11 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
     md, h, n = _communication_steps(fmu, step_s, current.size * dt,
                                     f"{copies}the profile {prof.name}")
     out, stop, first = _drive_fmu(fmu, md, step_means(current, dt, h, n), False, h, soc0,
-                                  temperature_c, cutoff, charge_cutoff)
+                                  temperature_c, cutoff, charge_cutoff,
+                                  cell_temperature_start_c)
     figures = {"profile": prof.name, "repetitions": repeat,
                **_cell_figures(out, h, soc0, temperature_c, cutoff, stop, first),
+               "cell_temperature_start_c": cell_temperature_start_c,
                "unrun_s": unrun_s(current.size * dt, h, n),
                "charge_cutoff_v": charge_cutoff}
     cell_t = out["cell_t"] if figures["cell_temperature_max_c"] is not None else None
@@ -556,7 +581,10 @@ def plot_cycle(res: CycleResult, path: str | Path) -> Path:
     if res.cell_temperature_c is not None:
         tx = ax[2].twinx()
         tx.plot(t, res.cell_temperature_c, color="tab:red", lw=0.8)
-        tx.set_ylabel(f"cell temperature / °C (ambient {f['ambient_c']:g})", color="tab:red")
+        start = f.get("cell_temperature_start_c")
+        tx.set_ylabel(f"cell temperature / °C (ambient {f['ambient_c']:g})"
+                      + (f"\nfrom {start:g} °C at the start" if start is not None else ""),
+                      color="tab:red")
     return save_figure(fig, path)
 
 
@@ -567,10 +595,10 @@ def simulate_cycle_cli(a) -> int:
     read_fmu_info(a.fmu)               # ConfigError naming the file unless an LMNCell FMU
     if a.current:
         res = run_profile(a.fmu, a.current, a.repeat, a.soc0, a.step, a.ambient, a.cutoff,
-                          a.discharge_positive, a.charge_cutoff)
+                          a.discharge_positive, a.charge_cutoff, a.cell_temperature_start)
     else:
         res = run_cycle(a.fmu, a.cycle, load_vehicle(a.vehicle), a.repeat, a.soc0, a.step,
-                        a.ambient, a.cutoff)
+                        a.ambient, a.cutoff, a.cell_temperature_start)
     plotted = plot_cycle(res, a.plot) if a.plot else None
     f = res.figures
     notes = sys.stderr if a.json else sys.stdout    # with --json, stdout is the JSON alone
@@ -628,4 +656,6 @@ def _run_line(f: dict) -> str:
             f"{100 * f['soc_end']:.1f} % (swing {100 * f['soc_swing']:.1f} points)"
             + ("" if f["cell_temperature_max_c"] is None else
                f", cell temperature up to {f['cell_temperature_max_c']:.1f} °C at "
-               f"{f['ambient_c']:g} °C ambient"))
+               f"{f['ambient_c']:g} °C ambient"
+               + ("" if f.get("cell_temperature_start_c") is None else
+                  f" (from {f['cell_temperature_start_c']:g} °C at the start)")))
