@@ -400,9 +400,10 @@ def _initialised(slave: Any, vr: dict[str, int], soc0: float, temperature_c: flo
     slave.setReal([vr["temperature"]], [temperature_c])
     if cell_temperature_start_c is not None:
         if "use_cell_temperature_start" not in vr:
-            raise DataError("--cell-temperature-start: this FMU has no parameter "
-                            "use_cell_temperature_start (an earlier LMNCell built it); build "
-                            "it again from its model with lmncell build-fmu")
+            raise DataError("a cell start temperature (--cell-temperature-start) was given, "
+                            "but this FMU has no parameter use_cell_temperature_start (an "
+                            "earlier LMNCell built it); build it again from its model with "
+                            "lmncell build-fmu")
         slave.setReal([vr["cell_temperature_start"]], [cell_temperature_start_c])
         slave.setBoolean([vr["use_cell_temperature_start"]], [True])
     try:
