@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from .model import CAPACITY_RANGE_AH, LmnModel, is_cell_capacity
 from .observers import OBSERVER_NAMES, SocObserver
 from .step import CellStepper, CellThermal
-from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C, cell_start_fault
+from .thermal import CELL_TEMPERATURE_RANGE_C, DEFAULT_TEMPERATURE_C
 
 STEP_TOL = 1e-9   # a model step completes when its covered time is within STEP_TOL·Ts of Ts
 MAX_C_RATE = 1000.0          # |current| beyond 1000 C is refused as not physical
@@ -119,14 +119,10 @@ class CellCosim:
             raise InputError(f"parameter 'observer' = {p.observer!r}: expected one of "
                              f"{OBSERVER_NAMES}")
         self.thermal = CellThermal(self.model, p.temperature_is_cell, p.cell_temperature_start_c)
-        if p.cell_temperature_start_c is None:
-            t_cell = self.thermal.rested(temperature_c)   # the first step's input sets it
-        else:
-            fault = cell_start_fault(p.cell_temperature_start_c, self.thermal.active,
-                                     p.temperature_is_cell)
-            if fault:
-                raise InputError(fault)
-            t_cell = p.cell_temperature_start_c
+        fault = self.thermal.start_fault()
+        if fault:
+            raise InputError(fault)
+        t_cell = self.thermal.start(temperature_c)   # else the first step's input sets it
         self.observer: SocObserver | None = None
         if p.observer:
             self.observer = SocObserver(self.model, OBSERVER_NAMES[p.observer], p.soc0,

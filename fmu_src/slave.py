@@ -35,7 +35,6 @@ from .thermal import (
     DEFAULT_TEMPERATURE_C,
     TEMPERATURE_DESCRIPTION,
     USE_CELL_START_DESCRIPTION,
-    cell_start_fault,
 )
 
 UNREADABLE = "unreadable"   # key of the state that _fmu_state_from_bytes gives for bad bytes
@@ -211,11 +210,10 @@ class LmnCellSlave(Fmi2Slave):
         cap = cap if is_cell_capacity(cap) else float(m.capacity_ah)
         observer = int(self.observer) if self.observer in OBSERVERS else 0
         is_cell = bool(self.temperature_is_cell)
-        start = self._cell_start()
-        if start is not None and cell_start_fault(start, m.thermal is not None and not is_cell,
-                                                  is_cell):
-            start = None          # refused by exitInitializationMode; until then as unset
-        cosim = CellCosim(m, Parameters(soc0, cap, observer, is_cell, start))
+        try:
+            cosim = CellCosim(m, Parameters(soc0, cap, observer, is_cell, self._cell_start()))
+        except InputError:     # a start temperature exitInitializationMode will refuse:
+            cosim = CellCosim(m, Parameters(soc0, cap, observer, is_cell))   # until then unset
         cosim.reset(self._start_temperature())
         return cosim
 

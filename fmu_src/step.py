@@ -808,6 +808,8 @@ class CellThermal:
         """start_c: the cell's temperature at the first step (°C), where the thermal model is
         active; None: rested at the first step's input."""
         self.model = model
+        self.temperature_is_cell = temperature_is_cell
+        self.start_c = start_c
         self.active = model.thermal is not None and not temperature_is_cell
         self._coefficients = (step_coefficients(model.thermal, model.sample_time_s)
                               if model.thermal is not None else None)
@@ -818,6 +820,18 @@ class CellThermal:
         """The temperature of a cell rested at the given `temperature` input (°C); nothing
         changes."""
         return rested_temperature(self.model.thermal, input_c) if self.active else input_c
+
+    def start_fault(self) -> str | None:
+        """Why start_c cannot be taken (thermal.cell_start_fault), or None (also without
+        one)."""
+        if self.start_c is None:
+            return None
+        return cell_start_fault(self.start_c, self.active, self.temperature_is_cell)
+
+    def start(self, input_c: float) -> float:
+        """The cell temperature the first step starts from (°C), given its `temperature`
+        input: start_c where given, else rested at the input; nothing changes."""
+        return self.rested(input_c) if self.start_c is None else self.start_c
 
     def next_temperature(self, input_c: float) -> float:
         """The cell temperature the next step takes, given its `temperature` input (the first
@@ -860,12 +874,10 @@ def simulate_ambient(model: LmnModel, current_a: np.ndarray, ambient_c: np.ndarr
     current = np.asarray(current_a, dtype=float)
     ambient = np.broadcast_to(np.asarray(ambient_c, dtype=float), current.shape)
     thermal = CellThermal(model, start_c=cell_temperature_start_c)
-    fault = None if cell_temperature_start_c is None else cell_start_fault(
-        cell_temperature_start_c, thermal.active, False)
+    fault = thermal.start_fault()
     if fault:
         raise ValueError(fault)
-    t_start = (thermal.rested(float(ambient[0])) if current.size else DEFAULT_TEMPERATURE_C
-               ) if cell_temperature_start_c is None else cell_temperature_start_c
+    t_start = thermal.start(float(ambient[0])) if current.size else DEFAULT_TEMPERATURE_C
     stepper = CellStepper(model, soc0, capacity_ah, t_start, h0)
     n = current.size
     u, soc, y = np.empty(n), np.empty(n), np.empty(n)

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 from lmncell.data.readers import read_record
-from lmncell.data.records import DataError, Record
+from lmncell.data.records import DataError, Record, is_cell_temperature
 from lmncell.evaluation.evaluate import warn_outside_training
 from lmncell.fmu.interface import NativeBuildError
 from lmncell.progress import Progress, print_progress
@@ -161,14 +161,13 @@ def _cell_start(model: LmnModel, start_c: Any) -> float | None:
     if model.thermal is None:
         raise DataError("simulate: cell_temperature_start_c given, but this model has no "
                         "thermal model: it takes ambient_c as the cell temperature")
-    low, high = CELL_TEMPERATURE_RANGE_C
     try:
         start = float(start_c)
     except (TypeError, ValueError):
         start = math.nan
-    if not (math.isfinite(start) and low <= start <= high):
+    if not is_cell_temperature(start):
         raise DataError(f"simulate: cell_temperature_start_c = {start_c!r:.60}; expected a cell "
-                        f"temperature within {low:g}…{high:g} °C")
+                        "temperature within {:g}…{:g} °C".format(*CELL_TEMPERATURE_RANGE_C))
     return start
 
 
@@ -207,8 +206,6 @@ def _temperature_profile(temperature_c: Any, steps: int,
                          name: str = "temperature_c") -> np.ndarray:
     """One temperature or one per step (°C) as an array of `steps`, within
     CELL_TEMPERATURE_RANGE_C, or DataError naming the argument `name`."""
-    from lmncell.data.records import is_cell_temperature
-
     temp = _profile(name, temperature_c, "°C")
     if np.ndim(temperature_c) == 0:
         temp = np.full(steps, temp[0])

@@ -434,9 +434,11 @@ def _stepped(slave: Any, vr: dict[str, int], outputs: list[int], t0: float, h: f
 
 
 def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature_c: float,
-                  cutoff_v: float, stop: str, first: str = "") -> dict:
-    """The figures of any run (_drive_fmu's steps): duration, charge, energy, extremes, and
-    the FMU's first out-of-range warning (out_of_range_first, None without one)."""
+                  cutoff_v: float, stop: str, first: str = "",
+                  cell_temperature_start_c: float | None = None) -> dict:
+    """The figures of any run (_drive_fmu's steps): duration, charge, energy, extremes, the
+    FMU's first out-of-range warning (out_of_range_first, None without one) and the cell's
+    start temperature where one was given."""
     cur, volt, n = out["current"], out["voltage"], out["time"].size
     has_cell_t = not np.isnan(out["cell_t"]).all()
     return {
@@ -448,7 +450,7 @@ def _cell_figures(out: dict[str, np.ndarray], h: float, soc0: float, temperature
         "soc_start": soc0, "soc_end": float(out["soc"][-1]),
         "soc_swing": float(out["soc"].max() - out["soc"].min()),
         "out_of_range_steps": int(out["oor"].sum()), "out_of_range_first": first or None,
-        "ambient_c": float(temperature_c),
+        "ambient_c": float(temperature_c), "cell_temperature_start_c": cell_temperature_start_c,
         "cell_temperature_max_c": float(np.max(out["cell_t"])) if has_cell_t else None,
         "cutoff_v": cutoff_v, "stop": stop, "stopped_at_s": float(n * h) if stop else None,
     }
@@ -483,8 +485,8 @@ def run_cycle(fmu: str | Path, cycle: str | Path | SpeedTrace = "wltc",
                                   temperature_c, cutoff,
                                   cell_temperature_start_c=cell_temperature_start_c)
     speed = speed[:out["time"].size]
-    cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop, first)
-    cell["cell_temperature_start_c"] = cell_temperature_start_c
+    cell = _cell_figures(out, h, soc0, temperature_c, cutoff, stop, first,
+                         cell_temperature_start_c)
     figures = {"cycle": trace.name, "repetitions": repeat, "step_s": h,
                "duration_s": cell["duration_s"], "unrun_s": unrun_s(power.size * dt, h, n),
                "distance_km": float(np.sum(speed) * h / 1000.0),
@@ -519,8 +521,8 @@ def run_profile(fmu: str | Path, profile: str | Path | CurrentProfile, repeat: i
                                   temperature_c, cutoff, charge_cutoff,
                                   cell_temperature_start_c)
     figures = {"profile": prof.name, "repetitions": repeat,
-               **_cell_figures(out, h, soc0, temperature_c, cutoff, stop, first),
-               "cell_temperature_start_c": cell_temperature_start_c,
+               **_cell_figures(out, h, soc0, temperature_c, cutoff, stop, first,
+                               cell_temperature_start_c),
                "unrun_s": unrun_s(current.size * dt, h, n),
                "charge_cutoff_v": charge_cutoff}
     cell_t = out["cell_t"] if figures["cell_temperature_max_c"] is not None else None
