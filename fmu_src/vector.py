@@ -23,20 +23,29 @@ from .step import (
     fixed_point,
     initial_hysteresis,
 )
-from .thermal import DEFAULT_TEMPERATURE_C, heat_w, next_temperature, rested_temperature
+from .thermal import (
+    DEFAULT_TEMPERATURE_C,
+    cell_start_fault,
+    heat_w,
+    next_temperature,
+    rested_temperature,
+)
 
 
 class VectorCells:
     """N cells: step(current_a (N,), temperature_c (N,) or scalar) → voltages (N,).
 
     temperature_is_cell False with a thermal model: the temperature given is the ambient and
-    each cell heats up by its own losses (as the FMU's default)."""
+    each cell heats up by its own losses (as the FMU's default), starting rested at the first
+    step's ambient, or at cell_temperature_start_c (°C) where given (the FMU's
+    use_cell_temperature_start; ValueError with the FMU's words where it would refuse it)."""
 
     def __init__(self, model: LmnModel, soc0: np.ndarray | float, n: int | None = None,
                  capacity_ah: np.ndarray | float | None = None,
                  resistance_scale: np.ndarray | float = 1.0,
                  temperature_c: float = DEFAULT_TEMPERATURE_C,
-                 temperature_is_cell: bool = True) -> None:
+                 temperature_is_cell: bool = True,
+                 cell_temperature_start_c: float | None = None) -> None:
         soc0 = np.atleast_1d(np.asarray(soc0, dtype=float))
         n = int(n if n is not None else soc0.size)
         self.model, self.n = model, n
@@ -58,7 +67,15 @@ class VectorCells:
         self.core = np.zeros(n)         # LP_τ(i²) of the core rise (A²; step.ExoState.core)
         self._core_a = core_rise_coefficient(m)
         self.thermal_active = m.thermal is not None and not temperature_is_cell
-        t0 = rested_temperature(m.thermal if self.thermal_active else None, temperature_c)
+        self._start_c = cell_temperature_start_c
+        if cell_temperature_start_c is not None:
+            fault = cell_start_fault(cell_temperature_start_c, self.thermal_active,
+                                     temperature_is_cell)
+            if fault:
+                raise ValueError(fault)
+            t0 = float(cell_temperature_start_c)
+        else:
+            t0 = rested_temperature(m.thermal if self.thermal_active else None, temperature_c)
         self.cell_temperature_c = np.full(n, float(t0))
         self._started = False
         y0 = np.array([fixed_point(m, float(s), t0, float(h)) for s, h in zip(self.soc, self.h,
@@ -151,7 +168,7 @@ class VectorCells:
     def _temperatures(self, temperature_c: np.ndarray) -> np.ndarray:
         if not self.thermal_active:
             return temperature_c
-        if not self._started:
+        if not self._started and self._start_c is None:
             self.cell_temperature_c = rested_temperature(self.model.thermal, temperature_c)
         return self.cell_temperature_c
 

@@ -94,6 +94,30 @@ def test_a_vectorised_cell_is_the_fmus_engine(quick_model, temperature_is_cell) 
     assert 0 < sum(flags) < len(flags)
 
 
+def test_a_vectorised_cell_from_a_start_temperature_is_the_fmus_engine(quick_model,
+                                                                      a123_model) -> None:
+    """cell_temperature_start_c: a cell that starts at 40 °C in a 10 °C ambient steps as the
+    FMU engine with use_cell_temperature_start, and cools; refused as the FMU refuses it."""
+    model = load_model(quick_model)
+    cells = VectorCells(model, 0.9, n=2, temperature_c=10.0, temperature_is_cell=False,
+                        cell_temperature_start_c=40.0)
+    fmu = CellCosim(model, Parameters(0.9, model.capacity_ah, cell_temperature_start_c=40.0))
+    fmu.reset(10.0)
+    assert cells.voltage_v[0] == pytest.approx(fmu.voltage_v, abs=1e-12)
+    for k in range(1500):
+        i = -8.0 if k % 200 < 120 else 0.0
+        cells.step(np.array([i, i]), 10.0)
+        fmu.advance(model.sample_time_s, i, 10.0)
+        assert cells.voltage_v[1] == pytest.approx(fmu.voltage_v, abs=1e-9), k
+        assert cells.cell_temperature_c[1] == pytest.approx(fmu.cell_temperature_c, abs=1e-9), k
+    assert 10.0 < cells.cell_temperature_c[0] < 39.0
+    with pytest.raises(ValueError, match="'cell_temperature_start' = 150: expected a cell "):
+        VectorCells(model, 0.9, n=1, temperature_is_cell=False, cell_temperature_start_c=150.0)
+    with pytest.raises(ValueError, match="this model has no thermal model"):
+        VectorCells(load_model(a123_model), 0.9, n=1, temperature_is_cell=False,
+                    cell_temperature_start_c=30.0)
+
+
 def test_a_cell_that_is_not_passive_does_not_take_the_groups_current(quick_model) -> None:
     """Where the model's dU/dI of a cell falls to 0 or below (a model far beyond its data),
     an equal-voltage share would send kiloamperes round the group: the share then takes a

@@ -44,6 +44,7 @@ def test_rows_equal_single_runs_whatever_the_workers(native_fmu, cases, tmp_path
     warm = one[one["ambient_c"] == 35.0]["cell_temperature_max_c"].to_numpy()
     cold = one[one["ambient_c"] == 10.0]["cell_temperature_max_c"].to_numpy()
     assert (warm > cold + 20).all()                      # the ambient reaches the model
+    assert one["cell_temperature_start_c"].isna().all()  # rested at the ambient
 
 
 @pytest.mark.parametrize("args, message", [
@@ -652,7 +653,8 @@ def test_a_sweep_says_which_runs_stopped_with_a_cell_full(native_fmu, tmp_path,
                  "--workers", "1", "--out", str(out)]) == 0
     assert ("1 scenario(s) stopped early: 1 with a cell full (columns stop, stopped_at_s)"
             in capsys.readouterr().out)
-    assert out.read_text().splitlines()[1].split(",")[16] == "SoC above 100 %"
+    header, first = out.read_text().splitlines()[:2]
+    assert first.split(",")[header.split(",").index("stop")] == "SoC above 100 %"
 
 
 def test_a_sweep_warns_of_scenarios_outside_the_trained_range(native_fmu, tmp_path,
@@ -814,3 +816,48 @@ def test_simulate_starts_a_cell_colder_or_warmer_than_its_ambient(native_fmu, a1
                  "30"]) == 2
     assert ("the FMU refused its parameters: parameter 'use_cell_temperature_start' = true: "
             "this model has no thermal model") in capsys.readouterr().err
+
+
+def test_a_sweep_starts_its_cells_colder_or_warmer_than_their_ambient(
+        native_fmu, a123_model, tmp_path, capsys) -> None:
+    """--cell-temperature-start: each row (one cell through the FMU, or a sample string of cells
+    on the vectorised runtime) equals the single run from that start, and the table says the
+    start; refused before any worker starts, with the FMU's words, where the FMU would refuse
+    it."""
+    import lmncell
+    import pandas as pd
+    from lmncell.fmu.native_build import build_native_fmu
+
+    cases = scenarios(["us06"], [0.0], [0.9], cell_temperature_start_c=25.0)
+    table = lmncell.sweep(native_fmu, "us06", 0.0, 0.9, workers=1, progress=False,
+                          cell_temperature_start_c=25.0)
+    warm = run_cycle(native_fmu, "us06", cases[0].vehicle, 1, 0.9, temperature_c=0.0,
+                     cell_temperature_start_c=25.0).figures
+    cold = run_cycle(native_fmu, "us06", cases[0].vehicle, 1, 0.9, temperature_c=0.0).figures
+    for key in ("voltage_min_v", "soc_end", "cell_energy_wh", "cell_temperature_max_c"):
+        assert table.loc[0, key] == warm[key], key
+    assert warm["cell_temperature_max_c"] > 20.0 > 5.0 > cold["cell_temperature_max_c"]
+    assert table.loc[0, "cell_temperature_start_c"] == 25.0
+    string = sweep(native_fmu, scenarios(["us06"], [0.0], [0.9], cells=3,
+                                         spread="capacity=0.0,resistance=0.0",
+                                         cell_temperature_start_c=25.0),
+                   workers=1, progress=False)
+    for key in ("voltage_min_v", "soc_end", "cell_temperature_max_c"):
+        assert string.loc[0, key] == pytest.approx(warm[key], abs=1e-9), key
+    out = tmp_path / "r.csv"
+    assert main(["sweep", str(native_fmu), "--cycles", "us06", "--ambient", "0",
+                 "--cell-temperature-start", "25", "--workers", "1", "--out", str(out),
+                 "--plot", str(tmp_path / "plots")]) == 0
+    assert pd.read_csv(out).loc[0, "cell_temperature_start_c"] == 25.0
+    assert ", cells from 25 °C at the start" in capsys.readouterr().out
+    assert (tmp_path / "plots" / "sweep_soc_end.png").exists()
+    no_thermal = build_native_fmu(a123_model, tmp_path / "a123.fmu")
+    assert main(["sweep", str(no_thermal), "--cycles", "us06", "--cell-temperature-start", "30",
+                 "--workers", "1", "--out", str(tmp_path / "n.csv")]) == 2
+    assert (f"sweep: --cell-temperature-start 30: {no_thermal} would refuse it: parameter "
+            "'use_cell_temperature_start' = true: this model has no thermal model"
+            ) in capsys.readouterr().err
+    assert not (tmp_path / "n.csv").exists()
+    with pytest.raises(DataError, match=r"--cell-temperature-start 400\.0: expected a "
+                                        r"temperature in °C within -60…100"):
+        scenarios(["us06"], [0.0], [0.9], cell_temperature_start_c=400.0)

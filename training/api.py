@@ -283,7 +283,8 @@ def sweep(fmu: str | Path, cycles: Sequence[str | Path] = ("wltc",),
           ambient_c: Sequence[float] = (25.0,), soc0: Sequence[float] = (0.9,),
           vehicles: Sequence[str | Path | None] = (None,),
           repeat: int = 1, workers: int | None = None, scheduler: str | None = None,
-          progress: bool = True, cutoff_v: float | None = None):
+          progress: bool = True, cutoff_v: float | None = None,
+          cell_temperature_start_c: float | None = None):
     """Drive an FMU through every combination of cycles (shipped cycles' names or speed-trace
     CSV files, as `lmncell simulate --cycle` takes them) × vehicles × ambient temperatures (°C)
     × start SoC on Dask (a LocalCluster of `workers` processes, or the cluster behind
@@ -291,12 +292,14 @@ def sweep(fmu: str | Path, cycles: Sequence[str | Path] = ("wltc",),
     maximum cell voltage, end SoC, Ah throughput, energy, maximum cell temperature,
     out-of-range steps, why and when a run stopped with the cell empty, wall time). A run stops
     where the cell voltage falls below cutoff_v (V; None: the lowest voltage of the model's
-    training records; 0: none, then below 0 V) or its SoC below 0. Needs the `sweep` extra
+    training records; 0: none, then below 0 V) or its SoC below 0. cell_temperature_start_c:
+    every run's cell starts at this temperature (°C) and tends towards its ambient (a model
+    with a thermal model; None: rested at the ambient). Needs the `sweep` extra
     (dask[distributed], pandas)."""
     from lmncell.scenarios.sweep import scenarios
     from lmncell.scenarios.sweep import sweep as _sweep
 
     cases = scenarios(_one_or_many(cycles), _one_or_many(ambient_c), _one_or_many(soc0),
                       [None if v is None else str(v) for v in _one_or_many(vehicles)], repeat,
-                      cutoff_v=cutoff_v)
+                      cutoff_v=cutoff_v, cell_temperature_start_c=cell_temperature_start_c)
     return _sweep(fmu, cases, workers, scheduler, progress)

@@ -403,11 +403,13 @@ def cmd_sweep(a: argparse.Namespace) -> int:
     require_sweep_extra()
     check_table_path(a.out)
     cases = scenarios(a.cycles, a.ambient, a.soc0, a.vehicle or [None], a.repeat,
-                      a.pack, a.spread, a.seed, a.cells, a.cutoff)
+                      a.pack, a.spread, a.seed, a.cells, a.cutoff, a.cell_temperature_start)
     check_sweep(a.fmu, cases, a.workers)
     print(f"sweep: {len(cases)} scenario(s) on "
           + (f"the scheduler {a.scheduler}" if a.scheduler else
-             f"a LocalCluster of {a.workers or 'all'} worker(s)"), flush=True)
+             f"a LocalCluster of {a.workers or 'all'} worker(s)")
+          + ("" if a.cell_temperature_start is None else
+             f", cells from {a.cell_temperature_start:g} °C at the start"), flush=True)
     table = sweep(a.fmu, cases, a.workers, a.scheduler)
     write_table(table, a.out)
     print(f"wrote {a.out}: {len(table)} rows; minimum cell voltage "
@@ -662,6 +664,10 @@ def _add_sweep_command(sub: argparse._SubParsersAction, fmt: dict) -> None:
                    help="comma list of ambient temperatures, °C (default: 25)")
     s.add_argument("--soc0", type=_floats("--soc0"), default=[0.9],
                    help="comma list of start SoC (default: 0.9)")
+    s.add_argument("--cell-temperature-start", type=_temperature, metavar="DEGC",
+                   help="every run's cells start at this temperature, °C, and tend towards "
+                   "their --ambient (needs the model's thermal model; default: rested at the "
+                   "ambient)")
     s.add_argument("--vehicle", action="append", metavar="V.toml", help="vehicle file; "
                    "repeatable (default: the built-in compact EV)")
     s.add_argument("--repeat", type=_positive_int, default=1, help="cycles back to back")

@@ -101,12 +101,16 @@ class Pack:
     """A pack stepped by its string current or its power."""
 
     def __init__(self, model: LmnModel, spec: PackSpec, soc0: float, ambient_c: float,
-                 temperature_is_cell: bool = False) -> None:
+                 temperature_is_cell: bool = False,
+                 cell_temperature_start_c: float | None = None) -> None:
+        """cell_temperature_start_c: every cell's temperature at the start (°C), with the
+        thermal model driven by ambient_c; None: rested at ambient_c (VectorCells)."""
         cap, r = cell_parameters(model, spec)
         self.spec, self.ambient_c = spec, float(ambient_c)
         self.cells = VectorCells(model, np.full(cap.size, soc0), capacity_ah=cap,
                                  resistance_scale=r, temperature_c=ambient_c,
-                                 temperature_is_cell=temperature_is_cell)
+                                 temperature_is_cell=temperature_is_cell,
+                                 cell_temperature_start_c=cell_temperature_start_c)
         self.current_a = np.zeros(cap.size)
         self.resistance_floor_ohm = max(MIN_RESISTANCE_SHARE * float(np.median(
             self._resistances(self.current_a))), MIN_RESISTANCE_OHM)
@@ -153,15 +157,19 @@ class Pack:
 
 
 def drive_pack(model: LmnModel, spec: PackSpec, pack_power_w: np.ndarray, ambient_c: float,
-               soc0: float, cutoff_v: float = 0.0) -> dict:
+               soc0: float, cutoff_v: float = 0.0,
+               cell_temperature_start_c: float | None = None) -> dict:
     """Drive a pack through a power profile (one value per model step); the figures a sweep
     reports: the weakest cell's minimum voltage and SoC, the hottest cell, the string's Ah,
     and the steps in which a cell left the trained region (VectorCells.out_of_range) or the
     share floored a resistance (out_of_range_steps).
     The run stops after the first step that leaves a cell empty (drive.empty_reason: its
     voltage below cutoff_v (V) or its SoC below 0) or full (drive.full_reason: its SoC above
-    1, as a single cell's run stops): "stop" says why, "stopped_at_s" when."""
-    pack = Pack(model, spec, soc0, ambient_c)
+    1, as a single cell's run stops): "stop" says why, "stopped_at_s" when.
+    cell_temperature_start_c: the cells' temperature at the start (°C; None: rested at the
+    ambient)."""
+    pack = Pack(model, spec, soc0, ambient_c,
+                cell_temperature_start_c=cell_temperature_start_c)
     ts = model.sample_time_s
     v_min, v_max, t_max = np.inf, -np.inf, -np.inf
     string_ah = energy_wh = 0.0

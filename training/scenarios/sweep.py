@@ -1,5 +1,6 @@
 """Sweeps of drive-cycle scenarios on Dask: the Cartesian product of cycles × vehicles × ambient
-temperatures × start SoC, each scenario one FMU run (run_cycle, as `lmncell simulate`), on a
+temperatures × start SoC (the cell starting rested at its ambient, or at one given cell start
+temperature), each scenario one FMU run (run_cycle, as `lmncell simulate`), on a
 `dask.distributed` LocalCluster or on the cluster behind a scheduler address.
 
 The FMU travels to the workers as bytes (scattered once), so a remote cluster needs no shared
@@ -33,6 +34,7 @@ from lmncell.data.records import (
     present,
 )
 from lmncell.runtime.model import LmnModel, model_from_dict, replaced_whole
+from lmncell.runtime.thermal import cell_start_fault
 from lmncell.scenarios.drive import (
     MAX_CYCLE_STEPS,
     STEP_ERROR_PREFIX,
@@ -69,6 +71,7 @@ class Scenario:
     repeat: int = 1
     pack: PackSpec | None = None     # None: one cell through the FMU; else the vectorised pack
     cutoff_v: float | None = None    # discharge cut-off (V); None: the FMU's model's
+    cell_temperature_start_c: float | None = None   # °C; None: rested at the ambient
 
 
 def check_distinct(option: str, values: Sequence[Any]) -> None:
@@ -86,7 +89,8 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
               vehicle_files: Sequence[str | None] = (None,), repeat: int = 1,
               pack: str | None = None, spread: str | None = None,
               seed: int = 0, cells: int | None = None,
-              cutoff_v: float | None = None) -> list[Scenario]:
+              cutoff_v: float | None = None,
+              cell_temperature_start_c: float | None = None) -> list[Scenario]:
     """The Cartesian product, cycle slowest and start SoC fastest; values checked with
     messages that name the option. cycles: shipped cycles' names or speed-trace files
     (load_cycle), each read here once. pack ('96s3p') or spread ('capacity=0.02,resistance=0.05')
@@ -94,7 +98,9 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
     only a spread is given); cells N without pack: a string of N cells in series (each
     carrying the cell current of the vehicle's pack, spread as given). cutoff_v: every run
     stops where a cell's voltage falls below it (V; None: the FMU model's lowest training
-    voltage, drive.shipped_cutoff_v) or its SoC below 0."""
+    voltage, drive.shipped_cutoff_v) or its SoC below 0. cell_temperature_start_c: every
+    run's cells start at this temperature (°C; the FMU's use_cell_temperature_start, for a
+    model with a thermal model) and tend towards their ambient; None: rested at the ambient."""
     if not cycles or not ambients or not soc0s or not vehicle_files:
         raise DataError("sweep: --cycles, --ambient and --soc0 each need at least one value")
     for option, values in (("--cycles", [str(c) for c in cycles]), ("--ambient", ambients),
@@ -112,6 +118,10 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
         raise DataError(f"sweep: --repeat {repeat!r}: expected a whole number ≥ 1")
     if cutoff_v is not None:
         check_cutoff(cutoff_v, "sweep: --cutoff")
+    if cell_temperature_start_c is not None and not is_cell_temperature(cell_temperature_start_c):
+        raise DataError(f"sweep: --cell-temperature-start {cell_temperature_start_c!r}: "
+                        "expected a temperature in °C within {:g}…{:g} (not K)".format(
+                            *CELL_TEMPERATURE_RANGE_C))
     vehicles = [(load_vehicle(v), str(v) if v else "built-in") for v in vehicle_files]
     spreads = parse_spread(spread) if spread else {}
     if cells is not None and (cells < 1 or pack):
@@ -130,7 +140,8 @@ def scenarios(cycles: Sequence[str | Path], ambients: Sequence[float], soc0s: Se
                         whole if cells is not None else None)
 
     specs = {vf: spec(veh, vf) for veh, vf in vehicles}
-    return [Scenario(c, veh, vf, float(t), float(s), int(repeat), specs[vf], cutoff_v)
+    return [Scenario(c, veh, vf, float(t), float(s), int(repeat), specs[vf], cutoff_v,
+                     cell_temperature_start_c)
             for c, (veh, vf), t, s in itertools.product(traces, vehicles, ambients, soc0s)]
 
 
@@ -185,7 +196,9 @@ def _model_of(fmu_bytes: bytes) -> LmnModel:
 def _settings(sc: Scenario, pack: str) -> dict:
     """The scenario's columns of a row."""
     return {"cycle": sc.cycle.name, "vehicle": sc.vehicle.name, "vehicle_file": sc.vehicle_file,
-            "ambient_c": sc.ambient_c, "soc0": sc.soc0, "repeat": sc.repeat, "pack": pack}
+            "ambient_c": sc.ambient_c, "soc0": sc.soc0,
+            "cell_temperature_start_c": _or_nan(sc.cell_temperature_start_c),
+            "repeat": sc.repeat, "pack": pack}
 
 
 def _or_nan(value: float | None) -> float:
@@ -205,7 +218,7 @@ def run_pack_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     steps = step_count(power.size * dt, ts)
     cutoff = cell_cutoff_v(model.cell) if sc.cutoff_v is None else sc.cutoff_v
     f = drive_pack(model, pack, step_means(power, dt, ts, steps), sc.ambient_c, sc.soc0,
-                   cutoff)
+                   cutoff, sc.cell_temperature_start_c)
     driven = step_means(np.tile(sc.cycle.speed_mps, sc.repeat), dt, ts, steps)[: f["steps"]]
     return {**_settings(sc, pack.label), "capacity_spread": pack.capacity_spread,
             "resistance_spread": pack.resistance_spread, "seed": pack.seed,
@@ -229,7 +242,8 @@ def run_scenario(fmu_bytes: bytes, sc: Scenario) -> dict:
     pack = f"{sc.vehicle.n_series}s{sc.vehicle.n_parallel}p"
     try:
         res = run_cycle(_fmu_file(fmu_bytes), sc.cycle, sc.vehicle, sc.repeat, sc.soc0,
-                        temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v)
+                        temperature_c=sc.ambient_c, cutoff_v=sc.cutoff_v,
+                        cell_temperature_start_c=sc.cell_temperature_start_c)
     except FmuStepError as exc:        # the row says so; the other scenarios' rows stand
         return {**_settings(sc, pack), **dict.fromkeys(RESULT_COLUMNS, math.nan),
                 "out_of_range_steps": 0, "stop": f"{STEP_ERROR_PREFIX}{exc}",
@@ -273,11 +287,31 @@ def check_sweep(fmu: str | Path, cases: list[Scenario], workers: int | None = No
     doc = shipped_model_doc(fmu)
     for cutoff_v in {sc.cutoff_v for sc in cases if sc.cutoff_v is not None}:
         check_cutoff_in_range(doc.get("cell"), cutoff_v, "sweep: --cutoff")
-    check_steps(cases, default_step_s(read_model_description(str(fmu))),
-                model_from_dict(doc, f"{fmu}: resources/model.json").sample_time_s)
+    description = read_model_description(str(fmu))
+    model = model_from_dict(doc, f"{fmu}: resources/model.json")
+    check_cell_starts(fmu, cases, model, {v.name for v in description.modelVariables})
+    check_steps(cases, default_step_s(description), model.sample_time_s)
     if workers is not None and workers < 1:
         raise DataError(f"sweep: --workers {workers!r}: expected a whole number ≥ 1")
     return fmu
+
+
+def check_cell_starts(fmu: Path, cases: list[Scenario], model: LmnModel,
+                      variables: set[str]) -> None:
+    """DataError naming --cell-temperature-start where a scenario starts its cell at a
+    temperature that the FMU (its variable names) or its model would not take: an FMU built
+    before the parameter existed, or the FMU's own refusal (thermal.cell_start_fault, e.g. a
+    model without a thermal model)."""
+    for start in {sc.cell_temperature_start_c for sc in cases
+                  if sc.cell_temperature_start_c is not None}:
+        if "use_cell_temperature_start" not in variables:
+            raise DataError(f"sweep: --cell-temperature-start {start:g}: {fmu} has no parameter "
+                            "use_cell_temperature_start (an earlier LMNCell built it); build it "
+                            "again from its model with lmncell build-fmu")
+        fault = cell_start_fault(start, model.thermal is not None, False)
+        if fault:
+            raise DataError(f"sweep: --cell-temperature-start {start:g}: {fmu} would refuse "
+                            f"it: {fault}")
 
 
 def check_steps(cases: list[Scenario], fmu_step_s: float, model_step_s: float) -> None:
@@ -409,11 +443,14 @@ def write_table(table, path: str | Path) -> Path:
 
 def plot_sweep(table, out_dir: str | Path) -> list[Path]:
     """Distance driven, minimum cell voltage and end SoC over ambient × cycle (mean over the
-    other settings; a run that stopped with the cell empty counts up to there)."""
+    other settings; a run that stopped with the cell empty counts up to there); the title
+    names a cell start temperature where the runs had one."""
     from lmncell.report.plots import plt, save_figure
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
+    starts = table["cell_temperature_start_c"].dropna().unique()
+    start = "".join(f", cells from {t:g} °C at the start" for t in starts)
     files = []
     for column, label in (("distance_km", "distance / km"),
                           ("voltage_min_v", "minimum cell voltage / V"),
@@ -425,7 +462,7 @@ def plot_sweep(table, out_dir: str | Path) -> list[Path]:
         ax.set(xticks=range(grid.shape[1]), xticklabels=[f"{c:g}" for c in grid.columns],
                yticks=range(grid.shape[0]), yticklabels=list(grid.index),
                xlabel="ambient temperature / °C", ylabel="cycle",
-               title=f"{label} (mean over start SoC and vehicles)")
+               title=f"{label} (mean over start SoC and vehicles{start})")
         for (r, c), v in np.ndenumerate(grid.to_numpy()):
             ax.text(c, r, f"{v:.3f}", ha="center", va="center", color="w", fontsize=8)
         fig.colorbar(im, ax=ax, label=label)
