@@ -47,6 +47,25 @@ UNREADABLE = "unreadable"   # key of the state that _fmu_state_from_bytes gives 
 _MODULE_DICT_REFS: list[dict] = []
 
 
+def value_text(value: Any, kind: type) -> str:
+    """A value of a get or set call as the log writes it, in the native FMU's words
+    (value_text in lmncell.c): a Boolean true or false, an Integer in decimal, a Real in the
+    fewest significant digits that read back to it, in %g's form and without an exponent
+    below 1e6 (0.2, 40, 250000, 2.5e+06, 1e-300, 0.30000000000000004), nan, inf or -inf."""
+    if kind is Boolean:
+        return "true" if value else "false"
+    if kind is Integer:
+        return str(int(value))
+    x = float(value)
+    if math.isnan(x):
+        return "nan"
+    if math.isinf(x):
+        return "inf" if x > 0 else "-inf"
+    digits = next(p for p in range(1, 18) if float(f"{x:.{p - 1}e}") == x)
+    exponent = int(f"{x:.{digits - 1}e}".split("e")[1])
+    return f"{x:.{max(digits, min(exponent + 1, 6))}g}"
+
+
 def keep_module_dict(namespace: dict) -> None:
     """Keep a reference to a slave module's namespace (see _MODULE_DICT_REFS)."""
     _MODULE_DICT_REFS.append(namespace)
@@ -242,12 +261,13 @@ class LmnCellSlave(Fmi2Slave):
         if var is None:
             return f"no variable with value reference {vr}"
         if not isinstance(var, kind):
-            return f"value reference {vr} ('{var.name}') is not a {kind.__name__}"
+            article = "an" if kind.__name__[0] in "AEIOU" else "a"
+            return f"value reference {vr} ('{var.name}') is not {article} {kind.__name__}"
         if setting and var.causality not in (Fmi2Causality.input, Fmi2Causality.parameter):
             return f"'{var.name}' is an {var.causality.name} and cannot be set"
         if setting and var.causality == Fmi2Causality.parameter and self._cosim is not None:
             return (f"parameter '{var.name}' is fixed after initialisation (value kept: "
-                    f"{var.getter()!r})")
+                    f"{value_text(var.getter(), kind)})")
         return ""
 
     def _check_readable(self, call: str) -> None:
@@ -273,12 +293,16 @@ class LmnCellSlave(Fmi2Slave):
             return
         problems = [(vr, value, self._problem(vr, kind, setting=True))
                     for vr, value in zip(vrs, values, strict=False)]
-        bad = [f"{problem}; {value!r} was not set" for _, value, problem in problems if problem]
-        if bad and self._errors_as_status:
-            self._error(f"{call}: " + "; ".join(bad) + " (nothing of this call was set)")
+        bad = [f"{problem}; {value_text(value, kind)} was not set"
+               for _, value, problem in problems if problem]
+        if bad and self._errors_as_status:     # the native FMU's words (all_settable)
+            more = len(bad) - 1
+            self._error(f"{call}: {bad[0]}"
+                        + (f"; {more} more value{'s' if more > 1 else ''} refused" if more
+                           else "") + " (nothing of this call was set)")
         for vr, value, problem in problems:
             if problem:
-                self._error(f"{call}: {problem}; {value!r} was not set")
+                self._error(f"{call}: {problem}; {value_text(value, kind)} was not set")
             else:
                 self.vars[vr].setter(value)
 
@@ -300,7 +324,8 @@ class LmnCellSlave(Fmi2Slave):
     def get_string(self, vrs: list[int]) -> list[str]:
         self._check_readable("fmi2GetString")
         for vr in vrs:
-            self._error(f"fmi2GetString: value reference {vr}: this FMU has no String")
+            self._error(f"fmi2GetString: value reference {vr}: this FMU has no String "
+                        "variables")
         return ["" for _ in vrs]
 
     def set_real(self, vrs: list[int], values: list[float]) -> None:
@@ -322,7 +347,8 @@ class LmnCellSlave(Fmi2Slave):
 
     def set_string(self, vrs: list[int], values: list[str]) -> None:
         for vr in vrs:
-            self._error(f"fmi2SetString: value reference {vr}: this FMU has no String")
+            self._error(f"fmi2SetString: value reference {vr}: this FMU has no String "
+                        "variables; nothing was set")
 
     def _error(self, msg: str) -> None:
         """Report an ordinary call error: raised as CallError (→ fmi2Error) where the wrapper

@@ -309,6 +309,55 @@ def cell_start_parameters(fmu: str) -> dict:
     return out
 
 
+def access_refusals(fmu: str) -> dict:
+    """Gets and sets that FMI 2.0 lets a host try and the FMU refuses, in Initialization Mode
+    and after it: an unknown value reference, a variable read or set as another type, an
+    output set, parameters set after initialisation (a call that also sets an input first, and
+    one with three refused values), String variables. The statuses, the messages and the
+    values read back after each refused set (nothing of the call set)."""
+    from lmncell.evaluation.fmueval import fmu_log
+
+    out: dict = {"statuses": [], "read_back": []}
+    with fmu_log("acc") as (name, callbacks, log):
+        slave, vr = _raw(fmu, True, name, callbacks)
+        slave.setupExperiment(startTime=0.0)
+        slave.enterInitializationMode()
+
+        def read_back() -> None:
+            out["read_back"].append([*slave.getReal([vr["current"], vr["soc0"], vr["capacity"],
+                                                     vr["cell_temperature_start"]]),
+                                     *slave.getInteger([vr["observer"]]),
+                                     *slave.getBoolean([vr["temperature_is_cell"],
+                                                        vr["use_cell_temperature_start"]])])
+
+        def refused(calls) -> None:
+            for call in calls:
+                out["statuses"].append(_status(call))
+                read_back()
+
+        refused([lambda: slave.setReal([vr["voltage"]], [3.3]),
+                 lambda: slave.setInteger([vr["current"]], [1]),
+                 lambda: slave.setBoolean([vr["observer"]], [True]),
+                 lambda: slave.setReal([vr["soc0"], 999], [0.5, 0.1 + 0.2])])
+        slave.setReal([vr["soc0"], vr["capacity"], vr["current"]], [0.7, 2.5, -1.0])
+        slave.exitInitializationMode()
+        refused([lambda: slave.setReal([vr["current"], vr["soc0"]], [-4.0, 0.2]),
+                 lambda: slave.setReal([vr["soc0"], vr["capacity"], vr["cell_temperature_start"]],
+                                       [1e-300, math.nan, 40.0]),
+                 lambda: slave.setInteger([vr["observer"]], [2]),
+                 lambda: slave.setBoolean([vr["temperature_is_cell"],
+                                           vr["use_cell_temperature_start"]], [True, False]),
+                 lambda: slave.getReal([999]),
+                 lambda: slave.getInteger([vr["soc0"]]),
+                 lambda: slave.getBoolean([vr["current"]]),
+                 lambda: slave.getString([vr["voltage"]]),
+                 lambda: slave.setString([vr["voltage"]], ["x"])])
+        out["steps_after"] = _status(lambda: slave.doStep(0.0, 1.0))
+        slave.freeInstance()
+        out["messages"] = [entry.replace(name, "NAME") for entry in log]
+    return out
+
+
 def debug_logging_categories(fmu: str) -> dict:
     """fmi2SetDebugLogging with each kind of category list, each followed by a step outside
     the trained temperatures (a warning where warnings are on) and one back inside, then a
@@ -982,7 +1031,7 @@ def random_calls_stock(fmu: str) -> dict:
 
 SEQUENCES = {f.__name__: f for f in (init_mode_outputs, temperature_outside_range_at_start,
                                      state_machine, stop_time, impossible_inputs,
-                                     logged_messages, cell_start_parameters,
+                                     logged_messages, cell_start_parameters, access_refusals,
                                      debug_logging_categories,
                                       observers_at_full, ordinary_errors, wrong_guid_or_type,
                                       resource_locations, logged_resource_refusals,

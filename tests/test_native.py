@@ -787,7 +787,7 @@ def test_native_temperature_forms_equal_the_runtime(quick_model, tmp_path, form,
 
 SANITIZED_SEQUENCES = ("random_calls", "ordinary_errors", "impossible_inputs", "null_pointers",
                        "state_reuse", "damaged_states", "observers_at_full", "stop_time",
-                       "cell_start_parameters")
+                       "cell_start_parameters", "access_refusals")
 
 
 def _sanitizer_environment() -> dict[str, str]:

@@ -1532,6 +1532,116 @@ static int given(Instance *in, const char *call, const void *p, const char *what
     return 0;
 }
 
+/* ----- variable access ------------------------------------------------------------------------ */
+/* the variables by value reference, as the pythonfmu FMU registers them (slave.py) */
+typedef enum { T_REAL, T_INTEGER, T_BOOLEAN } VarType;
+typedef enum { C_INPUT, C_OUTPUT, C_PARAMETER } VarCausality;
+static const char *const TYPE_NAMES[] = {"Real", "Integer", "Boolean"};
+static const struct { const char *name; VarType type; VarCausality causality; } VARS[] = {
+    {"current", T_REAL, C_INPUT}, {"voltage_measured", T_REAL, C_INPUT},
+    {"temperature", T_REAL, C_INPUT}, {"voltage", T_REAL, C_OUTPUT}, {"soc", T_REAL, C_OUTPUT},
+    {"soc_std", T_REAL, C_OUTPUT}, {"out_of_range", T_BOOLEAN, C_OUTPUT},
+    {"soc0", T_REAL, C_PARAMETER}, {"capacity", T_REAL, C_PARAMETER},
+    {"observer", T_INTEGER, C_PARAMETER}, {"temperature_is_cell", T_BOOLEAN, C_PARAMETER},
+    {"cell_temperature", T_REAL, C_OUTPUT}, {"cell_temperature_start", T_REAL, C_PARAMETER},
+    {"use_cell_temperature_start", T_BOOLEAN, C_PARAMETER}};
+#define N_VARS (sizeof VARS / sizeof VARS[0])
+
+/* a Real as the log writes it (slave.value_text): the fewest significant digits that read
+   back to it, in %g's form and without an exponent below 1e6; nan, inf or -inf */
+static void real_text(char *out, size_t size, double x) {
+    int p, exponent, q;
+    const char *e;
+    if (isnan(x)) { snprintf(out, size, "nan"); return; }
+    if (isinf(x)) { snprintf(out, size, x > 0 ? "inf" : "-inf"); return; }
+    for (p = 1; p < 17; p++) {
+        snprintf(out, size, "%.*e", p - 1, x);
+        if (strtod(out, NULL) == x) break;
+    }
+    snprintf(out, size, "%.*e", p - 1, x);
+    e = strchr(out, 'e');
+    exponent = e ? atoi(e + 1) : 0;
+    q = exponent + 1 < 6 ? exponent + 1 : 6;
+    snprintf(out, size, "%.*g", p > q ? p : q, x);
+}
+
+/* value k of a get or set call's array of the given type, as the log writes it */
+static void value_text(char *out, size_t size, VarType type, const void *values, size_t k) {
+    if (type == T_REAL) real_text(out, size, ((const fmi2Real *)values)[k]);
+    else if (type == T_INTEGER) snprintf(out, size, "%d", ((const fmi2Integer *)values)[k]);
+    else snprintf(out, size, "%s", ((const fmi2Boolean *)values)[k] ? "true" : "false");
+}
+
+/* a parameter's value, as the log writes it */
+static void parameter_text(char *out, size_t size, const State *s, fmi2ValueReference vr) {
+    switch (vr) {
+    case VR_SOC0: real_text(out, size, s->soc0); break;
+    case VR_CAPACITY: real_text(out, size, s->capacity); break;
+    case VR_CELL_TEMPERATURE_START: real_text(out, size, s->t_start); break;
+    case VR_OBSERVER: snprintf(out, size, "%d", s->observer); break;
+    case VR_TEMPERATURE_IS_CELL: snprintf(out, size, s->temperature_is_cell ? "true" : "false");
+        break;
+    default: snprintf(out, size, s->use_t_start ? "true" : "false"); break;
+    }
+}
+
+/* why value reference vr cannot be read (setting 0) or set (setting 1) as the given type now,
+   written into out, or 0 where it can (slave._problem's words) */
+static int access_problem(char *out, size_t size, const State *s, fmi2ValueReference vr,
+                          VarType type, int setting) {
+    char kept[32];
+    if (vr >= N_VARS) {
+        snprintf(out, size, "no variable with value reference %u", vr);
+        return 1;
+    }
+    if (VARS[vr].type != type) {
+        snprintf(out, size, "value reference %u ('%s') is not a%s %s", vr, VARS[vr].name,
+                 type == T_INTEGER ? "n" : "", TYPE_NAMES[type]);
+        return 1;
+    }
+    if (setting && VARS[vr].causality == C_OUTPUT) {
+        snprintf(out, size, "'%s' is an output and cannot be set", VARS[vr].name);
+        return 1;
+    }
+    if (setting && VARS[vr].causality == C_PARAMETER && s->initialized) {
+        parameter_text(kept, sizeof kept, s, vr);
+        snprintf(out, size, "parameter '%s' is fixed after initialisation (value kept: %s)",
+                 VARS[vr].name, kept);
+        return 1;
+    }
+    return 0;
+}
+
+/* 1 where every value of a set call can be set, else log the first that cannot (how many more
+   cannot) and 0: nothing of the call is then set */
+static int all_settable(Instance *in, const char *call, size_t n, const fmi2ValueReference vr[],
+                        VarType type, const void *values) {
+    char problem[160], given[32], more[48] = "";
+    size_t k, first = n, others = 0;
+    for (k = 0; k < n; k++) {
+        if (access_problem(problem, sizeof problem, &in->s, vr[k], type, 1)) {
+            if (first == n) first = k;
+            else others++;
+        }
+    }
+    if (first == n) return 1;
+    access_problem(problem, sizeof problem, &in->s, vr[first], type, 1);
+    value_text(given, sizeof given, type, values, first);
+    if (others)
+        snprintf(more, sizeof more, "; %zu more value%s refused", others, others > 1 ? "s" : "");
+    logf_(in, fmi2Error, "logStatusError", "%s: %s; %s was not set%s (nothing of this call was "
+          "set)", call, problem, given, more);
+    return 0;
+}
+
+/* 1 where value reference vr can be read as the given type, else log why and 0 */
+static int readable(Instance *in, const char *call, fmi2ValueReference vr, VarType type) {
+    char problem[160];
+    if (!access_problem(problem, sizeof problem, &in->s, vr, type, 0)) return 1;
+    logf_(in, fmi2Error, "logStatusError", "%s: %s", call, problem);
+    return 0;
+}
+
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n, fmi2Real v[]) {
     Instance *in = (Instance *)c;
     size_t k;
@@ -1539,12 +1649,8 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     if (!in || !in_mode(in, GETTABLE, "fmi2GetReal")
         || !arrays_given(in, "fmi2GetReal", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
+        if (!readable(in, "fmi2GetReal", vr[k], T_REAL)) return fmi2Error;
         v[k] = output_real(&in->s, vr[k], &ok);
-        if (!ok) {
-            logf_(in, fmi2Error, "logStatusError", "fmi2GetReal: no Real variable with value "
-                  "reference %u", vr[k]);
-            return fmi2Error;
-        }
     }
     return fmi2OK;
 }
@@ -1555,12 +1661,8 @@ fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     if (!in || !in_mode(in, GETTABLE, "fmi2GetInteger")
         || !arrays_given(in, "fmi2GetInteger", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
-        if (vr[k] != VR_OBSERVER) {
-            logf_(in, fmi2Error, "logStatusError", "fmi2GetInteger: no Integer variable with "
-                  "value reference %u", vr[k]);
-            return fmi2Error;
-        }
-        v[k] = in->s.observer;
+        if (!readable(in, "fmi2GetInteger", vr[k], T_INTEGER)) return fmi2Error;
+        v[k] = in->s.observer;     /* the only Integer */
     }
     return fmi2OK;
 }
@@ -1571,17 +1673,11 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     if (!in || !in_mode(in, GETTABLE, "fmi2GetBoolean")
         || !arrays_given(in, "fmi2GetBoolean", n, vr, v, "read")) return fmi2Error;
     for (k = 0; k < n; k++) {
-        if (vr[k] == VR_OUT_OF_RANGE) {
-            v[k] = in->s.out_of_range ? fmi2True : fmi2False;
-        } else if (vr[k] == VR_TEMPERATURE_IS_CELL) {
+        if (!readable(in, "fmi2GetBoolean", vr[k], T_BOOLEAN)) return fmi2Error;
+        if (vr[k] == VR_OUT_OF_RANGE) v[k] = in->s.out_of_range ? fmi2True : fmi2False;
+        else if (vr[k] == VR_TEMPERATURE_IS_CELL)
             v[k] = in->s.temperature_is_cell ? fmi2True : fmi2False;
-        } else if (vr[k] == VR_USE_CELL_TEMPERATURE_START) {
-            v[k] = in->s.use_t_start ? fmi2True : fmi2False;
-        } else {
-            logf_(in, fmi2Error, "logStatusError", "fmi2GetBoolean: no Boolean variable with "
-                  "value reference %u", vr[k]);
-            return fmi2Error;
-        }
+        else v[k] = in->s.use_t_start ? fmi2True : fmi2False;
     }
     return fmi2OK;
 }
@@ -1590,8 +1686,8 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     if (!c || !in_mode((Instance *)c, GETTABLE, "fmi2GetString")
         || !arrays_given((Instance *)c, "fmi2GetString", n, vr, v, "read")) return fmi2Error;
     if (n) {
-        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2GetString: the FMU has no String "
-              "variables");
+        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2GetString: value reference %u: "
+              "this FMU has no String variables", vr[0]);
         return fmi2Error;
     }
     return fmi2OK;
@@ -1602,30 +1698,18 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t n,
     State *s;
     size_t k;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
-                        "fmi2SetReal") || !arrays_given(in, "fmi2SetReal", n, vr, v, "set"))
+                        "fmi2SetReal") || !arrays_given(in, "fmi2SetReal", n, vr, v, "set")
+        || !all_settable(in, "fmi2SetReal", n, vr, T_REAL, v))
         return fmi2Error;
     s = &in->s;
     for (k = 0; k < n; k++) {
-        switch (vr[k]) {
+        switch (vr[k]) {       /* all_settable: the settable Reals only */
         case VR_CURRENT: s->current = v[k]; break;
         case VR_VOLTAGE_MEASURED: s->voltage_measured = v[k]; break;
         case VR_TEMPERATURE: s->temperature = v[k]; break;
-        case VR_SOC0:
-        case VR_CAPACITY:
-        case VR_CELL_TEMPERATURE_START:
-            if (s->initialized) {
-                logf_(in, fmi2Error, "logStatusError", "fmi2SetReal: parameter with value "
-                      "reference %u is fixed after initialisation", vr[k]);
-                return fmi2Error;
-            }
-            if (vr[k] == VR_SOC0) s->soc0 = v[k];
-            else if (vr[k] == VR_CAPACITY) s->capacity = v[k];
-            else s->t_start = v[k];
-            break;
-        default:
-            logf_(in, fmi2Error, "logStatusError", "fmi2SetReal: value reference %u is not a "
-                  "settable Real", vr[k]);
-            return fmi2Error;
+        case VR_SOC0: s->soc0 = v[k]; break;
+        case VR_CAPACITY: s->capacity = v[k]; break;
+        default: s->t_start = v[k]; break;
         }
     }
     return fmi2OK;
@@ -1636,16 +1720,10 @@ fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t
     Instance *in = (Instance *)c;
     size_t k;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
-                        "fmi2SetInteger") || !arrays_given(in, "fmi2SetInteger", n, vr, v, "set"))
+                        "fmi2SetInteger") || !arrays_given(in, "fmi2SetInteger", n, vr, v, "set")
+        || !all_settable(in, "fmi2SetInteger", n, vr, T_INTEGER, v))
         return fmi2Error;
-    for (k = 0; k < n; k++) {
-        if (vr[k] != VR_OBSERVER || in->s.initialized) {
-            logf_(in, fmi2Error, "logStatusError", "fmi2SetInteger: value reference %u is not a "
-                  "settable Integer now", vr[k]);
-            return fmi2Error;
-        }
-        in->s.observer = v[k];
-    }
+    for (k = 0; k < n; k++) in->s.observer = v[k];     /* the only Integer */
     return fmi2OK;
 }
 
@@ -1654,15 +1732,10 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
     Instance *in = (Instance *)c;
     size_t k;
     if (!in || !in_mode(in, M_(MODE_INSTANTIATED) | M_(MODE_INITIALIZATION) | M_(MODE_STEP),
-                        "fmi2SetBoolean") || !arrays_given(in, "fmi2SetBoolean", n, vr, v, "set"))
+                        "fmi2SetBoolean") || !arrays_given(in, "fmi2SetBoolean", n, vr, v, "set")
+        || !all_settable(in, "fmi2SetBoolean", n, vr, T_BOOLEAN, v))
         return fmi2Error;
-    for (k = 0; k < n; k++) {
-        if ((vr[k] != VR_TEMPERATURE_IS_CELL && vr[k] != VR_USE_CELL_TEMPERATURE_START)
-            || in->s.initialized) {
-            logf_(in, fmi2Error, "logStatusError", "fmi2SetBoolean: value reference %u is not a "
-                  "settable Boolean now", vr[k]);
-            return fmi2Error;
-        }
+    for (k = 0; k < n; k++) {  /* all_settable: the two Boolean parameters only */
         if (vr[k] == VR_TEMPERATURE_IS_CELL) in->s.temperature_is_cell = v[k] ? 1 : 0;
         else in->s.use_t_start = v[k] ? 1 : 0;
     }
@@ -1673,8 +1746,8 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
                          const fmi2String v[]) {
     if (!c || !arrays_given((Instance *)c, "fmi2SetString", n, vr, v, "set")) return fmi2Error;
     if (n) {
-        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2SetString: the FMU has no String "
-              "variables");
+        logf_((Instance *)c, fmi2Error, "logStatusError", "fmi2SetString: value reference %u: "
+              "this FMU has no String variables; nothing was set", vr[0]);
         return fmi2Error;
     }
     return fmi2OK;
