@@ -12,6 +12,7 @@ import ctypes
 import json
 import math
 import random
+import struct
 import sys
 from collections.abc import Callable
 
@@ -352,10 +353,19 @@ def access_refusals(fmu: str) -> dict:
                  lambda: slave.getBoolean([vr["current"]]),
                  lambda: slave.getString([vr["voltage"]]),
                  lambda: slave.setString([vr["voltage"]], ["x"])])
+        out["values_refused"] = [_status(lambda x=x: slave.setReal([vr["soc0"]], [x]))
+                                 for x in REFUSED_VALUES]
         out["steps_after"] = _status(lambda: slave.doStep(0.0, 1.0))
         slave.freeInstance()
         out["messages"] = [entry.replace(name, "NAME") for entry in log]
     return out
+
+
+# Reals the refusals write (value_text), the awkward ones and 40 doubles of random bits
+REFUSED_VALUES = [40.0, 250000.0, 2.5e6, 123456789.0, 99.99999999, -0.0, math.inf, -math.inf,
+                  5e-324, 1.7976931348623157e308, 9.999999999999999e5, 1e-5] + [
+    x for x in (struct.unpack("<d", random.Random(5 + k).getrandbits(64).to_bytes(8, "little"))[0]
+                for k in range(40)) if math.isfinite(x)]
 
 
 def debug_logging_categories(fmu: str) -> dict:

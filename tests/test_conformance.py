@@ -373,7 +373,11 @@ def test_refused_gets_and_sets_read_alike_and_set_nothing(quick_fmu, native_fmu)
         "fmi2SetString: value reference 3: this FMU has no String variables; nothing was set"]
     text = "\n".join(native["messages"])
     assert all(e in text for e in expected), [e for e in expected if e not in text]
-    assert len(native["messages"]) == 13
+    refused_values = native["messages"][-len(native["values_refused"]):]
+    assert len(native["messages"]) == 13 + len(native["values_refused"])
+    assert set(native["values_refused"]) == {ERROR}
+    assert "(value kept: 0.7); 40 was not set" in refused_values[0]
+    assert "(value kept: 0.7); 2.5e+06 was not set" in refused_values[2]
 
 
 def test_debug_logging_follows_its_categories_and_refuses_null_ones(quick_fmu,
