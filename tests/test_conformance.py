@@ -611,6 +611,47 @@ def _fmu_check(fmu, tmp_path, name: str) -> list[list[float]]:
     return [[float(x) for x in line.split(",")] for line in out.read_text().splitlines()[1:]]
 
 
+FMIL = os.environ.get("LMNCELL_FMIL")      # an FMI Library install: its include/ and lib/
+
+
+def _fmil_outputs(host: Path, fmu: Path) -> list[float]:
+    """tests/native/fmil_check.c's run of an FMU: the outputs at 600 s, after asserting that
+    FMIL found nothing wrong in its model description and every call returned fmi2OK."""
+    proc = subprocess.run([str(host), str(fmu)], capture_output=True, text=True, timeout=600)
+    assert proc.returncode == 0 and "XML problems 0, calls not OK 0" in proc.stdout, (
+        proc.stdout[-3000:] + proc.stderr[-2000:])
+    return [float(x) for x in proc.stdout.splitlines()[-1].split()[1:]]
+
+
+@pytest.mark.skipif(FMIL is None, reason="the FMI Library is not installed (LMNCELL_FMIL=the "
+                    "prefix of a build of modelon-community/fmi-library)")
+def test_the_fmi_library_parses_and_runs_both_fmus_alike(quick_model, quick_fmu, native_fmu,
+                                                         tmp_path) -> None:
+    """FMIL (the parser and loader under PyFMI and the FMI Compliance Checker) reports no
+    warning or error on either model description, and its C API runs both FMUs through 600 s
+    of a varying current to the same outputs as the FMU engine (CellCosim)."""
+    from lmncell.runtime.cosim import CellCosim, Parameters
+    from lmncell.runtime.model import load_model
+
+    c_compiler_or_skip()
+    host = tmp_path / "fmil_check"
+    subprocess.run(["gcc", "-std=c99", "-O1", f"-I{FMIL}/include",
+                    str(ROOT / "tests" / "native" / "fmil_check.c"), "-o", str(host),
+                    f"-L{FMIL}/lib", "-lfmilib_shared", f"-Wl,-rpath,{FMIL}/lib"], check=True)
+    py, native = (_fmil_outputs(host, f) for f in (quick_fmu, native_fmu))
+    model = load_model(quick_model)
+    soc0 = next(float(v.start) for v in read_model_description(native_fmu).modelVariables
+                if v.name == "soc0")
+    engine = CellCosim(model, Parameters(soc0, model.capacity_ah))
+    engine.reset(25.0)
+    steps = round(600.0 / model.sample_time_s)
+    for k in range(steps):
+        phase = int(k * model.sample_time_s / 20.0) % 3
+        engine.advance(model.sample_time_s, (-6.0, 0.0, 2.0)[phase], 25.0)
+    expected = [engine.voltage_v, engine.soc, engine.cell_temperature_c]
+    assert py == pytest.approx(expected, abs=1e-9) and native == pytest.approx(expected, abs=1e-9)
+
+
 @pytest.mark.skipif(FMUCHECK is None, reason="the FMI Compliance Checker is not installed "
                     "(fmuCheck.linux64 on PATH, or LMNCELL_FMUCHECK=its path)")
 def test_the_fmi_compliance_checker_passes_both_fmus_alike(quick_fmu, native_fmu,
