@@ -17,6 +17,7 @@ from .model import LmnModel
 from .step import (
     CHARGE,
     DISCHARGE,
+    CellThermal,
     arrhenius_gain,
     core_rise_coefficient,
     filter_coefficients,
@@ -25,7 +26,6 @@ from .step import (
 )
 from .thermal import (
     DEFAULT_TEMPERATURE_C,
-    cell_start_fault,
     heat_w,
     next_temperature,
     rested_temperature,
@@ -68,14 +68,11 @@ class VectorCells:
         self._core_a = core_rise_coefficient(m)
         self.thermal_active = m.thermal is not None and not temperature_is_cell
         self._start_c = cell_temperature_start_c
-        if cell_temperature_start_c is not None:
-            fault = cell_start_fault(cell_temperature_start_c, self.thermal_active,
-                                     temperature_is_cell)
-            if fault:
-                raise ValueError(fault)
-            t0 = float(cell_temperature_start_c)
-        else:
-            t0 = rested_temperature(m.thermal if self.thermal_active else None, temperature_c)
+        start = CellThermal(m, temperature_is_cell, cell_temperature_start_c)  # as the FMU's
+        fault = start.start_fault()
+        if fault:
+            raise ValueError(fault)
+        t0 = float(start.start(temperature_c))
         self.cell_temperature_c = np.full(n, float(t0))
         self._started = False
         y0 = np.array([fixed_point(m, float(s), t0, float(h)) for s, h in zip(self.soc, self.h,
