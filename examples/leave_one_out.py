@@ -25,7 +25,9 @@ PATTERN (e.g. 10degC: train on all, test each 10 °C record left out in turn), o
 comma list (N05,P05,P25: the A123 folds between training temperatures); with --together the
 records of each pattern are held out at once and the model is trained on the others
 (--hold-out 10degC --together: trained at 25 °C only, tested at 10 °C: leave one temperature
-out).
+out). A pattern A+B matches a name that contains A or B: --hold-out Cycle_1+US06,Cycle_2+HWFT
+--together holds out two records at a time (leave two out, how the figures grow with one
+record fewer in training; a record in several patterns is held out with each).
 --through-hidden-pauses evaluates the held-out record as a host that drives the FMU through its
 time column: pauses that only the wall clock shows (Panasonic 25 °C Cycle 1:
 16 h and 3 h) do not split it, and the model's state runs on through them (training still
@@ -49,7 +51,9 @@ from pathlib import Path
 
 from lmncell.api import build_fmu
 from lmncell.cli import (
+    HOLD_OUT_HELP,
     THROUGH_PAUSES_HELP,
+    TOGETHER_HELP,
     capacity_or_auto_argument,
     figure_file_argument,
     input_file_argument,
@@ -125,12 +129,8 @@ def _arguments() -> argparse.Namespace:
     ap.add_argument("--no-baselines", action="store_true",
                     help="leave out the ARX and 2RC baselines (faster)")
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
-                    help="hold out only records whose name contains PATTERN, or one of a "
-                    "comma list")
-    ap.add_argument("--together", action="store_true",
-                    help="hold out the records of each --hold-out pattern at once, trained on "
-                    "the records without it (--hold-out 10degC --together: leave one "
-                    "temperature out)")
+                    help=HOLD_OUT_HELP)
+    ap.add_argument("--together", action="store_true", help=TOGETHER_HELP)
     ap.add_argument("--through-hidden-pauses", action="store_true",
                     help=THROUGH_PAUSES_HELP)
     ap.add_argument("--fmu", choices=("native", "pythonfmu"),

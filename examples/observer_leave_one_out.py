@@ -15,8 +15,9 @@ Example (the four Panasonic 25 °C drive cycles of ../shared/data, the C/20 OCV 
 
 The observer starts where the reference SoC first falls to --start-soc (under load, its load
 history unknown to it) with the estimate --soc0-est. --hold-out PATTERN holds out only the
-records whose name contains PATTERN (e.g. 10degC), or one of a comma list (N05,P05,P25);
---together holds the records of each pattern out at once, the model trained on the others.
+records whose name contains PATTERN (e.g. 10degC), or one of a comma list (N05,P05,P25), a
+pattern A+B matching a name that contains A or B; --together holds the records of each pattern
+out at once, the model trained on the others.
 --through-hidden-pauses runs the observers through pauses that only the wall clock shows, as in
 an FMU driven through the record's time column (default: the record is split there).
 --plot FILE.png draws the RMSE and the share outside ±3σ per held-out record and observer, with
@@ -33,7 +34,9 @@ from pathlib import Path
 
 import numpy as np
 from lmncell.cli import (
+    HOLD_OUT_HELP,
     THROUGH_PAUSES_HELP,
+    TOGETHER_HELP,
     capacity_argument,
     figure_file_argument,
     input_file_argument,
@@ -110,10 +113,8 @@ def _arguments() -> argparse.Namespace:
     ap.add_argument("--ocv-tests", nargs="*", default=[], type=input_file_argument,
                     help="slow OCV tests for every fold's training (as train --ocv-tests)")
     ap.add_argument("--hold-out", default="", metavar="PATTERN",
-                    help="hold out only records whose name contains PATTERN, or one of a "
-                    "comma list")
-    ap.add_argument("--together", action="store_true",
-                    help="hold out the records of each --hold-out pattern at once")
+                    help=HOLD_OUT_HELP)
+    ap.add_argument("--together", action="store_true", help=TOGETHER_HELP)
     ap.add_argument("--start-soc", type=soc_argument, default=0.6,
                     help="start the observers where the reference SoC first reaches this "
                     "(default: 0.6)")

@@ -307,8 +307,20 @@ def test_leave_one_out_folds_name_what_is_wrong() -> None:
     assert leave_one_out_folds(recs, "10degC", [1.0, 0.0, 0.5], together=True) == [
         ("d/a_10degC.mat", 1.0, ["d/b_25degC.mat"], [0.0]),
         ("d/c_10degC.mat", 0.5, ["d/b_25degC.mat"], [0.0])]
-    assert [f[2] for f in leave_one_out_folds(recs, "a_,10degC", together=True)] == [
-        ["d/b_25degC.mat", "d/c_10degC.mat"], ["d/b_25degC.mat"]]
+    # a record matched by several groups is held out with each of them
+    assert [f[:3:2] for f in leave_one_out_folds(recs, "a_,10degC", together=True)] == [
+        ("d/a_10degC.mat", ["d/b_25degC.mat", "d/c_10degC.mat"]),
+        ("d/a_10degC.mat", ["d/b_25degC.mat"]), ("d/c_10degC.mat", ["d/b_25degC.mat"])]
+    # "A+B" matches either (leave two out); alone it is one record's fold per match
+    assert [f[:3:2] for f in leave_one_out_folds(recs, "a_+b_,b_+c_", together=True)] == [
+        ("d/a_10degC.mat", ["d/c_10degC.mat"]), ("d/b_25degC.mat", ["d/c_10degC.mat"]),
+        ("d/b_25degC.mat", ["d/a_10degC.mat"]), ("d/c_10degC.mat", ["d/a_10degC.mat"])]
+    assert [f[0] for f in leave_one_out_folds(recs, "a_+b_, a_")] == ["d/a_10degC.mat",
+                                                                      "d/b_25degC.mat"]
+    with pytest.raises(DataError, match="'P25' is in none of the 3"):
+        leave_one_out_folds(recs, "a_+P25", together=True)
+    assert hold_out_clause("a_+b_, c_") == " whose name contains one of ('a_' or 'b_'), 'c_'"
+    assert hold_out_clause("a_+ b_+") == " whose name contains 'a_' or 'b_'"
     with pytest.raises(DataError, match="'.mat' is in every record name, so held out "
                                         "together nothing is left to train on"):
         leave_one_out_folds(recs, ".mat", together=True)

@@ -245,6 +245,12 @@ THROUGH_PAUSES_HELP = ("do not split records at pauses that only the wall clock 
                        "Panasonic TimeStamp): drive the model through them as a host does that "
                        "feeds the FMU the record's time column (default: split, the next "
                        "segment starts rested)")
+HOLD_OUT_HELP = ("hold out only records whose name contains PATTERN, or one of a comma list; "
+                 "a pattern A+B matches a name that contains A or B (with --together: "
+                 "'Cycle_1+US06,Cycle_1+HWFT' holds out two records at a time)")
+TOGETHER_HELP = ("hold out the records of each --hold-out pattern at once, trained on the "
+                 "records it does not match (--hold-out 10degC --together: leave one "
+                 "temperature out)")
 
 
 def cmd_evaluate(a: argparse.Namespace) -> int:

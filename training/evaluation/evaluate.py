@@ -221,38 +221,55 @@ def leave_one_out_folds(records: list[str], hold_out: str = "",
                         ) -> list[tuple[str, float | None, list[str], list[float | None]]]:
     """(held-out record, its start SoC, training records, their start SoCs) for each record
     whose file name contains hold_out, or one of its comma-separated patterns ("N05,P05,P25":
-    the folds between the training temperatures; every record for ""); soc0 as in start_socs
-    (one for all, one per record in order, or None). together: the records of each pattern
-    are held out at once, each trained on the records that match none of it (10degC: leave
-    one temperature out; a record matched by several patterns goes with the first), group by
-    group in the patterns' order. DataError
-    where a pattern matches no record or a fold would have nothing to train or test on."""
-    from lmncell.data.records import DataError
-
+    the folds between the training temperatures; every record for ""); a pattern "A+B" matches
+    a name that contains A or B; soc0 as in start_socs (one for all, one per record in order,
+    or None). together: the records of each pattern are held out at once, each trained on the
+    records that it does not match (10degC: leave one temperature out; "Cycle_1+US06,
+    Cycle_1+HWFET": leave two out, a record matched by several patterns held out with each),
+    group by group in the patterns' order. DataError where a pattern (or a part of one)
+    matches no record or a fold would have nothing to train or test on."""
     if len(set(records)) < 2:
         raise DataError(f"leave-one-out needs at least two different records, got "
                         f"{len(set(records))}: {', '.join(records) or '(none)'}")
     start = dict(zip(records, start_socs(soc0, len(records)), strict=True))
     patterns = hold_out_patterns(hold_out) or [""]
-    for pat in patterns:
-        if not any(pat in Path(p).name for p in records):
-            raise DataError(f"hold-out pattern {pat!r} is in none of the {len(records)} record "
-                            "names: expected part of a file name, e.g. 10degC")
-    folds = []
-    for h in records:
-        group = next((k for k, pat in enumerate(patterns) if pat in Path(h).name), None)
-        if group is None:
-            continue
-        first = patterns[group]
-        train = [p for p in records if (first not in Path(p).name if together else p != h)]
-        if not train:
-            raise DataError(f"hold-out pattern {first!r} is in every record name, so held "
-                            "out together nothing is left to train on; expected a pattern "
-                            "that some records lack, e.g. 10degC among 10 and 25 °C records")
-        folds.append((group, (h, start[h], train, [start[p] for p in train])))
+    for part in (part for pat in patterns for part in _parts(pat)):
+        if not any(part in Path(p).name for p in records):
+            raise DataError(f"hold-out pattern {part!r} is in none of the {len(records)} "
+                            "record names: expected part of a file name, e.g. 10degC")
     if together:          # each group's folds one after another (one training per group)
-        folds.sort(key=lambda fold: fold[0])
-    return [fold for _, fold in folds]
+        return [fold for pat in patterns for fold in _group_folds(records, pat, start)]
+    return [_fold(h, [p for p in records if p != h], start) for h in records
+            if any(_matches(pat, h) for pat in patterns)]
+
+
+def _matches(pattern: str, path: str) -> bool:
+    """Whether a hold-out pattern matches a record: its file name contains the pattern, or
+    one of its "+"-separated parts."""
+    return any(part in Path(path).name for part in _parts(pattern))
+
+
+def _parts(pattern: str) -> list[str]:
+    """A hold-out pattern's "+"-separated parts, blanks dropped ("" matches every name)."""
+    return [q.strip() for q in pattern.split("+") if q.strip()] or [pattern]
+
+
+def _group_folds(records: list[str], pattern: str, start: Mapping[str, float | None]
+                 ) -> list[tuple[str, float | None, list[str], list[float | None]]]:
+    """leave_one_out_folds of one pattern's records held out together: each trained on the
+    records the pattern does not match."""
+    train = [p for p in records if not _matches(pattern, p)]
+    if not train:
+        raise DataError(f"hold-out pattern {pattern!r} is in every record name, so held "
+                        "out together nothing is left to train on; expected a pattern "
+                        "that some records lack, e.g. 10degC among 10 and 25 °C records")
+    return [_fold(h, train, start) for h in records if _matches(pattern, h)]
+
+
+def _fold(held: str, train: list[str], start: Mapping[str, float | None]
+          ) -> tuple[str, float | None, list[str], list[float | None]]:
+    """One fold: the held-out record and its start SoC, the training records and theirs."""
+    return held, start[held], train, [start[p] for p in train]
 
 
 def trained_per_fold(folds: Sequence[tuple[str, float | None, list[str], list[float | None]]],
@@ -276,12 +293,13 @@ def hold_out_patterns(hold_out: str) -> list[str]:
 
 def hold_out_clause(hold_out: str) -> str:
     """The words a caption puts after "each record" for leave_one_out_folds' hold_out."""
-    patterns = hold_out_patterns(hold_out)
+    patterns = [" or ".join(repr(q) for q in _parts(p)) for p in hold_out_patterns(hold_out)]
     if not patterns:
         return ""
     if len(patterns) == 1:
-        return f" whose name contains {patterns[0]!r}"
-    return " whose name contains one of " + ", ".join(repr(p) for p in patterns)
+        return f" whose name contains {patterns[0]}"
+    return " whose name contains one of " + ", ".join(
+        f"({p})" if " or " in p else p for p in patterns)
 
 
 def fold_words(hold_out: str, together: bool, n_records: int, what: str = "models"
